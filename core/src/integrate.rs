@@ -1,0 +1,317 @@
+//! Adaptive integration (paper section 2.3; SPEC section 5): for each particle
+//! region, `S(n)` = mean count per region pixel and `B(n)` = mean count per
+//! pixel of its 2-px ring, over the centred windows n = 1, 2, 4, …, n_max,
+//! then every integer in `[n/2, 2n]` around the best;
+//! `SNR(n) = (S − B)/sqrt(var(B))` with `var(B) = 1/4 + (σ_fpn·B)² + B/g`.
+//! The maximising n* (the smallest on a tie) is the region's integration
+//! time, ≈ its pixel dwell time.
+//!
+//! Cost: one pass over the region's bounding box (plus 2 px) for each tick
+//! of the n_max span builds per-tick spike sums of region and ring; every
+//! window is then two prefix-sum lookups, and SNRs are compared exactly as
+//! rationals (no square root, no division), so the choice of n* is exact.
+//! Memory: two 256-entry `u32` tables on the stack (2 KiB).
+
+use core::cmp::Ordering;
+
+use crate::history::History;
+use crate::label::Region;
+use crate::params::Params;
+use crate::state::Workspace;
+use crate::window::Window;
+
+/// The two integers that fix a region's SNR at one window, up to a positive
+/// factor shared by all windows of that region:
+/// `SNR ∝ d / sqrt(v)`, `d = S_sum·N_r − B_sum·N_p`,
+/// `v = var(B)·4·g·2^32·N_r²`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SnrTerms {
+    /// Signed contrast numerator.
+    pub d: i128,
+    /// Scaled variance (saturating).
+    pub v: u128,
+}
+
+/// SNR terms of a region of `np` pixels with ring of `nr` pixels (0 is
+/// read as an empty ring with B = 0), given their spike sums over one window.
+pub fn snr_terms(s_sum: u64, b_sum: u64, np: u32, nr: u32, p: &Params) -> SnrTerms {
+    let nr = u128::from(nr.max(1));
+    let (s, b, np) = (i128::from(s_sum), u128::from(b_sum), i128::from(np));
+    let d = s * nr as i128 - b as i128 * np;
+    let g = u128::from(p.electrons_per_spike.max(1));
+    let sig = u128::from(p.sigma_fpn.to_bits());
+    let v = (g << 32)
+        .saturating_mul(nr * nr)
+        .saturating_add((4 * g * sig * sig).saturating_mul(b.saturating_mul(b)))
+        .saturating_add((b << 34).saturating_mul(nr));
+    SnrTerms { d, v }
+}
+
+/// `a·b` as a 256-bit number `(high, low)`.
+fn mul_wide(a: u128, b: u128) -> (u128, u128) {
+    let mask = u128::from(u64::MAX);
+    let (a0, a1) = (a & mask, a >> 64);
+    let (b0, b1) = (b & mask, b >> 64);
+    let p00 = a0 * b0;
+    let p01 = a0 * b1;
+    let p10 = a1 * b0;
+    let p11 = a1 * b1;
+    let mid = (p00 >> 64) + (p01 & mask) + (p10 & mask);
+    let lo = (p00 & mask) | (mid << 64);
+    let hi = p11 + (p01 >> 64) + (p10 >> 64) + (mid >> 64);
+    (hi, lo)
+}
+
+/// Compares two SNRs of the same region exactly.
+pub fn cmp_snr(a: &SnrTerms, b: &SnrTerms) -> Ordering {
+    let sa = a.d.signum();
+    let sb = b.d.signum();
+    if sa != sb {
+        return sa.cmp(&sb);
+    }
+    if sa == 0 {
+        return Ordering::Equal;
+    }
+    let da = a.d.unsigned_abs();
+    let db = b.d.unsigned_abs();
+    // |SNR_a| vs |SNR_b|  <=>  da²·vb vs db²·va
+    let lhs = mul_wide(da.saturating_mul(da), b.v);
+    let rhs = mul_wide(db.saturating_mul(db), a.v);
+    let mag = lhs.cmp(&rhs);
+    if sa > 0 {
+        mag
+    } else {
+        mag.reverse()
+    }
+}
+
+/// Geometry of a region's neighbourhood in the strip.
+#[derive(Debug, Clone, Copy)]
+struct Bounds {
+    r0: usize,
+    r1: usize,
+    j0: usize,
+    j1: usize,
+}
+
+/// Finds n* of region `idx` of the strip whose row 0 is band row `s0`,
+/// fills the region's window fields and leaves `c_{n*}` in `ws.counts` for
+/// each of its pixels. `ws.masks` plane 0 must hold "any region" bits.
+pub(crate) fn adapt_region(
+    hist: &History<'_>,
+    k: u32,
+    p: &Params,
+    ws: &mut Workspace<'_>,
+    s0: u16,
+    strip_rows: u16,
+    idx: usize,
+) -> Region {
+    let mut reg = ws.regions[idx];
+    let id = idx as u16 + 1;
+    let width = usize::from(ws.sizes.width);
+    let wpr = crate::plane::words_per_row(ws.sizes.width);
+    let plane = usize::from(ws.sizes.rows) * wpr;
+    let b = Bounds {
+        r0: usize::from(reg.row0.saturating_sub(2)),
+        r1: (usize::from(reg.row1) + 2).min(usize::from(strip_rows)),
+        j0: usize::from(reg.col0.saturating_sub(2)) / 64,
+        j1: ((usize::from(reg.col1) + 2).min(width) - 1) / 64,
+    };
+    let (rr0, rr1) = (usize::from(reg.row0), usize::from(reg.row1));
+    let (any, rest) = ws.masks.split_at_mut(plane);
+    let (regm, rest) = rest.split_at_mut(plane);
+    let ring = &mut rest[..plane];
+    // Region bits.
+    for r in rr0..rr1 {
+        regm[r * wpr + b.j0..=r * wpr + b.j1].fill(0);
+        for c in usize::from(reg.col0)..usize::from(reg.col1) {
+            if ws.labels[r * width + c] == id {
+                regm[r * wpr + c / 64] |= 1 << (c % 64);
+            }
+        }
+    }
+    // Ring: region dilated by 2 px (Chebyshev), minus every region pixel.
+    let last_bits = if width % 64 == 0 { u64::MAX } else { (1u64 << (width % 64)) - 1 };
+    let hdil = |r: usize, j: usize| -> u64 {
+        let w = |jj: usize| regm[r * wpr + jj];
+        let m = w(j);
+        let prev = if j > b.j0 { w(j - 1) } else { 0 };
+        let next = if j < b.j1 { w(j + 1) } else { 0 };
+        m | m << 1 | m << 2 | m >> 1 | m >> 2 | prev >> 63 | prev >> 62 | next << 63 | next << 62
+    };
+    let mut nr = 0u32;
+    for r in b.r0..b.r1 {
+        for j in b.j0..=b.j1 {
+            let mut d = 0u64;
+            for rr in r.saturating_sub(2).max(rr0)..(r + 3).min(rr1) {
+                d |= hdil(rr, j);
+            }
+            if j + 1 == wpr {
+                d &= last_bits;
+            }
+            let v = d & !any[r * wpr + j];
+            ring[r * wpr + j] = v;
+            nr += v.count_ones();
+        }
+    }
+    // Per-tick spike sums of region and ring over the n_max span.
+    let span = Window::in_history(hist, k, p.n_max);
+    let mut ps = [0u32; 256];
+    let mut pb = [0u32; 256];
+    for (i, t) in (span.start..span.end()).enumerate() {
+        let (mut hs, mut hb) = (0u32, 0u32);
+        for r in b.r0..b.r1 {
+            let words = hist.row(t, s0 + r as u16);
+            for j in b.j0..=b.j1 {
+                let w = words.get(j).copied().unwrap_or(0);
+                hb += (w & ring[r * wpr + j]).count_ones();
+                if (rr0..rr1).contains(&r) {
+                    hs += (w & regm[r * wpr + j]).count_ones();
+                }
+            }
+        }
+        // ps[i + 1] = spikes of ticks span.start .. span.start + i + 1
+        if let (Some(&a), Some(&bb)) = (ps.get(i), pb.get(i)) {
+            if let (Some(x), Some(y)) = (ps.get_mut(i + 1), pb.get_mut(i + 1)) {
+                *x = a + hs;
+                *y = bb + hb;
+            }
+        }
+    }
+    let sums = |n: u16| -> (u64, u64, Window) {
+        let w = Window::in_history(hist, k, n);
+        let a = (w.start.saturating_sub(span.start)) as usize;
+        let e = (a + usize::from(w.len)).min(255);
+        let a = a.min(e);
+        (u64::from(ps[e] - ps[a]), u64::from(pb[e] - pb[a]), w)
+    };
+    let terms = |n: u16| {
+        let (s, bsum, _) = sums(n);
+        snr_terms(s, bsum, reg.pixels, nr, p)
+    };
+    // Coarse search over doubling windows, then every integer around the best.
+    let mut best_n = 1u16;
+    let mut best = terms(1);
+    let mut n = 1u16;
+    while n < p.n_max {
+        n = n.saturating_mul(2).min(p.n_max);
+        let t = terms(n);
+        if cmp_snr(&t, &best) == Ordering::Greater {
+            best = t;
+            best_n = n;
+        }
+    }
+    let lo = (best_n / 2).max(1);
+    let hi = best_n.saturating_mul(2).min(p.n_max);
+    let mut star = lo;
+    let mut star_t = terms(lo);
+    for m in lo + 1..=hi {
+        let t = terms(m);
+        if cmp_snr(&t, &star_t) == Ordering::Greater {
+            star_t = t;
+            star = m;
+        }
+    }
+    // Per-pixel counts over n*.
+    let (_, ring_sum, win) = sums(star);
+    for r in rr0..rr1 {
+        for c in usize::from(reg.col0)..usize::from(reg.col1) {
+            if ws.labels[r * width + c] == id {
+                ws.counts[r * width + c] = 0;
+            }
+        }
+    }
+    for t in win.start..win.end() {
+        for r in rr0..rr1 {
+            let words = hist.row(t, s0 + r as u16);
+            for j in b.j0..=b.j1 {
+                let mut w = words.get(j).copied().unwrap_or(0) & regm[r * wpr + j];
+                while w != 0 {
+                    let c = j * 64 + w.trailing_zeros() as usize;
+                    if let Some(x) = ws.counts.get_mut(r * width + c) {
+                        *x = x.saturating_add(1);
+                    }
+                    w &= w - 1;
+                }
+            }
+        }
+    }
+    let mut max_count = 0u8;
+    for r in rr0..rr1 {
+        for c in usize::from(reg.col0)..usize::from(reg.col1) {
+            if ws.labels[r * width + c] == id {
+                max_count = max_count.max(ws.counts[r * width + c]);
+            }
+        }
+    }
+    reg.n_star = star;
+    reg.win_len = win.len;
+    reg.ring_pixels = nr;
+    reg.ring_sum = ring_sum as u32;
+    reg.max_count = max_count;
+    ws.regions[idx] = reg;
+    reg
+}
+
+/// Output gray of a region pixel with count `c` over n*: linear in `c`, the
+/// ring mean going to FS/β and the region maximum to FS, rounded, clamped to
+/// `[0, FS]`. Evaluated exactly: with `x = (c − B)/(c_max − B)`,
+/// `gray = FS·(1 − x)/β + FS·x`. A region no brighter than its ring gives FS/β.
+pub fn region_gray(c: u8, reg: &Region, p: &Params, full_scale: u16) -> u16 {
+    let nr = i128::from(reg.ring_pixels.max(1));
+    let bsum = i128::from(reg.ring_sum);
+    let num = i128::from(c) * nr - bsum;
+    let den = i128::from(reg.max_count) * nr - bsum;
+    let fs = i128::from(full_scale);
+    let bq = i128::from(p.beta.to_bits().max(1));
+    let (n, d) = if den <= 0 { (fs * 256, bq) } else { (fs * (256 * (den - num) + num * bq), bq * den) };
+    let v = (2 * n + d).div_euclid(2 * d);
+    v.clamp(0, fs) as u16
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn wide_multiply() {
+        assert_eq!(mul_wide(u128::MAX, 2), (1, u128::MAX - 1));
+        assert_eq!(mul_wide(1 << 100, 1 << 100), (1 << 72, 0));
+        assert_eq!(mul_wide(12345, 678), (0, 12345 * 678));
+    }
+
+    #[test]
+    fn snr_order_matches_f64() {
+        let p = Params::default();
+        let snr = |s: u64, b: u64, np: u32, nr: u32| {
+            let (s, b) = (s as f64 / np as f64, b as f64 / nr.max(1) as f64);
+            let sig = p.sigma_fpn.to_num::<f64>();
+            (s - b) / (0.25 + (sig * b).powi(2) + b / 1000.0).sqrt()
+        };
+        let cases = [(40, 30, 20, 40), (80, 100, 20, 40), (10, 90, 20, 40), (0, 0, 20, 0), (5, 0, 3, 0), (200, 380, 20, 40)];
+        for a in cases {
+            for b in cases {
+                if (a.2, a.3) != (b.2, b.3) {
+                    continue;
+                }
+                let ta = snr_terms(a.0, a.1, a.2, a.3, &p);
+                let tb = snr_terms(b.0, b.1, b.2, b.3, &p);
+                let fa = snr(a.0, a.1, a.2, a.3);
+                let fb = snr(b.0, b.1, b.2, b.3);
+                assert_eq!(cmp_snr(&ta, &tb), fa.partial_cmp(&fb).unwrap(), "{a:?} {b:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn region_gray_maps_ring_to_fs_over_beta_and_max_to_fs() {
+        let p = Params::default();
+        let reg = Region { ring_pixels: 10, ring_sum: 20, max_count: 12, ..Region::default() };
+        assert_eq!(region_gray(12, &reg, &p, 255), 255);
+        assert_eq!(region_gray(2, &reg, &p, 255), 26); // 25.5 rounds up
+        assert_eq!(region_gray(0, &reg, &p, 255), 0); // below the ring: clamped
+        assert_eq!(region_gray(7, &reg, &p, 255), 140); // 25.5 + 0.5·229.5 = 140.25
+        let flat = Region { ring_pixels: 10, ring_sum: 50, max_count: 4, ..Region::default() };
+        assert_eq!(region_gray(4, &flat, &p, 255), 26);
+    }
+}

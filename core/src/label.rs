@@ -1,0 +1,183 @@
+//! Region labelling: particle pixels form regions by 8-connectivity
+//! (two-pass union-find in a caller-supplied table); regions under 3 px are
+//! noise. Bounded: when the provisional-label table or the region table is
+//! full, further pixels or regions stay background, and are counted.
+
+use crate::segment::{decode, Class};
+use crate::state::Workspace;
+
+/// Regions smaller than this many pixels are noise.
+pub const MIN_REGION_PIXELS: u32 = 3;
+
+/// One particle region of a strip and its adaptive window.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Region {
+    /// Pixels in the region.
+    pub pixels: u32,
+    /// Pixels of its 2-px ring (not in any region).
+    pub ring_pixels: u32,
+    /// Spikes of the ring over the region's window n*.
+    pub ring_sum: u32,
+    /// Bounding box, strip rows `row0..row1`.
+    pub row0: u16,
+    /// One past the last row.
+    pub row1: u16,
+    /// Bounding box, columns `col0..col1`.
+    pub col0: u16,
+    /// One past the last column.
+    pub col1: u16,
+    /// Optimal integration window n*, ticks (0 until computed).
+    pub n_star: u16,
+    /// Ticks of the window n* actually held.
+    pub win_len: u16,
+    /// Largest count of a region pixel over n*.
+    pub max_count: u8,
+    /// The union-find root it came from (labelling's bookkeeping).
+    pub root: u16,
+}
+
+/// Counts of one labelling.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LabelStats {
+    /// Regions kept (≥ 3 px), at most the table's size.
+    pub regions: u32,
+    /// Regions under 3 px, left as background.
+    pub noise_regions: u32,
+    /// Regions that did not fit the table, left as background.
+    pub overflow_regions: u32,
+    /// Particle pixels that found no provisional label (table full).
+    pub dropped_pixels: u32,
+}
+
+const ASSIGNED: u16 = 0x8000;
+const NONE: u16 = 0x7fff;
+
+#[inline]
+fn find(parents: &[u16], mut x: u16) -> u16 {
+    // Parents always point to smaller labels, so this ends.
+    while let Some(&p) = parents.get(usize::from(x)) {
+        if p == x || p & ASSIGNED != 0 {
+            return x;
+        }
+        x = p;
+    }
+    x
+}
+
+/// Labels the particle pixels of the first `rows` rows of the workspace.
+/// Writes `labels` (region index + 1, 0 for none) and the region table;
+/// returns the counts.
+pub(crate) fn label(ws: &mut Workspace<'_>, rows: u16) -> LabelStats {
+    let width = usize::from(ws.sizes.width);
+    let px = width * usize::from(rows);
+    let cap_prov = ws.parents.len().saturating_sub(1).min(usize::from(NONE) - 1) as u16;
+    let cap_regions = ws.regions.len().min(usize::from(NONE) - 1);
+    let mut stats = LabelStats::default();
+    let labels = &mut ws.labels[..px];
+    let parents = &mut *ws.parents;
+    let mut next: u16 = 0;
+    // Pass 1: provisional labels and unions with the W, NW, N, NE neighbours.
+    for i in 0..px {
+        if decode(ws.class[i]).0 != Class::Particle {
+            labels[i] = 0;
+            continue;
+        }
+        let (r, c) = (i / width, i % width);
+        let mut root = 0u16;
+        let mut neighbours = [0u16; 4];
+        if c > 0 {
+            neighbours[0] = labels[i - 1];
+        }
+        if r > 0 {
+            let up = i - width;
+            if c > 0 {
+                neighbours[1] = labels[up - 1];
+            }
+            neighbours[2] = labels[up];
+            if c + 1 < width {
+                neighbours[3] = labels[up + 1];
+            }
+        }
+        for &nb in neighbours.iter().filter(|&&l| l != 0) {
+            let rt = find(parents, nb);
+            root = if root == 0 { rt } else { root.min(rt) };
+        }
+        if root == 0 {
+            if next < cap_prov {
+                next += 1;
+                parents[usize::from(next)] = next;
+                root = next;
+            } else {
+                stats.dropped_pixels += 1;
+            }
+        } else {
+            for &nb in neighbours.iter().filter(|&&l| l != 0) {
+                let rt = find(parents, nb);
+                if rt != root {
+                    parents[usize::from(rt)] = root;
+                }
+            }
+        }
+        labels[i] = root;
+    }
+    // Flatten: every label points at its root (roots are smaller, done first).
+    for l in 1..=next {
+        let p = parents[usize::from(l)];
+        parents[usize::from(l)] = parents[usize::from(p)];
+    }
+    // Pass 2: one region per root, with size and bounding box.
+    let mut n = 0usize;
+    for i in 0..px {
+        let l = labels[i];
+        if l == 0 {
+            continue;
+        }
+        let root = parents[usize::from(l)];
+        let root = if root & ASSIGNED != 0 { l } else { root };
+        let e = parents[usize::from(root)];
+        let id = if e & ASSIGNED != 0 {
+            e & !ASSIGNED
+        } else if n < cap_regions {
+            ws.regions[n] = Region { root, row0: u16::MAX, col0: u16::MAX, ..Region::default() };
+            parents[usize::from(root)] = ASSIGNED | n as u16;
+            n += 1;
+            (n - 1) as u16
+        } else {
+            parents[usize::from(root)] = ASSIGNED | NONE;
+            stats.overflow_regions += 1;
+            NONE
+        };
+        if let Some(reg) = ws.regions.get_mut(usize::from(id)).filter(|_| id != NONE) {
+            let (r, c) = ((i / width) as u16, (i % width) as u16);
+            reg.pixels += 1;
+            reg.row0 = reg.row0.min(r);
+            reg.row1 = reg.row1.max(r + 1);
+            reg.col0 = reg.col0.min(c);
+            reg.col1 = reg.col1.max(c + 1);
+        }
+    }
+    // Drop noise regions, compact the table, point roots at the new index.
+    let mut kept = 0usize;
+    for j in 0..n {
+        let reg = ws.regions[j];
+        if reg.pixels >= MIN_REGION_PIXELS {
+            ws.regions[kept] = reg;
+            parents[usize::from(reg.root)] = ASSIGNED | kept as u16;
+            kept += 1;
+        } else {
+            parents[usize::from(reg.root)] = ASSIGNED | NONE;
+            stats.noise_regions += 1;
+        }
+    }
+    // Pass 3: final labels.
+    for l in labels.iter_mut().filter(|l| **l != 0) {
+        let root = parents[usize::from(*l)];
+        let root = if root & ASSIGNED != 0 { *l } else { root };
+        let id = parents[usize::from(root)] & !ASSIGNED;
+        *l = if id == NONE { 0 } else { id + 1 };
+    }
+    stats.regions = kept as u32;
+    stats
+}

@@ -1,0 +1,50 @@
+//! # spiv-core — the sidecar half of spike-camera PIV
+//!
+//! `#![no_std]`, no allocator, no panics on any input. Everything a sidecar MCU or
+//! FPGA next to a spike sensor must do to turn 1-bit spike planes into particle
+//! frames that suit PIV (Li et al. 2025, read as `SPEC.md` section 5 fixes it):
+//!
+//! | module | owns |
+//! |---|---|
+//! | [`plane`] | zero-copy view of one bit-packed Vidar spike plane |
+//! | [`history`] | the ingest: a ring of the last `depth` planes of a band of rows |
+//! | [`window`] | centred windows, bit-parallel window counts, TFP and TFI |
+//! | [`segment`] | saturation time `t_bgmax` and particle/background segmentation |
+//! | [`label`] | 8-connected region labelling with a bounded region table |
+//! | [`integrate`] | per-region SNR(n) and the optimal window n* |
+//! | [`suppress`] | background suppression `alpha = beta / t_bgmax` |
+//! | [`frame`] | one adaptive frame at any tick, in row strips |
+//! | [`state`] | the caller-owned per-pixel working memory |
+//! | [`q`] | the fixed-point formats, in one place |
+//!
+//! Units: time in **ticks** (one spike plane), space in **pixels** of the
+//! camera's stored row order (the Vidar layout stores image rows bottom-up: the
+//! core never flips, file readers do), counts in **spikes**, output in **gray
+//! levels** of an 8- or 16-bit frame.
+//!
+//! Memory is bounded by the caller: the spike history and the per-pixel state
+//! are slices the caller provides (static arrays on a sidecar, `Vec`s on a
+//! host), sized by [`history::History::words_needed`] and
+//! [`state::WorkspaceSizes`].
+#![cfg_attr(not(any(test, feature = "std")), no_std)]
+#![warn(missing_docs)]
+
+pub mod error;
+pub mod frame;
+pub mod history;
+pub mod integrate;
+pub mod label;
+pub mod params;
+pub mod plane;
+pub mod q;
+pub mod segment;
+pub mod state;
+pub mod suppress;
+pub mod window;
+
+pub use error::Error;
+pub use frame::{reconstruct_adaptive, FrameStats, Gray};
+pub use history::History;
+pub use params::Params;
+pub use plane::PlaneView;
+pub use state::{Workspace, WorkspaceSizes};

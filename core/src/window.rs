@@ -1,0 +1,263 @@
+//! Centred windows over the spike history, bit-parallel window counts, and
+//! the two classic reconstructions TFP and TFI (SPEC section 5).
+//!
+//! `c_n(x, y, k)` counts the spikes of a pixel over the `n` ticks
+//! `[k − ⌊n/2⌋, k − ⌊n/2⌋ + n)`. Windows are nested as `n` grows. Near the ends
+//! of the history a window is clipped to the ticks held, and rates use its
+//! real length ([`Window::len`]).
+//!
+//! Counting is SWAR: a 256-entry table spreads 8 spike bits into 8 byte
+//! lanes of a `u64`, so one add counts 8 pixels and a 64-pixel word costs 8
+//! adds per tick; counts are bytes, so a window is at most 255 ticks.
+
+use crate::error::{Error, ParamError};
+use crate::history::History;
+
+/// A window of ticks after clipping to the history.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Window {
+    /// First tick.
+    pub start: u32,
+    /// Ticks actually held (≤ `nominal`; 0 when nothing is held).
+    pub len: u16,
+    /// The requested length n, ticks.
+    pub nominal: u16,
+}
+
+impl Window {
+    /// The window of `n` ticks centred on `k`, clipped to `[oldest, newest]`.
+    pub fn centred(k: u32, n: u16, oldest: u32, newest: u32) -> Window {
+        let a = i64::from(k) - i64::from(n / 2);
+        let e = a + i64::from(n);
+        let a2 = a.max(i64::from(oldest));
+        let e2 = e.min(i64::from(newest) + 1);
+        let len = (e2 - a2).clamp(0, i64::from(n)) as u16;
+        let start = a2.clamp(0, i64::from(u32::MAX)) as u32;
+        Window { start, len, nominal: n }
+    }
+
+    /// The window of `n` ticks centred on `k` in `hist` (empty if it holds nothing).
+    pub fn in_history(hist: &History<'_>, k: u32, n: u16) -> Window {
+        match (hist.oldest(), hist.newest()) {
+            (Some(o), Some(w)) => Window::centred(k, n, o, w),
+            _ => Window { start: k, len: 0, nominal: n },
+        }
+    }
+
+    /// One past the last tick.
+    pub fn end(&self) -> u32 {
+        self.start.saturating_add(u32::from(self.len))
+    }
+}
+
+/// `SPREAD[b]` has byte `i` equal to bit `i` of `b`.
+const SPREAD: [u64; 256] = {
+    let mut t = [0u64; 256];
+    let mut b = 0;
+    while b < 256 {
+        let mut i = 0;
+        while i < 8 {
+            if (b >> i) & 1 == 1 {
+                t[b] |= 1 << (8 * i);
+            }
+            i += 1;
+        }
+        b += 1;
+    }
+    t
+};
+
+/// Adds, for every pixel of band rows `rows.0..rows.1`, its spikes over
+/// ticks `ticks.0..ticks.1` to `counts` (row-major, `width` per row, first
+/// row = `rows.0`). Ticks not held count nothing. The caller keeps every
+/// count ≤ 255 (at most 255 ticks in all); bytes wrap otherwise.
+pub fn add_counts(hist: &History<'_>, rows: (u16, u16), ticks: (u32, u32), counts: &mut [u8]) {
+    let width = usize::from(hist.width());
+    if ticks.1 <= ticks.0 || width == 0 {
+        return;
+    }
+    for (r, crow) in (rows.0..rows.1).zip(counts.chunks_exact_mut(width)) {
+        for (j, cw) in crow.chunks_mut(64).enumerate() {
+            // Eight byte-lane accumulators hold the 64 pixels of this word.
+            let mut acc = [0u64; 8];
+            for t in ticks.0..ticks.1 {
+                let w = hist.row(t, r).get(j).copied().unwrap_or(0);
+                for (g, a) in acc.iter_mut().enumerate() {
+                    *a = a.wrapping_add(SPREAD[((w >> (8 * g)) & 0xff) as usize]);
+                }
+            }
+            for (g, c8) in cw.chunks_mut(8).enumerate() {
+                let lanes = acc.get(g).copied().unwrap_or(0).to_le_bytes();
+                for (c, l) in c8.iter_mut().zip(lanes) {
+                    *c = c.wrapping_add(l);
+                }
+            }
+        }
+    }
+}
+
+/// Rounded `full_scale · num / den` (0 when `den` is 0), clamped to full scale.
+#[inline]
+pub(crate) fn scale(full_scale: u16, num: u64, den: u64) -> u16 {
+    if den == 0 {
+        return 0;
+    }
+    let v = (u64::from(full_scale) * num + den / 2) / den;
+    v.min(u64::from(full_scale)) as u16
+}
+
+/// TFP: gray = FS·c_n/len for every pixel of the band, window `n` (1..=255
+/// ticks, at most the history depth) centred on `k`. `counts` is scratch of
+/// `rows × width` bytes; `out` receives `rows × width` gray levels (stored
+/// row order). Returns the window actually used.
+pub fn tfp<G: crate::frame::Gray>(
+    hist: &History<'_>,
+    k: u32,
+    n: u16,
+    full_scale: u16,
+    counts: &mut [u8],
+    out: &mut [G],
+) -> Result<Window, Error> {
+    if n == 0 || n > 255 || n > hist.depth() {
+        return Err(Error::BadParam(ParamError::Window));
+    }
+    let px = usize::from(hist.width()) * usize::from(hist.rows());
+    check_len(counts.len(), px)?;
+    check_len(out.len(), px)?;
+    let win = Window::in_history(hist, k, n);
+    if win.len == 0 {
+        return Err(Error::TickUnavailable);
+    }
+    let counts = &mut counts[..px];
+    counts.fill(0);
+    add_counts(hist, (0, hist.rows()), (win.start, win.end()), counts);
+    for (o, &c) in out.iter_mut().zip(counts.iter()) {
+        *o = G::from_level(scale(full_scale.min(G::MAX), u64::from(c), u64::from(win.len)));
+    }
+    Ok(win)
+}
+
+pub(crate) fn check_len(got: usize, needed: usize) -> Result<(), Error> {
+    if got < needed {
+        Err(Error::BufferTooSmall { needed, got })
+    } else {
+        Ok(())
+    }
+}
+
+/// TFI: gray = FS/isi, with isi the ticks from the last spike at or before
+/// `k` to the first spike after `k`, both searched within
+/// `[k − ⌊n_max/2⌋, k − ⌊n_max/2⌋ + n_max)`; a pixel missing either spike gets
+/// isi = n_max (never a division by zero). `out` receives `rows × width`.
+pub fn tfi<G: crate::frame::Gray>(
+    hist: &History<'_>,
+    k: u32,
+    n_max: u16,
+    full_scale: u16,
+    out: &mut [G],
+) -> Result<(), Error> {
+    if n_max < 2 || n_max > hist.depth() {
+        return Err(Error::BadParam(ParamError::Window));
+    }
+    let width = usize::from(hist.width());
+    check_len(out.len(), width * usize::from(hist.rows()))?;
+    let win = Window::in_history(hist, k, n_max);
+    if !hist.holds(k) || win.len == 0 {
+        return Err(Error::TickUnavailable);
+    }
+    let fs = full_scale.min(G::MAX);
+    for (r, orow) in (0..hist.rows()).zip(out.chunks_exact_mut(width)) {
+        for (j, ow) in orow.chunks_mut(64).enumerate() {
+            let lanes = ow.len();
+            let all = if lanes == 64 { u64::MAX } else { (1u64 << lanes) - 1 };
+            let mut prev = [u32::MAX; 64];
+            let mut next = [u32::MAX; 64];
+            // Backwards from k for the last spike at or before k.
+            let mut found = 0u64;
+            let mut t = k;
+            while found != all && t >= win.start {
+                let mut new = hist.row(t, r).get(j).copied().unwrap_or(0) & all & !found;
+                found |= new;
+                while new != 0 {
+                    prev[new.trailing_zeros() as usize] = t;
+                    new &= new - 1;
+                }
+                if t == 0 {
+                    break;
+                }
+                t -= 1;
+            }
+            let mut found = 0u64;
+            let mut t = k.saturating_add(1);
+            while found != all && t < win.end() {
+                let mut new = hist.row(t, r).get(j).copied().unwrap_or(0) & all & !found;
+                found |= new;
+                while new != 0 {
+                    next[new.trailing_zeros() as usize] = t;
+                    new &= new - 1;
+                }
+                t += 1;
+            }
+            for ((o, &p), &nx) in ow.iter_mut().zip(prev.iter()).zip(next.iter()) {
+                let isi = if p == u32::MAX || nx == u32::MAX { u32::from(n_max) } else { nx - p };
+                *o = G::from_level(scale(fs, 1, u64::from(isi)));
+            }
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plane::PlaneView;
+
+    #[test]
+    fn centred_windows_clip() {
+        let w = Window::centred(10, 4, 0, 100);
+        assert_eq!((w.start, w.len), (8, 4));
+        let w = Window::centred(10, 5, 0, 100);
+        assert_eq!((w.start, w.len), (8, 5));
+        let w = Window::centred(1, 8, 0, 100);
+        assert_eq!((w.start, w.len), (0, 5));
+        let w = Window::centred(99, 8, 0, 100);
+        assert_eq!((w.start, w.len), (95, 6));
+        let w = Window::centred(500, 8, 0, 100);
+        assert_eq!(w.len, 0);
+    }
+
+    #[test]
+    fn counts_tfp_and_tfi() {
+        // 70 x 8 camera so a row spans two words with a partial last word.
+        let (w, h) = (72u16, 8u16);
+        let mut buf = [0u64; 2 * 8 * 16];
+        let mut hist = History::new(&mut buf, w, h, 0, 8, 16).unwrap();
+        let nbytes = 72;
+        for t in 0..16u32 {
+            let mut bytes = [0u8; 72];
+            // pixel (row 2, col 65) fires every 4th tick; (0,0) every tick.
+            for (p, on) in [(2 * 72 + 65, t % 4 == 0), (0, true)] {
+                if on {
+                    bytes[p / 8] |= 1 << (p % 8);
+                }
+            }
+            hist.push(&PlaneView::new(&bytes[..nbytes], w, h).unwrap()).unwrap();
+        }
+        let mut counts = [0u8; 72 * 8];
+        let mut out = [0u8; 72 * 8];
+        let win = tfp(&hist, 8, 8, 255, &mut counts, &mut out).unwrap();
+        assert_eq!((win.start, win.len), (4, 8));
+        assert_eq!(counts[2 * 72 + 65], 2);
+        assert_eq!(counts[0], 8);
+        assert_eq!(out[0], 255);
+        assert_eq!(out[2 * 72 + 65], 64); // 255 * 2 / 8 = 63.75
+        assert_eq!(counts.iter().map(|&c| u32::from(c)).sum::<u32>(), 10);
+
+        let mut out = [0u8; 72 * 8];
+        tfi(&hist, 9, 16, 255, &mut out).unwrap();
+        assert_eq!(out[2 * 72 + 65], 64); // spikes at 8 and 12: isi 4
+        assert_eq!(out[0], 255); // isi 1
+        assert_eq!(out[1], 16); // no spikes: isi = n_max = 16
+    }
+}

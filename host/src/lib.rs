@@ -1,0 +1,2 @@
+//! spiv-host: the host half of spiv.
+pub mod reference;
