@@ -210,18 +210,18 @@ pub(crate) fn segment(
             let row_t0 = (ty0 - tiles.y0) * tiles.x;
             let row_t1 = (ty1 - tiles.y0) * tiles.x;
             let base = usize::from(r - s0) * width;
-            let mut cached = (usize::MAX, 0u32, 0u32);
+            let mut cached = ((usize::MAX, usize::MAX), 0u32, 0u32);
             for x in 0..width {
                 let i = base + x;
                 if ws.class[i] != class_active {
                     continue;
                 }
                 let (tx0, tx1, fx) = tile_pos(x, 0, tiles.x - 1);
-                if cached.0 != tx0 {
+                if cached.0 != (tx0, tx1) {
                     let m = |t: usize| u32::from(ws.tiles.get(t).copied().unwrap_or(0));
                     let r0 = wy0 * m(row_t0 + tx0) + wy1 * m(row_t1 + tx0);
                     let r1 = wy0 * m(row_t0 + tx1) + wy1 * m(row_t1 + tx1);
-                    cached = (tx0, r0, r1);
+                    cached = ((tx0, tx1), r0, r1);
                 }
                 let b_q10 = (32 - fx) * cached.1 + fx * cached.2;
                 let c = ws.counts[i];

@@ -1,0 +1,144 @@
+//! The fixed-point core against its f64 reference on realistic spike streams
+//! (the paper scene: glare band along the wall plus moving particles).
+//! Tolerance (stated in `spiv_host::reference`): classes, labels and n*
+//! identical; ≥ 99.9 % of output pixels within 1 gray level.
+
+use spiv_core::label::Region;
+use spiv_core::segment::{decode, Class};
+use spiv_core::state::Buffers;
+use spiv_core::{reconstruct_adaptive, Gray, History, Params, PlaneView, Workspace, WorkspaceSizes};
+use spiv_firmware_sim::scene::{Profile, Scene, SceneParams};
+use spiv_firmware_sim::sensor::{simulate, SensorParams};
+use spiv_host::reference::{adaptive_frame, RefClass, SpikeVolume};
+
+struct CoreFrame<G> {
+    class: Vec<u8>,
+    labels: Vec<u16>,
+    regions: Vec<Region>,
+    out: Vec<G>,
+}
+
+fn run_core<G: Gray>(packed: &[u8], w: u16, h: u16, k: u32, p: &Params, strip_rows: u16) -> CoreFrame<G> {
+    let plane = usize::from(w) * usize::from(h) / 8;
+    // A ring at least n_max deep; a shorter recording clips the windows.
+    let depth = ((packed.len() / plane) as u16).max(p.n_max);
+    let mut hb = vec![0u64; History::words_needed(w, h, depth).unwrap()];
+    let mut hist = History::new(&mut hb, w, h, 0, h, depth).unwrap();
+    for bytes in packed.chunks_exact(plane) {
+        hist.push(&PlaneView::new(bytes, w, h).unwrap()).unwrap();
+    }
+    let sizes = WorkspaceSizes::for_strip(w, strip_rows);
+    let px = sizes.pixels();
+    let (mut counts, mut c_t, mut class) = (vec![0u8; px], vec![0u8; px], vec![0u8; px]);
+    let mut labels = vec![0u16; px];
+    let mut masks = vec![0u64; sizes.mask_words()];
+    let mut tiles = vec![0u8; sizes.tiles()];
+    let mut parents = vec![0u16; sizes.parents()];
+    let mut regions = vec![Region::default(); usize::from(sizes.max_regions)];
+    let mut ws = Workspace::new(
+        sizes,
+        Buffers {
+            counts: &mut counts,
+            c_t: &mut c_t,
+            class: &mut class,
+            labels: &mut labels,
+            masks: &mut masks,
+            tiles: &mut tiles,
+            parents: &mut parents,
+            regions: &mut regions,
+        },
+    )
+    .unwrap();
+    let mut out = vec![G::default(); usize::from(w) * usize::from(h)];
+    let stats = reconstruct_adaptive(&hist, k, p, &mut ws, &mut out).unwrap();
+    let n = if stats.strips == 1 { stats.labels.regions as usize } else { 0 };
+    let regs = ws.regions(n).to_vec();
+    let class = ws.class().to_vec();
+    let labels = ws.labels().to_vec();
+    CoreFrame { class, labels, regions: regs, out }
+}
+
+fn scene_stream(profile: Profile, seed: u64, w: u16, h: u16, ticks: u32) -> Vec<u8> {
+    let params = SceneParams { width: w, height: h, profile, ..SceneParams::default() };
+    let scene = Scene::new(params, seed, 200.0);
+    simulate(&scene, SensorParams::default(), seed, 0, ticks)
+}
+
+fn compare<G: Gray>(packed: &[u8], w: u16, h: u16, k: u32, p: &Params) -> (usize, f64) {
+    let core = run_core::<G>(packed, w, h, k, p, h);
+    let vol = SpikeVolume::from_packed(packed, usize::from(w), usize::from(h), 0);
+    let fs = f64::from(p.full_scale.min(G::MAX));
+    let reference = adaptive_frame(&vol, k, p, fs);
+    let px = usize::from(w) * usize::from(h);
+    for i in 0..px {
+        let (cls, lev) = decode(core.class[i]);
+        let want = match reference.class[i] {
+            RefClass::Particle(l) => (Class::Particle, l),
+            RefClass::Background(l) => (Class::Background, l),
+        };
+        assert_eq!((cls, lev), want, "class of pixel {i} (row {}, col {})", i / usize::from(w), i % usize::from(w));
+        assert_eq!(u32::from(core.labels[i]), reference.labels[i], "label of pixel {i}");
+    }
+    let n_core: Vec<u16> = core.regions.iter().map(|r| r.n_star).collect();
+    assert_eq!(n_core, reference.n_star, "region windows n*");
+    let mut within = 0usize;
+    let mut worst = 0.0f64;
+    for i in 0..px {
+        let d = (f64::from(core.out[i].level()) - reference.gray[i]).abs();
+        worst = worst.max(d);
+        if d <= 1.0 {
+            within += 1;
+        }
+    }
+    let frac = within as f64 / px as f64;
+    assert!(frac >= 0.999, "only {:.4} % of pixels within 1 gray level (worst {worst})", frac * 100.0);
+    (core.regions.len(), worst)
+}
+
+#[test]
+fn paper_linear_scene_matches_reference() {
+    let (w, h) = (400, 250);
+    let packed = scene_stream(Profile::Linear, 7, w, h, 160);
+    let (regions, worst) = compare::<u8>(&packed, w, h, 80, &Params::default());
+    assert!(regions > 100, "the scene must produce particle regions, got {regions}");
+    assert!(worst <= 1.0, "worst difference {worst}");
+}
+
+#[test]
+fn clipped_windows_at_the_start_of_a_recording_match() {
+    // A 62-plane file must still reconstruct at any tick.
+    let (w, h) = (160, 96);
+    let packed = scene_stream(Profile::Quadratic, 3, w, h, 62);
+    for k in [0, 5, 31, 61] {
+        compare::<u8>(&packed, w, h, k, &Params::default());
+    }
+}
+
+#[test]
+fn sixteen_bit_output_and_other_parameters_match() {
+    let (w, h) = (192, 128);
+    let packed = scene_stream(Profile::Log, 11, w, h, 140);
+    let p = Params {
+        n0: 1,
+        n_max: 100,
+        n_fs: 20,
+        full_scale: 65535,
+        beta: spiv_core::q::Beta::from_num(6.5),
+        k_sig: spiv_core::q::KSig::from_num(2.5),
+        ..Params::default()
+    };
+    compare::<u16>(&packed, w, h, 70, &p);
+}
+
+#[test]
+fn strips_agree_with_one_pass_away_from_their_edges() {
+    let (w, h) = (400, 250);
+    let packed = scene_stream(Profile::Linear, 5, w, h, 140);
+    let p = Params::default();
+    let whole = run_core::<u8>(&packed, w, h, 70, &p, h);
+    let strips = run_core::<u8>(&packed, w, h, 70, &p, 96);
+    let same = whole.out.iter().zip(&strips.out).filter(|(a, b)| a == b).count();
+    let frac = same as f64 / whole.out.len() as f64;
+    assert!(frac > 0.98, "strip processing changed {:.2} % of pixels", (1.0 - frac) * 100.0);
+}
+
