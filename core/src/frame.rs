@@ -117,13 +117,28 @@ pub fn reconstruct_adaptive<G: Gray>(
     for (l, &n) in lens.iter_mut().zip(levels.iter()).take(nlev) {
         *l = Window::in_history(hist, k, n).len;
     }
-    let mut stats = FrameStats { tick: k, ..FrameStats::default() };
+    let mut stats = FrameStats {
+        tick: k,
+        ..FrameStats::default()
+    };
     let mut e0 = 0u16;
     while e0 < band {
         let e1 = e0.saturating_add(inner).min(band);
         let s0 = e0.saturating_sub(margin);
         let s1 = e1.saturating_add(margin).min(band);
-        strip(hist, k, p, ws, (s0, s1), (e0, e1), &levels, &lens, fs, out, &mut stats);
+        strip(
+            hist,
+            k,
+            p,
+            ws,
+            (s0, s1),
+            (e0, e1),
+            &levels,
+            &lens,
+            fs,
+            out,
+            &mut stats,
+        );
         stats.strips += 1;
         e0 = e1;
     }

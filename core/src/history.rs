@@ -53,9 +53,21 @@ impl<'a> History<'a> {
         }
         let needed = Self::words_needed(width, rows, depth).ok_or(Error::BadDimensions)?;
         if buf.len() < needed {
-            return Err(Error::BufferTooSmall { needed, got: buf.len() });
+            return Err(Error::BufferTooSmall {
+                needed,
+                got: buf.len(),
+            });
         }
-        Ok(History { buf, width, height, row0, rows, wpr: words_per_row(width), depth, next_tick: 0 })
+        Ok(History {
+            buf,
+            width,
+            height,
+            row0,
+            rows,
+            wpr: words_per_row(width),
+            depth,
+            next_tick: 0,
+        })
     }
 
     /// Appends one plane; returns its tick.
@@ -88,7 +100,8 @@ impl<'a> History<'a> {
 
     /// Oldest tick still held, `None` before the first push.
     pub fn oldest(&self) -> Option<u32> {
-        self.newest().map(|n| n.saturating_sub(u32::from(self.depth) - 1))
+        self.newest()
+            .map(|n| n.saturating_sub(u32::from(self.depth) - 1))
     }
 
     /// Newest tick held, `None` before the first push.
@@ -108,8 +121,8 @@ impl<'a> History<'a> {
         if !self.holds(tick) || row >= self.rows {
             return &[];
         }
-        let start = (tick % u32::from(self.depth)) as usize * self.slot_len()
-            + usize::from(row) * self.wpr;
+        let start =
+            (tick % u32::from(self.depth)) as usize * self.slot_len() + usize::from(row) * self.wpr;
         self.buf.get(start..start + self.wpr).unwrap_or(&[])
     }
 
@@ -172,14 +185,23 @@ mod tests {
     #[test]
     fn band_and_errors() {
         let mut buf = [0u64; 4];
-        assert_eq!(History::new(&mut buf, 8, 4, 3, 2, 2).unwrap_err(), Error::BadBand);
-        assert!(matches!(History::new(&mut buf, 8, 4, 0, 4, 2), Err(Error::BufferTooSmall { .. })));
+        assert_eq!(
+            History::new(&mut buf, 8, 4, 3, 2, 2).unwrap_err(),
+            Error::BadBand
+        );
+        assert!(matches!(
+            History::new(&mut buf, 8, 4, 0, 4, 2),
+            Err(Error::BufferTooSmall { .. })
+        ));
         let mut h = History::new(&mut buf, 8, 4, 1, 2, 2).unwrap();
         let bytes = [1, 2, 3, 4];
         assert_eq!(h.push(&PlaneView::new(&bytes, 8, 4).unwrap()).unwrap(), 0);
         assert_eq!(h.row(0, 0), &[2]);
         assert_eq!(h.row(0, 1), &[3]);
         let other = [0u8; 2];
-        assert_eq!(h.push(&PlaneView::new(&other, 8, 2).unwrap()).unwrap_err(), Error::PlaneMismatch);
+        assert_eq!(
+            h.push(&PlaneView::new(&other, 8, 2).unwrap()).unwrap_err(),
+            Error::PlaneMismatch
+        );
     }
 }

@@ -131,7 +131,11 @@ pub(crate) fn adapt_region(
         }
     }
     // Ring: region dilated by 2 px (Chebyshev), minus every region pixel.
-    let last_bits = if width % 64 == 0 { u64::MAX } else { (1u64 << (width % 64)) - 1 };
+    let last_bits = if width % 64 == 0 {
+        u64::MAX
+    } else {
+        (1u64 << (width % 64)) - 1
+    };
     let hdil = |r: usize, j: usize| -> u64 {
         let w = |jj: usize| regm[r * wpr + jj];
         let m = w(j);
@@ -264,7 +268,11 @@ pub fn region_gray(c: u8, reg: &Region, p: &Params, full_scale: u16) -> u16 {
     let den = i128::from(reg.max_count) * nr - bsum;
     let fs = i128::from(full_scale);
     let bq = i128::from(p.beta.to_bits().max(1));
-    let (n, d) = if den <= 0 { (fs * 256, bq) } else { (fs * (256 * (den - num) + num * bq), bq * den) };
+    let (n, d) = if den <= 0 {
+        (fs * 256, bq)
+    } else {
+        (fs * (256 * (den - num) + num * bq), bq * den)
+    };
     let v = (2 * n + d).div_euclid(2 * d);
     v.clamp(0, fs) as u16
 }
@@ -288,7 +296,14 @@ mod tests {
             let sig = p.sigma_fpn.to_num::<f64>();
             (s - b) / (0.25 + (sig * b).powi(2) + b / 1000.0).sqrt()
         };
-        let cases = [(40, 30, 20, 40), (80, 100, 20, 40), (10, 90, 20, 40), (0, 0, 20, 0), (5, 0, 3, 0), (200, 380, 20, 40)];
+        let cases = [
+            (40, 30, 20, 40),
+            (80, 100, 20, 40),
+            (10, 90, 20, 40),
+            (0, 0, 20, 0),
+            (5, 0, 3, 0),
+            (200, 380, 20, 40),
+        ];
         for a in cases {
             for b in cases {
                 if (a.2, a.3) != (b.2, b.3) {
@@ -298,7 +313,11 @@ mod tests {
                 let tb = snr_terms(b.0, b.1, b.2, b.3, &p);
                 let fa = snr(a.0, a.1, a.2, a.3);
                 let fb = snr(b.0, b.1, b.2, b.3);
-                assert_eq!(cmp_snr(&ta, &tb), fa.partial_cmp(&fb).unwrap(), "{a:?} {b:?}");
+                assert_eq!(
+                    cmp_snr(&ta, &tb),
+                    fa.partial_cmp(&fb).unwrap(),
+                    "{a:?} {b:?}"
+                );
             }
         }
     }
@@ -306,12 +325,22 @@ mod tests {
     #[test]
     fn region_gray_maps_ring_to_fs_over_beta_and_max_to_fs() {
         let p = Params::default();
-        let reg = Region { ring_pixels: 10, ring_sum: 20, max_count: 12, ..Region::default() };
+        let reg = Region {
+            ring_pixels: 10,
+            ring_sum: 20,
+            max_count: 12,
+            ..Region::default()
+        };
         assert_eq!(region_gray(12, &reg, &p, 255), 255);
         assert_eq!(region_gray(2, &reg, &p, 255), 26); // 25.5 rounds up
         assert_eq!(region_gray(0, &reg, &p, 255), 0); // below the ring: clamped
         assert_eq!(region_gray(7, &reg, &p, 255), 140); // 25.5 + 0.5·229.5 = 140.25
-        let flat = Region { ring_pixels: 10, ring_sum: 50, max_count: 4, ..Region::default() };
+        let flat = Region {
+            ring_pixels: 10,
+            ring_sum: 50,
+            max_count: 4,
+            ..Region::default()
+        };
         assert_eq!(region_gray(4, &flat, &p, 255), 26);
     }
 }

@@ -72,7 +72,11 @@ fn find(parents: &[u16], mut x: u16) -> u16 {
 pub(crate) fn label(ws: &mut Workspace<'_>, rows: u16) -> LabelStats {
     let width = usize::from(ws.sizes.width);
     let px = width * usize::from(rows);
-    let cap_prov = ws.parents.len().saturating_sub(1).min(usize::from(NONE) - 1) as u16;
+    let cap_prov = ws
+        .parents
+        .len()
+        .saturating_sub(1)
+        .min(usize::from(NONE) - 1) as u16;
     let cap_regions = ws.regions.len().min(usize::from(NONE) - 1);
     let mut stats = LabelStats::default();
     let labels = &mut ws.labels[..px];
@@ -140,7 +144,12 @@ pub(crate) fn label(ws: &mut Workspace<'_>, rows: u16) -> LabelStats {
         let id = if e & ASSIGNED != 0 {
             e & !ASSIGNED
         } else if n < cap_regions {
-            ws.regions[n] = Region { root, row0: u16::MAX, col0: u16::MAX, ..Region::default() };
+            ws.regions[n] = Region {
+                root,
+                row0: u16::MAX,
+                col0: u16::MAX,
+                ..Region::default()
+            };
             parents[usize::from(root)] = ASSIGNED | n as u16;
             n += 1;
             (n - 1) as u16

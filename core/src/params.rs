@@ -105,10 +105,18 @@ mod tests {
     fn default_levels() {
         let (l, n) = Params::default().levels();
         assert_eq!(&l[..n], &[2, 4, 8, 16, 32, 64, 128]);
-        let p = Params { n0: 1, n_max: 255, ..Params::default() };
+        let p = Params {
+            n0: 1,
+            n_max: 255,
+            ..Params::default()
+        };
         let (l, n) = p.levels();
         assert_eq!(&l[..n], &[1, 2, 4, 8, 16, 32, 64, 128, 255]);
-        let p = Params { n0: 3, n_max: 20, ..Params::default() };
+        let p = Params {
+            n0: 3,
+            n_max: 20,
+            ..Params::default()
+        };
         let (l, n) = p.levels();
         assert_eq!(&l[..n], &[3, 6, 12, 20]);
     }
@@ -117,8 +125,23 @@ mod tests {
     fn validate_ranges() {
         assert!(Params::default().validate(128).is_ok());
         assert!(Params::default().validate(127).is_err());
-        assert!(Params { n0: 0, ..Params::default() }.validate(255).is_err());
-        assert!(Params { n_max: 256, ..Params::default() }.validate(256).is_err());
-        assert!(Params { beta: Beta::ZERO, ..Params::default() }.validate(255).is_err());
+        assert!(Params {
+            n0: 0,
+            ..Params::default()
+        }
+        .validate(255)
+        .is_err());
+        assert!(Params {
+            n_max: 256,
+            ..Params::default()
+        }
+        .validate(256)
+        .is_err());
+        assert!(Params {
+            beta: Beta::ZERO,
+            ..Params::default()
+        }
+        .validate(255)
+        .is_err());
     }
 }

@@ -31,9 +31,16 @@ impl<'a> PlaneView<'a> {
     pub fn new(bytes: &'a [u8], width: u16, height: u16) -> Result<Self, Error> {
         let expected = plane_bytes(width, height).ok_or(Error::BadDimensions)?;
         if bytes.len() != expected {
-            return Err(Error::PlaneSize { expected, got: bytes.len() });
+            return Err(Error::PlaneSize {
+                expected,
+                got: bytes.len(),
+            });
         }
-        Ok(PlaneView { bytes, width, height })
+        Ok(PlaneView {
+            bytes,
+            width,
+            height,
+        })
     }
 
     /// Width in pixels.
@@ -57,7 +64,9 @@ impl<'a> PlaneView<'a> {
             return false;
         }
         let p = usize::from(row) * usize::from(self.width) + usize::from(col);
-        self.bytes.get(p / 8).is_some_and(|b| (b >> (p % 8)) & 1 == 1)
+        self.bytes
+            .get(p / 8)
+            .is_some_and(|b| (b >> (p % 8)) & 1 == 1)
     }
 
     /// Spikes in the whole plane.
@@ -87,8 +96,14 @@ impl<'a> PlaneView<'a> {
             if let (Some(dst), Some(s)) = (buf.get_mut(..avail), src.get(start..start + avail)) {
                 dst.copy_from_slice(s);
             }
-            let lo = u64::from_le_bytes([buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6], buf[7]]);
-            let mut v = if shift == 0 { lo } else { (lo >> shift) | (u64::from(buf[8]) << (64 - shift)) };
+            let lo = u64::from_le_bytes([
+                buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6], buf[7],
+            ]);
+            let mut v = if shift == 0 {
+                lo
+            } else {
+                (lo >> shift) | (u64::from(buf[8]) << (64 - shift))
+            };
             let remaining = width - 64 * j;
             if remaining < 64 {
                 v &= (1u64 << remaining) - 1;
@@ -105,11 +120,20 @@ mod tests {
 
     #[test]
     fn rejects_bad_sizes() {
-        assert_eq!(PlaneView::new(&[0; 2], 3, 5).unwrap_err(), Error::BadDimensions);
-        assert_eq!(PlaneView::new(&[0; 2], 0, 8).unwrap_err(), Error::BadDimensions);
+        assert_eq!(
+            PlaneView::new(&[0; 2], 3, 5).unwrap_err(),
+            Error::BadDimensions
+        );
+        assert_eq!(
+            PlaneView::new(&[0; 2], 0, 8).unwrap_err(),
+            Error::BadDimensions
+        );
         assert_eq!(
             PlaneView::new(&[0; 3], 4, 4).unwrap_err(),
-            Error::PlaneSize { expected: 2, got: 3 }
+            Error::PlaneSize {
+                expected: 2,
+                got: 3
+            }
         );
     }
 

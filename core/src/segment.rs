@@ -140,7 +140,11 @@ pub(crate) fn tile_medians(ws: &mut Workspace<'_>, s0: u16, s1: u16, tiles: &Til
                     }
                 }
             }
-            let (h, m) = if n > 0 { (&hist, n) } else { (&hist_all, n_all) };
+            let (h, m) = if n > 0 {
+                (&hist, n)
+            } else {
+                (&hist_all, n_all)
+            };
             let rank = m.saturating_sub(1) / 2;
             let mut seen = 0u32;
             let mut med = 0u8;
@@ -261,7 +265,11 @@ mod tests {
         let p = Params::default();
         for c in 0..=255u8 {
             for b_q10 in (0..255 * 1024).step_by(97) {
-                assert_eq!(is_particle(c, b_q10, &p), test_f64(c, b_q10, &p), "c={c} b={b_q10}");
+                assert_eq!(
+                    is_particle(c, b_q10, &p),
+                    test_f64(c, b_q10, &p),
+                    "c={c} b={b_q10}"
+                );
             }
         }
         // Poisson would call c = 3 over b = 1 a 2-sigma event; here it is 4 sigma.
@@ -287,4 +295,51 @@ mod tests {
             }
         }
     }
+}
+
+/// Saturation time alone: for every pixel of the band, `t_bgmax` = the
+/// smallest window n of n0, 2n0, …, n_max (centred on `k`) whose count
+/// reaches `N_fs` (rate-scaled when clipped), or n_max if none. `counts` is
+/// scratch of `rows × width` bytes; `out` receives ticks. Unlike
+/// [`crate::reconstruct_adaptive`] it ignores particles: a pixel's own
+/// spikes decide, so more spikes never lengthen it.
+pub fn saturation_times(
+    hist: &History<'_>,
+    k: u32,
+    p: &Params,
+    counts: &mut [u8],
+    out: &mut [u16],
+) -> Result<(), crate::Error> {
+    p.validate(hist.depth())?;
+    if !hist.holds(k) {
+        return Err(crate::Error::TickUnavailable);
+    }
+    let px = usize::from(hist.width()) * usize::from(hist.rows());
+    crate::window::check_len(counts.len(), px)?;
+    crate::window::check_len(out.len(), px)?;
+    let (levels, nlev) = p.levels();
+    counts[..px].fill(0);
+    out[..px].fill(0);
+    let mut prev: Option<Window> = None;
+    for &n in levels.iter().take(nlev) {
+        let win = Window::in_history(hist, k, n);
+        let rows = (0, hist.rows());
+        match prev {
+            None => add_counts(hist, rows, (win.start, win.end()), &mut counts[..px]),
+            Some(pw) => {
+                add_counts(hist, rows, (win.start, pw.start), &mut counts[..px]);
+                add_counts(hist, rows, (pw.end(), win.end()), &mut counts[..px]);
+            }
+        }
+        prev = Some(win);
+        for (o, &c) in out[..px].iter_mut().zip(counts[..px].iter()) {
+            if *o == 0 && is_saturated(c, &win, p.n_fs) {
+                *o = n;
+            }
+        }
+    }
+    for o in out[..px].iter_mut().filter(|o| **o == 0) {
+        *o = p.n_max;
+    }
+    Ok(())
 }

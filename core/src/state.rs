@@ -31,20 +31,21 @@ pub struct WorkspaceSizes {
     pub rows: u16,
     /// Regions the table holds; more are left as background and counted.
     pub max_regions: u16,
-    /// Provisional labels of the labelling pass (union-find entries).
+    /// Provisional labels of the labelling pass (union-find entries), at most 32766.
     pub max_provisional: u16,
 }
 
 impl WorkspaceSizes {
     /// A workspace for `rows × width` pixels with room for one region per
-    /// 64 pixels and one provisional label per 16 pixels (both capped at 65535).
+    /// 64 pixels and one provisional label per 8 pixels (capped at 32766,
+    /// the labeller's limit).
     pub fn for_strip(width: u16, rows: u16) -> Self {
         let px = usize::from(width) * usize::from(rows);
         WorkspaceSizes {
             width,
             rows,
             max_regions: (px / 64).clamp(16, 65535) as u16,
-            max_provisional: (px / 16).clamp(64, 65534) as u16,
+            max_provisional: (px / 8).clamp(64, 32766) as u16,
         }
     }
     /// Pixels of the strip.

@@ -34,14 +34,22 @@ impl Window {
         let e2 = e.min(i64::from(newest) + 1);
         let len = (e2 - a2).clamp(0, i64::from(n)) as u16;
         let start = a2.clamp(0, i64::from(u32::MAX)) as u32;
-        Window { start, len, nominal: n }
+        Window {
+            start,
+            len,
+            nominal: n,
+        }
     }
 
     /// The window of `n` ticks centred on `k` in `hist` (empty if it holds nothing).
     pub fn in_history(hist: &History<'_>, k: u32, n: u16) -> Window {
         match (hist.oldest(), hist.newest()) {
             (Some(o), Some(w)) => Window::centred(k, n, o, w),
-            _ => Window { start: k, len: 0, nominal: n },
+            _ => Window {
+                start: k,
+                len: 0,
+                nominal: n,
+            },
         }
     }
 
@@ -133,7 +141,11 @@ pub fn tfp<G: crate::frame::Gray>(
     counts.fill(0);
     add_counts(hist, (0, hist.rows()), (win.start, win.end()), counts);
     for (o, &c) in out.iter_mut().zip(counts.iter()) {
-        *o = G::from_level(scale(full_scale.min(G::MAX), u64::from(c), u64::from(win.len)));
+        *o = G::from_level(scale(
+            full_scale.min(G::MAX),
+            u64::from(c),
+            u64::from(win.len),
+        ));
     }
     Ok(win)
 }
@@ -170,7 +182,11 @@ pub fn tfi<G: crate::frame::Gray>(
     for (r, orow) in (0..hist.rows()).zip(out.chunks_exact_mut(width)) {
         for (j, ow) in orow.chunks_mut(64).enumerate() {
             let lanes = ow.len();
-            let all = if lanes == 64 { u64::MAX } else { (1u64 << lanes) - 1 };
+            let all = if lanes == 64 {
+                u64::MAX
+            } else {
+                (1u64 << lanes) - 1
+            };
             let mut prev = [u32::MAX; 64];
             let mut next = [u32::MAX; 64];
             // Backwards from k for the last spike at or before k.
@@ -200,7 +216,11 @@ pub fn tfi<G: crate::frame::Gray>(
                 t += 1;
             }
             for ((o, &p), &nx) in ow.iter_mut().zip(prev.iter()).zip(next.iter()) {
-                let isi = if p == u32::MAX || nx == u32::MAX { u32::from(n_max) } else { nx - p };
+                let isi = if p == u32::MAX || nx == u32::MAX {
+                    u32::from(n_max)
+                } else {
+                    nx - p
+                };
                 *o = G::from_level(scale(fs, 1, u64::from(isi)));
             }
         }
@@ -242,7 +262,8 @@ mod tests {
                     bytes[p / 8] |= 1 << (p % 8);
                 }
             }
-            hist.push(&PlaneView::new(&bytes[..nbytes], w, h).unwrap()).unwrap();
+            hist.push(&PlaneView::new(&bytes[..nbytes], w, h).unwrap())
+                .unwrap();
         }
         let mut counts = [0u8; 72 * 8];
         let mut out = [0u8; 72 * 8];

@@ -6,7 +6,9 @@
 use spiv_core::label::Region;
 use spiv_core::segment::{decode, Class};
 use spiv_core::state::Buffers;
-use spiv_core::{reconstruct_adaptive, Gray, History, Params, PlaneView, Workspace, WorkspaceSizes};
+use spiv_core::{
+    reconstruct_adaptive, Gray, History, Params, PlaneView, Workspace, WorkspaceSizes,
+};
 use spiv_firmware_sim::scene::{Profile, Scene, SceneParams};
 use spiv_firmware_sim::sensor::{simulate, SensorParams};
 use spiv_host::reference::{adaptive_frame, RefClass, SpikeVolume};
@@ -18,7 +20,14 @@ struct CoreFrame<G> {
     out: Vec<G>,
 }
 
-fn run_core<G: Gray>(packed: &[u8], w: u16, h: u16, k: u32, p: &Params, strip_rows: u16) -> CoreFrame<G> {
+fn run_core<G: Gray>(
+    packed: &[u8],
+    w: u16,
+    h: u16,
+    k: u32,
+    p: &Params,
+    strip_rows: u16,
+) -> CoreFrame<G> {
     let plane = usize::from(w) * usize::from(h) / 8;
     // A ring at least n_max deep; a shorter recording clips the windows.
     let depth = ((packed.len() / plane) as u16).max(p.n_max);
@@ -27,7 +36,10 @@ fn run_core<G: Gray>(packed: &[u8], w: u16, h: u16, k: u32, p: &Params, strip_ro
     for bytes in packed.chunks_exact(plane) {
         hist.push(&PlaneView::new(bytes, w, h).unwrap()).unwrap();
     }
-    let sizes = WorkspaceSizes::for_strip(w, strip_rows);
+    // Tables as large as the reference's (unbounded) ones can get.
+    let mut sizes = WorkspaceSizes::for_strip(w, strip_rows);
+    sizes.max_regions = (sizes.pixels() / 3).min(30000) as u16;
+    sizes.max_provisional = (sizes.pixels() / 2).min(32766) as u16;
     let px = sizes.pixels();
     let (mut counts, mut c_t, mut class) = (vec![0u8; px], vec![0u8; px], vec![0u8; px]);
     let mut labels = vec![0u16; px];
@@ -51,15 +63,29 @@ fn run_core<G: Gray>(packed: &[u8], w: u16, h: u16, k: u32, p: &Params, strip_ro
     .unwrap();
     let mut out = vec![G::default(); usize::from(w) * usize::from(h)];
     let stats = reconstruct_adaptive(&hist, k, p, &mut ws, &mut out).unwrap();
-    let n = if stats.strips == 1 { stats.labels.regions as usize } else { 0 };
+    let n = if stats.strips == 1 {
+        stats.labels.regions as usize
+    } else {
+        0
+    };
     let regs = ws.regions(n).to_vec();
     let class = ws.class().to_vec();
     let labels = ws.labels().to_vec();
-    CoreFrame { class, labels, regions: regs, out }
+    CoreFrame {
+        class,
+        labels,
+        regions: regs,
+        out,
+    }
 }
 
 fn scene_stream(profile: Profile, seed: u64, w: u16, h: u16, ticks: u32) -> Vec<u8> {
-    let params = SceneParams { width: w, height: h, profile, ..SceneParams::default() };
+    let params = SceneParams {
+        width: w,
+        height: h,
+        profile,
+        ..SceneParams::default()
+    };
     let scene = Scene::new(params, seed, 200.0);
     simulate(&scene, SensorParams::default(), seed, 0, ticks)
 }
@@ -76,8 +102,18 @@ fn compare<G: Gray>(packed: &[u8], w: u16, h: u16, k: u32, p: &Params) -> (usize
             RefClass::Particle(l) => (Class::Particle, l),
             RefClass::Background(l) => (Class::Background, l),
         };
-        assert_eq!((cls, lev), want, "class of pixel {i} (row {}, col {})", i / usize::from(w), i % usize::from(w));
-        assert_eq!(u32::from(core.labels[i]), reference.labels[i], "label of pixel {i}");
+        assert_eq!(
+            (cls, lev),
+            want,
+            "class of pixel {i} (row {}, col {})",
+            i / usize::from(w),
+            i % usize::from(w)
+        );
+        assert_eq!(
+            u32::from(core.labels[i]),
+            reference.labels[i],
+            "label of pixel {i}"
+        );
     }
     let n_core: Vec<u16> = core.regions.iter().map(|r| r.n_star).collect();
     assert_eq!(n_core, reference.n_star, "region windows n*");
@@ -91,7 +127,11 @@ fn compare<G: Gray>(packed: &[u8], w: u16, h: u16, k: u32, p: &Params) -> (usize
         }
     }
     let frac = within as f64 / px as f64;
-    assert!(frac >= 0.999, "only {:.4} % of pixels within 1 gray level (worst {worst})", frac * 100.0);
+    assert!(
+        frac >= 0.999,
+        "only {:.4} % of pixels within 1 gray level (worst {worst})",
+        frac * 100.0
+    );
     (core.regions.len(), worst)
 }
 
@@ -100,7 +140,10 @@ fn paper_linear_scene_matches_reference() {
     let (w, h) = (400, 250);
     let packed = scene_stream(Profile::Linear, 7, w, h, 160);
     let (regions, worst) = compare::<u8>(&packed, w, h, 80, &Params::default());
-    assert!(regions > 100, "the scene must produce particle regions, got {regions}");
+    assert!(
+        regions > 100,
+        "the scene must produce particle regions, got {regions}"
+    );
     assert!(worst <= 1.0, "worst difference {worst}");
 }
 
@@ -137,8 +180,57 @@ fn strips_agree_with_one_pass_away_from_their_edges() {
     let p = Params::default();
     let whole = run_core::<u8>(&packed, w, h, 70, &p, h);
     let strips = run_core::<u8>(&packed, w, h, 70, &p, 96);
-    let same = whole.out.iter().zip(&strips.out).filter(|(a, b)| a == b).count();
+    let same = whole
+        .out
+        .iter()
+        .zip(&strips.out)
+        .filter(|(a, b)| a == b)
+        .count();
     let frac = same as f64 / whole.out.len() as f64;
-    assert!(frac > 0.98, "strip processing changed {:.2} % of pixels", (1.0 - frac) * 100.0);
+    assert!(
+        frac > 0.98,
+        "strip processing changed {:.2} % of pixels",
+        (1.0 - frac) * 100.0
+    );
 }
 
+proptest::proptest! {
+    /// Random streams: a dim background, a bright band and random blobs,
+    /// with random parameters; the core must make the reference's decisions.
+    #[test]
+    fn random_streams_match_reference(
+        seed in proptest::prelude::any::<u64>(),
+        n_max in 4u16..=160,
+        n_fs in 2u16..=64,
+        k_tenths in 10u16..=50,
+        k_frac in 0.0f64..1.0,
+    ) {
+        let (w, h) = (64u16, 48u16);
+        let ticks = 170usize;
+        let px = usize::from(w) * usize::from(h);
+        let mut s = seed | 1;
+        let mut next = move || { s ^= s << 13; s ^= s >> 7; s ^= s << 17; s };
+        let mut rate = vec![0u64; px];
+        for (i, r) in rate.iter_mut().enumerate() {
+            let row = i / usize::from(w);
+            *r = 3 + if row < 10 { 150 } else { 0 };
+        }
+        for _ in 0..20 {
+            let (cr, cc) = ((next() % u64::from(h)) as i64, (next() % u64::from(w)) as i64);
+            let bright = 40 + next() % 120;
+            for dr in -1..=1i64 { for dc in -1..=1i64 {
+                let (r, c) = (cr + dr, cc + dc);
+                if r >= 0 && c >= 0 && r < i64::from(h) && c < i64::from(w) {
+                    rate[r as usize * usize::from(w) + c as usize] += bright;
+                }
+            }}
+        }
+        let mut packed = vec![0u8; px / 8 * ticks];
+        for t in 0..ticks { for p in 0..px {
+            if next() % 1024 < rate[p] * 4 { packed[t * px / 8 + p / 8] |= 1 << (p % 8); }
+        }}
+        let p = Params { n0: 2.min(n_max), n_max, n_fs, k_sig: spiv_core::q::KSig::from_num(f64::from(k_tenths) / 10.0), ..Params::default() };
+        let k = (k_frac * (ticks - 1) as f64) as u32;
+        compare::<u8>(&packed, w, h, k, &p);
+    }
+}

@@ -127,8 +127,14 @@ impl Scene {
                         continue;
                     }
                     let peak = params.particle_peak * (1.0 + 0.3 * (2.0 * rng.gen::<f64>() - 1.0));
-                    let diameter = params.diameter.0 + (params.diameter.1 - params.diameter.0) * rng.gen::<f64>();
-                    particles.push(Particle { x, row, peak, diameter });
+                    let diameter = params.diameter.0
+                        + (params.diameter.1 - params.diameter.0) * rng.gen::<f64>();
+                    particles.push(Particle {
+                        x,
+                        row,
+                        peak,
+                        diameter,
+                    });
                     have += 1;
                 }
                 if have >= params.per_cell && cx0 >= 0.0 {
@@ -137,7 +143,11 @@ impl Scene {
             }
         }
         let image_cells = (w / 32.0).ceil() as usize * cells_y;
-        Scene { params, particles, density_reached: (reached, image_cells) }
+        Scene {
+            params,
+            particles,
+            density_reached: (reached, image_cells),
+        }
     }
 
     /// Height above the wall of a row coordinate (row centre at i + 0.5), px.
@@ -172,7 +182,10 @@ impl Scene {
     /// `light` (`width × height`, image rows top-down): the static part plus
     /// every particle, each only inside its 3σ box.
     pub fn render(&self, t: f64, light: &mut [f64]) {
-        let (w, h) = (usize::from(self.params.width), usize::from(self.params.height));
+        let (w, h) = (
+            usize::from(self.params.width),
+            usize::from(self.params.height),
+        );
         for (i, row) in light.chunks_exact_mut(w).enumerate().take(h) {
             row.fill(self.static_light(i));
         }
@@ -181,7 +194,10 @@ impl Scene {
             let sigma = p.diameter / 4.0;
             let r = 3.0 * sigma;
             let (c0, c1) = ((x - r).floor().max(0.0), (x + r).ceil().min(w as f64));
-            let (r0, r1) = ((p.row - r).floor().max(0.0), (p.row + r).ceil().min(h as f64));
+            let (r0, r1) = (
+                (p.row - r).floor().max(0.0),
+                (p.row + r).ceil().min(h as f64),
+            );
             if c1 <= c0 || r1 <= r0 {
                 continue;
             }

@@ -33,7 +33,12 @@ pub struct SensorParams {
 
 impl Default for SensorParams {
     fn default() -> Self {
-        SensorParams { phi0: 1000.0, dark: 0.005, sigma_fpn: 0.03, reset: Reset::Zero }
+        SensorParams {
+            phi0: 1000.0,
+            dark: 0.005,
+            sigma_fpn: 0.03,
+            reset: Reset::Zero,
+        }
     }
 }
 
@@ -57,7 +62,9 @@ fn photoelectrons(rng: &mut ChaCha8Rng, mean: f64) -> f64 {
     } else if mean < 30.0 {
         Poisson::new(mean).map(|d| d.sample(rng)).unwrap_or(0.0)
     } else {
-        let n: f64 = Normal::new(mean, mean.sqrt()).map(|d| d.sample(rng)).unwrap_or(mean);
+        let n: f64 = Normal::new(mean, mean.sqrt())
+            .map(|d| d.sample(rng))
+            .unwrap_or(mean);
         n.round().max(0.0)
     }
 }
@@ -85,7 +92,14 @@ impl SpikeSensor {
                 charge[i * w + j] = rng.gen::<f64>() * p;
             }
         }
-        SpikeSensor { params, width: w, height: h, charge, phi, rngs }
+        SpikeSensor {
+            params,
+            width: w,
+            height: h,
+            charge,
+            phi,
+            rngs,
+        }
     }
 
     /// One tick: integrates `light` (thresholds/tick, image rows top-down)

@@ -42,7 +42,13 @@ impl SpikeVolume {
                 data[t * width * rows + p] = (bytes[p / 8] >> (p % 8)) & 1;
             }
         }
-        SpikeVolume { width, rows, first, ticks, data }
+        SpikeVolume {
+            width,
+            rows,
+            first,
+            ticks,
+            data,
+        }
     }
 
     fn spike(&self, t: i64, r: usize, c: usize) -> u32 {
@@ -169,8 +175,8 @@ pub fn adaptive_frame(vol: &SpikeVolume, k: u32, p: &Params, fs: f64) -> RefFram
                 let bgd = (1.0 - fy) * ((1.0 - fx) * m(a0, b0) + fx * m(a0, b1))
                     + fy * ((1.0 - fx) * m(a1, b0) + fx * m(a1, b1));
                 let cnt = f64::from(counts[i]);
-                let particle =
-                    cnt > bgd && (cnt - bgd).powi(2) > k_sig * k_sig * count_variance(bgd, sigma, g);
+                let particle = cnt > bgd
+                    && (cnt - bgd).powi(2) > k_sig * k_sig * count_variance(bgd, sigma, g);
                 let saturated = len > 0 && cnt / f64::from(len) >= f64::from(p.n_fs) / f64::from(n);
                 if particle {
                     class[i] = Some(RefClass::Particle(j as u8));
@@ -183,7 +189,10 @@ pub fn adaptive_frame(vol: &SpikeVolume, k: u32, p: &Params, fs: f64) -> RefFram
             }
         }
     }
-    let class: Vec<RefClass> = class.into_iter().map(|c| c.unwrap_or(RefClass::Background(0))).collect();
+    let class: Vec<RefClass> = class
+        .into_iter()
+        .map(|c| c.unwrap_or(RefClass::Background(0)))
+        .collect();
 
     // Regions: 8-connected flood fill in raster order; under 3 px is noise.
     let mut labels = vec![0u32; w * h];
@@ -251,8 +260,9 @@ pub fn adaptive_frame(vol: &SpikeVolume, k: u32, p: &Params, fs: f64) -> RefFram
                 if labels[r * w + c] != 0 {
                     continue;
                 }
-                let near = (r.saturating_sub(2)..=(r + 2).min(h - 1))
-                    .any(|rr| (c.saturating_sub(2)..=(c + 2).min(w - 1)).any(|cc| labels[rr * w + cc] == id));
+                let near = (r.saturating_sub(2)..=(r + 2).min(h - 1)).any(|rr| {
+                    (c.saturating_sub(2)..=(c + 2).min(w - 1)).any(|cc| labels[rr * w + cc] == id)
+                });
                 if near {
                     ring.push(r * w + c);
                 }
@@ -290,7 +300,11 @@ pub fn adaptive_frame(vol: &SpikeVolume, k: u32, p: &Params, fs: f64) -> RefFram
         let n = star.0;
         n_star.push(n);
         let b = mean(&ring, n);
-        let cmax = pix.iter().map(|&i| vol.count(k, n, i / w, i % w)).max().unwrap_or(0);
+        let cmax = pix
+            .iter()
+            .map(|&i| vol.count(k, n, i / w, i % w))
+            .max()
+            .unwrap_or(0);
         let lo_gray = fs / beta;
         for &i in pix {
             let c = f64::from(vol.count(k, n, i / w, i % w));
@@ -303,13 +317,20 @@ pub fn adaptive_frame(vol: &SpikeVolume, k: u32, p: &Params, fs: f64) -> RefFram
             };
         }
     }
-    RefFrame { class, labels, n_star, gray }
+    RefFrame {
+        class,
+        labels,
+        n_star,
+        gray,
+    }
 }
 
 /// TFP in `f64`: FS·c/len.
 pub fn tfp(vol: &SpikeVolume, k: u32, n: u16, fs: f64) -> Vec<f64> {
     let (_, len) = vol.window(k, n);
     (0..vol.width * vol.rows)
-        .map(|i| fs * f64::from(vol.count(k, n, i / vol.width, i % vol.width)) / f64::from(len.max(1)))
+        .map(|i| {
+            fs * f64::from(vol.count(k, n, i / vol.width, i % vol.width)) / f64::from(len.max(1))
+        })
         .collect()
 }
