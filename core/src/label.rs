@@ -133,8 +133,7 @@ pub(crate) fn label(ws: &mut Workspace<'_>, rows: u16) -> LabelStats {
     }
     // Pass 2: one region per root, with size and bounding box.
     let mut n = 0usize;
-    for i in 0..px {
-        let l = labels[i];
+    for (i, &l) in labels.iter().enumerate() {
         if l == 0 {
             continue;
         }

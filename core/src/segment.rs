@@ -247,6 +247,53 @@ pub(crate) fn segment(
     stats
 }
 
+/// Saturation time alone: for every pixel of the band, `t_bgmax` = the
+/// smallest window n of n0, 2n0, …, n_max (centred on `k`) whose count
+/// reaches `N_fs` (rate-scaled when clipped), or n_max if none. `counts` is
+/// scratch of `rows × width` bytes; `out` receives ticks. Unlike
+/// [`crate::reconstruct_adaptive`] it ignores particles: a pixel's own
+/// spikes decide, so more spikes never lengthen it.
+pub fn saturation_times(
+    hist: &History<'_>,
+    k: u32,
+    p: &Params,
+    counts: &mut [u8],
+    out: &mut [u16],
+) -> Result<(), crate::Error> {
+    p.validate(hist.depth())?;
+    if !hist.holds(k) {
+        return Err(crate::Error::TickUnavailable);
+    }
+    let px = usize::from(hist.width()) * usize::from(hist.rows());
+    crate::window::check_len(counts.len(), px)?;
+    crate::window::check_len(out.len(), px)?;
+    let (levels, nlev) = p.levels();
+    counts[..px].fill(0);
+    out[..px].fill(0);
+    let mut prev: Option<Window> = None;
+    for &n in levels.iter().take(nlev) {
+        let win = Window::in_history(hist, k, n);
+        let rows = (0, hist.rows());
+        match prev {
+            None => add_counts(hist, rows, (win.start, win.end()), &mut counts[..px]),
+            Some(pw) => {
+                add_counts(hist, rows, (win.start, pw.start), &mut counts[..px]);
+                add_counts(hist, rows, (pw.end(), win.end()), &mut counts[..px]);
+            }
+        }
+        prev = Some(win);
+        for (o, &c) in out[..px].iter_mut().zip(counts[..px].iter()) {
+            if *o == 0 && is_saturated(c, &win, p.n_fs) {
+                *o = n;
+            }
+        }
+    }
+    for o in out[..px].iter_mut().filter(|o| **o == 0) {
+        *o = p.n_max;
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -295,51 +342,4 @@ mod tests {
             }
         }
     }
-}
-
-/// Saturation time alone: for every pixel of the band, `t_bgmax` = the
-/// smallest window n of n0, 2n0, …, n_max (centred on `k`) whose count
-/// reaches `N_fs` (rate-scaled when clipped), or n_max if none. `counts` is
-/// scratch of `rows × width` bytes; `out` receives ticks. Unlike
-/// [`crate::reconstruct_adaptive`] it ignores particles: a pixel's own
-/// spikes decide, so more spikes never lengthen it.
-pub fn saturation_times(
-    hist: &History<'_>,
-    k: u32,
-    p: &Params,
-    counts: &mut [u8],
-    out: &mut [u16],
-) -> Result<(), crate::Error> {
-    p.validate(hist.depth())?;
-    if !hist.holds(k) {
-        return Err(crate::Error::TickUnavailable);
-    }
-    let px = usize::from(hist.width()) * usize::from(hist.rows());
-    crate::window::check_len(counts.len(), px)?;
-    crate::window::check_len(out.len(), px)?;
-    let (levels, nlev) = p.levels();
-    counts[..px].fill(0);
-    out[..px].fill(0);
-    let mut prev: Option<Window> = None;
-    for &n in levels.iter().take(nlev) {
-        let win = Window::in_history(hist, k, n);
-        let rows = (0, hist.rows());
-        match prev {
-            None => add_counts(hist, rows, (win.start, win.end()), &mut counts[..px]),
-            Some(pw) => {
-                add_counts(hist, rows, (win.start, pw.start), &mut counts[..px]);
-                add_counts(hist, rows, (pw.end(), win.end()), &mut counts[..px]);
-            }
-        }
-        prev = Some(win);
-        for (o, &c) in out[..px].iter_mut().zip(counts[..px].iter()) {
-            if *o == 0 && is_saturated(c, &win, p.n_fs) {
-                *o = n;
-            }
-        }
-    }
-    for o in out[..px].iter_mut().filter(|o| **o == 0) {
-        *o = p.n_max;
-    }
-    Ok(())
 }

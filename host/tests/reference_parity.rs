@@ -3,6 +3,9 @@
 //! Tolerance (stated in `spiv_host::reference`): classes, labels and n*
 //! identical; ≥ 99.9 % of output pixels within 1 gray level.
 
+// Pixel loops index several parallel arrays; an index reads clearest.
+#![allow(clippy::needless_range_loop)]
+
 use spiv_core::label::Region;
 use spiv_core::segment::{decode, Class};
 use spiv_core::state::Buffers;

@@ -1,0 +1,140 @@
+//! Speed against error of the sidecar core on the paper's window (400×250 px):
+//! ingest throughput (pixel-samples per second), the time of one adaptive
+//! frame at n_max = 128, TFP for comparison, and the same frame by the f64
+//! reference with the error between them. Medians from criterion; run with
+//! `cargo bench -p spiv-host --bench core`.
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use spiv_core::label::Region;
+use spiv_core::state::Buffers;
+use spiv_core::window::tfp;
+use spiv_core::{reconstruct_adaptive, History, Params, PlaneView, Workspace, WorkspaceSizes};
+use spiv_firmware_sim::scene::{Scene, SceneParams};
+use spiv_firmware_sim::sensor::{simulate, SensorParams};
+use spiv_host::reference::{adaptive_frame, SpikeVolume};
+use std::hint::black_box;
+
+const W: u16 = 400;
+const H: u16 = 250;
+const TICKS: u32 = 160;
+
+fn stream() -> Vec<u8> {
+    let scene = Scene::new(SceneParams::default(), 1, 200.0);
+    simulate(&scene, SensorParams::default(), 1, 0, TICKS)
+}
+
+fn bench(c: &mut Criterion) {
+    let packed = stream();
+    let plane = usize::from(W) * usize::from(H) / 8;
+    let px = usize::from(W) * usize::from(H);
+
+    let mut g = c.benchmark_group("ingest");
+    g.throughput(Throughput::Elements(px as u64 * u64::from(TICKS)));
+    g.bench_function("400x250 x160 planes", |b| {
+        let mut hb = vec![0u64; History::words_needed(W, H, 128).unwrap()];
+        b.iter(|| {
+            let mut hist = History::new(&mut hb, W, H, 0, H, 128).unwrap();
+            for bytes in packed.chunks_exact(plane) {
+                hist.push(&PlaneView::new(bytes, W, H).unwrap()).unwrap();
+            }
+            black_box(hist.newest());
+        })
+    });
+    g.finish();
+
+    let mut hb = vec![0u64; History::words_needed(W, H, TICKS as u16).unwrap()];
+    let mut hist = History::new(&mut hb, W, H, 0, H, TICKS as u16).unwrap();
+    for bytes in packed.chunks_exact(plane) {
+        hist.push(&PlaneView::new(bytes, W, H).unwrap()).unwrap();
+    }
+    let p = Params::default();
+    let mut g = c.benchmark_group("frame");
+    g.sample_size(30);
+    for strip in [H, 64] {
+        let sizes = WorkspaceSizes::for_strip(W, strip);
+        let n = sizes.pixels();
+        let (mut a, mut b2, mut cl) = (vec![0u8; n], vec![0u8; n], vec![0u8; n]);
+        let mut labels = vec![0u16; n];
+        let mut masks = vec![0u64; sizes.mask_words()];
+        let mut tiles = vec![0u8; sizes.tiles()];
+        let mut parents = vec![0u16; sizes.parents()];
+        let mut regions = vec![Region::default(); usize::from(sizes.max_regions)];
+        let mut ws = Workspace::new(
+            sizes,
+            Buffers {
+                counts: &mut a,
+                c_t: &mut b2,
+                class: &mut cl,
+                labels: &mut labels,
+                masks: &mut masks,
+                tiles: &mut tiles,
+                parents: &mut parents,
+                regions: &mut regions,
+            },
+        )
+        .unwrap();
+        let mut out = vec![0u8; px];
+        g.bench_with_input(
+            BenchmarkId::new("adaptive n_max=128, strip rows", strip),
+            &strip,
+            |b, _| {
+                b.iter(|| {
+                    black_box(reconstruct_adaptive(&hist, 80, &p, &mut ws, &mut out).unwrap())
+                })
+            },
+        );
+    }
+    let mut counts = vec![0u8; px];
+    let mut out = vec![0u8; px];
+    g.bench_function("tfp n=8", |b| {
+        b.iter(|| black_box(tfp(&hist, 80, 8, 255, &mut counts, &mut out).unwrap()))
+    });
+    let vol = SpikeVolume::from_packed(&packed, usize::from(W), usize::from(H), 0);
+    g.sample_size(10);
+    g.bench_function("f64 reference adaptive", |b| {
+        b.iter(|| black_box(adaptive_frame(&vol, 80, &p, 255.0)))
+    });
+    g.finish();
+
+    // Error of the fixed-point core against the reference, printed beside the times.
+    let sizes = WorkspaceSizes::for_strip(W, H);
+    let n = sizes.pixels();
+    let (mut a, mut b2, mut cl) = (vec![0u8; n], vec![0u8; n], vec![0u8; n]);
+    let mut labels = vec![0u16; n];
+    let mut masks = vec![0u64; sizes.mask_words()];
+    let mut tiles = vec![0u8; sizes.tiles()];
+    let mut parents = vec![0u16; sizes.parents()];
+    let mut regions = vec![Region::default(); usize::from(sizes.max_regions)];
+    let mut ws = Workspace::new(
+        sizes,
+        Buffers {
+            counts: &mut a,
+            c_t: &mut b2,
+            class: &mut cl,
+            labels: &mut labels,
+            masks: &mut masks,
+            tiles: &mut tiles,
+            parents: &mut parents,
+            regions: &mut regions,
+        },
+    )
+    .unwrap();
+    let mut out = vec![0u8; px];
+    let stats = reconstruct_adaptive(&hist, 80, &p, &mut ws, &mut out).unwrap();
+    let r = adaptive_frame(&vol, 80, &p, 255.0);
+    let diffs: Vec<f64> = out
+        .iter()
+        .zip(&r.gray)
+        .map(|(&a, &b)| (f64::from(a) - b).abs())
+        .collect();
+    let max = diffs.iter().cloned().fold(0.0, f64::max);
+    let rms = (diffs.iter().map(|d| d * d).sum::<f64>() / diffs.len() as f64).sqrt();
+    println!(
+        "error of the core against the f64 reference: max {max:.3} gray, rms {rms:.3} gray; regions {}, mean n* {:.1} ticks",
+        stats.regions_out,
+        stats.n_star_sum as f64 / f64::from(stats.regions_out.max(1))
+    );
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

@@ -1,0 +1,71 @@
+//! Runs the core's kernels on the default scene for instruction counting
+//! (`valgrind --tool=callgrind`, see README): ingest of 160 planes of
+//! 400×250 px, then one adaptive frame at n_max = 128.
+//!
+//! `cargo run --release -p spiv-host --example core_kernels [frames]`
+
+use spiv_core::label::Region;
+use spiv_core::state::Buffers;
+use spiv_core::{reconstruct_adaptive, History, Params, PlaneView, Workspace, WorkspaceSizes};
+use spiv_firmware_sim::scene::{Scene, SceneParams};
+use spiv_firmware_sim::sensor::{simulate, SensorParams};
+
+const W: u16 = 400;
+const H: u16 = 250;
+
+#[inline(never)]
+fn ingest_all(hist: &mut History<'_>, packed: &[u8]) -> u32 {
+    let plane = usize::from(W) * usize::from(H) / 8;
+    let mut last = 0;
+    for bytes in packed.chunks_exact(plane) {
+        if let Ok(view) = PlaneView::new(bytes, W, H) {
+            last = hist.push(&view).unwrap_or(last);
+        }
+    }
+    last
+}
+
+fn main() {
+    let frames: u32 = std::env::args()
+        .nth(1)
+        .and_then(|a| a.parse().ok())
+        .unwrap_or(1);
+    let scene = Scene::new(SceneParams::default(), 1, 200.0);
+    let packed = simulate(&scene, SensorParams::default(), 1, 0, 160);
+    let mut hb = vec![0u64; History::words_needed(W, H, 160).unwrap()];
+    let mut hist = History::new(&mut hb, W, H, 0, H, 160).unwrap();
+    let last = ingest_all(&mut hist, &packed);
+    let sizes = WorkspaceSizes::for_strip(W, H);
+    let n = sizes.pixels();
+    let (mut a, mut b, mut c) = (vec![0u8; n], vec![0u8; n], vec![0u8; n]);
+    let mut labels = vec![0u16; n];
+    let mut masks = vec![0u64; sizes.mask_words()];
+    let mut tiles = vec![0u8; sizes.tiles()];
+    let mut parents = vec![0u16; sizes.parents()];
+    let mut regions = vec![Region::default(); usize::from(sizes.max_regions)];
+    let mut ws = Workspace::new(
+        sizes,
+        Buffers {
+            counts: &mut a,
+            c_t: &mut b,
+            class: &mut c,
+            labels: &mut labels,
+            masks: &mut masks,
+            tiles: &mut tiles,
+            parents: &mut parents,
+            regions: &mut regions,
+        },
+    )
+    .unwrap();
+    let mut out = vec![0u8; usize::from(W) * usize::from(H)];
+    let mut checksum = 0u64;
+    for f in 0..frames {
+        let stats =
+            reconstruct_adaptive(&hist, 80 - f % 8, &Params::default(), &mut ws, &mut out).unwrap();
+        checksum = out.iter().fold(checksum, |h, &g| {
+            h.wrapping_mul(31).wrapping_add(u64::from(g))
+        });
+        checksum ^= u64::from(stats.regions_out);
+    }
+    println!("planes {} regions-frame checksum {checksum:016x}", last + 1);
+}
