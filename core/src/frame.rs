@@ -19,10 +19,10 @@ use crate::history::History;
 use crate::integrate::{adapt_region, region_gray};
 use crate::label::{label, LabelStats};
 use crate::params::{Params, MAX_LEVELS};
-use crate::segment::{decode, segment, SegmentStats};
+use crate::segment::{decode, segment, SegmentStats, Thresholds};
 use crate::state::Workspace;
 use crate::suppress::background_gray;
-use crate::window::{check_len, Window};
+use crate::window::{check_len, Span, Window};
 
 /// An output pixel type: 8- or 16-bit gray.
 pub trait Gray: Copy + Default {
@@ -117,6 +117,18 @@ pub fn reconstruct_adaptive<G: Gray>(
     for (l, &n) in lens.iter_mut().zip(levels.iter()).take(nlev) {
         *l = Window::in_history(hist, k, n).len;
     }
+    let th = Thresholds::new(p);
+    let span = Span::new(hist, Window::in_history(hist, k, p.n_max));
+    let ctx = Ctx {
+        hist,
+        span: &span,
+        k,
+        p,
+        th: &th,
+        levels: &levels,
+        lens: &lens,
+        fs,
+    };
     let mut stats = FrameStats {
         tick: k,
         ..FrameStats::default()
@@ -126,42 +138,46 @@ pub fn reconstruct_adaptive<G: Gray>(
         let e1 = e0.saturating_add(inner).min(band);
         let s0 = e0.saturating_sub(margin);
         let s1 = e1.saturating_add(margin).min(band);
-        strip(
-            hist,
-            k,
-            p,
-            ws,
-            (s0, s1),
-            (e0, e1),
-            &levels,
-            &lens,
-            fs,
-            out,
-            &mut stats,
-        );
+        strip(&ctx, ws, (s0, s1), (e0, e1), out, &mut stats);
         stats.strips += 1;
         e0 = e1;
     }
     Ok(stats)
 }
 
-#[allow(clippy::too_many_arguments)]
-fn strip<G: Gray>(
-    hist: &History<'_>,
+/// What every strip of one frame shares.
+struct Ctx<'a, 'h> {
+    hist: &'a History<'h>,
+    span: &'a Span<'a>,
     k: u32,
-    p: &Params,
+    p: &'a Params,
+    th: &'a Thresholds,
+    levels: &'a [u16; MAX_LEVELS],
+    lens: &'a [u16; MAX_LEVELS],
+    fs: u16,
+}
+
+fn strip<G: Gray>(
+    ctx: &Ctx<'_, '_>,
     ws: &mut Workspace<'_>,
     (s0, s1): (u16, u16),
     (e0, e1): (u16, u16),
-    levels: &[u16; MAX_LEVELS],
-    lens: &[u16; MAX_LEVELS],
-    fs: u16,
     out: &mut [G],
     stats: &mut FrameStats,
 ) {
+    let Ctx {
+        hist,
+        span,
+        k,
+        p,
+        th,
+        levels,
+        lens,
+        fs,
+    } = *ctx;
     let width = usize::from(hist.width());
     let rows = s1 - s0;
-    let seg = segment(hist, k, p, ws, s0, s1);
+    let seg = segment(span, hist, k, p, th, ws, s0, s1);
     stats.segment.particle_pixels += seg.particle_pixels;
     stats.segment.saturated_pixels += seg.saturated_pixels;
     let lab = label(ws, rows);
@@ -197,7 +213,7 @@ fn strip<G: Gray>(
         if reg.row1 <= r_lo || reg.row0 >= r_hi {
             continue;
         }
-        let reg = adapt_region(hist, k, p, ws, s0, rows, idx);
+        let reg = adapt_region(span, hist, k, p, ws, s0, rows, idx);
         stats.regions_out += 1;
         stats.n_star_sum += u64::from(reg.n_star);
         let id = idx as u16 + 1;

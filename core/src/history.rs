@@ -126,6 +126,18 @@ impl<'a> History<'a> {
         self.buf.get(start..start + self.wpr).unwrap_or(&[])
     }
 
+    /// The whole band at `tick` (`rows × words_per_row` words, row-major);
+    /// empty when the tick is not held.
+    #[inline]
+    pub fn plane(&self, tick: u32) -> &[u64] {
+        if !self.holds(tick) {
+            return &[];
+        }
+        let len = self.slot_len();
+        let start = (tick % u32::from(self.depth)) as usize * len;
+        self.buf.get(start..start + len).unwrap_or(&[])
+    }
+
     /// Spike of band row `row`, column `col` at `tick` (`false` if not held).
     #[inline]
     pub fn bit(&self, tick: u32, row: u16, col: u16) -> bool {

@@ -18,7 +18,7 @@ use crate::history::History;
 use crate::label::Region;
 use crate::params::Params;
 use crate::state::Workspace;
-use crate::window::Window;
+use crate::window::{Span, Window};
 
 /// The two integers that fix a region's SNR at one window, up to a positive
 /// factor shared by all windows of that region:
@@ -98,6 +98,7 @@ struct Bounds {
 /// fills the region's window fields and leaves `c_{n*}` in `ws.counts` for
 /// each of its pixels. `ws.masks` plane 0 must hold "any region" bits.
 pub(crate) fn adapt_region(
+    span: &Span<'_>,
     hist: &History<'_>,
     k: u32,
     p: &Params,
@@ -159,15 +160,14 @@ pub(crate) fn adapt_region(
         }
     }
     // Per-tick spike sums of region and ring over the n_max span.
-    let span = Window::in_history(hist, k, p.n_max);
     let mut ps = [0u32; 256];
     let mut pb = [0u32; 256];
-    for (i, t) in (span.start..span.end()).enumerate() {
+    let band_off = usize::from(s0) * wpr;
+    for (i, plane) in span.planes().iter().enumerate() {
         let (mut hs, mut hb) = (0u32, 0u32);
         for r in b.r0..b.r1 {
-            let words = hist.row(t, s0 + r as u16);
             for j in b.j0..=b.j1 {
-                let w = words.get(j).copied().unwrap_or(0);
+                let w = plane.get(band_off + r * wpr + j).copied().unwrap_or(0);
                 hb += (w & ring[r * wpr + j]).count_ones();
                 if (rr0..rr1).contains(&r) {
                     hs += (w & regm[r * wpr + j]).count_ones();
@@ -225,11 +225,11 @@ pub(crate) fn adapt_region(
             }
         }
     }
-    for t in win.start..win.end() {
+    for plane in span.range(win.start, win.end()) {
         for r in rr0..rr1 {
-            let words = hist.row(t, s0 + r as u16);
             for j in b.j0..=b.j1 {
-                let mut w = words.get(j).copied().unwrap_or(0) & regm[r * wpr + j];
+                let mut w =
+                    plane.get(band_off + r * wpr + j).copied().unwrap_or(0) & regm[r * wpr + j];
                 while w != 0 {
                     let c = j * 64 + w.trailing_zeros() as usize;
                     if let Some(x) = ws.counts.get_mut(r * width + c) {

@@ -89,6 +89,28 @@ impl<'a> PlaneView<'a> {
         let shift = bit0 % 8;
         let row_bytes = (shift + width).div_ceil(8);
         let src = self.bytes.get(byte0..byte0 + row_bytes).unwrap_or(&[]);
+        if shift == 0 {
+            // Byte-aligned rows (any width that is a multiple of 8): whole
+            // words straight from the bytes, the tail word padded with zeros.
+            let mut chunks = src.chunks_exact(8);
+            let mut dst = out.iter_mut();
+            // Chunks first: `zip` must not take an output word it cannot fill.
+            for (c, w) in (&mut chunks).zip(&mut dst) {
+                *w = u64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]);
+            }
+            let rest = chunks.remainder();
+            if let Some(w) = dst.next().filter(|_| !rest.is_empty()) {
+                let mut buf = [0u8; 8];
+                buf[..rest.len()].copy_from_slice(rest);
+                *w = u64::from_le_bytes(buf);
+            }
+            if width % 64 != 0 {
+                if let Some(w) = out.get_mut(wpr - 1) {
+                    *w &= (1u64 << (width % 64)) - 1;
+                }
+            }
+            return true;
+        }
         for (j, w) in out.iter_mut().take(wpr).enumerate() {
             let start = 8 * j;
             let mut buf = [0u8; 9];
@@ -99,11 +121,7 @@ impl<'a> PlaneView<'a> {
             let lo = u64::from_le_bytes([
                 buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6], buf[7],
             ]);
-            let mut v = if shift == 0 {
-                lo
-            } else {
-                (lo >> shift) | (u64::from(buf[8]) << (64 - shift))
-            };
+            let mut v = (lo >> shift) | (u64::from(buf[8]) << (64 - shift));
             let remaining = width - 64 * j;
             if remaining < 64 {
                 v &= (1u64 << remaining) - 1;

@@ -18,7 +18,7 @@ use crate::history::History;
 use crate::params::Params;
 use crate::q::B_FRAC_BITS;
 use crate::state::Workspace;
-use crate::window::{add_counts, Window};
+use crate::window::{add_counts, add_plane_counts, Span, Window};
 
 /// What a pixel is, stored in the high bits of its class byte; the low 4 bits
 /// hold the index of the level (window) at which it was decided.
@@ -90,6 +90,59 @@ pub fn is_particle(c: u8, b_q10: u32, p: &Params) -> bool {
     lhs > var.saturating_mul(q * q)
 }
 
+/// Per-frame tables that decide the particle test without `u128` for almost
+/// every pixel. The test is monotone: harder as `b` grows, easier as `c`
+/// grows. So for `b` in `[1024·f, 1024·f + 1024)`, `c < lo[f]` is never a
+/// particle and `c ≥ hi[f]` always is; only `lo[f] ≤ c < hi[f]` needs the
+/// exact test. Exact, not an approximation. 1 KiB.
+#[derive(Debug, Clone)]
+pub struct Thresholds {
+    lo: [u16; 256],
+    hi: [u16; 256],
+}
+
+impl Thresholds {
+    /// Builds the tables for `p` (about 4000 exact tests).
+    pub fn new(p: &Params) -> Thresholds {
+        let cmin = |b_q10: u32| -> u16 {
+            // Smallest c in 0..=255 that passes (256: none); monotone in c.
+            let (mut lo, mut hi) = (0u16, 256u16);
+            while lo < hi {
+                let mid = (lo + hi) / 2;
+                if is_particle(mid as u8, b_q10, p) {
+                    hi = mid;
+                } else {
+                    lo = mid + 1;
+                }
+            }
+            lo
+        };
+        let mut t = Thresholds {
+            lo: [256; 256],
+            hi: [256; 256],
+        };
+        for f in 0..256u32 {
+            t.lo[f as usize] = cmin(f << B_FRAC_BITS);
+            t.hi[f as usize] = cmin((f << B_FRAC_BITS) + (1 << B_FRAC_BITS) - 1);
+        }
+        t
+    }
+
+    /// Same answer as [`is_particle`].
+    #[inline]
+    pub fn is_particle(&self, c: u8, b_q10: u32, p: &Params) -> bool {
+        let f = ((b_q10 >> B_FRAC_BITS) as usize).min(255);
+        let c16 = u16::from(c);
+        if c16 < self.lo[f] {
+            false
+        } else if c16 >= self.hi[f] {
+            true
+        } else {
+            is_particle(c, b_q10, p)
+        }
+    }
+}
+
 /// Saturation: `c` spikes over `len` of `n` ticks reach `N_fs` spikes per n.
 #[inline]
 pub fn is_saturated(c: u8, win: &Window, n_fs: u16) -> bool {
@@ -125,26 +178,28 @@ pub(crate) fn tile_medians(ws: &mut Workspace<'_>, s0: u16, s1: u16, tiles: &Til
             let c_lo = tx * 16;
             let c_hi = (tx * 16 + 16).min(width);
             let mut hist = [0u16; 256];
-            let mut hist_all = [0u16; 256];
             let mut n = 0u32;
-            let mut n_all = 0u32;
             for r in r_lo..r_hi {
                 let base = (r - usize::from(s0)) * width;
-                for i in base + c_lo..base + c_hi {
-                    let c = usize::from(ws.counts.get(i).copied().unwrap_or(0));
-                    hist_all[c] += 1;
-                    n_all += 1;
-                    if decode(ws.class.get(i).copied().unwrap_or(0)).0 != Class::Particle {
-                        hist[c] += 1;
+                let row = base + c_lo..base + c_hi;
+                for (&c, &cl) in ws.counts[row.clone()].iter().zip(&ws.class[row]) {
+                    if decode(cl).0 != Class::Particle {
+                        hist[usize::from(c)] += 1;
                         n += 1;
                     }
                 }
             }
-            let (h, m) = if n > 0 {
-                (&hist, n)
-            } else {
-                (&hist_all, n_all)
-            };
+            if n == 0 {
+                // A tile of particle pixels only: the median of all its counts.
+                for r in r_lo..r_hi {
+                    let base = (r - usize::from(s0)) * width;
+                    for &c in &ws.counts[base + c_lo..base + c_hi] {
+                        hist[usize::from(c)] += 1;
+                        n += 1;
+                    }
+                }
+            }
+            let (h, m) = (&hist, n);
             let rank = m.saturating_sub(1) / 2;
             let mut seen = 0u32;
             let mut med = 0u8;
@@ -175,12 +230,14 @@ pub(crate) fn tile_pos(i: usize, lo: usize, hi: usize) -> (usize, usize, u32) {
 }
 
 /// Runs the segmentation over strip rows `s0..s1` (band rows) for a frame at
-/// tick `k`. Leaves every pixel's class, `c_t` (count at its deciding
-/// window) and, in `counts`, its count at the last level.
+/// tick `k`. Leaves every pixel's class and `c_t` (count at its deciding
+/// window); `span` holds the planes of the n_max window.
 pub(crate) fn segment(
+    span: &Span<'_>,
     hist: &History<'_>,
     k: u32,
     p: &Params,
+    th: &Thresholds,
     ws: &mut Workspace<'_>,
     s0: u16,
     s1: u16,
@@ -190,57 +247,89 @@ pub(crate) fn segment(
     let (levels, nlev) = p.levels();
     let tiles = Tiles::for_strip(ws.sizes.width, s0, s1);
     let mut stats = SegmentStats::default();
-    let class_active = encode(Class::Active, 0);
+    let active = encode(Class::Active, 0);
     ws.counts[..px].fill(0);
-    ws.class[..px].fill(class_active);
+    ws.class[..px].fill(active);
     ws.c_t[..px].fill(0);
     let mut prev: Option<Window> = None;
     for (j, &n) in levels.iter().enumerate().take(nlev) {
         let win = Window::in_history(hist, k, n);
         // Windows are nested: add only the ticks the previous one lacked.
+        let rows = (s0, s1);
         match prev {
-            None => add_counts(hist, (s0, s1), (win.start, win.end()), &mut ws.counts[..px]),
+            None => add_plane_counts(
+                span.range(win.start, win.end()),
+                hist.width(),
+                rows,
+                &mut ws.counts[..px],
+            ),
             Some(pw) => {
-                add_counts(hist, (s0, s1), (win.start, pw.start), &mut ws.counts[..px]);
-                add_counts(hist, (s0, s1), (pw.end(), win.end()), &mut ws.counts[..px]);
+                add_plane_counts(
+                    span.range(win.start, pw.start),
+                    hist.width(),
+                    rows,
+                    &mut ws.counts[..px],
+                );
+                add_plane_counts(
+                    span.range(pw.end(), win.end()),
+                    hist.width(),
+                    rows,
+                    &mut ws.counts[..px],
+                );
             }
         }
         prev = Some(win);
         tile_medians(ws, s0, s1, &tiles);
+        // c ≥ sat_c ⟺ c·n ≥ N_fs·len (the rate reaches N_fs/n).
+        let sat_c = if win.len == 0 {
+            u32::MAX
+        } else {
+            (u32::from(p.n_fs) * u32::from(win.len)).div_ceil(u32::from(n))
+        };
+        let decided_bg = encode(Class::Background, j as u8);
+        let decided_particle = encode(Class::Particle, j as u8);
         let last = j + 1 == nlev;
         for r in s0..s1 {
             let (ty0, ty1, fy) = tile_pos(usize::from(r), tiles.y0, tiles.y1);
             let (wy0, wy1) = (32 - fy, fy);
             let row_t0 = (ty0 - tiles.y0) * tiles.x;
             let row_t1 = (ty1 - tiles.y0) * tiles.x;
+            let m = |t: usize| u32::from(ws.tiles.get(t).copied().unwrap_or(0));
             let base = usize::from(r - s0) * width;
-            let mut cached = ((usize::MAX, usize::MAX), 0u32, 0u32);
-            for x in 0..width {
-                let i = base + x;
-                if ws.class[i] != class_active {
-                    continue;
-                }
+            let counts = &ws.counts[base..base + width];
+            let class = &mut ws.class[base..base + width];
+            let c_t = &mut ws.c_t[base..base + width];
+            // Runs of pixels between the same two tile centres: x in [0, 8),
+            // then [8 + 16t, 24 + 16t). Along a run the background is linear
+            // in x, so it advances by a constant step (exact, in 1/1024).
+            let mut x = 0usize;
+            while x < width {
+                let run_end = if x < 8 { 8 } else { x + 16 - (x - 8) % 16 }.min(width);
                 let (tx0, tx1, fx) = tile_pos(x, 0, tiles.x - 1);
-                if cached.0 != (tx0, tx1) {
-                    let m = |t: usize| u32::from(ws.tiles.get(t).copied().unwrap_or(0));
-                    let r0 = wy0 * m(row_t0 + tx0) + wy1 * m(row_t1 + tx0);
-                    let r1 = wy0 * m(row_t0 + tx1) + wy1 * m(row_t1 + tx1);
-                    cached = ((tx0, tx1), r0, r1);
+                let r0 = wy0 * m(row_t0 + tx0) + wy1 * m(row_t1 + tx0);
+                let r1 = wy0 * m(row_t0 + tx1) + wy1 * m(row_t1 + tx1);
+                let mut b = i64::from((32 - fx) * r0 + fx * r1);
+                let step = 2 * (i64::from(r1) - i64::from(r0));
+                for i in x..run_end {
+                    if class[i] == active {
+                        let c = counts[i];
+                        let b_q10 = b as u32;
+                        if th.is_particle(c, b_q10, p) {
+                            class[i] = decided_particle;
+                            c_t[i] = c;
+                            stats.particle_pixels += 1;
+                        } else if u32::from(c) >= sat_c {
+                            class[i] = decided_bg;
+                            c_t[i] = c;
+                            stats.saturated_pixels += 1;
+                        } else if last {
+                            class[i] = decided_bg;
+                            c_t[i] = c;
+                        }
+                    }
+                    b += step;
                 }
-                let b_q10 = (32 - fx) * cached.1 + fx * cached.2;
-                let c = ws.counts[i];
-                if is_particle(c, b_q10, p) {
-                    ws.class[i] = encode(Class::Particle, j as u8);
-                    ws.c_t[i] = c;
-                    stats.particle_pixels += 1;
-                } else if is_saturated(c, &win, p.n_fs) {
-                    ws.class[i] = encode(Class::Background, j as u8);
-                    ws.c_t[i] = c;
-                    stats.saturated_pixels += 1;
-                } else if last {
-                    ws.class[i] = encode(Class::Background, j as u8);
-                    ws.c_t[i] = c;
-                }
+                x = run_end;
             }
         }
     }

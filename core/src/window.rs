@@ -76,23 +76,100 @@ const SPREAD: [u64; 256] = {
     t
 };
 
+/// The planes of a window, gathered once: slice `i` is the band at tick
+/// `start + i` (an empty slice for a tick not held). At most 256 planes.
+#[derive(Debug)]
+pub struct Span<'h> {
+    /// First tick.
+    pub start: u32,
+    planes: heapless::Vec<&'h [u64], 256>,
+}
+
+impl<'h> Span<'h> {
+    /// The planes of `win` (clipped to 256 ticks).
+    pub fn new(hist: &'h History<'_>, win: Window) -> Span<'h> {
+        let mut planes = heapless::Vec::new();
+        for t in win.start..win.end() {
+            if planes.push(hist.plane(t)).is_err() {
+                break;
+            }
+        }
+        Span {
+            start: win.start,
+            planes,
+        }
+    }
+
+    /// The planes of ticks `a..e` (clipped to the span).
+    #[inline]
+    pub fn range(&self, a: u32, e: u32) -> &[&'h [u64]] {
+        let lo = (a.saturating_sub(self.start) as usize).min(self.planes.len());
+        let hi = (e.saturating_sub(self.start) as usize).clamp(lo, self.planes.len());
+        &self.planes[lo..hi]
+    }
+
+    /// All planes.
+    pub fn planes(&self) -> &[&'h [u64]] {
+        &self.planes
+    }
+}
+
 /// Adds, for every pixel of band rows `rows.0..rows.1`, its spikes over
 /// ticks `ticks.0..ticks.1` to `counts` (row-major, `width` per row, first
 /// row = `rows.0`). Ticks not held count nothing. The caller keeps every
 /// count ≤ 255 (at most 255 ticks in all); bytes wrap otherwise.
 pub fn add_counts(hist: &History<'_>, rows: (u16, u16), ticks: (u32, u32), counts: &mut [u8]) {
-    let width = usize::from(hist.width());
-    if ticks.1 <= ticks.0 || width == 0 {
+    if ticks.1 <= ticks.0 {
+        return;
+    }
+    let len = (ticks.1 - ticks.0).min(256) as u16;
+    let span = Span::new(
+        hist,
+        Window {
+            start: ticks.0,
+            len,
+            nominal: len,
+        },
+    );
+    add_plane_counts(span.planes(), hist.width(), rows, counts);
+}
+
+/// [`add_counts`] over planes already gathered (each `band rows × words`).
+///
+/// Bit-sliced: 15 planes at a time are summed into 4-bit vertical counters
+/// (four words hold 64 pixels' counts; 7 logic ops per plane per 64 px), then
+/// flushed into the byte counters through the `SPREAD` table. Hand-written
+/// because this is the hot loop of every frame.
+pub fn add_plane_counts(planes: &[&[u64]], width: u16, rows: (u16, u16), counts: &mut [u8]) {
+    let width = usize::from(width);
+    let wpr = crate::plane::words_per_row(width as u16);
+    if planes.is_empty() || width == 0 {
         return;
     }
     for (r, crow) in (rows.0..rows.1).zip(counts.chunks_exact_mut(width)) {
+        let row_off = usize::from(r) * wpr;
         for (j, cw) in crow.chunks_mut(64).enumerate() {
-            // Eight byte-lane accumulators hold the 64 pixels of this word.
+            let idx = row_off + j;
             let mut acc = [0u64; 8];
-            for t in ticks.0..ticks.1 {
-                let w = hist.row(t, r).get(j).copied().unwrap_or(0);
+            for chunk in planes.chunks(15) {
+                let (mut s0, mut s1, mut s2, mut s3) = (0u64, 0u64, 0u64, 0u64);
+                for p in chunk {
+                    let x = p.get(idx).copied().unwrap_or(0);
+                    let c0 = s0 & x;
+                    s0 ^= x;
+                    let c1 = s1 & c0;
+                    s1 ^= c0;
+                    let c2 = s2 & c1;
+                    s2 ^= c1;
+                    s3 ^= c2;
+                }
+                if s0 | s1 | s2 | s3 == 0 {
+                    continue;
+                }
                 for (g, a) in acc.iter_mut().enumerate() {
-                    *a = a.wrapping_add(SPREAD[((w >> (8 * g)) & 0xff) as usize]);
+                    let sh = 8 * g;
+                    let b = |s: u64| SPREAD[((s >> sh) & 0xff) as usize];
+                    *a = a.wrapping_add(b(s0) + (b(s1) << 1) + (b(s2) << 2) + (b(s3) << 3));
                 }
             }
             for (g, c8) in cw.chunks_mut(8).enumerate() {

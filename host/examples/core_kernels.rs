@@ -25,6 +25,16 @@ fn ingest_all(hist: &mut History<'_>, packed: &[u8]) -> u32 {
     last
 }
 
+#[inline(never)]
+fn frame_once(
+    hist: &History<'_>,
+    k: u32,
+    ws: &mut Workspace<'_>,
+    out: &mut [u8],
+) -> spiv_core::FrameStats {
+    reconstruct_adaptive(hist, k, &Params::default(), ws, out).unwrap()
+}
+
 fn main() {
     let frames: u32 = std::env::args()
         .nth(1)
@@ -60,8 +70,7 @@ fn main() {
     let mut out = vec![0u8; usize::from(W) * usize::from(H)];
     let mut checksum = 0u64;
     for f in 0..frames {
-        let stats =
-            reconstruct_adaptive(&hist, 80 - f % 8, &Params::default(), &mut ws, &mut out).unwrap();
+        let stats = frame_once(&hist, 80 - f % 8, &mut ws, &mut out);
         checksum = out.iter().fold(checksum, |h, &g| {
             h.wrapping_mul(31).wrapping_add(u64::from(g))
         });
