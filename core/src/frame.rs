@@ -146,15 +146,15 @@ pub fn reconstruct_adaptive<G: Gray>(
 }
 
 /// What every strip of one frame shares.
-struct Ctx<'a, 'h> {
-    hist: &'a History<'h>,
-    span: &'a Span<'a>,
-    k: u32,
-    p: &'a Params,
-    th: &'a Thresholds,
-    levels: &'a [u16; MAX_LEVELS],
-    lens: &'a [u16; MAX_LEVELS],
-    fs: u16,
+pub(crate) struct Ctx<'a, 'h> {
+    pub hist: &'a History<'h>,
+    pub span: &'a Span<'a>,
+    pub k: u32,
+    pub p: &'a Params,
+    pub th: &'a Thresholds,
+    pub levels: &'a [u16; MAX_LEVELS],
+    pub lens: &'a [u16; MAX_LEVELS],
+    pub fs: u16,
 }
 
 fn strip<G: Gray>(
@@ -167,17 +167,15 @@ fn strip<G: Gray>(
 ) {
     let Ctx {
         hist,
-        span,
-        k,
         p,
-        th,
         levels,
         lens,
         fs,
+        ..
     } = *ctx;
     let width = usize::from(hist.width());
     let rows = s1 - s0;
-    let seg = segment(span, hist, k, p, th, ws, s0, s1);
+    let seg = segment(ctx, ws, s0, s1);
     stats.segment.particle_pixels += seg.particle_pixels;
     stats.segment.saturated_pixels += seg.saturated_pixels;
     let lab = label(ws, rows);
@@ -213,7 +211,7 @@ fn strip<G: Gray>(
         if reg.row1 <= r_lo || reg.row0 >= r_hi {
             continue;
         }
-        let reg = adapt_region(span, hist, k, p, ws, s0, rows, idx);
+        let reg = adapt_region(ctx, ws, s0, rows, idx);
         stats.regions_out += 1;
         stats.n_star_sum += u64::from(reg.n_star);
         let id = idx as u16 + 1;

@@ -14,11 +14,10 @@
 
 use core::cmp::Ordering;
 
-use crate::history::History;
 use crate::label::Region;
 use crate::params::Params;
 use crate::state::Workspace;
-use crate::window::{Span, Window};
+use crate::window::Window;
 
 /// The two integers that fix a region's SNR at one window, up to a positive
 /// factor shared by all windows of that region:
@@ -98,15 +97,15 @@ struct Bounds {
 /// fills the region's window fields and leaves `c_{n*}` in `ws.counts` for
 /// each of its pixels. `ws.masks` plane 0 must hold "any region" bits.
 pub(crate) fn adapt_region(
-    span: &Span<'_>,
-    hist: &History<'_>,
-    k: u32,
-    p: &Params,
+    ctx: &crate::frame::Ctx<'_, '_>,
     ws: &mut Workspace<'_>,
     s0: u16,
     strip_rows: u16,
     idx: usize,
 ) -> Region {
+    let crate::frame::Ctx {
+        hist, span, k, p, ..
+    } = *ctx;
     let mut reg = ws.regions[idx];
     let id = idx as u16 + 1;
     let width = usize::from(ws.sizes.width);

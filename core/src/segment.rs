@@ -18,7 +18,7 @@ use crate::history::History;
 use crate::params::Params;
 use crate::q::B_FRAC_BITS;
 use crate::state::Workspace;
-use crate::window::{add_counts, add_plane_counts, Span, Window};
+use crate::window::{add_counts, add_plane_counts, Window};
 
 /// What a pixel is, stored in the high bits of its class byte; the low 4 bits
 /// hold the index of the level (window) at which it was decided.
@@ -233,15 +233,19 @@ pub(crate) fn tile_pos(i: usize, lo: usize, hi: usize) -> (usize, usize, u32) {
 /// tick `k`. Leaves every pixel's class and `c_t` (count at its deciding
 /// window); `span` holds the planes of the n_max window.
 pub(crate) fn segment(
-    span: &Span<'_>,
-    hist: &History<'_>,
-    k: u32,
-    p: &Params,
-    th: &Thresholds,
+    ctx: &crate::frame::Ctx<'_, '_>,
     ws: &mut Workspace<'_>,
     s0: u16,
     s1: u16,
 ) -> SegmentStats {
+    let crate::frame::Ctx {
+        hist,
+        span,
+        k,
+        p,
+        th,
+        ..
+    } = *ctx;
     let width = usize::from(ws.sizes.width);
     let px = width * usize::from(s1 - s0);
     let (levels, nlev) = p.levels();
