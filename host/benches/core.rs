@@ -9,7 +9,7 @@ use spiv_core::label::Region;
 use spiv_core::state::Buffers;
 use spiv_core::window::tfp;
 use spiv_core::{reconstruct_adaptive, History, Params, PlaneView, Workspace, WorkspaceSizes};
-use spiv_firmware_sim::scene::{Scene, SceneParams};
+use spiv_firmware_sim::scene::{Scene, SceneKind, SceneParams};
 use spiv_firmware_sim::sensor::{simulate, SensorParams};
 use spiv_host::reference::{adaptive_frame, SpikeVolume};
 use std::hint::black_box;
@@ -19,7 +19,7 @@ const H: u16 = 250;
 const TICKS: u32 = 160;
 
 fn stream() -> Vec<u8> {
-    let scene = Scene::new(SceneParams::default(), 1, 200.0);
+    let scene = Scene::new(SceneParams::new(SceneKind::PaperLinear), 1, 160);
     simulate(&scene, SensorParams::default(), 1, 0, TICKS)
 }
 

@@ -7,7 +7,7 @@
 use spiv_core::label::Region;
 use spiv_core::state::Buffers;
 use spiv_core::{reconstruct_adaptive, History, Params, PlaneView, Workspace, WorkspaceSizes};
-use spiv_firmware_sim::scene::{Scene, SceneParams};
+use spiv_firmware_sim::scene::{Scene, SceneKind, SceneParams};
 use spiv_firmware_sim::sensor::{simulate, SensorParams};
 
 const W: u16 = 400;
@@ -40,7 +40,7 @@ fn main() {
         .nth(1)
         .and_then(|a| a.parse().ok())
         .unwrap_or(1);
-    let scene = Scene::new(SceneParams::default(), 1, 200.0);
+    let scene = Scene::new(SceneParams::new(SceneKind::PaperLinear), 1, 160);
     let packed = simulate(&scene, SensorParams::default(), 1, 0, 160);
     let mut hb = vec![0u64; History::words_needed(W, H, 160).unwrap()];
     let mut hist = History::new(&mut hb, W, H, 0, H, 160).unwrap();

@@ -12,7 +12,7 @@ use spiv_core::state::Buffers;
 use spiv_core::{
     reconstruct_adaptive, Gray, History, Params, PlaneView, Workspace, WorkspaceSizes,
 };
-use spiv_firmware_sim::scene::{Profile, Scene, SceneParams};
+use spiv_firmware_sim::scene::{Scene, SceneKind, SceneParams};
 use spiv_firmware_sim::sensor::{simulate, SensorParams};
 use spiv_host::reference::{adaptive_frame, RefClass, SpikeVolume};
 
@@ -82,14 +82,13 @@ fn run_core<G: Gray>(
     }
 }
 
-fn scene_stream(profile: Profile, seed: u64, w: u16, h: u16, ticks: u32) -> Vec<u8> {
+fn scene_stream(kind: SceneKind, seed: u64, w: u16, h: u16, ticks: u32) -> Vec<u8> {
     let params = SceneParams {
         width: w,
         height: h,
-        profile,
-        ..SceneParams::default()
+        ..SceneParams::new(kind)
     };
-    let scene = Scene::new(params, seed, 200.0);
+    let scene = Scene::new(params, seed, ticks);
     simulate(&scene, SensorParams::default(), seed, 0, ticks)
 }
 
@@ -141,7 +140,7 @@ fn compare<G: Gray>(packed: &[u8], w: u16, h: u16, k: u32, p: &Params) -> (usize
 #[test]
 fn paper_linear_scene_matches_reference() {
     let (w, h) = (400, 250);
-    let packed = scene_stream(Profile::Linear, 7, w, h, 160);
+    let packed = scene_stream(SceneKind::PaperLinear, 7, w, h, 160);
     let (regions, worst) = compare::<u8>(&packed, w, h, 80, &Params::default());
     assert!(
         regions > 100,
@@ -154,7 +153,7 @@ fn paper_linear_scene_matches_reference() {
 fn clipped_windows_at_the_start_of_a_recording_match() {
     // A 62-plane file must still reconstruct at any tick.
     let (w, h) = (160, 96);
-    let packed = scene_stream(Profile::Quadratic, 3, w, h, 62);
+    let packed = scene_stream(SceneKind::PaperQuadratic, 3, w, h, 62);
     for k in [0, 5, 31, 61] {
         compare::<u8>(&packed, w, h, k, &Params::default());
     }
@@ -163,7 +162,7 @@ fn clipped_windows_at_the_start_of_a_recording_match() {
 #[test]
 fn sixteen_bit_output_and_other_parameters_match() {
     let (w, h) = (192, 128);
-    let packed = scene_stream(Profile::Log, 11, w, h, 140);
+    let packed = scene_stream(SceneKind::PaperLog, 11, w, h, 140);
     let p = Params {
         n0: 1,
         n_max: 100,
@@ -179,7 +178,7 @@ fn sixteen_bit_output_and_other_parameters_match() {
 #[test]
 fn strips_agree_with_one_pass_away_from_their_edges() {
     let (w, h) = (400, 250);
-    let packed = scene_stream(Profile::Linear, 5, w, h, 140);
+    let packed = scene_stream(SceneKind::PaperLinear, 5, w, h, 140);
     let p = Params::default();
     let whole = run_core::<u8>(&packed, w, h, 70, &p, h);
     let strips = run_core::<u8>(&packed, w, h, 70, &p, 96);

@@ -1,74 +1,121 @@
-//! Scenes (SPEC section 4): a horizontal flow over a wall at the bottom edge,
-//! Gaussian particle images advected with it, and a glare band
-//! `I(y) = I0·exp(−y²/2σ²)` along the wall. Light is in thresholds per tick.
+//! Scenes (SPEC section 4): a flow ([`flow`]), Gaussian particle images
+//! advected with it, and a glare band `I(y) = I0·exp(−y²/2σ²)` along the
+//! wall. Light is in thresholds per tick; geometry in pixels of the upright
+//! image (row 0 at the top, the wall at the bottom edge); time in ticks.
 //!
-//! Geometry: `y = H − 0.5 − i` is the height above the wall of pixel row `i`
-//! (row 0 at the top); flow is left to right; u(y) in pixels per tick.
+//! Model only what a scene needs: the static part of the light (background
+//! and glare) depends on the row only and is computed once; particles are
+//! rendered only inside their 3σ boxes, by a separable Gaussian.
+
+pub mod flow;
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
 
-/// The velocity profile u(y).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Profile {
-    /// u = U·y/H.
-    Linear,
-    /// u = U·(y/H)².
-    Quadratic,
-    /// u = U·ln(1 + y/y0)/ln(1 + H/y0), y0 = 5 px.
-    Log,
-    /// u = U everywhere.
+pub use flow::{Flow, Profile};
+
+/// The named scenes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SceneKind {
+    /// u = U·y/H under a glare band.
+    PaperLinear,
+    /// u = U·(y/H)² under a glare band.
+    PaperQuadratic,
+    /// Logarithmic profile under a glare band.
+    PaperLog,
+    /// Laminar boundary layer, the paper's experiment (U = 0.988 m/s, δ99 = 14.6 mm).
+    Blasius,
+    /// One fractional displacement everywhere (bias, peak locking).
     Uniform,
+    /// Lamb–Oseen vortex, core radius H/8, peak 6 px per pair.
+    Vortex,
 }
 
-/// One particle: centre at tick 0 (pixels, image coordinates x right, row
-/// down), peak light above background (thresholds/tick), e⁻² diameter (px).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Particle {
-    /// Column of the centre at tick 0, px.
-    pub x: f64,
-    /// Row coordinate of the centre (row i has its centre at i + 0.5), px.
-    pub row: f64,
-    /// Peak light above background, thresholds/tick.
-    pub peak: f64,
-    /// e⁻² diameter of the Gaussian image, px.
-    pub diameter: f64,
+impl SceneKind {
+    /// Every scene, by name.
+    pub const ALL: [(&'static str, SceneKind); 6] = [
+        ("paper-linear", SceneKind::PaperLinear),
+        ("paper-quadratic", SceneKind::PaperQuadratic),
+        ("paper-log", SceneKind::PaperLog),
+        ("blasius", SceneKind::Blasius),
+        ("uniform", SceneKind::Uniform),
+        ("vortex", SceneKind::Vortex),
+    ];
+
+    /// The scene of a name, if any.
+    pub fn from_name(name: &str) -> Option<SceneKind> {
+        Self::ALL.iter().find(|(n, _)| *n == name).map(|&(_, k)| k)
+    }
+
+    /// Its name.
+    pub fn name(self) -> &'static str {
+        Self::ALL
+            .iter()
+            .find(|(_, k)| *k == self)
+            .map(|(n, _)| *n)
+            .unwrap_or("?")
+    }
 }
 
-/// Scene parameters with the SPEC section 4 defaults.
-#[derive(Debug, Clone, PartialEq)]
+/// Pixel size (mm) and tick (s) of the paper's setup.
+pub const PIXEL_MM: f64 = 0.02;
+/// Sampling frequency of the spike camera, Hz.
+pub const TICK_HZ: f64 = 20_000.0;
+
+/// m/s to px/tick at 0.02 mm/px and 20 kHz.
+pub fn ms_to_px_per_tick(v: f64) -> f64 {
+    v * 1000.0 / PIXEL_MM / TICK_HZ
+}
+
+/// Every parameter of a scene; [`SceneParams::new`] gives the SPEC defaults.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SceneParams {
+    /// Which scene.
+    pub kind: SceneKind,
     /// Width, px.
     pub width: u16,
     /// Height, px.
     pub height: u16,
-    /// Velocity profile.
-    pub profile: Profile,
-    /// Top speed U, px/tick (0.5 m/s at 0.02 mm/px and 50 µs/tick = 1.25).
+    /// Top speed U, px/tick (paper scenes 1.25 = 0.5 m/s; Blasius 2.47 = 0.988 m/s).
     pub top_speed: f64,
+    /// Pair separation Δt, ticks.
+    pub pair_dt: u32,
+    /// Uniform scene: displacement per pair (px right, px down).
+    pub shift: (f64, f64),
+    /// Vortex: peak displacement per pair, px.
+    pub vortex_peak: f64,
+    /// Blasius: δ99, px (14.6 mm = 730 px).
+    pub delta99: f64,
     /// Background light, thresholds/tick.
     pub background: f64,
-    /// Mean particle peak light above background, thresholds/tick (±30 %).
+    /// Mean particle peak light above background, thresholds/tick (±30 % per particle).
     pub particle_peak: f64,
     /// Particle e⁻² diameters are uniform in this range, px.
     pub diameter: (f64, f64),
-    /// Glare peak I0 at the wall, thresholds/tick.
+    /// Glare peak I0 at the wall, thresholds/tick (0: no glare).
     pub glare_peak: f64,
     /// Glare width σ, px.
     pub glare_sigma: f64,
     /// At least this many particles per 32×32 cell.
     pub per_cell: usize,
-    /// Minimum centre spacing, px.
+    /// Minimum centre spacing, px (8 by default; the paper's 15 as an option).
     pub min_spacing: f64,
 }
 
-impl Default for SceneParams {
-    fn default() -> Self {
-        SceneParams {
+impl SceneParams {
+    /// The SPEC defaults of scene `kind`.
+    pub fn new(kind: SceneKind) -> SceneParams {
+        let base = SceneParams {
+            kind,
             width: 400,
             height: 250,
-            profile: Profile::Linear,
-            top_speed: 1.25,
+            top_speed: ms_to_px_per_tick(0.5),
+            pair_dt: 13,
+            shift: (0.5, 0.25),
+            vortex_peak: 6.0,
+            delta99: 14.6 / PIXEL_MM,
             background: 0.01,
             particle_peak: 0.25,
             diameter: (4.0, 6.0),
@@ -76,139 +123,330 @@ impl Default for SceneParams {
             glare_sigma: 25.0,
             per_cell: 4,
             min_spacing: 8.0,
+        };
+        match kind {
+            SceneKind::PaperLinear | SceneKind::PaperQuadratic | SceneKind::PaperLog => base,
+            // The paper's laminar validation: no glare, the layer fits 800 rows,
+            // Δt keeps the largest displacement near 16 px like the others.
+            SceneKind::Blasius => SceneParams {
+                height: 800,
+                top_speed: ms_to_px_per_tick(0.988),
+                pair_dt: 7,
+                glare_peak: 0.0,
+                ..base
+            },
+            SceneKind::Uniform | SceneKind::Vortex => SceneParams {
+                glare_peak: 0.0,
+                ..base
+            },
+        }
+    }
+
+    /// The flow this scene moves its particles with.
+    pub fn flow(&self) -> Flow {
+        let (w, h) = (f64::from(self.width), f64::from(self.height));
+        let shear = |profile| Flow::Shear {
+            profile,
+            top: self.top_speed,
+            height: h,
+            delta99: self.delta99,
+        };
+        match self.kind {
+            SceneKind::PaperLinear => shear(Profile::Linear),
+            SceneKind::PaperQuadratic => shear(Profile::Quadratic),
+            SceneKind::PaperLog => shear(Profile::Log),
+            SceneKind::Blasius => shear(Profile::Blasius),
+            SceneKind::Uniform => {
+                let dt = f64::from(self.pair_dt.max(1));
+                Flow::Uniform {
+                    u: self.shift.0 / dt,
+                    v: self.shift.1 / dt,
+                }
+            }
+            SceneKind::Vortex => {
+                let rc = h / 8.0;
+                let gamma =
+                    flow::vortex_gamma(rc, self.vortex_peak, f64::from(self.pair_dt.max(1)));
+                Flow::Vortex {
+                    cx: w / 2.0,
+                    cy: h / 2.0,
+                    gamma,
+                    rc,
+                }
+            }
         }
     }
 }
 
-/// A seeded scene: its parameters and particles.
+/// One particle: its centre at scene tick 0 (px), peak light above
+/// background (thresholds/tick), e⁻² diameter (px).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Particle {
+    /// Column of the centre at tick 0, px.
+    pub x: f64,
+    /// Row coordinate of the centre at tick 0, px.
+    pub row: f64,
+    /// Peak light above background, thresholds/tick.
+    pub peak: f64,
+    /// e⁻² diameter, px.
+    pub diameter: f64,
+}
+
+/// A seeded scene.
 #[derive(Debug, Clone)]
 pub struct Scene {
     /// The parameters.
     pub params: SceneParams,
-    /// The particles, seeded over the region the frames will see (upstream
-    /// included, so particles flow in).
+    /// The flow.
+    pub flow: Flow,
+    /// The particles.
     pub particles: Vec<Particle>,
-    /// Cells (32×32) of the image that reached `per_cell` particles, of all.
+    /// Full 32×32 cells of the image holding at least `per_cell` particles
+    /// at tick 0, and all full cells of the image.
     pub density_reached: (usize, usize),
+    static_rows: Vec<f32>,
 }
 
 impl Scene {
-    /// Seeds particles over `[-upstream, width)` × `[0, height)`: at least
-    /// `per_cell` per 32×32 cell, centres at least `min_spacing` apart, with
-    /// a bounded number of retries (the paper's rule; SPEC section 4).
-    pub fn new(params: SceneParams, seed: u64, upstream: f64) -> Scene {
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    /// Seeds particles for ticks `0..=last_tick`: over the image, plus the
+    /// region upstream that the flow carries into it by then. Per 32×32 cell
+    /// at least `per_cell`, centres at least `min_spacing` apart, at most 1000
+    /// tries per particle (the paper's rule with its bounded retries).
+    pub fn new(params: SceneParams, seed: u64, last_tick: u32) -> Scene {
+        let flow = params.flow();
         let (w, h) = (f64::from(params.width), f64::from(params.height));
-        let x0 = -upstream.max(0.0);
-        let cells_x = ((w - x0) / 32.0).ceil() as usize;
-        let cells_y = (h / 32.0).ceil() as usize;
+        let (mut umin, mut umax) = (0.0f64, 0.0f64);
+        for i in 0..=64 {
+            if let Some(u) = flow.profile_u(h * f64::from(i) / 64.0) {
+                umin = umin.min(u);
+                umax = umax.max(u);
+            }
+        }
+        let t = f64::from(last_tick);
+        let margin = 8.0;
+        let cell = 32.0;
+        // Seeding cells sit on the image's own 32×32 grid (the rule is about
+        // those cells), extended by whole cells up- and downstream.
+        let snap_lo = |v: f64| (v / cell).floor() * cell;
+        let x0 = snap_lo(-margin - umax.max(0.0) * t);
+        let x1 = w + margin - umin.min(0.0) * t;
+        let (r0, r1) = match flow {
+            Flow::Uniform { v, .. } => (
+                snap_lo(-margin - v.max(0.0) * t),
+                h + margin - v.min(0.0) * t,
+            ),
+            _ => (snap_lo(-margin), h + margin),
+        };
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let mut particles: Vec<Particle> = Vec::new();
-        let mut reached = 0;
-        let spacing2 = params.min_spacing * params.min_spacing;
-        for cy in 0..cells_y {
-            for cx in 0..cells_x {
-                let (cx0, cy0) = (x0 + 32.0 * cx as f64, 32.0 * cy as f64);
-                let cw = 32.0f64.min(w - cx0);
-                let ch = 32.0f64.min(h - cy0);
-                let mut have = particles
-                    .iter()
-                    .filter(|p| p.x >= cx0 && p.x < cx0 + cw && p.row >= cy0 && p.row < cy0 + ch)
-                    .count();
+        let (nx, ny) = (
+            ((x1 - x0) / cell).ceil() as usize,
+            ((r1 - r0) / cell).ceil() as usize,
+        );
+        // A grid of particle indices for the spacing test.
+        let mut grid: Vec<Vec<usize>> = vec![Vec::new(); nx * ny];
+        let min2 = params.min_spacing * params.min_spacing;
+        let mut image_ok = 0;
+        let mut image_cells = 0;
+        for cy in 0..ny {
+            for cx in 0..nx {
+                let (cx0, cy0) = (x0 + cell * cx as f64, r0 + cell * cy as f64);
+                let (cw, ch) = (cell.min(x1 - cx0), cell.min(r1 - cy0));
+                let mut have = grid[cy * nx + cx].len();
                 let mut tries = 0;
-                while have < params.per_cell && tries < 2000 {
+                while have < params.per_cell && tries < 1000 * params.per_cell {
                     tries += 1;
                     let x = cx0 + rng.gen::<f64>() * cw;
                     let row = cy0 + rng.gen::<f64>() * ch;
-                    let near = particles.iter().rev().take(64).any(|p| {
-                        let (dx, dy) = (p.x - x, p.row - row);
-                        dx * dx + dy * dy < spacing2
+                    let near = (cy.saturating_sub(1)..(cy + 2).min(ny)).any(|gy| {
+                        (cx.saturating_sub(1)..(cx + 2).min(nx)).any(|gx| {
+                            grid[gy * nx + gx].iter().any(|&i| {
+                                let p: &Particle = &particles[i];
+                                (p.x - x).powi(2) + (p.row - row).powi(2) < min2
+                            })
+                        })
                     });
                     if near {
                         continue;
                     }
                     let peak = params.particle_peak * (1.0 + 0.3 * (2.0 * rng.gen::<f64>() - 1.0));
-                    let diameter = params.diameter.0
+                    let d = params.diameter.0
                         + (params.diameter.1 - params.diameter.0) * rng.gen::<f64>();
+                    grid[cy * nx + cx].push(particles.len());
                     particles.push(Particle {
                         x,
                         row,
                         peak,
-                        diameter,
+                        diameter: d,
                     });
                     have += 1;
                 }
-                if have >= params.per_cell && cx0 >= 0.0 {
-                    reached += 1;
-                }
             }
         }
-        let image_cells = (w / 32.0).ceil() as usize * cells_y;
+        // Density reached over the image's full 32×32 cells at tick 0 (cells
+        // cut by the right or bottom edge hold proportionally fewer).
+        let (icx, icy) = ((w / cell).floor() as usize, (h / cell).floor() as usize);
+        let mut per = vec![0usize; icx * icy];
+        for p in &particles {
+            if p.x >= 0.0 && p.x < icx as f64 * cell && p.row >= 0.0 && p.row < icy as f64 * cell {
+                per[(p.row / cell) as usize * icx + (p.x / cell) as usize] += 1;
+            }
+        }
+        for &n in &per {
+            image_cells += 1;
+            if n >= params.per_cell {
+                image_ok += 1;
+            }
+        }
+        let static_rows = (0..params.height)
+            .map(|i| Self::static_light_of(&params, usize::from(i)) as f32)
+            .collect();
         Scene {
             params,
+            flow,
             particles,
-            density_reached: (reached, image_cells),
+            density_reached: (image_ok, image_cells),
+            static_rows,
         }
     }
 
-    /// Height above the wall of a row coordinate (row centre at i + 0.5), px.
-    pub fn height_above_wall(&self, row: f64) -> f64 {
-        f64::from(self.params.height) - row
+    fn static_light_of(p: &SceneParams, i: usize) -> f64 {
+        let y = f64::from(p.height) - 0.5 - i as f64;
+        let s = p.glare_sigma.max(1e-9);
+        p.background + p.glare_peak * (-(y * y) / (2.0 * s * s)).exp()
     }
 
-    /// u(y), px/tick, y = height above the wall in px.
-    pub fn u(&self, y: f64) -> f64 {
-        let p = &self.params;
-        let h = f64::from(p.height);
-        let y = y.clamp(0.0, h);
-        match p.profile {
-            Profile::Linear => p.top_speed * y / h,
-            Profile::Quadratic => p.top_speed * (y / h).powi(2),
-            Profile::Log => {
-                let y0 = 5.0;
-                p.top_speed * (1.0 + y / y0).ln() / (1.0 + h / y0).ln()
-            }
-            Profile::Uniform => p.top_speed,
-        }
-    }
-
-    /// Static light of image row `i` (background + glare), thresholds/tick.
+    /// Light of the static part (background + glare) in image row `i`, thresholds/tick.
     pub fn static_light(&self, i: usize) -> f64 {
-        let y = f64::from(self.params.height) - 0.5 - i as f64;
-        let s = self.params.glare_sigma;
-        self.params.background + self.params.glare_peak * (-(y * y) / (2.0 * s * s)).exp()
+        self.static_rows.get(i).map_or(0.0, |&v| f64::from(v))
     }
 
-    /// Renders the light at time `t` (ticks, centre of the tick) into
-    /// `light` (`width × height`, image rows top-down): the static part plus
-    /// every particle, each only inside its 3σ box.
-    pub fn render(&self, t: f64, light: &mut [f64]) {
+    /// Renders the light at time `t` (ticks) into `light` (`width × height`,
+    /// upright rows): the static rows plus every particle near the image.
+    pub fn render(&self, t: f64, light: &mut [f32]) {
         let (w, h) = (
             usize::from(self.params.width),
             usize::from(self.params.height),
         );
-        for (i, row) in light.chunks_exact_mut(w).enumerate().take(h) {
-            row.fill(self.static_light(i));
+        for (row, &v) in light.chunks_exact_mut(w).zip(&self.static_rows) {
+            row.fill(v);
         }
+        let mut ex = [0f32; 32];
+        let mut ey = [0f32; 32];
         for p in &self.particles {
-            let x = p.x + self.u(self.height_above_wall(p.row)) * t;
+            let (x, r) = self.flow.advect(p.x, p.row, 0.0, t);
             let sigma = p.diameter / 4.0;
-            let r = 3.0 * sigma;
-            let (c0, c1) = ((x - r).floor().max(0.0), (x + r).ceil().min(w as f64));
-            let (r0, r1) = (
-                (p.row - r).floor().max(0.0),
-                (p.row + r).ceil().min(h as f64),
-            );
+            let rad = (3.0 * sigma).min(15.0);
+            let (c0, c1) = ((x - rad).floor().max(0.0), (x + rad).ceil().min(w as f64));
+            let (r0, r1) = ((r - rad).floor().max(0.0), (r + rad).ceil().min(h as f64));
             if c1 <= c0 || r1 <= r0 {
                 continue;
             }
             let k = -1.0 / (2.0 * sigma * sigma);
-            for i in r0 as usize..r1 as usize {
-                let dy = i as f64 + 0.5 - p.row;
-                for j in c0 as usize..c1 as usize {
-                    let dx = j as f64 + 0.5 - x;
-                    light[i * w + j] += p.peak * ((dx * dx + dy * dy) * k).exp();
+            let (c0, c1, r0, r1) = (c0 as usize, c1 as usize, r0 as usize, r1 as usize);
+            for (j, e) in (c0..c1).zip(ex.iter_mut()) {
+                let d = j as f64 + 0.5 - x;
+                *e = (d * d * k).exp() as f32;
+            }
+            for (i, e) in (r0..r1).zip(ey.iter_mut()) {
+                let d = i as f64 + 0.5 - r;
+                *e = (p.peak * (d * d * k).exp()) as f32;
+            }
+            for (i, &eyi) in (r0..r1).zip(ey.iter()) {
+                let row = &mut light[i * w + c0..i * w + c1];
+                for (l, &exj) in row.iter_mut().zip(ex.iter()) {
+                    *l += eyi * exj;
                 }
             }
         }
+    }
+
+    /// Ground truth at vector positions `(x, y)` (FORMATS.md: pixel (row i,
+    /// column j) has its centre at (x = j, y = i)) for a pair `dt` ticks apart:
+    /// `(x, y, u, v)` in px, u right, v down.
+    pub fn truth(&self, points: &[(f64, f64)], dt: f64) -> Vec<(f64, f64, f64, f64)> {
+        points
+            .iter()
+            .map(|&(x, y)| {
+                // Vector coordinates put pixel centres on integers; the scene on half-integers.
+                let (u, v) = self.flow.displacement(x + 0.5, y + 0.5, dt);
+                (x, y, u, v)
+            })
+            .collect()
+    }
+
+    /// The analytic profile u(y) for a pair `dt` ticks apart, one value per
+    /// pixel row: `(y up from the wall, u px per pair)`; empty for the vortex.
+    pub fn profile(&self, dt: f64) -> Vec<(f64, f64)> {
+        let h = f64::from(self.params.height);
+        (0..self.params.height)
+            .filter_map(|i| {
+                let y = h - 0.5 - f64::from(i);
+                self.flow.profile_u(y).map(|u| (y, u * dt))
+            })
+            .collect()
+    }
+}
+
+/// Window centres of a PIV grid: windows of `win` px every `step` px, the
+/// centre of columns `j0..j0+win−1` at `x = j0 + (win−1)/2` (FORMATS.md).
+pub fn vector_grid(width: u16, height: u16, win: u16, step: u16) -> Vec<(f64, f64)> {
+    let (w, h, win, step) = (
+        usize::from(width),
+        usize::from(height),
+        usize::from(win),
+        usize::from(step.max(1)),
+    );
+    let mut v = Vec::new();
+    if win > w || win > h {
+        return v;
+    }
+    for i0 in (0..=h - win).step_by(step) {
+        for j0 in (0..=w - win).step_by(step) {
+            v.push((
+                j0 as f64 + (win as f64 - 1.0) / 2.0,
+                i0 as f64 + (win as f64 - 1.0) / 2.0,
+            ));
+        }
+    }
+    v
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn seeding_meets_the_density_rule() {
+        let s = Scene::new(SceneParams::new(SceneKind::PaperLinear), 1, 141);
+        let (ok, all) = s.density_reached;
+        assert_eq!(all, 12 * 7);
+        assert!(ok as f64 >= 0.95 * all as f64, "{ok}/{all}");
+        for (i, a) in s.particles.iter().enumerate() {
+            for b in &s.particles[i + 1..] {
+                assert!((a.x - b.x).hypot(a.row - b.row) >= 8.0);
+            }
+        }
+    }
+
+    #[test]
+    fn glare_and_particles_render() {
+        let s = Scene::new(SceneParams::new(SceneKind::PaperLinear), 2, 0);
+        let mut light = vec![0f32; 400 * 250];
+        s.render(0.0, &mut light);
+        // Bottom row: background + glare peak (y = 0.5).
+        assert!((s.static_light(249) - 0.66).abs() < 1e-3);
+        assert!((s.static_light(0) - 0.01).abs() < 1e-6);
+        let max = light.iter().cloned().fold(0.0, f32::max);
+        assert!(max > 0.3, "a particle on the glare should exceed it: {max}");
+    }
+
+    #[test]
+    fn names_round_trip() {
+        for (n, k) in SceneKind::ALL {
+            assert_eq!(SceneKind::from_name(n), Some(k));
+            assert_eq!(k.name(), n);
+        }
+        assert_eq!(SceneKind::from_name("nope"), None);
     }
 }

@@ -1,0 +1,85 @@
+//! Vector fields (`x,y,u,v,flag`) and profiles (`y,u`) as CSV (FORMATS.md).
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use super::{io_err, FormatError};
+
+/// One vector: window centre (px, origin top-left, y down), displacement
+/// (px, u right, v down), flag (0 valid, 1 replaced, 2 masked or invalid).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Vector {
+    /// Column of the centre, px.
+    pub x: f64,
+    /// Row of the centre, px.
+    pub y: f64,
+    /// Displacement right, px.
+    pub u: f64,
+    /// Displacement down, px.
+    pub v: f64,
+    /// 0 valid, 1 replaced, 2 masked or invalid (then u = v = 0).
+    pub flag: u8,
+}
+
+/// Writes a vector field.
+pub fn write_vectors(path: &Path, vectors: &[Vector]) -> Result<(), FormatError> {
+    let mut s = String::from("x,y,u,v,flag\n");
+    for v in vectors {
+        let (u, vv) = if v.flag == 2 { (0.0, 0.0) } else { (v.u, v.v) };
+        let _ = writeln!(s, "{},{},{:.6},{:.6},{}", v.x, v.y, u, vv, v.flag);
+    }
+    std::fs::write(path, s).map_err(io_err(path))
+}
+
+/// Reads a vector field (extra columns after `flag` are ignored).
+pub fn read_vectors(path: &Path) -> Result<Vec<Vector>, FormatError> {
+    let text = std::fs::read_to_string(path).map_err(io_err(path))?;
+    let bad = |line: usize, msg: &str| FormatError::Parse {
+        path: path.to_path_buf(),
+        msg: format!("line {line}: {msg}"),
+    };
+    let mut lines = text.lines().enumerate();
+    match lines.next() {
+        Some((_, h)) if h.trim().starts_with("x,y,u,v,flag") => {}
+        _ => return Err(bad(1, "header must start with x,y,u,v,flag")),
+    }
+    let mut out = Vec::new();
+    for (i, line) in lines {
+        if line.trim().is_empty() {
+            continue;
+        }
+        let f: Vec<&str> = line.split(',').collect();
+        if f.len() < 5 {
+            return Err(bad(i + 1, "fewer than 5 columns"));
+        }
+        let num = |k: usize| {
+            f[k].trim()
+                .parse::<f64>()
+                .map_err(|_| bad(i + 1, "not a number"))
+        };
+        let flag = f[4]
+            .trim()
+            .parse::<u8>()
+            .map_err(|_| bad(i + 1, "flag must be 0, 1 or 2"))?;
+        if flag > 2 {
+            return Err(bad(i + 1, "flag must be 0, 1 or 2"));
+        }
+        out.push(Vector {
+            x: num(0)?,
+            y: num(1)?,
+            u: num(2)?,
+            v: num(3)?,
+            flag,
+        });
+    }
+    Ok(out)
+}
+
+/// Writes a profile: `y` px up from the wall, `u` px per pair.
+pub fn write_profile(path: &Path, profile: &[(f64, f64)]) -> Result<(), FormatError> {
+    let mut s = String::from("y,u\n");
+    for (y, u) in profile {
+        let _ = writeln!(s, "{y},{u:.6}");
+    }
+    std::fs::write(path, s).map_err(io_err(path))
+}

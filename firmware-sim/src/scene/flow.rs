@@ -1,0 +1,279 @@
+//! Velocity fields of the scenes (SPEC section 4), in pixels per tick, image
+//! coordinates: `x` right, `row` down (row i has its centre at i + 0.5), the
+//! wall at the bottom edge, `y = H − row` the height above it.
+//!
+//! Particles are advected exactly: shear flows move each particle along its
+//! row at u(y); the vortex turns each particle about the centre at its own
+//! angular velocity. So positions at any tick come in closed form, and the
+//! ground truth is the true displacement of a particle, not a sampled velocity.
+
+use serde::{Deserialize, Serialize};
+
+/// The velocity profile of a shear flow.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Profile {
+    /// u = U·y/H.
+    Linear,
+    /// u = U·(y/H)².
+    Quadratic,
+    /// u = U·ln(1 + y/y0)/ln(1 + H/y0), y0 = 5 px.
+    Log,
+    /// u/U = f'(η), η = 4.91·y/δ99 (laminar boundary layer).
+    Blasius,
+}
+
+/// A velocity field.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase")]
+pub enum Flow {
+    /// Horizontal shear over the wall: u(y), v = 0.
+    Shear {
+        /// Profile.
+        profile: Profile,
+        /// Top speed U, px/tick.
+        top: f64,
+        /// Image height H, px.
+        height: f64,
+        /// δ99 of the Blasius profile, px (unused by the others).
+        delta99: f64,
+    },
+    /// The same displacement everywhere (px/tick right and down).
+    Uniform {
+        /// px/tick, right.
+        u: f64,
+        /// px/tick, down.
+        v: f64,
+    },
+    /// Lamb–Oseen vortex: v_θ(r) = Γ/(2πr)·(1 − exp(−r²/rc²)).
+    Vortex {
+        /// Centre column, px.
+        cx: f64,
+        /// Centre row coordinate, px.
+        cy: f64,
+        /// Circulation Γ, px²/tick.
+        gamma: f64,
+        /// Core radius rc, px.
+        rc: f64,
+    },
+}
+
+/// Blasius solution `f'(η)` on η ∈ [0, 10], step 0.01, with `f''(0)`.
+#[derive(Debug, Clone)]
+pub struct Blasius {
+    /// f''(0), ≈ 0.332057.
+    pub fpp0: f64,
+    fp: Vec<f64>,
+}
+
+const BLASIUS_STEP: f64 = 0.01;
+const BLASIUS_END: f64 = 10.0;
+
+fn blasius_shoot(fpp0: f64, store: Option<&mut Vec<f64>>) -> f64 {
+    // f''' + ½ f f'' = 0 as a first-order system, classic RK4.
+    let rhs = |s: [f64; 3]| [s[1], s[2], -0.5 * s[0] * s[2]];
+    let mut s = [0.0, 0.0, fpp0];
+    let h = BLASIUS_STEP;
+    let n = (BLASIUS_END / h).round() as usize;
+    let mut out = store;
+    if let Some(v) = out.as_deref_mut() {
+        v.clear();
+        v.push(s[1]);
+    }
+    for _ in 0..n {
+        let add =
+            |a: [f64; 3], b: [f64; 3], k: f64| [a[0] + k * b[0], a[1] + k * b[1], a[2] + k * b[2]];
+        let k1 = rhs(s);
+        let k2 = rhs(add(s, k1, h / 2.0));
+        let k3 = rhs(add(s, k2, h / 2.0));
+        let k4 = rhs(add(s, k3, h));
+        for i in 0..3 {
+            s[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+        }
+        if let Some(v) = out.as_deref_mut() {
+            v.push(s[1]);
+        }
+    }
+    s[1]
+}
+
+impl Blasius {
+    /// Solves by shooting on f''(0) until f'(10) = 1 (bisection to 1e-12).
+    pub fn solve() -> Blasius {
+        let (mut lo, mut hi) = (0.1, 1.0);
+        for _ in 0..60 {
+            let mid = 0.5 * (lo + hi);
+            if blasius_shoot(mid, None) > 1.0 {
+                hi = mid;
+            } else {
+                lo = mid;
+            }
+        }
+        let fpp0 = 0.5 * (lo + hi);
+        let mut fp = Vec::new();
+        blasius_shoot(fpp0, Some(&mut fp));
+        Blasius { fpp0, fp }
+    }
+
+    /// f'(η), linear between samples, 1 beyond η = 10.
+    pub fn fprime(&self, eta: f64) -> f64 {
+        if eta <= 0.0 {
+            return 0.0;
+        }
+        let x = eta / BLASIUS_STEP;
+        let i = x.floor() as usize;
+        match (self.fp.get(i), self.fp.get(i + 1)) {
+            (Some(&a), Some(&b)) => a + (b - a) * (x - i as f64),
+            _ => 1.0,
+        }
+    }
+}
+
+fn blasius() -> &'static Blasius {
+    static B: std::sync::OnceLock<Blasius> = std::sync::OnceLock::new();
+    B.get_or_init(Blasius::solve)
+}
+
+impl Flow {
+    /// u(y) of a shear flow (px/tick), y = height above the wall in px.
+    fn shear_u(profile: Profile, top: f64, h: f64, delta99: f64, y: f64) -> f64 {
+        let y = y.clamp(0.0, h);
+        match profile {
+            Profile::Linear => top * y / h,
+            Profile::Quadratic => top * (y / h).powi(2),
+            Profile::Log => top * (1.0 + y / 5.0).ln() / (1.0 + h / 5.0).ln(),
+            Profile::Blasius => top * blasius().fprime(4.91 * y / delta99),
+        }
+    }
+
+    /// Angular velocity of the vortex at radius r (rad/tick).
+    fn omega(gamma: f64, rc: f64, r: f64) -> f64 {
+        if r < 1e-9 {
+            return gamma / (2.0 * std::f64::consts::PI * rc * rc);
+        }
+        gamma / (2.0 * std::f64::consts::PI * r * r) * (1.0 - (-(r * r) / (rc * rc)).exp())
+    }
+
+    /// Where a particle at `(x, row)` at tick `t0` is at tick `t1`.
+    pub fn advect(&self, x: f64, row: f64, t0: f64, t1: f64) -> (f64, f64) {
+        let dt = t1 - t0;
+        match *self {
+            Flow::Shear {
+                profile,
+                top,
+                height,
+                delta99,
+            } => (
+                x + Self::shear_u(profile, top, height, delta99, height - row) * dt,
+                row,
+            ),
+            Flow::Uniform { u, v } => (x + u * dt, row + v * dt),
+            Flow::Vortex { cx, cy, gamma, rc } => {
+                let (dx, dy) = (x - cx, row - cy);
+                let r = dx.hypot(dy);
+                let a = Self::omega(gamma, rc, r) * dt;
+                let (s, c) = a.sin_cos();
+                (cx + c * dx - s * dy, cy + s * dx + c * dy)
+            }
+        }
+    }
+
+    /// The true displacement over `dt` ticks of the particle that is at
+    /// `(x, row)` halfway through (px right, px down): symmetric about the
+    /// pair's midpoint, as a PIV window centred there measures it.
+    pub fn displacement(&self, x: f64, row: f64, dt: f64) -> (f64, f64) {
+        let (xa, ra) = self.advect(x, row, 0.0, -dt / 2.0);
+        let (xb, rb) = self.advect(x, row, 0.0, dt / 2.0);
+        (xb - xa, rb - ra)
+    }
+
+    /// The profile u(y) of a shear flow in px/tick (`None` for other flows).
+    pub fn profile_u(&self, y: f64) -> Option<f64> {
+        match *self {
+            Flow::Shear {
+                profile,
+                top,
+                height,
+                delta99,
+            } => Some(Self::shear_u(profile, top, height, delta99, y)),
+            Flow::Uniform { u, .. } => Some(u),
+            Flow::Vortex { .. } => None,
+        }
+    }
+
+    /// The largest displacement over `dt` ticks anywhere in a `w × h` image, px.
+    pub fn max_displacement(&self, w: f64, h: f64, dt: f64) -> f64 {
+        let mut m: f64 = 0.0;
+        for i in 0..=32 {
+            for j in 0..=32 {
+                let (dx, dy) = self.displacement(w * j as f64 / 32.0, h * i as f64 / 32.0, dt);
+                m = m.max(dx.hypot(dy));
+            }
+        }
+        m
+    }
+}
+
+/// Γ of a Lamb–Oseen vortex of core radius `rc` whose fastest particles move
+/// `peak` px in `dt` ticks.
+pub fn vortex_gamma(rc: f64, peak: f64, dt: f64) -> f64 {
+    // max of (1 − e^{−s²})/s over s = r/rc, found numerically (≈ 0.6382 at s ≈ 1.1209).
+    let m = (1..20000)
+        .map(|i| {
+            let s = i as f64 * 1e-4 * 5.0;
+            (1.0 - (-s * s).exp()) / s
+        })
+        .fold(0.0, f64::max);
+    peak / dt * 2.0 * std::f64::consts::PI * rc / m
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn blasius_wall_shear_matches_the_literature() {
+        let b = Blasius::solve();
+        assert!((b.fpp0 - 0.332057).abs() < 1e-5, "f''(0) = {}", b.fpp0);
+        // η = 4.91 is the 99 % thickness.
+        assert!((b.fprime(4.91) - 0.99).abs() < 2e-3, "{}", b.fprime(4.91));
+        assert!((b.fprime(10.0) - 1.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn vortex_turns_at_the_requested_peak() {
+        let rc = 250.0 / 8.0;
+        let g = vortex_gamma(rc, 6.0, 13.0);
+        let f = Flow::Vortex {
+            cx: 200.0,
+            cy: 125.0,
+            gamma: g,
+            rc,
+        };
+        let m = f.max_displacement(400.0, 250.0, 13.0);
+        assert!((m - 6.0).abs() < 0.05, "peak {m}");
+        // Rotation keeps the radius.
+        let (x, r) = f.advect(230.0, 125.0, 0.0, 500.0);
+        assert!(((x - 200.0).hypot(r - 125.0) - 30.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn shear_profiles() {
+        let f = Flow::Shear {
+            profile: Profile::Linear,
+            top: 1.25,
+            height: 250.0,
+            delta99: 730.0,
+        };
+        let (dx, dy) = f.displacement(10.0, 0.0, 13.0);
+        assert!((dx - 16.25).abs() < 1e-12 && dy == 0.0);
+        let f = Flow::Shear {
+            profile: Profile::Log,
+            top: 1.0,
+            height: 250.0,
+            delta99: 730.0,
+        };
+        assert!((f.profile_u(250.0).unwrap() - 1.0).abs() < 1e-12);
+        assert_eq!(f.profile_u(0.0).unwrap(), 0.0);
+    }
+}
