@@ -1,2 +1,10 @@
-//! spiv-host: the host half of spiv.
+//! # spiv-host — the host half of spiv
+//!
+//! Frames from spike files through the core ([`reconstruct`]), owned buffers
+//! for the no_std core ([`core_run`]), and the `f64` reference of the core's
+//! algorithm ([`reference`]). The `spiv` binary's subcommands live in `cli`.
+#![warn(missing_docs)]
+
+pub mod core_run;
+pub mod reconstruct;
 pub mod reference;

@@ -12,8 +12,12 @@ use super::{io_err, FormatError};
 /// A spike recording held unpacked in memory.
 #[derive(Debug, Clone)]
 pub struct NpzSpikes {
-    /// Width, px.
+    /// Width of the capture, px.
     pub width: u16,
+    /// Width of the packed planes, px: `width`, or the next multiple of 8
+    /// when `width × height` is not whole bytes (the extra columns are
+    /// zero; crop them from any output).
+    pub packed_width: u16,
     /// Height, px.
     pub height: u16,
     /// Planes packed LSB first in **upright** row order (read them with
@@ -40,19 +44,26 @@ pub fn read_npz_spikes(path: &Path) -> Result<NpzSpikes, FormatError> {
         u16::try_from(w).map_err(|_| parse("too wide".into()))?,
         u16::try_from(h).map_err(|_| parse("too tall".into()))?,
     );
-    let pb = super::dat::plane_bytes(width, height)?;
+    let packed_width = if (w * h) % 8 == 0 {
+        width
+    } else {
+        width.next_multiple_of(8)
+    };
+    let pw = usize::from(packed_width);
+    let pb = super::dat::plane_bytes(packed_width, height)?;
     let mut planes = vec![0u8; pb * t];
     for ((k, r, c), &v) in spk.indexed_iter() {
         if v > 1 {
             return Err(parse(format!("spk[{k},{r},{c}] = {v}, not 0/1")));
         }
         if v == 1 {
-            let p = r * w + c;
+            let p = r * pw + c;
             planes[k * pb + p / 8] |= 1 << (p % 8);
         }
     }
     Ok(NpzSpikes {
         width,
+        packed_width,
         height,
         planes,
         ticks: t,

@@ -1,0 +1,229 @@
+//! Frames from spike files through the core: TFP, TFI or adaptive at any
+//! tick of a `.dat` (streamed: only the planes the window needs are read) or
+//! of an in-memory recording.
+
+use std::path::Path;
+
+use spiv_core::window::{tfi, tfp};
+use spiv_core::{reconstruct_adaptive, FrameStats, Params, PlaneView};
+use spiv_firmware_sim::formats::dat::{DatOptions, DatReader};
+use spiv_firmware_sim::formats::meta::SceneMeta;
+use spiv_firmware_sim::formats::npz::read_npz_spikes;
+use spiv_firmware_sim::formats::FormatError;
+
+use crate::core_run::{HistoryBuf, WorkspaceBuf};
+
+/// How a frame is made.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Method {
+    /// Spike count over a window: gray = FS·c/n.
+    Tfp,
+    /// Inverse inter-spike interval around the tick.
+    Tfi,
+    /// The paper's adaptive integration (segmentation, suppression, n* per region).
+    Adaptive,
+}
+
+/// Everything that can go wrong making a frame from a file.
+#[derive(Debug, thiserror::Error)]
+pub enum ReconstructError {
+    /// The file.
+    #[error(transparent)]
+    Format(#[from] FormatError),
+    /// The core refused.
+    #[error("{0}")]
+    Core(#[from] spiv_core::Error),
+    /// A tick past the end.
+    #[error("tick {tick} is not in the recording (planes 0..{planes})")]
+    TickOutside {
+        /// Requested.
+        tick: u64,
+        /// Planes in the file.
+        planes: u64,
+    },
+    /// A window the core cannot hold.
+    #[error("window {0} out of range (1..=255)")]
+    Window(u32),
+}
+
+/// A reconstructed frame, upright (row 0 at the top).
+#[derive(Debug, Clone)]
+pub struct Frame {
+    /// Width, px.
+    pub width: u16,
+    /// Height, px.
+    pub height: u16,
+    /// Gray levels `0..=full_scale`.
+    pub data: Vec<u16>,
+    /// The core's counts (adaptive only).
+    pub stats: Option<FrameStats>,
+}
+
+/// Planes of a recording in the core's stored row order.
+#[derive(Debug, Clone)]
+pub struct Planes {
+    /// Width, px.
+    pub width: u16,
+    /// Height, px.
+    pub height: u16,
+    /// Stored rows are bottom-up.
+    pub flip: bool,
+    /// Columns of the output (≤ `width`; padding columns are cropped).
+    pub crop_width: u16,
+    /// Tick of the first plane held.
+    pub first: u64,
+    /// Planes back to back.
+    pub data: Vec<u8>,
+}
+
+/// Runs `method` at file tick `at` over `planes` (which must hold the window).
+pub fn frame_from_planes(
+    planes: &Planes,
+    at: u64,
+    method: Method,
+    window: u16,
+    p: &Params,
+) -> Result<Frame, ReconstructError> {
+    let (w, h) = (planes.width, planes.height);
+    let pb = usize::from(w) * usize::from(h) / 8;
+    let n = (planes.data.len() / pb.max(1)) as u64;
+    if at < planes.first || at >= planes.first + n {
+        return Err(ReconstructError::TickOutside {
+            tick: at,
+            planes: planes.first + n,
+        });
+    }
+    let depth = n.clamp(u64::from(window.max(2)), 256) as u16;
+    let mut hb = HistoryBuf::new(w, h, depth)?;
+    let mut hist = hb.history()?;
+    // History ticks count from 0 at the first plane pushed; push the last `depth`.
+    let skip = n.saturating_sub(u64::from(depth));
+    for chunk in planes.data.chunks_exact(pb).skip(skip as usize) {
+        hist.push(&PlaneView::new(chunk, w, h)?)?;
+    }
+    let k = u32::try_from(at - planes.first - skip).map_err(|_| ReconstructError::TickOutside {
+        tick: at,
+        planes: n,
+    })?;
+    let px = usize::from(w) * usize::from(h);
+    let mut out = vec![0u16; px];
+    let fs = p.full_scale;
+    let stats = match method {
+        Method::Tfp => {
+            let mut counts = vec![0u8; px];
+            tfp(&hist, k, window, fs, &mut counts, &mut out)?;
+            None
+        }
+        Method::Tfi => {
+            tfi(&hist, k, window, fs, &mut out)?;
+            None
+        }
+        Method::Adaptive => {
+            let mut ws = WorkspaceBuf::whole(w, h);
+            let p = Params {
+                n_max: window,
+                ..*p
+            };
+            Some(reconstruct_adaptive(
+                &hist,
+                k,
+                &p,
+                &mut ws.workspace(),
+                &mut out,
+            )?)
+        }
+    };
+    let up = upright(&out, w, planes.flip);
+    let cw = planes.crop_width.min(w);
+    let data = if cw == w {
+        up
+    } else {
+        up.chunks_exact(usize::from(w))
+            .flat_map(|r| r[..usize::from(cw)].iter().copied())
+            .collect()
+    };
+    Ok(Frame {
+        width: cw,
+        height: h,
+        data,
+        stats,
+    })
+}
+
+/// Stored row order to upright.
+pub fn upright<T: Copy>(stored: &[T], w: u16, flip: bool) -> Vec<T> {
+    if !flip {
+        return stored.to_vec();
+    }
+    let w = usize::from(w);
+    stored
+        .chunks_exact(w)
+        .rev()
+        .flat_map(|r| r.iter().copied())
+        .collect()
+}
+
+/// Options of [`frame_from_file`].
+#[derive(Debug, Clone, Copy)]
+pub struct FileOptions {
+    /// Width, px (else from `scene.json`).
+    pub width: Option<u16>,
+    /// Height, px (else from `scene.json`).
+    pub height: Option<u16>,
+    /// `.dat` reading options.
+    pub dat: DatOptions,
+}
+
+/// Reads only the planes a window of `window` ticks centred on `at` needs
+/// from a `.dat` (or a `.npz` capture) and makes the frame.
+pub fn frame_from_file(
+    path: &Path,
+    at: u64,
+    method: Method,
+    window: u16,
+    p: &Params,
+    opts: FileOptions,
+) -> Result<Frame, ReconstructError> {
+    if !(1..=255).contains(&window) {
+        return Err(ReconstructError::Window(u32::from(window)));
+    }
+    let is_npz = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("npz"));
+    let planes = if is_npz {
+        let s = read_npz_spikes(path)?;
+        Planes {
+            width: s.packed_width,
+            height: s.height,
+            flip: false,
+            crop_width: s.width,
+            first: 0,
+            data: s.planes,
+        }
+    } else {
+        let meta = SceneMeta::beside(path)?;
+        let (w, h) = match (opts.width, opts.height, &meta) {
+            (Some(w), Some(h), _) => (w, h),
+            (None, None, Some(m)) => (m.width, m.height),
+            _ => return Err(FormatError::NoSize(path.to_path_buf()).into()),
+        };
+        let mut r = DatReader::open(path, w, h, opts.dat)?;
+        if at >= r.planes() {
+            return Err(ReconstructError::TickOutside {
+                tick: at,
+                planes: r.planes(),
+            });
+        }
+        let first = at.saturating_sub(u64::from(window / 2));
+        let data = r.read_range(first, u64::from(window))?;
+        Planes {
+            width: r.width(),
+            height: r.height(),
+            flip: r.flip(),
+            crop_width: r.width(),
+            first,
+            data,
+        }
+    };
+    frame_from_planes(&planes, at, method, window, p)
+}
