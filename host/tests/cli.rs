@@ -1,0 +1,354 @@
+//! The `spiv` binary as a user calls it: simulate, reconstruct, and one clear
+//! line with a non-zero exit on every bad input.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn spiv(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_spiv"))
+        .args(args)
+        .output()
+        .expect("spawn spiv")
+}
+
+fn ok(args: &[&str]) -> String {
+    let o = spiv(args);
+    assert!(
+        o.status.success(),
+        "spiv {args:?} failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// Runs a command that must fail; returns its stderr, checked to be one line.
+fn fails(args: &[&str]) -> String {
+    let o = spiv(args);
+    assert!(!o.status.success(), "spiv {args:?} should have failed");
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert_eq!(err.trim_end().lines().count(), 1, "one line, got: {err}");
+    assert!(err.starts_with("spiv: error: "), "{err}");
+    err
+}
+
+fn p(path: &Path) -> &str {
+    path.to_str().expect("utf-8 temp path")
+}
+
+fn simulate_small(dir: &Path) -> PathBuf {
+    let out = dir.join("sim");
+    let msg = ok(&[
+        "simulate",
+        "--scene",
+        "paper-linear",
+        "--out",
+        p(&out),
+        "--width",
+        "128",
+        "--height",
+        "96",
+        "--seed",
+        "3",
+    ]);
+    assert!(msg.contains("128x96"), "{msg}");
+    out
+}
+
+#[test]
+fn simulate_writes_every_file_and_reconstruct_reads_it_back() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let sim = simulate_small(tmp.path());
+    for f in [
+        "spikes.dat",
+        "scene.json",
+        "frame_a.png",
+        "frame_b.png",
+        "truth.csv",
+        "profile.csv",
+    ] {
+        let len = std::fs::metadata(sim.join(f)).map(|m| m.len()).unwrap_or(0);
+        assert!(len > 0, "{f} missing or empty");
+    }
+    // The layout: the pair [64, 64 + dt] with 64 ticks on each side.
+    let meta: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(sim.join("scene.json")).expect("json"))
+            .expect("parse");
+    let planes = meta["planes"].as_u64().expect("planes");
+    let pair = &meta["pair"];
+    let dt = pair[1].as_u64().expect("pair") - pair[0].as_u64().expect("pair");
+    assert_eq!(pair[0].as_u64(), Some(64));
+    assert_eq!(planes, dt + 2 * 64 + 1);
+    let dat = std::fs::metadata(sim.join("spikes.dat"))
+        .expect("dat")
+        .len();
+    assert_eq!(dat, planes * 128 * 96 / 8);
+
+    for (method, bits) in [("adaptive", "8"), ("tfp", "16"), ("tfi", "8")] {
+        let out = tmp.path().join(format!("{method}.png"));
+        ok(&[
+            "reconstruct",
+            p(&sim.join("spikes.dat")),
+            "--at",
+            "64",
+            "--method",
+            method,
+            "--bits",
+            bits,
+            "-o",
+            p(&out),
+        ]);
+        let img = image::open(&out).expect("output image");
+        assert_eq!((img.width(), img.height()), (128, 96), "{method}");
+        // Not a blank frame: the scene has particles and a bright band.
+        let g = img.to_luma16();
+        let (lo, hi) = g
+            .pixels()
+            .fold((u16::MAX, 0), |(l, h), px| (l.min(px.0[0]), h.max(px.0[0])));
+        assert!(hi > lo, "{method}: flat output");
+    }
+}
+
+#[test]
+fn bad_inputs_fail_with_one_line() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    let out = d.join("o.png");
+
+    // Unknown scene, bad sizes.
+    let e = fails(&["simulate", "--scene", "nope", "--out", p(&d.join("x"))]);
+    assert!(e.contains("unknown scene"), "{e}");
+    let e = fails(&[
+        "simulate",
+        "--out",
+        p(&d.join("x")),
+        "--width",
+        "9",
+        "--height",
+        "9",
+    ]);
+    assert!(e.contains("multiple of 8"), "{e}");
+
+    // Missing file.
+    fails(&[
+        "reconstruct",
+        p(&d.join("missing.dat")),
+        "--width",
+        "8",
+        "--height",
+        "8",
+        "--at",
+        "0",
+        "-o",
+        p(&out),
+    ]);
+
+    // Empty file.
+    let empty = d.join("empty.dat");
+    std::fs::write(&empty, b"").expect("write");
+    let e = fails(&[
+        "reconstruct",
+        p(&empty),
+        "--width",
+        "16",
+        "--height",
+        "8",
+        "--at",
+        "0",
+        "-o",
+        p(&out),
+    ]);
+    assert!(e.to_lowercase().contains("empty"), "{e}");
+
+    // Not a whole number of planes (16x8 -> 16 bytes a plane).
+    let ragged = d.join("ragged.dat");
+    std::fs::write(&ragged, vec![0u8; 16 * 3 + 5]).expect("write");
+    let e = fails(&[
+        "reconstruct",
+        p(&ragged),
+        "--width",
+        "16",
+        "--height",
+        "8",
+        "--at",
+        "1",
+        "-o",
+        p(&out),
+    ]);
+    assert!(e.contains("plane"), "{e}");
+
+    // W*H not divisible by 8.
+    let odd = d.join("odd.dat");
+    std::fs::write(&odd, vec![0u8; 64]).expect("write");
+    fails(&[
+        "reconstruct",
+        p(&odd),
+        "--width",
+        "3",
+        "--height",
+        "3",
+        "--at",
+        "0",
+        "-o",
+        p(&out),
+    ]);
+
+    // A tick outside the file.
+    let whole = d.join("whole.dat");
+    std::fs::write(&whole, vec![0xffu8; 16 * 4]).expect("write");
+    fails(&[
+        "reconstruct",
+        p(&whole),
+        "--width",
+        "16",
+        "--height",
+        "8",
+        "--at",
+        "99",
+        "-o",
+        p(&out),
+    ]);
+
+    // No size and no scene.json beside the file.
+    fails(&["reconstruct", p(&whole), "--at", "0", "-o", p(&out)]);
+
+    // Bad option values.
+    fails(&[
+        "reconstruct",
+        p(&whole),
+        "--width",
+        "16",
+        "--height",
+        "8",
+        "--at",
+        "0",
+        "--bits",
+        "12",
+        "-o",
+        p(&out),
+    ]);
+    fails(&[
+        "reconstruct",
+        p(&whole),
+        "--width",
+        "16",
+        "--at",
+        "0",
+        "-o",
+        p(&out),
+    ]);
+    assert!(!out.exists(), "no output written on failure");
+}
+
+#[test]
+fn truncated_last_plane_is_refused_or_read_on_request() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    let f = d.join("t.dat");
+    // 4 whole planes of 16x8 and half a fifth.
+    std::fs::write(&f, vec![0x55u8; 16 * 4 + 8]).expect("write");
+    let out = d.join("o.png");
+    let e = fails(&[
+        "reconstruct",
+        p(&f),
+        "--width",
+        "16",
+        "--height",
+        "8",
+        "--at",
+        "2",
+        "--method",
+        "tfp",
+        "--window",
+        "3",
+        "-o",
+        p(&out),
+    ]);
+    assert!(e.contains("trunc"), "{e}");
+    ok(&[
+        "reconstruct",
+        p(&f),
+        "--width",
+        "16",
+        "--height",
+        "8",
+        "--at",
+        "2",
+        "--method",
+        "tfp",
+        "--window",
+        "3",
+        "--allow-truncated",
+        "-o",
+        p(&out),
+    ]);
+    let img = image::open(&out).expect("image").to_luma8();
+    assert_eq!(img.dimensions(), (16, 8));
+}
+
+/// The shared real capture, when present (SPEC section 9: `SPIV_DATA` or
+/// `../../shared/data` from the crate); missing data fails the test.
+fn shared_data() -> Option<PathBuf> {
+    let dir = std::env::var_os("SPIV_DATA")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data"));
+    dir.join("spike").is_dir().then_some(dir)
+}
+
+#[test]
+fn reconstructs_the_real_reference_capture() {
+    let data =
+        shared_data().expect("shared data not found: set SPIV_DATA to the folder holding spike/");
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let out = tmp.path().join("tfp.png");
+    let dat = data.join("spike/spikezoo_base_reds_400x250_301f.dat");
+    ok(&[
+        "reconstruct",
+        p(&dat),
+        "--width",
+        "400",
+        "--height",
+        "250",
+        "--at",
+        "150",
+        "--method",
+        "tfp",
+        "--window",
+        "41",
+        "-o",
+        p(&out),
+    ]);
+    let got = image::open(&out).expect("out").to_luma8();
+    let gt = image::open(data.join("spike/spikezoo_base_reds_400x250_gt.png"))
+        .expect("gt")
+        .to_luma8();
+    assert_eq!(got.dimensions(), gt.dimensions());
+    let (a, b): (Vec<f64>, Vec<f64>) = got
+        .pixels()
+        .zip(gt.pixels())
+        .map(|(x, y)| (f64::from(x.0[0]), f64::from(y.0[0])))
+        .unzip();
+    let n = a.len() as f64;
+    let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
+    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+    for (x, y) in a.iter().zip(&b) {
+        sab += (x - ma) * (y - mb);
+        saa += (x - ma) * (x - ma);
+        sbb += (y - mb) * (y - mb);
+    }
+    let r = sab / (saa * sbb).sqrt();
+    assert!(r > 0.98, "correlation with ground truth {r}");
+
+    let npz = data.join("spike/spikezoo_uhsr_real_250x250_200f.npz");
+    let out = tmp.path().join("npz.png");
+    ok(&[
+        "reconstruct",
+        p(&npz),
+        "--at",
+        "100",
+        "--method",
+        "adaptive",
+        "-o",
+        p(&out),
+    ]);
+    assert_eq!(image::open(&out).expect("npz out").width(), 250);
+}
