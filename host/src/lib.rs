@@ -6,5 +6,6 @@
 #![warn(missing_docs)]
 
 pub mod core_run;
+pub mod piv;
 pub mod reconstruct;
 pub mod reference;

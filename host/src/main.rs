@@ -21,6 +21,8 @@ enum Command {
     Simulate(cli::simulate::SimulateArgs),
     /// Make one frame from a spike file at any tick (adaptive, TFP or TFI).
     Reconstruct(cli::reconstruct::ReconstructArgs),
+    /// PIV on an image pair: multi-pass FFT correlation with deformation.
+    Piv(cli::piv::PivArgs),
 }
 
 fn main() {
@@ -28,6 +30,7 @@ fn main() {
     let result = match &cli.command {
         Command::Simulate(a) => cli::simulate::run(a),
         Command::Reconstruct(a) => cli::reconstruct::run(a),
+        Command::Piv(a) => cli::piv::run(a),
     };
     if let Err(e) = result {
         eprintln!("spiv: error: {e}");

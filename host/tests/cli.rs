@@ -352,3 +352,40 @@ fn reconstructs_the_real_reference_capture() {
     ]);
     assert_eq!(image::open(&out).expect("npz out").width(), 250);
 }
+
+#[test]
+fn piv_on_a_simulated_pair_and_its_errors() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let sim = simulate_small(tmp.path());
+    let out = tmp.path().join("v.csv");
+    let msg = ok(&[
+        "piv",
+        p(&sim.join("frame_a.png")),
+        p(&sim.join("frame_b.png")),
+        "-o",
+        p(&out),
+        "--windows",
+        "32,32",
+    ]);
+    assert!(msg.contains("vectors"), "{msg}");
+    let v = spiv_firmware_sim::formats::csv::read_vectors(&out).expect("csv");
+    // 128x96 with 32-px windows every 16 px: 7 x 5.
+    assert_eq!(v.len(), 35);
+    assert!(v.iter().all(|x| x.u.is_finite() && x.v.is_finite()));
+
+    // A pair of different sizes, a missing image, an image smaller than the
+    // window, a bad window list.
+    let small = tmp.path().join("small.png");
+    spiv_firmware_sim::formats::image::write_gray8(&small, 16, 16, &[0u8; 256]).expect("png");
+    let a = sim.join("frame_a.png");
+    let e = fails(&["piv", p(&a), p(&small), "-o", p(&out)]);
+    assert!(e.contains("differ in size"), "{e}");
+    fails(&["piv", p(&a), p(&tmp.path().join("none.png")), "-o", p(&out)]);
+    let e = fails(&["piv", p(&small), p(&small), "-o", p(&out)]);
+    assert!(e.contains("smaller than"), "{e}");
+    fails(&["piv", p(&a), p(&a), "-o", p(&out), "--windows", "2"]);
+    fails(&["piv", p(&a), p(&a), "-o", p(&out), "--overlap", "1.5"]);
+    let garbage = tmp.path().join("garbage.png");
+    std::fs::write(&garbage, b"not a png").expect("write");
+    fails(&["piv", p(&garbage), p(&a), "-o", p(&out)]);
+}

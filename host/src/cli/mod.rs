@@ -1,5 +1,6 @@
 //! The `spiv` command line: one file per subcommand.
 
+pub mod piv;
 pub mod reconstruct;
 pub mod simulate;
 
@@ -12,6 +13,9 @@ pub enum CliError {
     /// Making a frame.
     #[error(transparent)]
     Reconstruct(#[from] spiv_host::reconstruct::ReconstructError),
+    /// PIV.
+    #[error(transparent)]
+    Piv(#[from] spiv_host::piv::PivError),
     /// A bad option value.
     #[error("{0}")]
     Usage(String),

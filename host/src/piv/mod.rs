@@ -1,0 +1,369 @@
+//! The PIV engine: multi-pass FFT cross-correlation with image deformation,
+//! sub-pixel Gaussian peaks, normalised-median and peak-ratio validation,
+//! replacement, an optional mask, and rayon across windows.
+//!
+//! Pass 1 correlates the images as they are; every later pass deforms both
+//! images by the (validated, replaced) field of the pass before — A moved
+//! back and B forward by half of it — and adds the residual it finds. A
+//! window list `64,32,32` means three passes.
+
+pub mod correlate;
+pub mod deform;
+pub mod grid;
+pub mod validate;
+
+use std::path::Path;
+
+use ndarray::Array2;
+use rayon::prelude::*;
+use spiv_firmware_sim::formats::csv::Vector;
+use spiv_firmware_sim::formats::image::read_gray;
+use spiv_firmware_sim::formats::FormatError;
+
+pub use deform::Interp;
+pub use grid::Grid;
+pub use validate::{State, Validation};
+
+use correlate::{correlate, NoPeak, Plan, Scratch};
+
+/// Fraction of windows with signal that must pass validation for a pass's
+/// field to deform the next pass.
+const MIN_SUPPORT: f64 = 0.25;
+
+/// Settings of a PIV run.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Settings {
+    /// Window side of each pass, px (4..=1024).
+    pub windows: Vec<usize>,
+    /// Overlap of neighbouring windows, a fraction in [0, 0.9].
+    pub overlap: f64,
+    /// Resampling of the deformed images.
+    pub interp: Interp,
+    /// Vector validation.
+    pub validation: Validation,
+    /// Sweeps of neighbour replacement.
+    pub replace_iterations: usize,
+}
+
+impl Default for Settings {
+    /// 64 → 32 → 32 px at 50 % overlap (a 16-px grid, the paper's ≈ 4
+    /// particles per 32-px window), B-spline deformation.
+    fn default() -> Self {
+        Settings {
+            windows: vec![64, 32, 32],
+            overlap: 0.5,
+            interp: Interp::Bspline,
+            validation: Validation::default(),
+            replace_iterations: 4,
+        }
+    }
+}
+
+/// What can go wrong before any correlation.
+#[derive(Debug, thiserror::Error)]
+pub enum PivError {
+    /// The two images differ in size.
+    #[error("images differ in size: {0}x{1} and {2}x{3} px")]
+    SizeMismatch(usize, usize, usize, usize),
+    /// The mask differs in size from the images.
+    #[error("mask is {0}x{1} px but the images are {2}x{3} px")]
+    MaskSize(usize, usize, usize, usize),
+    /// An image is smaller than a window.
+    #[error("images of {0}x{1} px are smaller than the {2} px window")]
+    TooSmall(usize, usize, usize),
+    /// Bad settings.
+    #[error("{0}")]
+    Settings(String),
+    /// Reading an image.
+    #[error(transparent)]
+    Format(#[from] FormatError),
+}
+
+/// A vector field on the grid of the last pass.
+#[derive(Debug, Clone)]
+pub struct Field {
+    /// The grid.
+    pub grid: Grid,
+    /// Displacement right, px per pair (0 where invalid).
+    pub u: Array2<f64>,
+    /// Displacement down, px per pair (0 where invalid).
+    pub v: Array2<f64>,
+    /// State of each vector.
+    pub state: Array2<State>,
+    /// Peak ratio of the last pass (0 where no peak).
+    pub peak_ratio: Array2<f64>,
+    /// Normalised correlation at the peak of the last pass (0 where none).
+    pub peak_height: Array2<f64>,
+}
+
+impl Field {
+    /// The vectors in row-major order, as the CSV writes them.
+    pub fn vectors(&self) -> Vec<Vector> {
+        let mut out = Vec::with_capacity(self.grid.len());
+        for r in 0..self.grid.ny {
+            for c in 0..self.grid.nx {
+                let (x, y) = self.grid.centre(r, c);
+                let flag = self.state[[r, c]].flag();
+                out.push(Vector {
+                    x,
+                    y,
+                    u: self.u[[r, c]],
+                    v: self.v[[r, c]],
+                    flag,
+                });
+            }
+        }
+        out
+    }
+
+    /// Counts of (valid, replaced, invalid) vectors.
+    pub fn counts(&self) -> (usize, usize, usize) {
+        let mut n = (0, 0, 0);
+        for s in &self.state {
+            match s {
+                State::Valid => n.0 += 1,
+                State::Replaced => n.1 += 1,
+                State::Invalid => n.2 += 1,
+            }
+        }
+        n
+    }
+}
+
+/// Reads a PNG/TIFF/BMP, 8- or 16-bit gray (colour is converted), as gray
+/// values in its own scale.
+pub fn load_image(path: &Path) -> Result<Array2<f32>, PivError> {
+    let g = read_gray(path)?;
+    let (w, h) = (g.width as usize, g.height as usize);
+    Ok(Array2::from_shape_fn((h, w), |(i, j)| {
+        f32::from(g.data[i * w + j])
+    }))
+}
+
+/// Reads a mask image: pixels above 0 are excluded.
+pub fn load_mask(path: &Path) -> Result<Array2<bool>, PivError> {
+    Ok(load_image(path)?.mapv(|v| v > 0.0))
+}
+
+fn check(s: &Settings, (h, w): (usize, usize)) -> Result<(), PivError> {
+    if s.windows.is_empty() {
+        return Err(PivError::Settings("no windows given".into()));
+    }
+    if let Some(bad) = s.windows.iter().find(|&&n| !(4..=1024).contains(&n)) {
+        return Err(PivError::Settings(format!(
+            "window {bad} px: expected 4..=1024"
+        )));
+    }
+    if !(0.0..=0.9).contains(&s.overlap) {
+        return Err(PivError::Settings(format!(
+            "overlap {}: expected 0..=0.9",
+            s.overlap
+        )));
+    }
+    let v = &s.validation;
+    if !(v.median_threshold >= 0.0 && v.median_eps >= 0.0 && v.min_peak_ratio >= 0.0) {
+        return Err(PivError::Settings(
+            "validation thresholds must be non-negative numbers".into(),
+        ));
+    }
+    let big = s.windows.iter().copied().max().unwrap_or(0);
+    if w < big || h < big {
+        return Err(PivError::TooSmall(w, h, big));
+    }
+    Ok(())
+}
+
+/// Runs PIV on a pair; the field lives on the last pass's grid.
+pub fn piv(
+    a: &Array2<f32>,
+    b: &Array2<f32>,
+    mask: Option<&Array2<bool>>,
+    s: &Settings,
+) -> Result<Field, PivError> {
+    if a.dim() != b.dim() {
+        let ((ha, wa), (hb, wb)) = (a.dim(), b.dim());
+        return Err(PivError::SizeMismatch(wa, ha, wb, hb));
+    }
+    if let Some(m) = mask {
+        if m.dim() != a.dim() {
+            return Err(PivError::MaskSize(
+                m.dim().1,
+                m.dim().0,
+                a.dim().1,
+                a.dim().0,
+            ));
+        }
+    }
+    check(s, a.dim())?;
+    let (h, w) = a.dim();
+    let mut prev: Option<(Field, f64)> = None;
+    let mut predictor: Option<Field> = None;
+    let resamplers = (s.windows.len() > 1).then(|| {
+        (
+            deform::Resampler::new(a, s.interp),
+            deform::Resampler::new(b, s.interp),
+        )
+    });
+    for &size in &s.windows {
+        let step = ((size as f64) * (1.0 - s.overlap)).round().max(1.0) as usize;
+        let grid = Grid::new(w, h, size, step).ok_or(PivError::TooSmall(w, h, size))?;
+        let (pa, pb, pred, outside) = match &predictor {
+            None => (None, None, None, None),
+            Some(f) => {
+                let (du, dv) = deform::dense(&f.grid, &f.u, &f.v, h, w);
+                let (ra, rb) = resamplers
+                    .as_ref()
+                    .ok_or_else(|| PivError::Settings("internal: no resampler".into()))?;
+                let (da, db, mut outside) = deform::deform(ra, rb, &du, &dv);
+                if let Some(m) = mask {
+                    outside.zip_mut_with(m, |o, &m| *o |= m);
+                }
+                (Some(da), Some(db), Some((du, dv)), Some(outside))
+            }
+        };
+        let (ia, ib) = (pa.as_ref().unwrap_or(a), pb.as_ref().unwrap_or(b));
+        let excluded = outside.as_ref().or(mask);
+        let (field, support) = pass(ia, ib, mask, excluded, grid, pred.as_ref(), s);
+        // A pass where fewer than a quarter of the windows with signal
+        // passed validation has failed (e.g. displacements beyond the
+        // window): its replaced field would only spread noise, so the next
+        // pass starts again from the undeformed images.
+        predictor = (support >= MIN_SUPPORT).then(|| field.clone());
+        prev = Some((field, support));
+    }
+    let (mut field, support) = prev.ok_or_else(|| PivError::Settings("no windows given".into()))?;
+    if support < MIN_SUPPORT {
+        // The last pass failed as a whole: what passed its tests are chance
+        // matches (overlapping windows share particles, so two neighbours
+        // can agree by chance). Nothing is reported as measured.
+        for ((st, u), v) in field
+            .state
+            .iter_mut()
+            .zip(field.u.iter_mut())
+            .zip(field.v.iter_mut())
+        {
+            *st = State::Invalid;
+            *u = 0.0;
+            *v = 0.0;
+        }
+    }
+    Ok(field)
+}
+
+/// One pass on (possibly deformed) images; `pred` is the dense predictor
+/// the images were deformed by; `mask` holds the user's masked pixels (a
+/// window whose centre is masked has no vector) and `excluded` every pixel
+/// the correlation leaves out (the mask and, after deformation, pixels with
+/// no data).
+fn pass(
+    a: &Array2<f32>,
+    b: &Array2<f32>,
+    mask: Option<&Array2<bool>>,
+    excluded: Option<&Array2<bool>>,
+    grid: Grid,
+    pred: Option<&(Array2<f32>, Array2<f32>)>,
+    s: &Settings,
+) -> (Field, f64) {
+    let plan = Plan::new(grid.size);
+    let n = grid.size;
+    let results: Vec<(f64, f64, f64, f64, Option<NoPeak>)> = (0..grid.len())
+        .into_par_iter()
+        .map_init(
+            || Scratch::new(&plan),
+            |sc, k| {
+                let (r, c) = (k / grid.nx, k % grid.nx);
+                let (x0, y0) = grid.origin(r, c);
+                let (xc, yc) = (x0 + n / 2, y0 + n / 2);
+                if mask.is_some_and(|m| m[[yc.min(m.dim().0 - 1), xc.min(m.dim().1 - 1)]]) {
+                    return (0.0, 0.0, 0.0, 0.0, Some(NoPeak::NoSignal));
+                }
+                if let Some(m) = excluded {
+                    sc.masked.clear();
+                    for i in 0..n {
+                        for j in 0..n {
+                            sc.masked.push(m[[y0 + i, x0 + j]]);
+                        }
+                    }
+                }
+                for i in 0..n {
+                    for j in 0..n {
+                        sc.a[i * n + j] = a[[y0 + i, x0 + j]];
+                        sc.b[i * n + j] = b[[y0 + i, x0 + j]];
+                    }
+                }
+                let (pu, pv) = match pred {
+                    None => (0.0, 0.0),
+                    Some((du, dv)) => {
+                        // The predictor at the window centre (mean of the
+                        // central 2×2 for even windows).
+                        let (i1, j1) = (y0 + (n - 1) / 2, x0 + (n - 1) / 2);
+                        let (i2, j2) = (y0 + n / 2, x0 + n / 2);
+                        let m = |f: &Array2<f32>| {
+                            0.25 * f64::from(f[[i1, j1]] + f[[i1, j2]] + f[[i2, j1]] + f[[i2, j2]])
+                        };
+                        (m(du), m(dv))
+                    }
+                };
+                match correlate(&plan, sc) {
+                    // After deformation the residual must be small: a
+                    // correction beyond a quarter window means the
+                    // predictor was wrong here, so the peak is not trusted.
+                    Ok(p) if pred.is_some() && p.dx.hypot(p.dy) > n as f64 / 4.0 => {
+                        (pu + p.dx, pv + p.dy, 0.0, p.height, Some(NoPeak::NoPeak))
+                    }
+                    Ok(p) => (pu + p.dx, pv + p.dy, p.ratio, p.height, None),
+                    Err(e) => (pu, pv, 0.0, 0.0, Some(e)),
+                }
+            },
+        )
+        .collect();
+    let shape = (grid.ny, grid.nx);
+    let mut u = Array2::zeros(shape);
+    let mut v = Array2::zeros(shape);
+    let mut ratio = Array2::zeros(shape);
+    let mut height = Array2::zeros(shape);
+    let mut state = Array2::from_elem(shape, State::Valid);
+    let mut replaceable = Array2::from_elem(shape, true);
+    for (k, (du, dv, pr, ph, err)) in results.into_iter().enumerate() {
+        let idx = [k / grid.nx, k % grid.nx];
+        u[idx] = du;
+        v[idx] = dv;
+        ratio[idx] = pr;
+        height[idx] = ph;
+        match err {
+            Some(NoPeak::NoSignal) => {
+                state[idx] = State::Invalid;
+                replaceable[idx] = false;
+            }
+            Some(NoPeak::NoPeak) => state[idx] = State::Invalid,
+            None if pr < s.validation.min_peak_ratio => state[idx] = State::Invalid,
+            None => {}
+        }
+    }
+    validate::median_test(
+        &u,
+        &v,
+        &mut state,
+        s.validation.median_threshold,
+        s.validation.median_eps,
+    );
+    let with_signal = replaceable.iter().filter(|&&r| r).count();
+    let valid = state.iter().filter(|&&st| st == State::Valid).count();
+    let support = valid as f64 / with_signal.max(1) as f64;
+    validate::replace(
+        &mut u,
+        &mut v,
+        &mut state,
+        &replaceable,
+        s.replace_iterations,
+    );
+    let field = Field {
+        grid,
+        u,
+        v,
+        state,
+        peak_ratio: ratio,
+        peak_height: height,
+    };
+    (field, support)
+}

@@ -1,0 +1,95 @@
+//! Accuracy of the PIV engine on frame-camera pairs of the simulated scenes
+//! (no glare) with known truth. Bounds (SPEC 6, issue 3): uniform
+//! displacements 0–1 px: RMS ≤ 0.05 px, |bias| ≤ 0.02 px per component;
+//! shear and vortex with ≥ 8 particles per 32-px window: outliers (error
+//! > 1 px) < 1 %; displacements up to 12 px: RMS ≤ 0.06 px.
+
+mod common;
+
+use common::{errors, pair, params, rms};
+use spiv_firmware_sim::scene::{SceneKind, SceneParams};
+use spiv_host::piv::{piv, Settings};
+
+fn uniform(shift: (f64, f64), seed: u64) -> Vec<(f64, f64, u8)> {
+    let p = SceneParams {
+        shift,
+        ..params(SceneKind::Uniform)
+    };
+    let pr = pair(p, seed);
+    let f = piv(&pr.a, &pr.b, None, &Settings::default()).expect("piv");
+    errors(&f, &pr)
+}
+
+#[test]
+fn uniform_subpixel_displacements_have_no_peak_locking() {
+    let mut all = Vec::new();
+    for k in 0..=10 {
+        let d = f64::from(k) * 0.1;
+        let e = uniform((d, 0.5 * d), 10 + k as u64);
+        let n = e.len() as f64;
+        let bu = e.iter().map(|x| x.0).sum::<f64>() / n;
+        let bv = e.iter().map(|x| x.1).sum::<f64>() / n;
+        let r = rms(&e);
+        eprintln!(
+            "shift {d:.1},{:.2}: bias {bu:+.4} {bv:+.4} rms {r:.4} invalid {}",
+            0.5 * d,
+            e.iter().filter(|x| x.2 != 0).count()
+        );
+        assert!(
+            bu.abs() <= 0.02 && bv.abs() <= 0.02,
+            "bias at {d}: {bu} {bv}"
+        );
+        assert!(r <= 0.05, "rms at {d}: {r}");
+        all.extend(e);
+    }
+    eprintln!("all: rms {:.4}", rms(&all));
+}
+
+#[test]
+fn larger_uniform_displacements() {
+    for (i, d) in [(2.5, -1.3), (5.3, 3.7), (11.6, -7.2)]
+        .into_iter()
+        .enumerate()
+    {
+        let e = uniform(d, 40 + i as u64);
+        let r = rms(&e);
+        let bad = e.iter().filter(|x| x.2 != 0).count();
+        eprintln!("shift {d:?}: rms {r:.4} flagged {bad}/{}", e.len());
+        // Particles leave the image at the edges: a slightly looser bound.
+        assert!(r <= 0.06, "rms at {d:?}: {r}");
+    }
+}
+
+/// Vectors more than 1 px off the truth, whatever their flag.
+fn outliers(e: &[(f64, f64, u8)]) -> usize {
+    e.iter()
+        .filter(|x| (x.0 * x.0 + x.1 * x.1).sqrt() > 1.0)
+        .count()
+}
+
+#[test]
+fn shear_and_vortex_with_dense_seeding() {
+    for kind in [SceneKind::PaperLinear, SceneKind::Vortex] {
+        let (mut all, mut r) = (Vec::new(), 0.0);
+        for seed in [7, 8, 9] {
+            // 8 particles per 32-px window.
+            let p = SceneParams {
+                per_cell: 8,
+                min_spacing: 6.0,
+                ..params(kind)
+            };
+            let pr = pair(p, seed);
+            let f = piv(&pr.a, &pr.b, None, &Settings::default()).expect("piv");
+            let e = errors(&f, &pr);
+            r += rms(&e) / 3.0;
+            all.extend(e);
+        }
+        let out = outliers(&all);
+        eprintln!("{kind:?}: rms {r:.4} px, outliers {out}/{}", all.len());
+        assert!(
+            (out as f64) < 0.01 * all.len() as f64,
+            "{kind:?}: {out} outliers"
+        );
+        assert!(r < 0.25, "{kind:?}: rms {r}");
+    }
+}

@@ -1,0 +1,232 @@
+//! The PIV engine on the hard cases spike reconstructions produce: no NaN,
+//! no wrong vector marked valid, clear errors for impossible inputs.
+
+mod common;
+
+use common::{errors, pair, params};
+use ndarray::Array2;
+use spiv_firmware_sim::scene::{SceneKind, SceneParams};
+use spiv_host::piv::{load_image, piv, PivError, Settings, State};
+
+fn finite(f: &spiv_host::piv::Field) -> bool {
+    f.u.iter().chain(f.v.iter()).all(|x| x.is_finite())
+}
+
+#[test]
+fn all_zero_and_all_saturated_images_are_invalid_never_nan() {
+    for value in [0.0f32, 255.0, 65535.0] {
+        let a = Array2::from_elem((128, 160), value);
+        let f = piv(&a, &a, None, &Settings::default()).expect("runs");
+        assert!(finite(&f));
+        assert!(f.state.iter().all(|s| *s == State::Invalid), "{value}");
+        assert!(f
+            .vectors()
+            .iter()
+            .all(|v| v.flag == 2 && v.u == 0.0 && v.v == 0.0));
+    }
+}
+
+#[test]
+fn saturated_patch_inside_a_good_image() {
+    let p = SceneParams {
+        shift: (3.2, -1.7),
+        ..params(SceneKind::Uniform)
+    };
+    let mut pr = pair(p, 5);
+    // A clipped block of 80x80 px (the glare of a frame camera).
+    for img in [&mut pr.a, &mut pr.b] {
+        for i in 60..140 {
+            for j in 100..180 {
+                img[[i, j]] = 4095.0;
+            }
+        }
+    }
+    let f = piv(&pr.a, &pr.b, None, &Settings::default()).expect("runs");
+    assert!(finite(&f));
+    let e = errors(&f, &pr);
+    let vs = f.vectors();
+    let mut inside = 0;
+    for (v, err) in vs.iter().zip(&e) {
+        let covered =
+            v.x - 15.5 >= 100.0 && v.x + 15.5 < 180.0 && v.y - 15.5 >= 60.0 && v.y + 15.5 < 140.0;
+        if covered {
+            inside += 1;
+            assert_eq!(
+                v.flag, 2,
+                "window inside the clipped block at {},{}",
+                v.x, v.y
+            );
+        } else if v.flag == 0 {
+            assert!(
+                (err.0 * err.0 + err.1 * err.1).sqrt() < 0.5,
+                "valid vector off by {err:?} at {},{}",
+                v.x,
+                v.y
+            );
+        }
+    }
+    assert!(inside > 0);
+}
+
+fn particle(img: &mut Array2<f32>, x: f64, y: f64) {
+    let (h, w) = img.dim();
+    for i in 0..h {
+        for j in 0..w {
+            let d2 = (j as f64 - x).powi(2) + (i as f64 - y).powi(2);
+            img[[i, j]] += (200.0 * (-d2 / 2.0).exp()) as f32;
+        }
+    }
+}
+
+#[test]
+fn a_single_particle() {
+    let mut a = Array2::zeros((96, 96));
+    let mut b = Array2::zeros((96, 96));
+    particle(&mut a, 40.3, 45.6);
+    particle(&mut b, 43.1, 44.4);
+    let f = piv(&a, &b, None, &Settings::default()).expect("runs");
+    assert!(finite(&f));
+    let mut found = 0;
+    for v in f.vectors() {
+        if v.flag == 0 {
+            found += 1;
+            assert!((v.u - 2.8).abs() < 0.1 && (v.v + 1.2).abs() < 0.1, "{v:?}");
+        }
+    }
+    assert!(found > 0, "the windows holding the particle measure it");
+}
+
+#[test]
+fn displacements_beyond_the_window_are_recovered_or_flagged() {
+    // 20 px: the 64-px first pass finds it, the 32-px passes refine it.
+    let p = SceneParams {
+        shift: (20.0, 6.0),
+        pair_dt: 40,
+        ..params(SceneKind::Uniform)
+    };
+    let pr = pair(p, 11);
+    let f = piv(&pr.a, &pr.b, None, &Settings::default()).expect("runs");
+    let e = errors(&f, &pr);
+    let valid: Vec<_> = e.iter().filter(|x| x.2 == 0).collect();
+    assert!(valid.len() > e.len() * 8 / 10);
+    assert!(valid.iter().all(|x| x.0.hypot(x.1) < 0.5));
+
+    // 40 px with 32-px windows only: nothing to find; no valid vector may
+    // be wrong by more than a pixel.
+    let p = SceneParams {
+        shift: (40.0, 3.0),
+        pair_dt: 40,
+        ..params(SceneKind::Uniform)
+    };
+    let pr = pair(p, 12);
+    let s = Settings {
+        windows: vec![32, 32],
+        ..Settings::default()
+    };
+    let f = piv(&pr.a, &pr.b, None, &s).expect("runs");
+    let e = errors(&f, &pr);
+    let wrong_valid = e
+        .iter()
+        .filter(|x| x.2 == 0 && x.0.hypot(x.1) > 1.0)
+        .count();
+    let valid = e.iter().filter(|x| x.2 == 0).count();
+    eprintln!(
+        "40 px with 32-px windows: {valid} valid, {wrong_valid} wrong among them, of {}",
+        e.len()
+    );
+    assert_eq!(wrong_valid, 0);
+}
+
+#[test]
+fn impossible_inputs_are_clear_errors() {
+    let a = Array2::<f32>::zeros((20, 40));
+    let b = Array2::<f32>::zeros((20, 40));
+    assert!(matches!(
+        piv(&a, &b, None, &Settings::default()),
+        Err(PivError::TooSmall(40, 20, 64))
+    ));
+    let c = Array2::<f32>::zeros((128, 128));
+    let d = Array2::<f32>::zeros((128, 96));
+    let e = piv(&c, &d, None, &Settings::default()).expect_err("sizes differ");
+    assert!(matches!(e, PivError::SizeMismatch(..)));
+    assert_eq!(
+        e.to_string(),
+        "images differ in size: 128x128 and 96x128 px"
+    );
+    for bad in [vec![], vec![2], vec![32, 4096]] {
+        let s = Settings {
+            windows: bad,
+            ..Settings::default()
+        };
+        assert!(matches!(piv(&c, &c, None, &s), Err(PivError::Settings(_))));
+    }
+    let s = Settings {
+        overlap: 0.95,
+        ..Settings::default()
+    };
+    assert!(matches!(piv(&c, &c, None, &s), Err(PivError::Settings(_))));
+    let m = Array2::from_elem((10, 10), false);
+    assert!(matches!(
+        piv(&c, &c, Some(&m), &Settings::default()),
+        Err(PivError::MaskSize(..))
+    ));
+}
+
+#[test]
+fn sixteen_bit_images_and_masks() {
+    let p = SceneParams {
+        shift: (2.3, 1.1),
+        ..params(SceneKind::Uniform)
+    };
+    let pr = pair(p, 21);
+    let dir = tempfile::tempdir().expect("tmp");
+    let (h, w) = pr.a.dim();
+    let save = |img: &Array2<f32>, name: &str| {
+        let data: Vec<u16> = img.iter().map(|&v| (v * 16.0) as u16).collect();
+        let path = dir.path().join(name);
+        spiv_firmware_sim::formats::image::write_gray16(&path, w as u32, h as u32, &data)
+            .expect("write");
+        path
+    };
+    let (pa, pb) = (save(&pr.a, "a.png"), save(&pr.b, "b.tif"));
+    let (a, b) = (load_image(&pa).expect("a"), load_image(&pb).expect("b"));
+    assert!(a.iter().any(|&v| v > 255.0), "16-bit range kept");
+    let f = piv(&a, &b, None, &Settings::default()).expect("runs");
+    let e = errors(&f, &pr);
+    assert!(common::rms(&e) < 0.06);
+
+    // A mask over the left half: those windows have no vector.
+    let mask = Array2::from_shape_fn((h, w), |(_, j)| j < w / 2);
+    let f = piv(&a, &b, Some(&mask), &Settings::default()).expect("runs");
+    for v in f.vectors() {
+        if (v.x as usize) < w / 2 {
+            assert_eq!(v.flag, 2);
+        }
+    }
+    let e = errors(&f, &pr);
+    assert!(e.iter().filter(|x| x.2 == 0).all(|x| x.0.hypot(x.1) < 0.5));
+}
+
+#[test]
+fn strong_gradients() {
+    // Shear of 0.1 px/px: 25 px over 250 rows.
+    let p = SceneParams {
+        top_speed: 25.0 / 13.0,
+        per_cell: 6,
+        min_spacing: 6.0,
+        ..params(SceneKind::PaperLinear)
+    };
+    let pr = pair(p, 31);
+    let f = piv(&pr.a, &pr.b, None, &Settings::default()).expect("runs");
+    assert!(finite(&f));
+    let e = errors(&f, &pr);
+    let bad = e
+        .iter()
+        .filter(|x| x.2 == 0 && x.0.hypot(x.1) > 1.0)
+        .count();
+    eprintln!(
+        "shear 0.1 px/px: rms {:.3}, {bad} valid vectors off by > 1 px",
+        common::rms(&e)
+    );
+    assert!(bad * 50 < e.len(), "{bad} of {}", e.len());
+}
