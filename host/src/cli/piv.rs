@@ -4,15 +4,17 @@ use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
 use spiv_firmware_sim::formats::csv::write_vectors;
-use spiv_host::piv::{load_image, load_mask, piv, Interp, Settings, Validation};
+use spiv_host::piv::{load_image, load_mask, piv, Clip, Interp, Settings, Subpixel, Validation};
 
 use super::CliError;
 
 /// Image resampling for the deformation passes.
 #[derive(Debug, Clone, Copy, ValueEnum)]
 pub enum InterpArg {
-    /// Cubic B-spline (most accurate).
+    /// Cubic B-spline.
     Bspline,
+    /// Quintic B-spline.
+    Bspline5,
     /// Keys' bicubic.
     Bicubic,
     /// Bilinear (fastest).
@@ -44,6 +46,16 @@ pub struct PivArgs {
     /// Normalised median test threshold (0 disables).
     #[arg(long, default_value_t = 2.0)]
     median_threshold: f64,
+    /// Clipped areas left out: "auto" (each image's maximum when it is
+    /// shared by ≥ 0.1 % of pixels), "off", or a gray level.
+    #[arg(long, default_value = "auto")]
+    clip: String,
+    /// High-pass pre-filter: σ of the subtracted background blur, px (0 = off).
+    #[arg(long, default_value_t = 3.0)]
+    highpass: f32,
+    /// Sub-pixel estimator: gaussian or parabolic.
+    #[arg(long, default_value = "parabolic")]
+    subpixel: String,
     /// Minimum correlation peak ratio (1 disables).
     #[arg(long, default_value_t = 1.5)]
     min_peak_ratio: f64,
@@ -51,11 +63,43 @@ pub struct PivArgs {
 
 /// Runs it.
 pub fn run(a: &PivArgs) -> Result<(), CliError> {
+    let clip = match a.clip.as_str() {
+        "auto" => Clip::Auto,
+        "off" => Clip::Off,
+        v => Clip::Level(
+            v.parse::<f32>()
+                .ok()
+                .filter(|l| l.is_finite())
+                .ok_or_else(|| {
+                    CliError::Usage(format!("--clip {v}: expected auto, off or a gray level"))
+                })?,
+        ),
+    };
+    if !(0.0..=1000.0).contains(&a.highpass) {
+        return Err(CliError::Usage(format!(
+            "--highpass {}: expected 0..=1000 px",
+            a.highpass
+        )));
+    }
+    let subpixel = match a.subpixel.as_str() {
+        "gaussian" => Subpixel::Gaussian,
+        "parabolic" => Subpixel::Parabolic,
+        "gaussian2d" => Subpixel::Gaussian2d,
+        v => {
+            return Err(CliError::Usage(format!(
+                "--subpixel {v}: gaussian or parabolic"
+            )))
+        }
+    };
     let settings = Settings {
+        subpixel,
+        clip,
+        highpass: a.highpass,
         windows: a.windows.clone(),
         overlap: a.overlap,
         interp: match a.interp {
             InterpArg::Bspline => Interp::Bspline,
+            InterpArg::Bspline5 => Interp::Bspline5,
             InterpArg::Bicubic => Interp::Bicubic,
             InterpArg::Bilinear => Interp::Bilinear,
         },

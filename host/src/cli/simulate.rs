@@ -33,6 +33,9 @@ pub struct SimulateArgs {
     /// Pair separation, ticks.
     #[arg(long)]
     dt: Option<u32>,
+    /// Displacement of the `uniform` scene per pair, px: "U,V" (right, down).
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    shift: Option<Vec<f64>>,
     /// Minimum particle spacing, px (the paper used 15).
     #[arg(long)]
     spacing: Option<f64>,
@@ -66,6 +69,19 @@ pub fn run(a: &SimulateArgs) -> Result<(), CliError> {
             return Err(CliError::Usage("--dt must be at least 1 tick".into()));
         }
         p.pair_dt = dt;
+    }
+    if let Some(sh) = &a.shift {
+        if kind != SceneKind::Uniform {
+            return Err(CliError::Usage(
+                "--shift applies to the uniform scene".into(),
+            ));
+        }
+        if sh.len() != 2 || sh.iter().any(|v| !v.is_finite() || v.abs() > 1000.0) {
+            return Err(CliError::Usage(
+                "--shift U,V: two numbers within ±1000 px".into(),
+            ));
+        }
+        p.shift = (sh[0], sh[1]);
     }
     if let Some(s) = a.spacing {
         if !(0.0..=64.0).contains(&s) {

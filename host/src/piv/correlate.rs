@@ -108,13 +108,15 @@ const FLAT: f64 = 1e-3;
 /// set to the mean, so they add nothing); the correlation is normalised by
 /// both energies. Sub-pixel: 3-point Gaussian per axis, the 3-point parabola
 /// where a value is not positive, 0 where neither has a maximum.
-pub fn correlate(plan: &Plan, s: &mut Scratch) -> Result<Peak, NoPeak> {
+pub fn correlate(plan: &Plan, s: &mut Scratch, method: Subpixel) -> Result<Peak, NoPeak> {
     let n = plan.n;
     let (ea, ma, ka) = zero_mean(&mut s.a, &s.masked);
     let (eb, mb, kb) = zero_mean(&mut s.b, &s.masked);
     let n2 = (n * n) as f64;
-    let flat =
-        |e: f64, m: f64, k: usize| k < 2 || e / k as f64 <= (FLAT * m.abs().max(1.0)).powi(2);
+    // Too few pixels left (an eighth of the window) or no contrast.
+    let flat = |e: f64, m: f64, k: usize| {
+        k < (n * n / 8).max(2) || e / k as f64 <= (FLAT * m.abs().max(1.0)).powi(2)
+    };
     if flat(ea, ma, ka) || flat(eb, mb, kb) {
         return Err(NoPeak::NoSignal);
     }
@@ -142,39 +144,62 @@ pub fn correlate(plan: &Plan, s: &mut Scratch) -> Result<Peak, NoPeak> {
     transpose(&s.z, &mut s.t, n);
     plan.inv.process_with_scratch(&mut s.t, &mut s.fft);
     let norm = 1.0 / (n2 * (ea * eb).sqrt());
-    let c = |i: usize, j: usize| f64::from(s.t[(i % n) * n + (j % n)].re) * norm;
-
-    let (mut bi, mut bj, mut best) = (0usize, 0usize, f64::NEG_INFINITY);
-    for i in 0..n {
-        for j in 0..n {
-            let v = c(i, j);
-            if v > best {
-                (bi, bj, best) = (i, j, v);
-            }
+    let (mut best_k, mut best_raw) = (0usize, f32::NEG_INFINITY);
+    for (k, z) in s.t.iter().enumerate() {
+        if z.re > best_raw {
+            (best_k, best_raw) = (k, z.re);
         }
     }
+    let (bi, bj) = (best_k / n, best_k % n);
+    let best = f64::from(best_raw) * norm;
     if !best.is_finite() || best <= 0.0 {
         return Err(NoPeak::NoPeak);
     }
-    let mut second = 0.0f64;
+    let c = |i: usize, j: usize| f64::from(s.t[(i % n) * n + (j % n)].re) * norm;
+    // The second peak: the maximum outside the 5×5 around the first.
+    let mut second_raw = 0.0f32;
     for i in 0..n {
         let di = (i + n - bi) % n;
-        let near_i = di <= 2 || di >= n - 2;
-        for j in 0..n {
-            let dj = (j + n - bj) % n;
-            if near_i && (dj <= 2 || dj >= n - 2) {
-                continue;
+        let row = &s.t[i * n..(i + 1) * n];
+        if di <= 2 || di >= n - 2 {
+            for (j, z) in row.iter().enumerate() {
+                let dj = (j + n - bj) % n;
+                if dj > 2 && dj < n - 2 {
+                    second_raw = second_raw.max(z.re);
+                }
             }
-            second = second.max(c(i, j));
+        } else {
+            for z in row {
+                second_raw = second_raw.max(z.re);
+            }
         }
     }
+    let second = f64::from(second_raw) * norm;
     let ratio = if second > 0.0 {
         (best / second).min(1000.0)
     } else {
         1000.0
     };
-    let sy = subpixel(c(bi + n - 1, bj), best, c(bi + 1, bj));
-    let sx = subpixel(c(bi, bj + n - 1), best, c(bi, bj + 1));
+    let fit = |m: f64, p: f64| match method {
+        Subpixel::Gaussian => subpixel(m, best, p),
+        Subpixel::Parabolic => parabolic(m, best, p),
+        Subpixel::Gaussian2d => subpixel(m, best, p),
+    };
+    let (mut sy, mut sx) = (
+        fit(c(bi + n - 1, bj), c(bi + 1, bj)),
+        fit(c(bi, bj + n - 1), c(bi, bj + 1)),
+    );
+    if method == Subpixel::Gaussian2d {
+        let mut v = [[0.0; 3]; 3];
+        for (r, row) in v.iter_mut().enumerate() {
+            for (k, x) in row.iter_mut().enumerate() {
+                *x = c(bi + n + r - 1, bj + n + k - 1);
+            }
+        }
+        if let Some((dx, dy)) = gaussian2d(&v) {
+            (sx, sy) = (dx, dy);
+        }
+    }
     let wrap = |k: usize| {
         if k >= n / 2 {
             k as f64 - n as f64
@@ -219,11 +244,57 @@ fn zero_mean(w: &mut [f32], masked: &[bool]) -> (f64, f64, usize) {
 }
 
 fn transpose(src: &[Complex32], dst: &mut [Complex32], n: usize) {
-    for i in 0..n {
-        for j in 0..n {
-            dst[j * n + i] = src[i * n + j];
+    transpose::transpose(src, dst, n, n);
+}
+
+/// The 3-point sub-pixel estimator.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Subpixel {
+    /// Gaussian fit (parabola where a value is not positive).
+    Gaussian,
+    /// Parabola.
+    Parabolic,
+    /// Least-squares 2-D Gaussian over the 3×3 around the peak (Nobach &
+    /// Honkanen 2005); the 3-point Gaussian where a value is not positive.
+    Gaussian2d,
+}
+
+/// 9-point 2-D Gaussian regression; `v[row][col]` around the peak. Returns
+/// (dx, dy) in (−1, 1) or `None`.
+fn gaussian2d(v: &[[f64; 3]; 3]) -> Option<(f64, f64)> {
+    let (mut c10, mut c01, mut c11, mut c20, mut c02) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for (r, row) in v.iter().enumerate() {
+        for (k, &x) in row.iter().enumerate() {
+            if x.is_nan() || x <= 0.0 {
+                return None;
+            }
+            let l = x.ln();
+            let (i, j) = (k as f64 - 1.0, r as f64 - 1.0);
+            c10 += i * l;
+            c01 += j * l;
+            c11 += i * j * l;
+            c20 += (3.0 * i * i - 2.0) * l;
+            c02 += (3.0 * j * j - 2.0) * l;
         }
     }
+    let (c10, c01, c11, c20, c02) = (c10 / 6.0, c01 / 6.0, c11 / 4.0, c20 / 6.0, c02 / 6.0);
+    let den = 4.0 * c20 * c02 - c11 * c11;
+    let dx = (c11 * c01 - 2.0 * c10 * c02) / den;
+    let dy = (c11 * c10 - 2.0 * c01 * c20) / den;
+    (dx.is_finite() && dy.is_finite() && dx.abs() < 1.0 && dy.abs() < 1.0).then_some((dx, dy))
+}
+
+/// Parabolic sub-pixel offset in (−1, 1), 0 without a maximum.
+pub fn parabolic(cm: f64, c0: f64, cp: f64) -> f64 {
+    let den = 2.0 * cm - 4.0 * c0 + 2.0 * cp;
+    if den < 0.0 {
+        let d = (cm - cp) / den;
+        if d.is_finite() && d.abs() < 1.0 {
+            return d;
+        }
+    }
+    0.0
 }
 
 /// Sub-pixel offset of a peak `c0` between `cm` (at −1) and `cp` (at +1),
@@ -239,14 +310,7 @@ pub fn subpixel(cm: f64, c0: f64, cp: f64) -> f64 {
             }
         }
     }
-    let den = 2.0 * cm - 4.0 * c0 + 2.0 * cp;
-    if den < 0.0 {
-        let d = (cm - cp) / den;
-        if d.is_finite() && d.abs() < 1.0 {
-            return d;
-        }
-    }
-    0.0
+    parabolic(cm, c0, cp)
 }
 
 #[cfg(test)]
@@ -271,7 +335,7 @@ mod tests {
             s.b.fill(0.0);
             blob(32, 14.0, 15.0, &mut s.a);
             blob(32, 14.0 + dx, 15.0 + dy, &mut s.b);
-            let p = correlate(&plan, &mut s).expect("peak");
+            let p = correlate(&plan, &mut s, Subpixel::Gaussian).expect("peak");
             assert!(
                 (p.dx - dx).abs() < 0.1 && (p.dy - dy).abs() < 0.1,
                 "{p:?} vs {dx},{dy}"
@@ -286,10 +350,16 @@ mod tests {
         let mut s = Scratch::new(&plan);
         s.a.fill(255.0);
         s.b.fill(255.0);
-        assert_eq!(correlate(&plan, &mut s), Err(NoPeak::NoSignal));
+        assert_eq!(
+            correlate(&plan, &mut s, Subpixel::Gaussian),
+            Err(NoPeak::NoSignal)
+        );
         s.a.fill(0.0);
         blob(16, 8.0, 8.0, &mut s.b);
-        assert_eq!(correlate(&plan, &mut s), Err(NoPeak::NoSignal));
+        assert_eq!(
+            correlate(&plan, &mut s, Subpixel::Gaussian),
+            Err(NoPeak::NoSignal)
+        );
     }
 
     #[test]

@@ -9,6 +9,7 @@
 
 pub mod correlate;
 pub mod deform;
+pub mod filter;
 pub mod grid;
 pub mod validate;
 
@@ -24,6 +25,7 @@ pub use deform::Interp;
 pub use grid::Grid;
 pub use validate::{State, Validation};
 
+pub use correlate::Subpixel;
 use correlate::{correlate, NoPeak, Plan, Scratch};
 
 /// Fraction of windows with signal that must pass validation for a pass's
@@ -43,6 +45,48 @@ pub struct Settings {
     pub validation: Validation,
     /// Sweeps of neighbour replacement.
     pub replace_iterations: usize,
+    /// Clipped (saturated) pixels, left out of the correlation.
+    pub clip: Clip,
+    /// High-pass pre-filter: background blur σ, px (0 = off).
+    pub highpass: f32,
+    /// Sub-pixel estimator.
+    pub subpixel: Subpixel,
+}
+
+/// Which pixels count as clipped: a saturated pixel carries no particle, and
+/// the edge of a clipped area would correlate at zero displacement.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Clip {
+    /// Each image's maximum, when at least 0.1 % of its pixels (and 16)
+    /// sit there — an image that reached full scale.
+    Auto,
+    /// No pixel is clipped.
+    Off,
+    /// Pixels at or above this gray level.
+    Level(f32),
+}
+
+impl Clip {
+    /// The clipping level of `img`, if any.
+    pub fn level(self, img: &Array2<f32>) -> Option<f32> {
+        match self {
+            Clip::Off => None,
+            Clip::Level(l) => Some(l),
+            Clip::Auto => {
+                let (max, at) = img.iter().fold((f32::NEG_INFINITY, 0usize), |(m, n), &v| {
+                    if v > m {
+                        (v, 1)
+                    } else if v == m {
+                        (m, n + 1)
+                    } else {
+                        (m, n)
+                    }
+                });
+                (max > 0.0 && at >= 16 && at * 1000 >= img.len()).then_some(max)
+            }
+        }
+    }
 }
 
 impl Default for Settings {
@@ -55,6 +99,9 @@ impl Default for Settings {
             interp: Interp::Bspline,
             validation: Validation::default(),
             replace_iterations: 4,
+            clip: Clip::Auto,
+            highpass: 3.0,
+            subpixel: Subpixel::Parabolic,
         }
     }
 }
@@ -173,6 +220,51 @@ fn check(s: &Settings, (h, w): (usize, usize)) -> Result<(), PivError> {
     Ok(())
 }
 
+/// The clipped areas of `img` (pixels at or above `level`): those that
+/// survive an erosion by `CLIP_CORE` px — so a particle with a clipped core
+/// keeps its pixels — grown back by `grow` px to cover the rim where the
+/// high-pass filter rings at the area's static edge. `None` without a level.
+fn clipped_areas(img: &Array2<f32>, level: Option<f32>, grow: usize) -> Option<Array2<bool>> {
+    let l = level?;
+    let clipped = img.mapv(|v| v >= l);
+    let core = box_count(&clipped, CLIP_CORE);
+    let full = (2 * CLIP_CORE + 1).pow(2) as u32;
+    let eroded = core.mapv(|c| c == full);
+    Some(box_count(&eroded, CLIP_CORE + grow).mapv(|c| c > 0))
+}
+
+/// Radius of the erosion that tells a clipped area from a clipped particle.
+const CLIP_CORE: usize = 3;
+
+/// For every pixel, how many set pixels lie within `r` (a (2r+1)² square,
+/// clipped at the image edge): running sums along rows, then along columns,
+/// rows in parallel.
+fn box_count(m: &Array2<bool>, r: usize) -> Array2<u32> {
+    let sum_rows = |src: &Array2<u32>| -> Array2<u32> {
+        let mut out = Array2::<u32>::zeros(src.dim());
+        out.axis_iter_mut(ndarray::Axis(0))
+            .into_par_iter()
+            .zip(src.axis_iter(ndarray::Axis(0)))
+            .for_each(|(mut o, s)| {
+                let n = s.len();
+                let mut acc: u32 = s.iter().take(r.min(n)).sum();
+                for j in 0..n {
+                    if j + r < n {
+                        acc += s[j + r];
+                    }
+                    o[j] = acc;
+                    if j >= r {
+                        acc -= s[j - r];
+                    }
+                }
+            });
+        out
+    };
+    let rows = sum_rows(&m.mapv(u32::from));
+    let cols = sum_rows(&rows.t().as_standard_layout().into_owned());
+    cols.t().as_standard_layout().into_owned()
+}
+
 /// Runs PIV on a pair; the field lives on the last pass's grid.
 pub fn piv(
     a: &Array2<f32>,
@@ -196,26 +288,51 @@ pub fn piv(
     }
     check(s, a.dim())?;
     let (h, w) = a.dim();
+    // Pixels every pass leaves out: the user's mask and clipped pixels of
+    // either raw image (a clipped area is large next to a residual
+    // displacement, so its undeformed outline serves every pass).
+    let (la, lb) = (s.clip.level(a), s.clip.level(b));
+    let base = (mask.is_some() || la.is_some() || lb.is_some()).then(|| {
+        let mut ex = mask
+            .cloned()
+            .unwrap_or_else(|| Array2::from_elem((h, w), false));
+        let grow = 3 * (s.highpass.max(0.0).round() as usize);
+        let (ca, cb) = rayon::join(|| clipped_areas(a, la, grow), || clipped_areas(b, lb, grow));
+        for c in [ca, cb].into_iter().flatten() {
+            ex.zip_mut_with(&c, |e, &c| *e |= c);
+        }
+        ex
+    });
+    let (fa, fb);
+    let (a, b) = if s.highpass > 0.0 {
+        (fa, fb) = rayon::join(
+            || filter::highpass(a, s.highpass),
+            || filter::highpass(b, s.highpass),
+        );
+        (&fa, &fb)
+    } else {
+        (a, b)
+    };
     let mut prev: Option<(Field, f64)> = None;
     let mut predictor: Option<Field> = None;
     let resamplers = (s.windows.len() > 1).then(|| {
-        (
-            deform::Resampler::new(a, s.interp),
-            deform::Resampler::new(b, s.interp),
+        rayon::join(
+            || deform::Resampler::new(a, s.interp),
+            || deform::Resampler::new(b, s.interp),
         )
     });
     for &size in &s.windows {
         let step = ((size as f64) * (1.0 - s.overlap)).round().max(1.0) as usize;
         let grid = Grid::new(w, h, size, step).ok_or(PivError::TooSmall(w, h, size))?;
         let (pa, pb, pred, outside) = match &predictor {
-            None => (None, None, None, None),
+            None => (None, None, None, base.clone()),
             Some(f) => {
                 let (du, dv) = deform::dense(&f.grid, &f.u, &f.v, h, w);
                 let (ra, rb) = resamplers
                     .as_ref()
                     .ok_or_else(|| PivError::Settings("internal: no resampler".into()))?;
                 let (da, db, mut outside) = deform::deform(ra, rb, &du, &dv);
-                if let Some(m) = mask {
+                if let Some(m) = &base {
                     outside.zip_mut_with(m, |o, &m| *o |= m);
                 }
                 (Some(da), Some(db), Some((du, dv)), Some(outside))
@@ -286,9 +403,20 @@ fn pass(
                     }
                 }
                 for i in 0..n {
-                    for j in 0..n {
-                        sc.a[i * n + j] = a[[y0 + i, x0 + j]];
-                        sc.b[i * n + j] = b[[y0 + i, x0 + j]];
+                    let ra = a.row(y0 + i);
+                    let rb = b.row(y0 + i);
+                    let (da, db) = (&mut sc.a[i * n..(i + 1) * n], &mut sc.b[i * n..(i + 1) * n]);
+                    match (ra.as_slice(), rb.as_slice()) {
+                        (Some(ra), Some(rb)) => {
+                            da.copy_from_slice(&ra[x0..x0 + n]);
+                            db.copy_from_slice(&rb[x0..x0 + n]);
+                        }
+                        _ => {
+                            for j in 0..n {
+                                da[j] = ra[x0 + j];
+                                db[j] = rb[x0 + j];
+                            }
+                        }
                     }
                 }
                 let (pu, pv) = match pred {
@@ -304,7 +432,7 @@ fn pass(
                         (m(du), m(dv))
                     }
                 };
-                match correlate(&plan, sc) {
+                match correlate(&plan, sc, s.subpixel) {
                     // After deformation the residual must be small: a
                     // correction beyond a quarter window means the
                     // predictor was wrong here, so the peak is not trusted.

@@ -1,0 +1,25 @@
+#!/usr/bin/env bash
+# spiv against OpenPIV (multi-pass windef) on the same simulated pairs:
+# errors against the truth and times, in one table.
+#
+#   bash bench/openpiv_compare.sh --install   # first time: OpenPIV into bench/.venv
+#   bash bench/openpiv_compare.sh             # the table
+set -euo pipefail
+cd "$(dirname "$0")/.."
+VENV=bench/.venv
+if [[ "${1:-}" == "--install" ]]; then
+  python3 -m venv "$VENV"
+  "$VENV/bin/pip" install --quiet openpiv imageio
+  shift
+fi
+[[ -x "$VENV/bin/python" ]] || { echo "no $VENV: run $0 --install" >&2; exit 1; }
+cargo build --release --quiet -p spiv-host
+SPIV=target/release/spiv
+CASES=target/openpiv-cases
+rm -rf "$CASES"; mkdir -p "$CASES"
+$SPIV simulate --scene uniform --shift 0.3,0.15 --out "$CASES/uniform-0.3px" --seed 1 >/dev/null
+$SPIV simulate --scene uniform --shift 3.3,-1.7 --out "$CASES/uniform-3.3px" --seed 2 >/dev/null
+$SPIV simulate --scene paper-linear --out "$CASES/paper-linear" --seed 3 >/dev/null
+$SPIV simulate --scene vortex --out "$CASES/vortex" --seed 4 >/dev/null
+$SPIV simulate --scene uniform --shift 2.6,1.4 --width 1024 --height 1024 --out "$CASES/uniform-1024" --seed 5 >/dev/null
+"$VENV/bin/python" bench/openpiv_compare.py "$CASES"/* --spiv "$SPIV" --json target/openpiv-compare.json "$@"
