@@ -77,65 +77,35 @@ pub struct Simulated {
     pub spikes: u64,
 }
 
-/// Runs `req` and writes its files into `dir` (created if missing).
-/// `progress` is called with (planes done, planes in all).
-pub fn simulate_to_dir(
+/// Runs `req`: the spike planes go to `sink` one at a time (stored row
+/// order, bottom-up, as in a `.dat`), the frame camera's pair and the truth
+/// come back in memory. `progress` is called with (planes done, planes in
+/// all).
+pub fn simulate(
     req: &Request,
-    dir: &Path,
     mut progress: impl FnMut(u32, u32),
+    mut sink: impl FnMut(&[u8]) -> Result<(), FormatError>,
 ) -> Result<Simulated, FormatError> {
-    std::fs::create_dir_all(dir).map_err(crate::formats::io_err(dir))?;
     let p = &req.scene;
     let pb = plane_bytes(p.width, p.height)?;
     let (ticks, pair) = req.layout()?;
     let scene = Scene::new(p.clone(), req.seed, ticks);
     let (w, h) = (p.width, p.height);
     let mut sensor = SpikeSensor::new(req.sensor, w, h, req.seed ^ 0x5eed_5e45);
-    let mut writer = DatWriter::create(&dir.join("spikes.dat"), w, h)?;
     let mut light = vec![0f32; usize::from(w) * usize::from(h)];
     let mut plane = vec![0u8; pb];
     let mut spikes = 0u64;
     for t in 0..ticks {
         scene.render(f64::from(t) + 0.5, &mut light);
         spikes += sensor.tick(&light, true, &mut plane);
-        writer.write_planes(&plane)?;
+        sink(&plane)?;
         progress(t + 1, ticks);
     }
-    writer.finish()?;
     let camera = FrameCamera { params: req.camera };
     let frames = [
         camera.capture(&scene, pair[0], req.seed),
         camera.capture(&scene, pair[1], req.seed.wrapping_add(1)),
     ];
-    for (name, f) in ["frame_a.png", "frame_b.png"].iter().zip(&frames) {
-        let path = dir.join(name);
-        if req.camera.bits <= 8 {
-            let v: Vec<u8> = f.iter().map(|&d| d.min(255) as u8).collect();
-            write_gray8(&path, u32::from(w), u32::from(h), &v)?;
-        } else {
-            // 12-bit digital numbers spread over the 16-bit range.
-            let max = u32::from(req.camera.max_dn()).max(1);
-            let v: Vec<u16> = f
-                .iter()
-                .map(|&d| ((u32::from(d) * 65535 + max / 2) / max) as u16)
-                .collect();
-            write_gray16(&path, u32::from(w), u32::from(h), &v)?;
-        }
-    }
-    let dt = f64::from(pair[1] - pair[0]);
-    let truth: Vec<Vector> = scene
-        .truth(&vector_grid(w, h, 32, 16), dt)
-        .into_iter()
-        .map(|(x, y, u, v)| Vector {
-            x,
-            y,
-            u,
-            v,
-            flag: 0,
-        })
-        .collect();
-    write_vectors(&dir.join("truth.csv"), &truth)?;
-    write_profile(&dir.join("profile.csv"), &scene.profile(dt))?;
     let meta = SceneMeta {
         width: w,
         height: h,
@@ -159,11 +129,67 @@ pub fn simulate_to_dir(
         },
         version: env!("CARGO_PKG_VERSION").to_string(),
     };
-    meta.write(&dir.join("scene.json"))?;
     Ok(Simulated {
         meta,
         scene,
         frames,
         spikes,
     })
+}
+
+/// The frame camera's digital numbers as the image file holds them: 8-bit
+/// as is, deeper ADCs spread over 16 bits.
+pub fn write_frame(
+    path: &Path,
+    req: &Request,
+    w: u16,
+    h: u16,
+    f: &[u16],
+) -> Result<(), FormatError> {
+    if req.camera.bits <= 8 {
+        let v: Vec<u8> = f.iter().map(|&d| d.min(255) as u8).collect();
+        write_gray8(path, u32::from(w), u32::from(h), &v)
+    } else {
+        let max = u32::from(req.camera.max_dn()).max(1);
+        let v: Vec<u16> = f
+            .iter()
+            .map(|&d| ((u32::from(d) * 65535 + max / 2) / max) as u16)
+            .collect();
+        write_gray16(path, u32::from(w), u32::from(h), &v)
+    }
+}
+
+/// Runs `req` and writes its files into `dir` (created if missing).
+/// `progress` is called with (planes done, planes in all).
+pub fn simulate_to_dir(
+    req: &Request,
+    dir: &Path,
+    progress: impl FnMut(u32, u32),
+) -> Result<Simulated, FormatError> {
+    std::fs::create_dir_all(dir).map_err(crate::formats::io_err(dir))?;
+    let (w, h) = (req.scene.width, req.scene.height);
+    let mut writer = DatWriter::create(&dir.join("spikes.dat"), w, h)?;
+    let sim = simulate(req, progress, |plane| writer.write_planes(plane))?;
+    writer.finish()?;
+    for (name, f) in ["frame_a.png", "frame_b.png"].iter().zip(&sim.frames) {
+        write_frame(&dir.join(name), req, w, h, f)?;
+    }
+    let pair = sim.meta.pair;
+    let dt = f64::from(pair[1] - pair[0]);
+    let truth: Vec<Vector> = sim
+        .scene
+        .truth(&vector_grid(w, h, 32, 16), dt)
+        .into_iter()
+        .map(|(x, y, u, v)| Vector {
+            x,
+            y,
+            u,
+            v,
+            flag: 0,
+        })
+        .collect();
+    write_vectors(&dir.join("truth.csv"), &truth)?;
+    write_profile(&dir.join("profile.csv"), &sim.scene.profile(dt))?;
+    sim.meta.write(&dir.join("scene.json"))?;
+    Ok(sim)
 }

@@ -6,6 +6,9 @@
 #![warn(missing_docs)]
 
 pub mod core_run;
+pub mod metrics;
+pub mod pipeline;
 pub mod piv;
+pub mod plot;
 pub mod reconstruct;
 pub mod reference;

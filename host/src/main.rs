@@ -17,6 +17,11 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// The main job: a scene through both cameras, the core and PIV; the
+    /// paper's table, images, vectors, plots and summary.json.
+    Run(cli::run::RunArgs),
+    /// Benchmarks: the paper's tables over seeds, Blasius, speed against error.
+    Bench(cli::bench::BenchArgs),
     /// Simulate a scene through the spike sensor and the frame camera.
     Simulate(cli::simulate::SimulateArgs),
     /// Make one frame from a spike file at any tick (adaptive, TFP or TFI).
@@ -26,9 +31,33 @@ enum Command {
 }
 
 fn main() {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) => {
+            use clap::error::ErrorKind;
+            if matches!(
+                e.kind(),
+                ErrorKind::DisplayHelp
+                    | ErrorKind::DisplayVersion
+                    | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+            ) {
+                e.exit();
+            }
+            // One line, as for every other error (clap's own message adds
+            // usage lines; `--help` has them).
+            let text = e.to_string();
+            let first = text.lines().next().unwrap_or("bad arguments");
+            eprintln!(
+                "spiv: {} (see --help)",
+                first.trim_start_matches("error: ").trim()
+            );
+            std::process::exit(2);
+        }
+    };
     let result = match &cli.command {
+        Command::Run(a) => cli::run::run(a),
         Command::Simulate(a) => cli::simulate::run(a),
+        Command::Bench(a) => cli::bench::run(a),
         Command::Reconstruct(a) => cli::reconstruct::run(a),
         Command::Piv(a) => cli::piv::run(a),
     };

@@ -1,7 +1,9 @@
 //! The `spiv` command line: one file per subcommand.
 
+pub mod bench;
 pub mod piv;
 pub mod reconstruct;
+pub mod run;
 pub mod simulate;
 
 /// An error the CLI prints as one line before exiting non-zero.
@@ -16,6 +18,9 @@ pub enum CliError {
     /// PIV.
     #[error(transparent)]
     Piv(#[from] spiv_host::piv::PivError),
+    /// The main job.
+    #[error(transparent)]
+    Job(#[from] spiv_host::pipeline::JobError),
     /// A bad option value.
     #[error("{0}")]
     Usage(String),

@@ -1,0 +1,326 @@
+//! The main job, one pair end to end: the simulated scene through the frame
+//! camera and the spike camera; the spike stream through the sidecar core
+//! (adaptive frames and the TFP baseline); PIV on the three pairs; the
+//! paper's metrics against the truth.
+
+use ndarray::Array2;
+use serde::Serialize;
+use spiv_core::Params;
+use spiv_firmware_sim::formats::csv::Vector;
+use spiv_firmware_sim::formats::FormatError;
+use spiv_firmware_sim::scene::{vector_grid, SceneParams};
+use spiv_firmware_sim::simulation::{simulate, Request, Simulated};
+
+use crate::metrics::{region_error, row_profile, ProfileRow, RegionError};
+use crate::piv::{piv, PivError, Settings};
+use crate::reconstruct::{frame_from_planes, Frame, Method, Planes, ReconstructError};
+
+/// What one run does.
+#[derive(Debug, Clone)]
+pub struct Job {
+    /// The scene and its seed.
+    pub request: Request,
+    /// The core's parameters (n_max is the adaptive window limit).
+    pub core: Params,
+    /// TFP window, ticks (the baseline).
+    pub tfp_window: u16,
+    /// PIV settings for all three pairs.
+    pub piv: Settings,
+    /// Beyond the paper (SPEC 5): cap each band's adaptive window so that
+    /// the fastest particle the TFP pair's PIV sees there blurs by at most
+    /// this many px (`None`: the paper's algorithm, one n_max everywhere).
+    pub dwell_cap: Option<f64>,
+}
+
+impl Job {
+    /// The defaults for `scene` and `seed`.
+    pub fn new(scene: SceneParams, seed: u64) -> Job {
+        Job {
+            request: Request::new(scene, seed),
+            core: Params::default(),
+            tfp_window: 8,
+            piv: Settings {
+                // Spike frames are noisier than camera frames: their true
+                // peaks often stand only 1.2–1.5× above the next one.
+                validation: crate::piv::Validation {
+                    min_peak_ratio: 1.2,
+                    ..crate::piv::Validation::default()
+                },
+                ..Settings::default()
+            },
+            dwell_cap: None,
+        }
+    }
+}
+
+/// Rows per band of the capped adaptive reconstruction, and the margin
+/// reconstructed on each side so regions at a band edge are whole.
+pub const BAND: usize = 32;
+const BAND_MARGIN: usize = 16;
+
+/// The adaptive frame at `k` with each band of `BAND` rows reconstructed by
+/// the core with its own window limit `caps[band]`.
+pub fn adaptive_banded(
+    planes: &Planes,
+    k: u64,
+    core: &Params,
+    caps: &[u16],
+) -> Result<Vec<u16>, JobError> {
+    let (w, h) = (usize::from(planes.width), usize::from(planes.height));
+    let rb = w / 8;
+    let pb = w * h / 8;
+    let mut out = vec![0u16; w * h];
+    for (b, &cap) in caps.iter().enumerate() {
+        let (r0, r1) = (b * BAND, ((b + 1) * BAND).min(h));
+        let (e0, e1) = (r0.saturating_sub(BAND_MARGIN), (r1 + BAND_MARGIN).min(h));
+        // Upright rows e0..e1 are stored rows h-e1..h-e0 (bottom-up).
+        let (s0, s1) = (h - e1, h - e0);
+        let mut data = Vec::with_capacity(planes.data.len() / h * (e1 - e0));
+        for plane in planes.data.chunks_exact(pb) {
+            data.extend_from_slice(&plane[s0 * rb..s1 * rb]);
+        }
+        let band = Planes {
+            width: planes.width,
+            height: (e1 - e0) as u16,
+            flip: true,
+            crop_width: planes.width,
+            first: planes.first,
+            data,
+        };
+        let f = frame_from_planes(&band, k, Method::Adaptive, cap, core)?;
+        for r in r0..r1 {
+            let src = (r - e0) * w;
+            out[r * w..(r + 1) * w].copy_from_slice(&f.data[src..src + w]);
+        }
+    }
+    Ok(out)
+}
+
+/// Window limit per band from a field: the budget over the fastest valid
+/// vector near the band, px per tick, as ticks within [2·n0, n_max].
+pub fn band_caps(field: &[Vector], h: usize, dt: f64, budget: f64, core: &Params) -> Vec<u16> {
+    (0..h.div_ceil(BAND))
+        .map(|b| {
+            let (lo, hi) = ((b * BAND) as f64 - 16.0, ((b + 1) * BAND) as f64 + 16.0);
+            let vmax = field
+                .iter()
+                .filter(|v| v.flag < 2 && v.y >= lo && v.y < hi)
+                .map(|v| v.u.hypot(v.v))
+                .fold(0.0, f64::max);
+            let n = if vmax > 0.0 {
+                budget / (vmax / dt)
+            } else {
+                f64::from(core.n_max)
+            };
+            n.clamp(f64::from(2 * core.n0), f64::from(core.n_max)) as u16
+        })
+        .collect()
+}
+
+/// Errors of a run.
+#[derive(Debug, thiserror::Error)]
+pub enum JobError {
+    /// Simulating.
+    #[error(transparent)]
+    Format(#[from] FormatError),
+    /// Reconstructing.
+    #[error(transparent)]
+    Reconstruct(#[from] ReconstructError),
+    /// PIV.
+    #[error(transparent)]
+    Piv(#[from] PivError),
+}
+
+/// The three kinds of frames compared.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Source {
+    /// The frame camera.
+    Frame,
+    /// TFP of the spike stream.
+    Tfp,
+    /// The adaptive reconstruction.
+    Adaptive,
+}
+
+impl Source {
+    /// All three, in table order.
+    pub const ALL: [Source; 3] = [Source::Frame, Source::Tfp, Source::Adaptive];
+
+    /// File-name stem.
+    pub fn name(self) -> &'static str {
+        match self {
+            Source::Frame => "frame",
+            Source::Tfp => "tfp",
+            Source::Adaptive => "adaptive",
+        }
+    }
+}
+
+/// One source's pair, field and errors.
+#[derive(Debug, Clone)]
+pub struct Measured {
+    /// Which frames.
+    pub source: Source,
+    /// The pair as gray levels (upright), with the full-scale value.
+    pub pair: [Vec<u16>; 2],
+    /// Gray level of full scale.
+    pub full_scale: u16,
+    /// The vectors.
+    pub vectors: Vec<Vector>,
+    /// Row profiles against the truth.
+    pub rows: Vec<ProfileRow>,
+    /// Errors in the glare rows.
+    pub glare: RegionError,
+    /// Errors in the other rows.
+    pub rest: RegionError,
+    /// PIV time, ms.
+    pub piv_ms: f64,
+}
+
+/// A finished run.
+#[derive(Debug, Clone)]
+pub struct Outcome {
+    /// The simulation (scene, metadata, frame camera pair).
+    pub sim: Simulated,
+    /// The truth on the PIV grid.
+    pub truth: Vec<Vector>,
+    /// Frame camera, TFP and adaptive, in that order.
+    pub measured: Vec<Measured>,
+    /// Height above the wall below which a vector row is in the glare band, px.
+    pub glare_limit: f64,
+    /// Time of each stage, ms: simulate, reconstruct, PIV (all three).
+    pub stage_ms: [f64; 3],
+}
+
+fn to_f32(data: &[u16], w: usize, h: usize) -> Array2<f32> {
+    Array2::from_shape_fn((h, w), |(i, j)| f32::from(data[i * w + j]))
+}
+
+/// Runs `job`; `stage` is told the name of each stage as it starts.
+pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> {
+    let t0 = std::time::Instant::now();
+    stage("simulating both cameras");
+    let p = &job.request.scene;
+    let (w, h) = (p.width, p.height);
+    let mut data = Vec::new();
+    let sim = simulate(
+        &job.request,
+        |_, _| {},
+        |plane| {
+            data.extend_from_slice(plane);
+            Ok(())
+        },
+    )?;
+    let t_sim = t0.elapsed().as_secs_f64() * 1e3;
+
+    stage("reconstructing through the core");
+    let planes = Planes {
+        width: w,
+        height: h,
+        flip: true,
+        crop_width: w,
+        first: 0,
+        data,
+    };
+    let [ka, kb] = sim.meta.pair.map(u64::from);
+    let make = |m: Method, window: u16, k: u64| -> Result<Frame, JobError> {
+        Ok(frame_from_planes(&planes, k, m, window, &job.core)?)
+    };
+    let (tfp, adaptive) = rayon::join(
+        || -> Result<[Frame; 2], JobError> {
+            Ok([
+                make(Method::Tfp, job.tfp_window, ka)?,
+                make(Method::Tfp, job.tfp_window, kb)?,
+            ])
+        },
+        || -> Result<[Frame; 2], JobError> {
+            Ok([
+                make(Method::Adaptive, job.core.n_max, ka)?,
+                make(Method::Adaptive, job.core.n_max, kb)?,
+            ])
+        },
+    );
+    let (tfp, adaptive) = (tfp?, adaptive?);
+    let t_rec = t0.elapsed().as_secs_f64() * 1e3 - t_sim;
+
+    stage("PIV on three pairs");
+    let dt = f64::from(sim.meta.pair[1] - sim.meta.pair[0]);
+    let win = job.piv.windows.last().copied().unwrap_or(32);
+    let step = ((win as f64) * (1.0 - job.piv.overlap)).round().max(1.0) as u16;
+    let truth: Vec<Vector> = sim
+        .scene
+        .truth(&vector_grid(w, h, win as u16, step), dt)
+        .into_iter()
+        .map(|(x, y, u, v)| Vector {
+            x,
+            y,
+            u,
+            v,
+            flag: 0,
+        })
+        .collect();
+    let glare_limit = 2.0 * p.glare_sigma;
+    let (wu, hu) = (usize::from(w), usize::from(h));
+    let cam_max = job.request.camera.max_dn();
+    let mut pairs: Vec<(Source, [Vec<u16>; 2], u16)> = vec![
+        (Source::Frame, sim.frames.clone(), cam_max),
+        (
+            Source::Tfp,
+            [tfp[0].data.clone(), tfp[1].data.clone()],
+            job.core.full_scale,
+        ),
+        (
+            Source::Adaptive,
+            [adaptive[0].data.clone(), adaptive[1].data.clone()],
+            job.core.full_scale,
+        ),
+    ];
+    let mut measured: Vec<Measured> = Vec::new();
+    let last = pairs.len();
+    for idx in 0..last {
+        if idx == 2 {
+            if let (Some(budget), Some(tfp_m)) = (job.dwell_cap, measured.get(1)) {
+                if w % 8 == 0 {
+                    let caps = band_caps(&tfp_m.vectors, hu, dt, budget, &job.core);
+                    let (a, b) = rayon::join(
+                        || adaptive_banded(&planes, ka, &job.core, &caps),
+                        || adaptive_banded(&planes, kb, &job.core, &caps),
+                    );
+                    pairs[2].1 = [a?, b?];
+                }
+            }
+        }
+        let (source, pair, full_scale) = pairs[idx].clone();
+        let t = std::time::Instant::now();
+        let field = piv(
+            &to_f32(&pair[0], wu, hu),
+            &to_f32(&pair[1], wu, hu),
+            None,
+            &job.piv,
+        )?;
+        let piv_ms = t.elapsed().as_secs_f64() * 1e3;
+        let vectors = field.vectors();
+        let rows = row_profile(&vectors, &truth, f64::from(h));
+        let glare = region_error(&rows, |y| y < glare_limit);
+        let rest = region_error(&rows, |y| y >= glare_limit);
+        measured.push(Measured {
+            source,
+            pair,
+            full_scale,
+            vectors,
+            rows,
+            glare,
+            rest,
+            piv_ms,
+        });
+    }
+    let t_piv = t0.elapsed().as_secs_f64() * 1e3 - t_sim - t_rec;
+    Ok(Outcome {
+        sim,
+        truth,
+        measured,
+        glare_limit,
+        stage_ms: [t_sim, t_rec, t_piv],
+    })
+}

@@ -1,0 +1,201 @@
+//! Plots of a run, as PNG (plotters, bitmap backend; the font is bundled so
+//! a fresh machine needs no system fonts): the u(y) profile against the
+//! truth, and the vector field over its frame.
+
+use std::path::Path;
+use std::sync::Once;
+
+use plotters::prelude::*;
+use plotters::style::{register_font, FontStyle};
+
+use crate::metrics::ProfileRow;
+use spiv_firmware_sim::formats::csv::Vector;
+
+/// A plotting failure, as text (plotters' errors are generic over backends).
+#[derive(Debug, thiserror::Error)]
+#[error("plot {path}: {msg}")]
+pub struct PlotError {
+    path: String,
+    msg: String,
+}
+
+fn err(path: &Path) -> impl Fn(String) -> PlotError + '_ {
+    move |msg| PlotError {
+        path: path.display().to_string(),
+        msg,
+    }
+}
+
+static FONT: Once = Once::new();
+
+/// Registers the bundled font for plotters' "sans-serif" (idempotent).
+pub fn ensure_font() {
+    font();
+}
+
+fn font() {
+    FONT.call_once(|| {
+        // DejaVu Sans (Bitstream Vera licence, host/assets/).
+        let _ = register_font(
+            "sans-serif",
+            FontStyle::Normal,
+            include_bytes!("../assets/DejaVuSans.ttf"),
+        );
+    });
+}
+
+/// One measured profile: its name, colour and rows.
+#[derive(Debug)]
+pub struct Series<'a> {
+    /// Legend text.
+    pub name: &'a str,
+    /// Colour.
+    pub color: RGBColor,
+    /// Rows (height above the wall, measured u).
+    pub rows: &'a [ProfileRow],
+}
+
+/// The u(y) profile: the truth as a line, each series as points, the glare
+/// band shaded below `glare_limit` px above the wall.
+pub fn profile(
+    path: &Path,
+    title: &str,
+    truth: &[(f64, f64)],
+    series: &[Series<'_>],
+    glare_limit: f64,
+) -> Result<(), PlotError> {
+    font();
+    let e = err(path);
+    let root = BitMapBackend::new(path, (720, 560)).into_drawing_area();
+    root.fill(&WHITE).map_err(|x| e(x.to_string()))?;
+    let ymax = truth.iter().map(|t| t.0).fold(1.0, f64::max);
+    let mut umax = truth.iter().map(|t| t.1).fold(1.0, f64::max);
+    for s in series {
+        for r in s.rows {
+            if let Some(m) = r.measured {
+                umax = umax.max(m);
+            }
+        }
+    }
+    let umin = series
+        .iter()
+        .flat_map(|s| s.rows.iter().filter_map(|r| r.measured))
+        .fold(0.0, f64::min);
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 20))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(50)
+        .build_cartesian_2d(umin - 0.5..umax * 1.1 + 0.5, 0.0..ymax)
+        .map_err(|x| e(x.to_string()))?;
+    chart
+        .configure_mesh()
+        .x_desc("u, px per pair")
+        .y_desc("height above the wall, px")
+        .draw()
+        .map_err(|x| e(x.to_string()))?;
+    chart
+        .draw_series(std::iter::once(Rectangle::new(
+            [(umin - 0.5, 0.0), (umax * 1.1 + 0.5, glare_limit)],
+            RGBColor(255, 236, 179).filled(),
+        )))
+        .map_err(|x| e(x.to_string()))?
+        .label("glare band")
+        .legend(|(x, y)| {
+            Rectangle::new(
+                [(x, y - 5), (x + 14, y + 5)],
+                RGBColor(255, 236, 179).filled(),
+            )
+        });
+    chart
+        .draw_series(LineSeries::new(
+            truth.iter().map(|&(y, u)| (u, y)),
+            BLACK.stroke_width(2),
+        ))
+        .map_err(|x| e(x.to_string()))?
+        .label("truth")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 14, y)], BLACK.stroke_width(2)));
+    for s in series {
+        let c = s.color;
+        chart
+            .draw_series(s.rows.iter().filter_map(|r| {
+                r.measured
+                    .map(|m| Circle::new((m, r.y_wall), 4, c.filled()))
+            }))
+            .map_err(|x| e(x.to_string()))?
+            .label(s.name)
+            .legend(move |(x, y)| Circle::new((x + 7, y), 4, c.filled()));
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|x| e(x.to_string()))?;
+    root.present().map_err(|x| e(x.to_string()))
+}
+
+/// The vectors over their frame (gray levels `0..=full_scale`, upright),
+/// arrows scaled by `scale`; valid yellow, replaced orange, flag 2 a red dot.
+pub fn vectors(
+    path: &Path,
+    frame: &[u16],
+    width: u32,
+    height: u32,
+    full_scale: u16,
+    field: &[Vector],
+    scale: f64,
+) -> Result<(), PlotError> {
+    font();
+    let e = err(path);
+    let k = 2u32;
+    let root = BitMapBackend::new(path, (width * k, height * k)).into_drawing_area();
+    let fs = f64::from(full_scale.max(1));
+    for i in 0..height {
+        for j in 0..width {
+            let g =
+                (f64::from(frame[(i * width + j) as usize]) / fs * 255.0).clamp(0.0, 255.0) as u8;
+            for (di, dj) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
+                root.draw_pixel(
+                    ((j * k + dj) as i32, (i * k + di) as i32),
+                    &RGBColor(g, g, g),
+                )
+                .map_err(|x| e(x.to_string()))?;
+            }
+        }
+    }
+    let kk = f64::from(k);
+    for v in field {
+        let (x0, y0) = ((v.x + 0.5) * kk, (v.y + 0.5) * kk);
+        let p0 = (x0 as i32, y0 as i32);
+        if v.flag == 2 {
+            root.draw(&Circle::new(p0, 2, RED.filled()))
+                .map_err(|x| e(x.to_string()))?;
+            continue;
+        }
+        let color = if v.flag == 0 {
+            RGBColor(255, 221, 0)
+        } else {
+            RGBColor(255, 140, 0)
+        };
+        let (dx, dy) = (v.u * scale * kk, v.v * scale * kk);
+        let p1 = ((x0 + dx) as i32, (y0 + dy) as i32);
+        root.draw(&PathElement::new(vec![p0, p1], color.stroke_width(2)))
+            .map_err(|x| e(x.to_string()))?;
+        // Arrow head.
+        let len = (dx * dx + dy * dy).sqrt().max(1e-9);
+        let (ux, uy) = (dx / len, dy / len);
+        let hl = (len * 0.3).min(8.0);
+        for s in [-1.0, 1.0] {
+            let hx = x0 + dx - hl * (ux - s * 0.5 * uy);
+            let hy = y0 + dy - hl * (uy + s * 0.5 * ux);
+            root.draw(&PathElement::new(
+                vec![p1, (hx as i32, hy as i32)],
+                color.stroke_width(2),
+            ))
+            .map_err(|x| e(x.to_string()))?;
+        }
+    }
+    root.present().map_err(|x| e(x.to_string()))
+}
