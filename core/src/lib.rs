@@ -16,6 +16,8 @@
 //! | [`frame`] | one adaptive frame at any tick, in row strips |
 //! | [`state`] | the caller-owned per-pixel working memory |
 //! | [`q`] | the fixed-point formats, in one place |
+//! | [`wire`] | the sidecar link: message header, COBS framing, CRC, stream decoder |
+//! | [`compress`] | tile codecs: raw, lossless Rice, lossy sparse |
 //!
 //! Units: time in **ticks** (one spike plane), space in **pixels** of the
 //! camera's stored row order (the Vidar layout stores image rows bottom-up: the
@@ -29,6 +31,7 @@
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 #![warn(missing_docs)]
 
+pub mod compress;
 pub mod error;
 pub mod frame;
 pub mod history;
@@ -41,6 +44,7 @@ pub mod segment;
 pub mod state;
 pub mod suppress;
 pub mod window;
+pub mod wire;
 
 pub use error::Error;
 pub use frame::{reconstruct_adaptive, FrameStats, Gray};
