@@ -64,7 +64,7 @@ impl BitWriter<'_> {
         for i in (0..n).rev() {
             let byte = self.bit / 8;
             let b = self.out.get_mut(byte).ok_or(WireError::TooLarge)?;
-            if self.bit % 8 == 0 {
+            if self.bit.is_multiple_of(8) {
                 *b = 0;
             }
             if (value >> i) & 1 == 1 {

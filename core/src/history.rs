@@ -98,6 +98,20 @@ impl<'a> History<'a> {
         self.buf.get_mut(start..start + len).unwrap_or(&mut [])
     }
 
+    /// Reattaches a ring whose storage the caller kept between calls (a
+    /// firmware loop holding its buffer in a static): the ticks before
+    /// `next_tick` (at most `depth` of them) are taken as held, exactly as
+    /// they were pushed.
+    pub fn resumed(mut self, next_tick: u32) -> Self {
+        self.next_tick = next_tick;
+        self
+    }
+
+    /// The tick the next push gets.
+    pub fn next_tick(&self) -> u32 {
+        self.next_tick
+    }
+
     /// Oldest tick still held, `None` before the first push.
     pub fn oldest(&self) -> Option<u32> {
         self.newest()

@@ -184,7 +184,7 @@ fn a_million_mutated_streams() {
             let r = next();
             let i = (r >> 8) as usize % buf.len().max(1);
             match r % 5 {
-                0 => buf[i] ^= 1 << (r >> 40) % 8,
+                0 => buf[i] ^= 1 << ((r >> 40) % 8),
                 1 => {
                     buf.remove(i);
                 }

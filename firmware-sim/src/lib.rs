@@ -7,6 +7,8 @@
 //! sensor → packed spike planes → `spiv-core`.
 #![warn(missing_docs)]
 
+pub mod buffers;
+pub mod firmware;
 pub mod formats;
 pub mod scene;
 pub mod sensor;

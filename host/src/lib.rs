@@ -6,9 +6,11 @@
 #![warn(missing_docs)]
 
 pub mod core_run;
+pub mod link;
 pub mod metrics;
 pub mod pipeline;
 pub mod piv;
 pub mod plot;
+pub mod receive;
 pub mod reconstruct;
 pub mod reference;

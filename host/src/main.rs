@@ -28,6 +28,8 @@ enum Command {
     Reconstruct(cli::reconstruct::ReconstructArgs),
     /// PIV on an image pair: multi-pass FFT correlation with deformation.
     Piv(cli::piv::PivArgs),
+    /// Receive frames from a sidecar (USB, TCP, pipe or file); write them, run PIV.
+    Receive(cli::receive::ReceiveArgs),
 }
 
 fn main() {
@@ -60,6 +62,7 @@ fn main() {
         Command::Bench(a) => cli::bench::run(a),
         Command::Reconstruct(a) => cli::reconstruct::run(a),
         Command::Piv(a) => cli::piv::run(a),
+        Command::Receive(a) => cli::receive::run(a),
     };
     if let Err(e) = result {
         eprintln!("spiv: error: {e}");

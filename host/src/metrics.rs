@@ -135,6 +135,20 @@ fn t95(df: usize) -> f64 {
     }
 }
 
+/// RMS of the vector error |(u, v) − truth| over the vectors not rejected
+/// (flag < 2), px per pair, and how many were used. Rejected vectors are
+/// left out; a field with none gives `NaN`.
+pub fn vector_rmse(field: &[Vector], truth: &[Vector]) -> (f64, usize) {
+    let (mut sq, mut n) = (0.0, 0usize);
+    for (v, t) in field.iter().zip(truth) {
+        if v.flag < 2 {
+            sq += (v.u - t.u).powi(2) + (v.v - t.v).powi(2);
+            n += 1;
+        }
+    }
+    ((sq / n as f64).sqrt(), n)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

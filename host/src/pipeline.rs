@@ -1,7 +1,8 @@
 //! The main job, one pair end to end: the simulated scene through the frame
-//! camera and the spike camera; the spike stream through the sidecar core
-//! (adaptive frames and the TFP baseline); PIV on the three pairs; the
-//! paper's metrics against the truth.
+//! camera and the spike camera; the spike stream through the sidecar
+//! firmware loop (the core, then the wire: adaptive frames and the TFP
+//! baseline) and the host's receiver; PIV on the three pairs; the paper's
+//! metrics against the truth.
 
 use ndarray::Array2;
 use serde::Serialize;
@@ -11,9 +12,11 @@ use spiv_firmware_sim::formats::FormatError;
 use spiv_firmware_sim::scene::{vector_grid, SceneParams};
 use spiv_firmware_sim::simulation::{simulate, Request, Simulated};
 
+use crate::link::{dwell_caps, transfer, Transfer};
 use crate::metrics::{region_error, row_profile, ProfileRow, RegionError};
 use crate::piv::{piv, PivError, Settings};
-use crate::reconstruct::{frame_from_planes, Frame, Method, Planes, ReconstructError};
+use crate::reconstruct::{frame_from_planes, Method, Planes, ReconstructError};
+use spiv_firmware_sim::firmware::{Config, Method as FwMethod};
 
 /// What one run does.
 #[derive(Debug, Clone)]
@@ -30,6 +33,10 @@ pub struct Job {
     /// the fastest particle the TFP pair's PIV sees there blurs by at most
     /// this many px (`None`: the paper's algorithm, one n_max everywhere).
     pub dwell_cap: Option<f64>,
+    /// How the sidecar codes the frames it sends (lossless Rice by default).
+    pub encoding: spiv_core::wire::Encoding,
+    /// Lossy mode settings.
+    pub lossy: spiv_core::compress::Lossy,
 }
 
 impl Job {
@@ -49,6 +56,8 @@ impl Job {
                 ..Settings::default()
             },
             dwell_cap: None,
+            encoding: spiv_core::wire::Encoding::Rice,
+            lossy: spiv_core::compress::Lossy::default(),
         }
     }
 }
@@ -129,6 +138,12 @@ pub enum JobError {
     /// PIV.
     #[error(transparent)]
     Piv(#[from] PivError),
+    /// The sidecar link.
+    #[error(transparent)]
+    Link(#[from] crate::link::LinkError),
+    /// A pair did not come through the link.
+    #[error("the sidecar link delivered no {0} pair")]
+    NoPair(&'static str),
 }
 
 /// The three kinds of frames compared.
@@ -189,8 +204,25 @@ pub struct Outcome {
     pub measured: Vec<Measured>,
     /// Height above the wall below which a vector row is in the glare band, px.
     pub glare_limit: f64,
-    /// Time of each stage, ms: simulate, reconstruct, PIV (all three).
+    /// Time of each stage, ms: simulate, sidecar (core and wire), PIV (all three).
     pub stage_ms: [f64; 3],
+    /// What the link carried.
+    pub link: LinkSummary,
+}
+
+/// What the sidecar link carried in a run.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct LinkSummary {
+    /// Bytes of the adaptive pair on the wire.
+    pub adaptive_bytes: u64,
+    /// Bytes of the TFP pair on the wire.
+    pub tfp_bytes: u64,
+    /// Raw spike bytes over the ticks of one pair period (4·dt).
+    pub raw_bytes_per_period: u64,
+    /// Frames lost or corrupted on the way (0 in process).
+    pub lost_frames: u64,
+    /// Whether the received frames equal what the firmware made.
+    pub bit_exact: bool,
 }
 
 fn to_f32(data: &[u16], w: usize, h: usize) -> Array2<f32> {
@@ -214,34 +246,52 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
     )?;
     let t_sim = t0.elapsed().as_secs_f64() * 1e3;
 
-    stage("reconstructing through the core");
-    let planes = Planes {
-        width: w,
-        height: h,
-        flip: true,
-        crop_width: w,
-        first: 0,
-        data,
+    stage("sidecar: core and wire");
+    let [ka, kb] = sim.meta.pair;
+    let mut base = Config::new(ka, kb - ka);
+    base.params = job.core;
+    base.pairs = Some(1);
+    base.encoding = job.encoding;
+    base.lossy = job.lossy;
+    let (caps, tfp_t) = match job.dwell_cap {
+        Some(budget) => dwell_caps(&data, w, h, &base, job.tfp_window, budget, &job.piv)?,
+        None => {
+            let cfg = Config {
+                method: FwMethod::Tfp(job.tfp_window),
+                ..base.clone()
+            };
+            (Vec::new(), transfer(&data, w, h, cfg)?)
+        }
     };
-    let [ka, kb] = sim.meta.pair.map(u64::from);
-    let make = |m: Method, window: u16, k: u64| -> Result<Frame, JobError> {
-        Ok(frame_from_planes(&planes, k, m, window, &job.core)?)
+    let ad_t = transfer(
+        &data,
+        w,
+        h,
+        Config {
+            caps,
+            ..base.clone()
+        },
+    )?;
+    let exact = |t: &Transfer| {
+        t.pairs.iter().flatten().all(|r| {
+            t.sent
+                .iter()
+                .any(|s| s.frame_id == r.frame_id && s.data == r.data)
+        })
     };
-    let (tfp, adaptive) = rayon::join(
-        || -> Result<[Frame; 2], JobError> {
-            Ok([
-                make(Method::Tfp, job.tfp_window, ka)?,
-                make(Method::Tfp, job.tfp_window, kb)?,
-            ])
-        },
-        || -> Result<[Frame; 2], JobError> {
-            Ok([
-                make(Method::Adaptive, job.core.n_max, ka)?,
-                make(Method::Adaptive, job.core.n_max, kb)?,
-            ])
-        },
-    );
-    let (tfp, adaptive) = (tfp?, adaptive?);
+    let link = LinkSummary {
+        adaptive_bytes: ad_t.bytes,
+        tfp_bytes: tfp_t.bytes,
+        raw_bytes_per_period: u64::from(base.every) * u64::from(w) * u64::from(h) / 8,
+        lost_frames: ad_t.report.lost_frames + tfp_t.report.lost_frames,
+        bit_exact: exact(&ad_t) && exact(&tfp_t),
+    };
+    let up = |t: &Transfer, what: &'static str| -> Result<[Vec<u16>; 2], JobError> {
+        let [a, b] = t.pairs.first().ok_or(JobError::NoPair(what))?;
+        Ok([a.upright(), b.upright()])
+    };
+    let tfp = up(&tfp_t, "TFP")?;
+    let adaptive = up(&ad_t, "adaptive")?;
     let t_rec = t0.elapsed().as_secs_f64() * 1e3 - t_sim;
 
     stage("PIV on three pairs");
@@ -263,35 +313,13 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
     let glare_limit = 2.0 * p.glare_sigma;
     let (wu, hu) = (usize::from(w), usize::from(h));
     let cam_max = job.request.camera.max_dn();
-    let mut pairs: Vec<(Source, [Vec<u16>; 2], u16)> = vec![
+    let pairs: [(Source, [Vec<u16>; 2], u16); 3] = [
         (Source::Frame, sim.frames.clone(), cam_max),
-        (
-            Source::Tfp,
-            [tfp[0].data.clone(), tfp[1].data.clone()],
-            job.core.full_scale,
-        ),
-        (
-            Source::Adaptive,
-            [adaptive[0].data.clone(), adaptive[1].data.clone()],
-            job.core.full_scale,
-        ),
+        (Source::Tfp, tfp, job.core.full_scale),
+        (Source::Adaptive, adaptive, job.core.full_scale),
     ];
     let mut measured: Vec<Measured> = Vec::new();
-    let last = pairs.len();
-    for idx in 0..last {
-        if idx == 2 {
-            if let (Some(budget), Some(tfp_m)) = (job.dwell_cap, measured.get(1)) {
-                if w % 8 == 0 {
-                    let caps = band_caps(&tfp_m.vectors, hu, dt, budget, &job.core);
-                    let (a, b) = rayon::join(
-                        || adaptive_banded(&planes, ka, &job.core, &caps),
-                        || adaptive_banded(&planes, kb, &job.core, &caps),
-                    );
-                    pairs[2].1 = [a?, b?];
-                }
-            }
-        }
-        let (source, pair, full_scale) = pairs[idx].clone();
+    for (source, pair, full_scale) in pairs {
         let t = std::time::Instant::now();
         let field = piv(
             &to_f32(&pair[0], wu, hu),
@@ -322,5 +350,6 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
         measured,
         glare_limit,
         stage_ms: [t_sim, t_rec, t_piv],
+        link,
     })
 }

@@ -1,4 +1,4 @@
-//! `spiv bench (paper | blasius | speed)`: the paper's comparison over
+//! `spiv bench (paper | blasius | speed | link)`: the paper's comparison over
 //! seeds, the Blasius validation, and speed against error.
 
 use std::path::PathBuf;
@@ -48,6 +48,8 @@ enum Which {
         #[arg(long, default_value_t = 1)]
         seeds: u64,
     },
+    /// The sidecar link: bandwidth reduction and added PIV error per mode and M.
+    Link(super::bench_link::LinkArgs),
     /// Speed against error: configurations of the core and PIV.
     Speed {
         /// Pareto plot (PNG).
@@ -70,10 +72,11 @@ pub fn run(a: &BenchArgs) -> Result<(), CliError> {
         ),
         Which::Blasius { seeds } => blasius(*seeds),
         Which::Speed { plot } => speed(plot),
+        Which::Link(l) => super::bench_link::run(l),
     }
 }
 
-fn bar(len: u64, what: &str) -> ProgressBar {
+pub(super) fn bar(len: u64, what: &str) -> ProgressBar {
     let b = ProgressBar::new(len);
     b.set_style(
         ProgressStyle::with_template(&format!("{what} {{bar:30}} {{pos}}/{{len}} {{elapsed}}"))

@@ -1,7 +1,9 @@
 //! The `spiv` command line: one file per subcommand.
 
 pub mod bench;
+pub mod bench_link;
 pub mod piv;
+pub mod receive;
 pub mod reconstruct;
 pub mod run;
 pub mod simulate;
@@ -21,6 +23,9 @@ pub enum CliError {
     /// The main job.
     #[error(transparent)]
     Job(#[from] spiv_host::pipeline::JobError),
+    /// Receiving from a sidecar.
+    #[error(transparent)]
+    Source(#[from] spiv_host::receive::SourceError),
     /// A bad option value.
     #[error("{0}")]
     Usage(String),

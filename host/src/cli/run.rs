@@ -33,6 +33,23 @@ pub struct RunArgs {
     /// "off" runs the paper's algorithm with one n_max everywhere.
     #[arg(long, default_value = "8")]
     dwell_cap: String,
+    /// How the sidecar codes frames on the wire: rice (lossless, default),
+    /// sparse (lossy: particles exact, background at low resolution) or raw.
+    #[arg(long, default_value = "rice")]
+    encoding: String,
+}
+
+/// Parses `--encoding`.
+pub fn parse_encoding(v: &str) -> Result<spiv_core::wire::Encoding, CliError> {
+    use spiv_core::wire::Encoding;
+    match v {
+        "rice" => Ok(Encoding::Rice),
+        "sparse" => Ok(Encoding::Sparse),
+        "raw" => Ok(Encoding::Raw8),
+        _ => Err(CliError::Usage(format!(
+            "--encoding {v}: expected rice, sparse or raw"
+        ))),
+    }
 }
 
 /// Parses `--dwell-cap`: px, or "off".
@@ -148,6 +165,7 @@ fn write_pair(dir: &Path, x: &Measured, w: u16, h: u16) -> Result<(), CliError> 
 pub fn run(a: &RunArgs) -> Result<(), CliError> {
     let mut job = Job::new(scene_params(&a.scene)?, a.seed);
     job.dwell_cap = parse_dwell_cap(&a.dwell_cap)?;
+    job.encoding = parse_encoding(&a.encoding)?;
     std::fs::create_dir_all(&a.out)
         .map_err(|e| CliError::Usage(format!("{}: {e}", a.out.display())))?;
     let bar = ProgressBar::new_spinner();
@@ -237,8 +255,16 @@ pub fn run(a: &RunArgs) -> Result<(), CliError> {
             "glare": ratio(o.measured[0].glare.rmae, o.measured[2].glare.rmae),
             "rest": ratio(o.measured[0].rest.rmae, o.measured[2].rest.rmae),
         },
-        "stage_ms": { "simulate": o.stage_ms[0], "reconstruct": o.stage_ms[1], "piv": o.stage_ms[2] },
-        "wire": "not yet: the frames go from the core to PIV in process (issue 4 adds the wire)",
+        "stage_ms": { "simulate": o.stage_ms[0], "sidecar": o.stage_ms[1], "piv": o.stage_ms[2] },
+        "wire": {
+            "encoding": format!("{:?}", job.encoding),
+            "adaptive_pair_bytes": o.link.adaptive_bytes,
+            "tfp_pair_bytes": o.link.tfp_bytes,
+            "raw_spike_bytes_per_pair_period": o.link.raw_bytes_per_period,
+            "reduction_adaptive": o.link.raw_bytes_per_period as f64 / o.link.adaptive_bytes.max(1) as f64,
+            "lost_frames": o.link.lost_frames,
+            "bit_exact": o.link.bit_exact,
+        },
     });
     std::fs::write(
         a.out.join("summary.json"),
@@ -248,7 +274,17 @@ pub fn run(a: &RunArgs) -> Result<(), CliError> {
     bar.finish_and_clear();
     print_table(&o, &job);
     println!(
-        "simulate {:.0} ms, core {:.0} ms, PIV {:.0} ms -> {}",
+        "wire ({:?}): adaptive pair {} B, TFP pair {} B, raw spikes {} B per pair period ({:.1}x less); lost {}, bit-exact {}",
+        job.encoding,
+        o.link.adaptive_bytes,
+        o.link.tfp_bytes,
+        o.link.raw_bytes_per_period,
+        o.link.raw_bytes_per_period as f64 / o.link.adaptive_bytes.max(1) as f64,
+        o.link.lost_frames,
+        if o.link.bit_exact { "yes" } else { "NO" },
+    );
+    println!(
+        "simulate {:.0} ms, sidecar core + wire {:.0} ms, PIV {:.0} ms -> {}",
         o.stage_ms[0],
         o.stage_ms[1],
         o.stage_ms[2],

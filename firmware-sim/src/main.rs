@@ -1,0 +1,290 @@
+//! `spiv-firmware-sim`: the sidecar, simulated. Spike planes from the
+//! simulated sensor (`--scene`) or a `.dat` file (`--input`) go through
+//! spiv-core's firmware loop; framed messages go to stdout, a file, or a
+//! loopback TCP socket it listens on; faults can be injected on the way.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use clap::Parser;
+use spiv_core::wire::Encoding;
+use spiv_firmware_sim::firmware::{
+    run_on_dat, run_on_scene, Config, Counters, DriveError, Faults, Faulty, Method, Plain,
+};
+use spiv_firmware_sim::formats::dat::DatOptions;
+use spiv_firmware_sim::formats::meta::SceneMeta;
+use spiv_firmware_sim::scene::{SceneKind, SceneParams};
+use spiv_firmware_sim::simulation::Request;
+
+#[derive(Debug, Parser)]
+#[command(
+    name = "spiv-firmware-sim",
+    version,
+    about = "The spiv sidecar, simulated: spike planes in, compressed frame pairs out over the wire protocol"
+)]
+struct Args {
+    /// Simulate this scene (paper-linear, paper-quadratic, paper-log, blasius, uniform, vortex).
+    #[arg(long, conflicts_with = "input", required_unless_present = "input")]
+    scene: Option<String>,
+    /// Or read spike planes from this .dat.
+    #[arg(long)]
+    input: Option<PathBuf>,
+    /// Width of the .dat, px (else from scene.json beside it).
+    #[arg(long)]
+    width: Option<u16>,
+    /// Height of the .dat, px.
+    #[arg(long)]
+    height: Option<u16>,
+    /// Listen on this address (e.g. 127.0.0.1:7878) and send to the first host that connects.
+    #[arg(long, conflicts_with = "out")]
+    tcp: Option<String>,
+    /// Write the messages to this file (stdout when neither --tcp nor --out).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Faults per message: drop=P,corrupt=P,truncate=P,stall=P,reorder=P.
+    #[arg(long)]
+    fault: Option<String>,
+    /// Seed of the scene and of the faults.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Frame pairs to send (scene: default 4; file: until it ends).
+    #[arg(long)]
+    pairs: Option<u32>,
+    /// Ticks between the frames of a pair (scene: its pair_dt; file: scene.json or 13).
+    #[arg(long)]
+    dt: Option<u32>,
+    /// Ticks between pairs (default 4·dt).
+    #[arg(long)]
+    every: Option<u32>,
+    /// Tick of the first frame (default: n_max/2, the first with a whole window).
+    #[arg(long)]
+    first: Option<u32>,
+    /// Tile coding: rice (lossless, default), raw (lossless), sparse (lossy).
+    #[arg(long, default_value = "rice")]
+    encoding: String,
+    /// Sparse mode: largest error of a background sample, gray levels.
+    #[arg(long, default_value_t = 12)]
+    tolerance: u16,
+    /// Frame method: adaptive or tfp.
+    #[arg(long, default_value = "adaptive")]
+    method: String,
+    /// Adaptive window limit n_max, or the TFP window, ticks.
+    #[arg(long)]
+    window: Option<u16>,
+    /// Do not print the throughput line.
+    #[arg(long)]
+    quiet: bool,
+}
+
+#[derive(Debug, thiserror::Error)]
+enum Error {
+    #[error("{0}")]
+    Usage(String),
+    #[error(transparent)]
+    Drive(#[from] DriveError),
+    #[error(transparent)]
+    Format(#[from] spiv_firmware_sim::formats::FormatError),
+    #[error("{0}")]
+    Io(#[from] std::io::Error),
+}
+
+fn main() {
+    let args = match Args::try_parse() {
+        Ok(a) => a,
+        Err(e) => {
+            use clap::error::ErrorKind;
+            if matches!(
+                e.kind(),
+                ErrorKind::DisplayHelp
+                    | ErrorKind::DisplayVersion
+                    | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+            ) {
+                e.exit();
+            }
+            let text = e.to_string();
+            let first = text.lines().next().unwrap_or("bad arguments");
+            eprintln!(
+                "spiv-firmware-sim: {} (see --help)",
+                first.trim_start_matches("error: ").trim()
+            );
+            std::process::exit(2);
+        }
+    };
+    match run(&args) {
+        Ok(()) => {}
+        Err(Error::Drive(DriveError::Firmware(
+            spiv_firmware_sim::firmware::FirmwareError::Link(e),
+        ))) if e.kind() == std::io::ErrorKind::BrokenPipe => {
+            eprintln!("spiv-firmware-sim: error: the receiver closed the link");
+            std::process::exit(1);
+        }
+        Err(e) => {
+            eprintln!("spiv-firmware-sim: error: {e}");
+            std::process::exit(1);
+        }
+    }
+}
+
+fn config(a: &Args, dt: u32) -> Result<Config, Error> {
+    let mut cfg = Config::new(0, dt);
+    cfg.method = match a.method.as_str() {
+        "adaptive" => Method::Adaptive,
+        "tfp" => Method::Tfp(a.window.unwrap_or(8)),
+        m => {
+            return Err(Error::Usage(format!(
+                "unknown --method {m} (adaptive, tfp)"
+            )))
+        }
+    };
+    if let (Method::Adaptive, Some(n)) = (cfg.method, a.window) {
+        cfg.params.n_max = n;
+    }
+    cfg.encoding = match a.encoding.as_str() {
+        "rice" => Encoding::Rice,
+        "raw" => Encoding::Raw8,
+        "sparse" => Encoding::Sparse,
+        e => {
+            return Err(Error::Usage(format!(
+                "unknown --encoding {e} (rice, raw, sparse)"
+            )))
+        }
+    };
+    cfg.lossy.tolerance = a.tolerance;
+    let window = match cfg.method {
+        Method::Adaptive => cfg.params.n_max,
+        Method::Tfp(n) => n,
+    };
+    if !(1..=255).contains(&window) {
+        return Err(Error::Usage(format!("--window {window}: expected 1..=255")));
+    }
+    cfg.first = a.first.unwrap_or(u32::from(window / 2));
+    cfg.every = a.every.unwrap_or(4 * dt);
+    if cfg.every < dt {
+        return Err(Error::Usage(format!(
+            "--every {} must be at least dt = {dt}",
+            cfg.every
+        )));
+    }
+    cfg.pairs = a.pairs;
+    Ok(cfg)
+}
+
+/// Where messages go: stdout, a file or the first TCP client.
+fn open_link(a: &Args) -> Result<Box<dyn Write>, Error> {
+    Ok(match (&a.tcp, &a.out) {
+        (Some(addr), _) => {
+            let l = std::net::TcpListener::bind(addr)
+                .map_err(|e| Error::Usage(format!("--tcp {addr}: cannot listen ({e})")))?;
+            if !a.quiet {
+                eprintln!("spiv-firmware-sim: listening on {}", l.local_addr()?);
+            }
+            let (s, peer) = l.accept()?;
+            if !a.quiet {
+                eprintln!("spiv-firmware-sim: host {peer} connected");
+            }
+            Box::new(std::io::BufWriter::with_capacity(1 << 16, s))
+        }
+        (None, Some(p)) => Box::new(std::io::BufWriter::new(
+            std::fs::File::create(p)
+                .map_err(|e| Error::Usage(format!("--out {}: {e}", p.display())))?,
+        )),
+        (None, None) => Box::new(std::io::BufWriter::with_capacity(
+            1 << 16,
+            std::io::stdout().lock(),
+        )),
+    })
+}
+
+fn run(a: &Args) -> Result<(), Error> {
+    let faults = match &a.fault {
+        Some(f) => Faults::parse(f).map_err(|e| Error::Usage(format!("--fault: {e}")))?,
+        None => Faults::default(),
+    };
+    let t0 = Instant::now();
+    let (counters, width, height, fault_counts) = if let Some(name) = &a.scene {
+        let kind = SceneKind::from_name(name).ok_or_else(|| {
+            let names: Vec<&str> = SceneKind::ALL.iter().map(|(n, _)| *n).collect();
+            Error::Usage(format!(
+                "unknown scene '{name}' (one of: {})",
+                names.join(", ")
+            ))
+        })?;
+        let mut p = SceneParams::new(kind);
+        if let Some(dt) = a.dt {
+            p.pair_dt = dt.max(1);
+        }
+        let (w, h) = (a.width.unwrap_or(p.width), a.height.unwrap_or(p.height));
+        if w < 8 || h < 8 || (usize::from(w) * usize::from(h)) % 8 != 0 {
+            return Err(Error::Usage(format!(
+                "--width {w} --height {h}: both at least 8 and width*height a multiple of 8"
+            )));
+        }
+        p.width = w;
+        p.height = h;
+        let mut cfg = config(a, p.pair_dt)?;
+        cfg.pairs = Some(a.pairs.unwrap_or(4).max(1));
+        let req = Request::new(p, a.seed);
+        let link = Faulty::new(Plain(open_link(a)?), faults, a.seed);
+        let (fw, _) = run_on_scene(&req, cfg, link, false, |_, _| {})?;
+        let c = fw.counters();
+        let fc = fw.into_link().counts;
+        (c, w, h, fc)
+    } else {
+        let path = a
+            .input
+            .as_ref()
+            .ok_or_else(|| Error::Usage("--scene or --input".into()))?;
+        let meta = SceneMeta::beside(path)?;
+        let (w, h) = match (a.width, a.height, &meta) {
+            (Some(w), Some(h), _) => (w, h),
+            (None, None, Some(m)) => (m.width, m.height),
+            _ => {
+                return Err(Error::Usage(format!(
+                    "{}: give --width and --height (no scene.json beside it)",
+                    path.display()
+                )))
+            }
+        };
+        let dt =
+            a.dt.or_else(|| meta.as_ref().map(|m| m.pair[1] - m.pair[0]))
+                .unwrap_or(13)
+                .max(1);
+        let cfg = config(a, dt)?;
+        let link = Faulty::new(Plain(open_link(a)?), faults, a.seed);
+        let fw = run_on_dat(path, w, h, DatOptions::default(), cfg, link, false)?;
+        let c = fw.counters();
+        let fc = fw.into_link().counts;
+        (c, w, h, fc)
+    };
+    if !a.quiet {
+        report(&counters, width, height, t0.elapsed().as_secs_f64());
+        if faults != Faults::default() {
+            eprintln!(
+                "spiv-firmware-sim: faults: {} dropped, {} corrupted, {} truncated, {} stalled, {} reordered",
+                fault_counts.dropped,
+                fault_counts.corrupted,
+                fault_counts.truncated,
+                fault_counts.stalled,
+                fault_counts.reordered
+            );
+        }
+    }
+    Ok(())
+}
+
+fn report(c: &Counters, w: u16, h: u16, secs: f64) {
+    let px_ticks = f64::from(c.planes) * f64::from(w) * f64::from(h);
+    let raw = px_ticks / 8.0;
+    eprintln!(
+        "spiv-firmware-sim: {} planes, {} frames, {} messages, {} bytes ({:.1}x less than the {:.0} raw spike bytes) in {:.2} s: {:.2e} pixel-ticks/s",
+        c.planes,
+        c.frames,
+        c.messages,
+        c.bytes,
+        raw / c.bytes.max(1) as f64,
+        raw,
+        secs,
+        px_ticks / secs.max(1e-9)
+    );
+}

@@ -1,0 +1,168 @@
+//! `spiv receive (--usb [VID:PID] | --tcp ADDR | --pipe | --file PATH) [--out DIR] [--piv]`
+
+use std::path::PathBuf;
+
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use ndarray::Array2;
+use spiv_firmware_sim::formats::csv::write_vectors;
+use spiv_firmware_sim::formats::image::{write_gray16, write_gray8};
+use spiv_host::piv::{piv, Settings, Validation};
+use spiv_host::receive::source::{open, parse_vid_pid};
+use spiv_host::receive::{receive, Event, ReceivedFrame, Spec};
+
+use super::CliError;
+
+/// Receive frames from a sidecar; write them and/or run PIV on each pair.
+#[derive(Debug, Args)]
+#[command(group(clap::ArgGroup::new("source").required(true).args(["usb", "tcp", "pipe", "file"])))]
+pub struct ReceiveArgs {
+    /// USB bulk IN from the sidecar (default c0de:cafe).
+    #[arg(long, num_args = 0..=1, default_missing_value = "c0de:cafe", value_name = "VID:PID")]
+    usb: Option<String>,
+    /// Connect to a sidecar listening at ADDR (host:port).
+    #[arg(long, value_name = "ADDR")]
+    tcp: Option<String>,
+    /// Read the message stream from standard input.
+    #[arg(long)]
+    pipe: bool,
+    /// Replay a file of recorded messages.
+    #[arg(long, value_name = "PATH")]
+    file: Option<PathBuf>,
+    /// Write every frame (PNG, upright) and the vectors here.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Run PIV on every pair received.
+    #[arg(long)]
+    piv: bool,
+    /// PIV window side of each pass, px.
+    #[arg(long, value_delimiter = ',', default_value = "64,32,32")]
+    windows: Vec<usize>,
+    /// Print the final counts as JSON instead of a line.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Runs it.
+pub fn run(a: &ReceiveArgs) -> Result<(), CliError> {
+    let spec = if let Some(id) = &a.usb {
+        let (v, p) = parse_vid_pid(id).map_err(|e| CliError::Usage(e.to_string()))?;
+        Spec::Usb(v, p)
+    } else if let Some(t) = &a.tcp {
+        Spec::Tcp(t.clone())
+    } else if let Some(f) = &a.file {
+        Spec::File(f.clone())
+    } else {
+        Spec::Pipe
+    };
+    let mut source = open(&spec).map_err(|e| CliError::Usage(e.to_string()))?;
+    if let Some(d) = &a.out {
+        std::fs::create_dir_all(d).map_err(|e| CliError::Usage(format!("{}: {e}", d.display())))?;
+    }
+    let settings = Settings {
+        windows: a.windows.clone(),
+        validation: Validation {
+            min_peak_ratio: 1.2,
+            ..Validation::default()
+        },
+        ..Settings::default()
+    };
+    let bar = ProgressBar::new_spinner();
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} receiving from {prefix}: {msg} {elapsed}")
+            .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+    );
+    bar.set_prefix(source.name());
+    let mut vectors = 0usize;
+    let report = receive::<CliError>(
+        source.as_mut(),
+        |e| {
+            match e {
+                Event::Frame(f) => {
+                    if let Some(d) = &a.out {
+                        save_frame(d, &f)?;
+                    }
+                }
+                Event::Pair(pair) => {
+                    if a.piv {
+                        let [fa, fb] = &*pair;
+                        let field = piv(&to_f32(fa), &to_f32(fb), None, &settings)?;
+                        let v = field.vectors();
+                        vectors += v.len();
+                        if let Some(d) = &a.out {
+                            write_vectors(&d.join(format!("vectors_{:05}.csv", fa.end.pair)), &v)?;
+                        }
+                    }
+                }
+            }
+            Ok(())
+        },
+        |r| {
+            bar.set_message(format!(
+                "{} frames, {} pairs, {} bytes, {} lost, {} corrupted",
+                r.frames, r.pairs, r.bytes, r.lost_frames, r.corrupted
+            ));
+            bar.tick();
+        },
+    )?;
+    bar.finish_and_clear();
+    if a.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&report).unwrap_or_default()
+        );
+    } else {
+        println!(
+            "received {} frames ({} pairs{}), {} bytes, {} messages; lost {} frames ({} messages, {} broken pairs); corrupted {}{}",
+            report.frames,
+            report.pairs,
+            if a.piv {
+                format!(", {vectors} vectors")
+            } else {
+                String::new()
+            },
+            report.bytes,
+            report.messages,
+            report.lost_frames,
+            report.lost_messages,
+            report.broken_pairs,
+            report.corrupted,
+            if report.truncated_tail > 0 {
+                format!("; {} bytes of a truncated last message", report.truncated_tail)
+            } else {
+                String::new()
+            }
+        );
+    }
+    if report.bytes > 0 && report.messages == 0 {
+        return Err(CliError::Usage(
+            "no valid message in the stream (not spiv wire format?)".into(),
+        ));
+    }
+    Ok(())
+}
+
+fn to_f32(f: &ReceivedFrame) -> Array2<f32> {
+    let up = f.upright();
+    let w = usize::from(f.width);
+    Array2::from_shape_fn((usize::from(f.height), w), |(i, j)| {
+        f32::from(up[i * w + j])
+    })
+}
+
+fn save_frame(dir: &std::path::Path, f: &ReceivedFrame) -> Result<(), CliError> {
+    let path = dir.join(format!(
+        "frame_{:05}_{}.png",
+        f.end.pair,
+        if f.end.member == 0 { "a" } else { "b" }
+    ));
+    let up = f.upright();
+    let (w, h) = (u32::from(f.width), u32::from(f.height));
+    if f.end.full_scale <= 255 {
+        let v: Vec<u8> = up.iter().map(|&x| x.min(255) as u8).collect();
+        write_gray8(&path, w, h, &v)?;
+    } else {
+        write_gray16(&path, w, h, &up)?;
+    }
+    Ok(())
+}

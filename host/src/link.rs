@@ -1,0 +1,154 @@
+//! The sidecar link in process: the firmware loop over a recorded spike
+//! stream, its messages through the host's decoder and reassembly, and PIV on
+//! the pairs that arrive — so `spiv run` and the link benchmark exercise the
+//! same bytes a real sidecar would send.
+
+use ndarray::Array2;
+use spiv_core::wire::Encoding;
+use spiv_firmware_sim::firmware::{run_on_planes, Config, FirmwareError, Method, SentFrame};
+use spiv_firmware_sim::formats::csv::Vector;
+
+use crate::piv::{piv, PivError, Settings};
+use crate::receive::{receive, Event, ReceivedFrame, Report, Source, SourceError};
+
+/// Errors of an in-process link run.
+#[derive(Debug, thiserror::Error)]
+pub enum LinkError {
+    /// The firmware.
+    #[error(transparent)]
+    Firmware(#[from] FirmwareError),
+    /// Reading (cannot happen from memory, but the trait says so).
+    #[error(transparent)]
+    Source(#[from] SourceError),
+    /// PIV.
+    #[error(transparent)]
+    Piv(#[from] PivError),
+}
+
+/// Bytes in memory as a [`Source`].
+#[derive(Debug)]
+pub struct Memory(std::io::Cursor<Vec<u8>>);
+
+impl Memory {
+    /// A source over `bytes`.
+    pub fn new(bytes: Vec<u8>) -> Self {
+        Memory(std::io::Cursor::new(bytes))
+    }
+}
+
+impl Source for Memory {
+    fn read(&mut self, buf: &mut [u8]) -> Result<usize, SourceError> {
+        use std::io::Read;
+        self.0.read(buf).map_err(|source| SourceError::Io {
+            what: "memory".into(),
+            source,
+        })
+    }
+    fn name(&self) -> String {
+        "memory".into()
+    }
+}
+
+/// What went over the link.
+#[derive(Debug, Clone)]
+pub struct Transfer {
+    /// Pairs as received (stored row order).
+    pub pairs: Vec<[ReceivedFrame; 2]>,
+    /// Frames as the firmware made them (to compare).
+    pub sent: Vec<SentFrame>,
+    /// Receiver counts.
+    pub report: Report,
+    /// Bytes on the wire.
+    pub bytes: u64,
+    /// Tiles per encoding used: raw8, raw16, rice, sparse.
+    pub tiles: [u32; 4],
+}
+
+/// Runs the firmware with `cfg` over `planes` and receives its messages.
+pub fn transfer(
+    planes: &[u8],
+    width: u16,
+    height: u16,
+    cfg: Config,
+) -> Result<Transfer, LinkError> {
+    let fw = run_on_planes(planes, width, height, cfg, Vec::new(), true)?;
+    let counters = fw.counters();
+    let mut fw = fw;
+    let sent = fw.keep.take().unwrap_or_default();
+    let bytes = fw.into_link();
+    let mut pairs = Vec::new();
+    let report = receive::<LinkError>(
+        &mut Memory::new(bytes),
+        |e| {
+            if let Event::Pair(p) = e {
+                pairs.push(*p);
+            }
+            Ok(())
+        },
+        |_| {},
+    )?;
+    Ok(Transfer {
+        pairs,
+        sent,
+        report,
+        bytes: counters.bytes,
+        tiles: counters.tiles,
+    })
+}
+
+/// A received frame upright as PIV input.
+pub fn upright_f32(f: &ReceivedFrame) -> Array2<f32> {
+    let up = f.upright();
+    let w = usize::from(f.width);
+    Array2::from_shape_fn((usize::from(f.height), w), |(i, j)| {
+        f32::from(up[i * w + j])
+    })
+}
+
+/// PIV on every pair.
+pub fn piv_pairs(
+    pairs: &[[ReceivedFrame; 2]],
+    s: &Settings,
+) -> Result<Vec<Vec<Vector>>, LinkError> {
+    use rayon::prelude::*;
+    pairs
+        .par_iter()
+        .map(|[a, b]| Ok(piv(&upright_f32(a), &upright_f32(b), None, s)?.vectors()))
+        .collect()
+}
+
+/// Beyond the paper (SPEC 5): adaptive window limits per band of 32 upright
+/// rows from the TFP pair's PIV, so the fastest particle near a band blurs
+/// by at most `budget` px. The TFP pair goes through the link like any
+/// other (a sidecar sends it on request); the limits would go back down
+/// the control endpoint. Empty when no TFP pair arrived.
+pub fn dwell_caps(
+    planes: &[u8],
+    width: u16,
+    height: u16,
+    base: &Config,
+    tfp_window: u16,
+    budget: f64,
+    s: &Settings,
+) -> Result<(Vec<u16>, Transfer), LinkError> {
+    let cfg = Config {
+        method: Method::Tfp(tfp_window),
+        encoding: Encoding::Rice,
+        caps: Vec::new(),
+        pairs: Some(1),
+        ..base.clone()
+    };
+    let t = transfer(planes, width, height, cfg)?;
+    let Some([a, b]) = t.pairs.first() else {
+        return Ok((Vec::new(), t));
+    };
+    let field = piv(&upright_f32(a), &upright_f32(b), None, s)?.vectors();
+    let caps = crate::pipeline::band_caps(
+        &field,
+        usize::from(height),
+        f64::from(base.dt),
+        budget,
+        &base.params,
+    );
+    Ok((caps, t))
+}

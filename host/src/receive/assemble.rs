@@ -1,0 +1,257 @@
+//! Messages back into frames and pairs. A frame is delivered only when all
+//! its rows arrived and the CRC of the reassembled samples matches the one
+//! its frame-end message carries, so every delivered frame is bit-exact with
+//! what the sidecar sent; anything else is counted as lost.
+
+use std::collections::BTreeMap;
+
+use spiv_core::compress::{decode_tile, sparse_scratch};
+use spiv_core::wire::{frame_crc, FrameEnd, Kind, Message, Status};
+
+/// A frame as received (stored row order: the camera's rows bottom-up).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ReceivedFrame {
+    /// Frame counter.
+    pub frame_id: u32,
+    /// Centre tick.
+    pub tick: u32,
+    /// Width, px.
+    pub width: u16,
+    /// Height, px.
+    pub height: u16,
+    /// Pairing, method, full scale, dt, CRC.
+    pub end: FrameEnd,
+    /// Samples, stored row order.
+    pub data: Vec<u16>,
+}
+
+impl ReceivedFrame {
+    /// The samples upright (row 0 at the top).
+    pub fn upright(&self) -> Vec<u16> {
+        crate::reconstruct::upright(&self.data, self.width, true)
+    }
+}
+
+/// What the assembler counted.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+pub struct AssemblyStats {
+    /// Frames delivered bit-exact.
+    pub frames: u64,
+    /// Frames lost: never seen, missing rows, or failing their CRC.
+    pub lost_frames: u64,
+    /// Of those, frames whose CRC did not match.
+    pub crc_mismatch: u64,
+    /// Tiles whose payload did not decode, or that disagree with their frame.
+    pub bad_tiles: u64,
+    /// Status messages.
+    pub status: u64,
+}
+
+#[derive(Debug)]
+struct Partial {
+    tick: u32,
+    width: u16,
+    height: u16,
+    data: Vec<u16>,
+    rows: Vec<bool>,
+    end: Option<FrameEnd>,
+}
+
+/// Frames in, from messages.
+#[derive(Debug, Default)]
+pub struct Assembler {
+    partial: BTreeMap<u32, Partial>,
+    closed: std::collections::BTreeSet<u32>,
+    highest: Option<u32>,
+    scratch: Vec<u16>,
+    stats: AssemblyStats,
+    /// The sidecar's last status.
+    pub last_status: Option<Status>,
+}
+
+/// Frames kept open behind the newest one (reordering tolerated).
+const OPEN_BEHIND: u32 = 2;
+
+impl Assembler {
+    /// An empty assembler.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Counts so far.
+    pub fn stats(&self) -> AssemblyStats {
+        self.stats
+    }
+
+    /// Takes one message; returns a frame when it completes one.
+    pub fn push(&mut self, m: &Message<'_>) -> Option<ReceivedFrame> {
+        let h = m.header;
+        if h.kind == Kind::Status {
+            self.stats.status += 1;
+            self.last_status = Status::parse(m.payload).ok();
+            return None;
+        }
+        let id = h.frame_id;
+        // Frames never seen between the highest so far and this one are lost.
+        match self.highest {
+            None => self.highest = Some(id),
+            Some(top) => {
+                let ahead = id.wrapping_sub(top);
+                if ahead != 0 && ahead < 1 << 31 {
+                    self.stats.lost_frames += u64::from(ahead - 1);
+                    self.highest = Some(id);
+                } else if ahead != 0 && top.wrapping_sub(id) > OPEN_BEHIND {
+                    // Too late: its frame was closed and counted already.
+                    return None;
+                }
+            }
+        }
+        if self.closed.contains(&id) {
+            return None;
+        }
+        self.evict(id);
+        let px = usize::from(h.width) * usize::from(h.height);
+        if px == 0 {
+            self.stats.bad_tiles += 1;
+            return None;
+        }
+        let p = self.partial.entry(id).or_insert_with(|| Partial {
+            tick: h.tick,
+            width: h.width,
+            height: h.height,
+            data: vec![0; px],
+            rows: vec![false; usize::from(h.height)],
+            end: None,
+        });
+        if p.width != h.width || p.height != h.height || p.tick != h.tick {
+            self.stats.bad_tiles += 1;
+            return None;
+        }
+        match h.kind {
+            Kind::FrameTile => {
+                let (r0, rows) = (usize::from(h.row0), usize::from(h.rows));
+                let w = usize::from(h.width);
+                if rows == 0 || r0 + rows > usize::from(h.height) {
+                    self.stats.bad_tiles += 1;
+                    return None;
+                }
+                let need = sparse_scratch(h.width, h.rows, 2);
+                if self.scratch.len() < need {
+                    self.scratch.resize(need, 0);
+                }
+                let out = &mut p.data[r0 * w..(r0 + rows) * w];
+                if decode_tile(
+                    h.encoding,
+                    m.payload,
+                    h.width,
+                    h.rows,
+                    &mut self.scratch,
+                    out,
+                )
+                .is_err()
+                {
+                    self.stats.bad_tiles += 1;
+                    return None;
+                }
+                p.rows[r0..r0 + rows].fill(true);
+            }
+            Kind::FrameEnd => match FrameEnd::parse(m.payload) {
+                Ok(e) => p.end = Some(e),
+                Err(_) => {
+                    self.stats.bad_tiles += 1;
+                    return None;
+                }
+            },
+            Kind::Status => return None,
+        }
+        self.try_complete(id)
+    }
+
+    fn try_complete(&mut self, id: u32) -> Option<ReceivedFrame> {
+        let p = self.partial.get(&id)?;
+        let end = p.end?;
+        if !p.rows.iter().all(|&r| r) {
+            return None;
+        }
+        let p = self.partial.remove(&id)?;
+        self.closed.insert(id);
+        if frame_crc(&p.data) != end.frame_crc {
+            self.stats.crc_mismatch += 1;
+            self.stats.lost_frames += 1;
+            return None;
+        }
+        self.stats.frames += 1;
+        Some(ReceivedFrame {
+            frame_id: id,
+            tick: p.tick,
+            width: p.width,
+            height: p.height,
+            end,
+            data: p.data,
+        })
+    }
+
+    /// Closes frames more than [`OPEN_BEHIND`] behind `id` as lost.
+    fn evict(&mut self, id: u32) {
+        let stale: Vec<u32> = self
+            .partial
+            .keys()
+            .copied()
+            .filter(|&k| {
+                let behind = id.wrapping_sub(k);
+                behind < 1 << 31 && behind > OPEN_BEHIND
+            })
+            .collect();
+        for k in stale {
+            self.partial.remove(&k);
+            self.stats.lost_frames += 1;
+        }
+        self.closed
+            .retain(|&k| id.wrapping_sub(k) <= OPEN_BEHIND || id.wrapping_sub(k) >= 1 << 31);
+    }
+
+    /// At the end of the stream: every open frame is lost.
+    pub fn finish(&mut self) -> AssemblyStats {
+        self.stats.lost_frames += self.partial.len() as u64;
+        // Frames after the last one seen, which the sidecar's final status
+        // says it sent, were lost too.
+        if let (Some(s), Some(top)) = (self.last_status, self.highest) {
+            let seen = u64::from(top) + 1;
+            self.stats.lost_frames += u64::from(s.frames).saturating_sub(seen);
+        }
+        self.partial.clear();
+        self.stats
+    }
+}
+
+/// Frames into pairs (k, k + dt) by their pair counter.
+#[derive(Debug, Default)]
+pub struct Pairer {
+    first: BTreeMap<u32, ReceivedFrame>,
+    /// Pairs missing a member (one frame of it lost).
+    pub broken: u64,
+}
+
+impl Pairer {
+    /// Takes a frame; returns a pair when it completes one.
+    pub fn push(&mut self, f: ReceivedFrame) -> Option<[ReceivedFrame; 2]> {
+        let pair = f.end.pair;
+        // Older pairs still waiting lost their second frame.
+        let stale: Vec<u32> = self.first.keys().copied().filter(|&p| p < pair).collect();
+        for p in stale {
+            self.first.remove(&p);
+            self.broken += 1;
+        }
+        if f.end.member == 0 {
+            self.first.insert(pair, f);
+            return None;
+        }
+        match self.first.remove(&pair) {
+            Some(a) => Some([a, f]),
+            None => {
+                self.broken += 1;
+                None
+            }
+        }
+    }
+}

@@ -1,0 +1,213 @@
+//! The host end of the sidecar link: a [`source::Source`] of bytes, the
+//! core's stream decoder ([`spiv_core::wire::Decoder`]), frame reassembly
+//! and pairing ([`assemble`]), with counts of everything lost.
+
+pub mod assemble;
+pub mod source;
+
+use serde::Serialize;
+use spiv_core::wire::{Decoder, MAX_ENCODED};
+
+pub use assemble::{Assembler, AssemblyStats, Pairer, ReceivedFrame};
+pub use source::{Source, SourceError, Spec};
+
+/// Final counts of a reception.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+pub struct Report {
+    /// Bytes read.
+    pub bytes: u64,
+    /// Valid messages.
+    pub messages: u64,
+    /// Chunks that were not valid messages (COBS, CRC, header, overlong).
+    pub corrupted: u64,
+    /// Messages missing by sequence number.
+    pub lost_messages: u64,
+    /// Messages that arrived out of order.
+    pub late_messages: u64,
+    /// Frames delivered bit-exact.
+    pub frames: u64,
+    /// Frames lost (missing, incomplete or failing their CRC).
+    pub lost_frames: u64,
+    /// Pairs delivered.
+    pub pairs: u64,
+    /// Pairs with a member lost.
+    pub broken_pairs: u64,
+    /// Bytes of an unterminated message at the end of the stream.
+    pub truncated_tail: u64,
+}
+
+/// What a receiver hands its caller.
+#[derive(Debug)]
+pub enum Event {
+    /// A frame arrived whole.
+    Frame(ReceivedFrame),
+    /// Both frames of a pair arrived.
+    Pair(Box<[ReceivedFrame; 2]>),
+}
+
+/// Reads `source` to its end; calls `on` with every frame and pair, and
+/// `progress` with the running report after every read.
+pub fn receive<E>(
+    source: &mut dyn Source,
+    mut on: impl FnMut(Event) -> Result<(), E>,
+    mut progress: impl FnMut(&Report),
+) -> Result<Report, E>
+where
+    E: From<SourceError>,
+{
+    let mut rx = vec![0u8; MAX_ENCODED];
+    let mut dec = Decoder::new(&mut rx);
+    let mut asm = Assembler::new();
+    let mut pairer = Pairer::default();
+    let mut buf = vec![0u8; 64 * 1024];
+    let mut report = Report::default();
+    loop {
+        let n = source.read(&mut buf)?;
+        if n == 0 {
+            break;
+        }
+        let mut input = &buf[..n];
+        while let Some(m) = dec.feed(&mut input) {
+            let Ok(m) = m else { continue };
+            if let Some(f) = asm.push(&m) {
+                if let Some(pair) = pairer.push(f.clone()) {
+                    on(Event::Frame(f))?;
+                    report.pairs += 1;
+                    on(Event::Pair(Box::new(pair)))?;
+                } else {
+                    on(Event::Frame(f))?;
+                }
+            }
+        }
+        fill(&mut report, &dec, &asm, &pairer);
+        progress(&report);
+    }
+    report.truncated_tail = dec.pending() as u64;
+    asm.finish();
+    fill(&mut report, &dec, &asm, &pairer);
+    Ok(report)
+}
+
+fn fill(r: &mut Report, dec: &Decoder<'_>, asm: &Assembler, pairer: &Pairer) {
+    let d = dec.stats();
+    let a = asm.stats();
+    r.bytes = d.bytes;
+    r.messages = d.messages;
+    r.corrupted = d.corrupt + d.overflow;
+    r.lost_messages = d.lost;
+    r.late_messages = d.late;
+    r.frames = a.frames;
+    r.lost_frames = a.lost_frames;
+    r.broken_pairs = pairer.broken;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use spiv_firmware_sim::firmware::{Config, Faults, Faulty, Firmware};
+
+    struct Bytes(std::io::Cursor<Vec<u8>>);
+    impl Source for Bytes {
+        fn read(&mut self, buf: &mut [u8]) -> Result<usize, SourceError> {
+            use std::io::Read;
+            Ok(self.0.read(buf).unwrap_or(0))
+        }
+        fn name(&self) -> String {
+            "memory".into()
+        }
+    }
+
+    fn planes(w: u16, h: u16, n: usize) -> Vec<Vec<u8>> {
+        // A bright band in the stored rows near 0 and a few moving dots.
+        let mut s = 12345u64;
+        (0..n)
+            .map(|t| {
+                let mut p = vec![0u8; usize::from(w) * usize::from(h) / 8];
+                for y in 0..usize::from(h) {
+                    for x in 0..usize::from(w) {
+                        s ^= s << 13;
+                        s ^= s >> 7;
+                        s ^= s << 17;
+                        let dot = (x + 40 - t % 40) % 20 < 3 && y % 16 < 3;
+                        let rate = if dot {
+                            60
+                        } else if y < 6 {
+                            40
+                        } else {
+                            4
+                        };
+                        if s % 100 < rate {
+                            let i = y * usize::from(w) + x;
+                            p[i / 8] |= 1 << (i % 8);
+                        }
+                    }
+                }
+                p
+            })
+            .collect()
+    }
+
+    fn run_fw(faults: Faults) -> (Vec<u8>, Vec<spiv_firmware_sim::firmware::SentFrame>) {
+        let (w, h) = (64u16, 48u16);
+        let mut cfg = Config::new(64, 5);
+        cfg.every = 10;
+        cfg.pairs = Some(4);
+        let mut fw = Firmware::new(w, h, cfg, Faulty::new(Vec::new(), faults, 7)).unwrap();
+        fw.keep = Some(Vec::new());
+        for p in planes(w, h, 64 + 35 + 64) {
+            fw.push_plane(&p).unwrap();
+        }
+        fw.finish().unwrap();
+        let kept = fw.keep.take().unwrap();
+        (fw.into_link().into_inner(), kept)
+    }
+
+    #[test]
+    fn clean_link_delivers_every_frame_bit_exact() {
+        let (bytes, sent) = run_fw(Faults::default());
+        assert_eq!(sent.len(), 8);
+        let mut got = Vec::new();
+        let r = receive::<SourceError>(
+            &mut Bytes(std::io::Cursor::new(bytes)),
+            |e| {
+                if let Event::Frame(f) = e {
+                    got.push(f);
+                }
+                Ok(())
+            },
+            |_| {},
+        )
+        .unwrap();
+        assert_eq!(
+            (r.frames, r.pairs, r.lost_frames, r.corrupted),
+            (8, 4, 0, 0)
+        );
+        for (g, s) in got.iter().zip(&sent) {
+            assert_eq!((g.frame_id, g.tick), (s.frame_id, s.tick));
+            assert_eq!(g.data, s.data);
+        }
+    }
+
+    #[test]
+    fn faulty_link_loses_frames_but_never_delivers_a_wrong_one() {
+        let faults = Faults::parse("drop=0.05,corrupt=0.05,truncate=0.05,reorder=0.1").unwrap();
+        let (bytes, sent) = run_fw(faults);
+        let mut got = Vec::new();
+        let r = receive::<SourceError>(
+            &mut Bytes(std::io::Cursor::new(bytes)),
+            |e| {
+                if let Event::Frame(f) = e {
+                    got.push(f);
+                }
+                Ok(())
+            },
+            |_| {},
+        )
+        .unwrap();
+        assert_eq!(r.frames + r.lost_frames, sent.len() as u64, "{r:?}");
+        for g in &got {
+            let s = &sent[g.frame_id as usize];
+            assert_eq!(g.data, s.data);
+        }
+    }
+}

@@ -1,0 +1,207 @@
+//! Where the sidecar's bytes come from, behind one trait: a stdin pipe, a
+//! TCP connection to a listening sidecar, a file of recorded messages, or a
+//! USB device's bulk IN endpoint (rusb against the system libusb).
+
+use std::io::Read;
+use std::net::TcpStream;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// Errors of opening or reading a source.
+#[derive(Debug, thiserror::Error)]
+pub enum SourceError {
+    /// Reading failed.
+    #[error("{what}: {source}")]
+    Io {
+        /// Which source.
+        what: String,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// libusb failed or no device matched.
+    #[error("usb: {0}")]
+    Usb(String),
+    /// A `VID:PID` that is not two hex numbers.
+    #[error("usb: `{0}` is not VID:PID in hex (e.g. c0de:cafe)")]
+    BadId(String),
+}
+
+/// A stream of bytes from the sidecar.
+pub trait Source {
+    /// Reads up to `buf.len()` bytes; `Ok(0)` at the end of the stream.
+    fn read(&mut self, buf: &mut [u8]) -> Result<usize, SourceError>;
+    /// A short name for messages.
+    fn name(&self) -> String;
+}
+
+/// Any `Read` (stdin, a file, a TCP stream).
+#[derive(Debug)]
+pub struct Reader<R: Read> {
+    inner: R,
+    name: String,
+}
+
+impl<R: Read> Source for Reader<R> {
+    fn read(&mut self, buf: &mut [u8]) -> Result<usize, SourceError> {
+        loop {
+            match self.inner.read(buf) {
+                Ok(n) => return Ok(n),
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                Err(source) => {
+                    return Err(SourceError::Io {
+                        what: self.name.clone(),
+                        source,
+                    })
+                }
+            }
+        }
+    }
+    fn name(&self) -> String {
+        self.name.clone()
+    }
+}
+
+/// Standard input.
+pub fn pipe() -> Reader<std::io::Stdin> {
+    Reader {
+        inner: std::io::stdin(),
+        name: "pipe".into(),
+    }
+}
+
+/// A file of recorded messages.
+pub fn file(path: &Path) -> Result<Reader<std::fs::File>, SourceError> {
+    let name = path.display().to_string();
+    let f = std::fs::File::open(path).map_err(|source| SourceError::Io {
+        what: name.clone(),
+        source,
+    })?;
+    Ok(Reader { inner: f, name })
+}
+
+/// Connects to a sidecar listening at `addr`, retrying for up to `wait`
+/// (the sidecar may still be starting).
+pub fn tcp(addr: &str, wait: Duration) -> Result<Reader<TcpStream>, SourceError> {
+    let t0 = std::time::Instant::now();
+    loop {
+        match TcpStream::connect(addr) {
+            Ok(s) => {
+                return Ok(Reader {
+                    inner: s,
+                    name: format!("tcp {addr}"),
+                })
+            }
+            Err(e) if t0.elapsed() < wait => {
+                let _ = e;
+                std::thread::sleep(Duration::from_millis(50));
+            }
+            Err(source) => {
+                return Err(SourceError::Io {
+                    what: format!("tcp {addr}"),
+                    source,
+                })
+            }
+        }
+    }
+}
+
+/// The sidecar's USB identity (see `docs/protocol.md`): a development
+/// VID:PID, vendor-class interface 0, bulk IN endpoint 0x81.
+pub const USB_VID: u16 = 0xc0de;
+/// Product id.
+pub const USB_PID: u16 = 0xcafe;
+/// Interface number.
+pub const USB_INTERFACE: u8 = 0;
+/// Bulk IN endpoint address.
+pub const USB_EP_IN: u8 = 0x81;
+
+/// Parses `VID:PID` in hex.
+pub fn parse_vid_pid(s: &str) -> Result<(u16, u16), SourceError> {
+    let bad = || SourceError::BadId(s.to_string());
+    let (v, p) = s.split_once(':').ok_or_else(bad)?;
+    Ok((
+        u16::from_str_radix(v, 16).map_err(|_| bad())?,
+        u16::from_str_radix(p, 16).map_err(|_| bad())?,
+    ))
+}
+
+/// A sidecar on USB: bulk IN reads into buffers of whole 512-byte packets.
+pub struct Usb {
+    handle: rusb::DeviceHandle<rusb::Context>,
+    name: String,
+}
+
+impl std::fmt::Debug for Usb {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.name)
+    }
+}
+
+impl Usb {
+    /// Opens the first device with `vid:pid` and claims its interface.
+    pub fn open(vid: u16, pid: u16) -> Result<Usb, SourceError> {
+        use rusb::UsbContext;
+        let usb = |e: rusb::Error| SourceError::Usb(e.to_string());
+        // Never the global context: it panics when libusb cannot start.
+        let ctx = rusb::Context::new().map_err(|e| {
+            SourceError::Usb(format!(
+                "cannot initialise libusb ({e}); is USB available here?"
+            ))
+        })?;
+        let handle = ctx.open_device_with_vid_pid(vid, pid).ok_or_else(|| {
+            SourceError::Usb(format!(
+                "no device {vid:04x}:{pid:04x} attached (or no permission to open it)"
+            ))
+        })?;
+        let _ = handle.set_auto_detach_kernel_driver(true);
+        handle.claim_interface(USB_INTERFACE).map_err(usb)?;
+        Ok(Usb {
+            handle,
+            name: format!("usb {vid:04x}:{pid:04x}"),
+        })
+    }
+}
+
+impl Source for Usb {
+    fn read(&mut self, buf: &mut [u8]) -> Result<usize, SourceError> {
+        // A multiple of the high-speed packet size, so libusb never overflows.
+        let n = (buf.len() / 512 * 512).max(512).min(buf.len());
+        loop {
+            match self
+                .handle
+                .read_bulk(USB_EP_IN, &mut buf[..n], Duration::from_secs(1))
+            {
+                Ok(k) => return Ok(k),
+                Err(rusb::Error::Timeout) => continue,
+                Err(rusb::Error::NoDevice) => return Ok(0),
+                Err(e) => return Err(SourceError::Usb(e.to_string())),
+            }
+        }
+    }
+    fn name(&self) -> String {
+        self.name.clone()
+    }
+}
+
+/// Which source, as the CLI names it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Spec {
+    /// `--usb [VID:PID]`.
+    Usb(u16, u16),
+    /// `--tcp ADDR`.
+    Tcp(String),
+    /// `--pipe`.
+    Pipe,
+    /// `--file PATH`.
+    File(PathBuf),
+}
+
+/// Opens `spec`.
+pub fn open(spec: &Spec) -> Result<Box<dyn Source>, SourceError> {
+    Ok(match spec {
+        Spec::Usb(v, p) => Box::new(Usb::open(*v, *p)?),
+        Spec::Tcp(a) => Box::new(tcp(a, Duration::from_secs(10))?),
+        Spec::Pipe => Box::new(pipe()),
+        Spec::File(p) => Box::new(file(p)?),
+    })
+}
