@@ -96,6 +96,21 @@ pub fn transfer(
     })
 }
 
+/// The PIV settings `spiv receive --piv` uses on each received pair: the
+/// given window of each pass (px), the default overlap and deformation, and
+/// a peak-ratio floor of 1.2 (received frames have no frame-camera noise
+/// floor, so a weaker second peak is the sign of a lost particle pattern).
+pub fn receiver_settings(windows: Vec<usize>) -> Settings {
+    Settings {
+        windows,
+        validation: crate::piv::Validation {
+            min_peak_ratio: 1.2,
+            ..crate::piv::Validation::default()
+        },
+        ..Settings::default()
+    }
+}
+
 /// A received frame upright as PIV input.
 pub fn upright_f32(f: &ReceivedFrame) -> Array2<f32> {
     let up = f.upright();

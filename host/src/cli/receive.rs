@@ -4,10 +4,10 @@ use std::path::PathBuf;
 
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use ndarray::Array2;
 use spiv_firmware_sim::formats::csv::write_vectors;
 use spiv_firmware_sim::formats::image::{write_gray16, write_gray8};
-use spiv_host::piv::{piv, Settings, Validation};
+use spiv_host::link::{receiver_settings, upright_f32};
+use spiv_host::piv::piv;
 use spiv_host::receive::source::{open, parse_vid_pid};
 use spiv_host::receive::{receive, Event, ReceivedFrame, Spec};
 
@@ -59,14 +59,7 @@ pub fn run(a: &ReceiveArgs) -> Result<(), CliError> {
     if let Some(d) = &a.out {
         std::fs::create_dir_all(d).map_err(|e| CliError::Usage(format!("{}: {e}", d.display())))?;
     }
-    let settings = Settings {
-        windows: a.windows.clone(),
-        validation: Validation {
-            min_peak_ratio: 1.2,
-            ..Validation::default()
-        },
-        ..Settings::default()
-    };
+    let settings = receiver_settings(a.windows.clone());
     let bar = ProgressBar::new_spinner();
     bar.set_style(
         ProgressStyle::with_template("{spinner} receiving from {prefix}: {msg} {elapsed}")
@@ -86,7 +79,7 @@ pub fn run(a: &ReceiveArgs) -> Result<(), CliError> {
                 Event::Pair(pair) => {
                     if a.piv {
                         let [fa, fb] = &*pair;
-                        let field = piv(&to_f32(fa), &to_f32(fb), None, &settings)?;
+                        let field = piv(&upright_f32(fa), &upright_f32(fb), None, &settings)?;
                         let v = field.vectors();
                         vectors += v.len();
                         if let Some(d) = &a.out {
@@ -140,14 +133,6 @@ pub fn run(a: &ReceiveArgs) -> Result<(), CliError> {
         ));
     }
     Ok(())
-}
-
-fn to_f32(f: &ReceivedFrame) -> Array2<f32> {
-    let up = f.upright();
-    let w = usize::from(f.width);
-    Array2::from_shape_fn((usize::from(f.height), w), |(i, j)| {
-        f32::from(up[i * w + j])
-    })
 }
 
 fn save_frame(dir: &std::path::Path, f: &ReceivedFrame) -> Result<(), CliError> {
