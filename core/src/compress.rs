@@ -10,9 +10,14 @@
 //! | `Sparse` | lossy | `block u8, 0u8`, bitstream: background grid (block means of the darker half, Rice-coded deltas), then per row alternating runs: background (decoded as the bilinear upsampling of the grid) and exact samples (Rice-coded left-neighbour residuals) |
 //!
 //! `Sparse` sends a sample exactly when it differs from the upsampled
-//! background by more than `tolerance` gray levels, so every decoded sample
-//! is within `tolerance` of the original; particles (far above the
-//! flattened background) arrive exact.
+//! background by more than its block's tolerance, so every decoded sample is
+//! within `tolerance` gray levels of the original; particles (far above the
+//! flattened background) arrive exact. The block's tolerance is at most its
+//! contrast (brightest sample minus background) over `contrast`: a block of
+//! dim particles a few levels above a suppressed background — what an
+//! adaptive frame shows where short windows leave particles unsegmented —
+//! goes exact, while noise around bright segmented particles is flattened.
+//! This is an encoder decision only; the payload format does not change.
 //!
 //! Bitstreams are MSB first. The Rice parameter adapts as in LOCO-I: k is
 //! the smallest with `N·2^k ≥ A`, `A` the running sum of coded values and
@@ -36,6 +41,11 @@ pub struct Lossy {
     pub block: u8,
     /// Largest error of a sample sent as background, gray levels.
     pub tolerance: u16,
+    /// Contrast rule: in a block whose brightest sample stands `r` levels
+    /// above its background, the tolerance is at most `r / contrast` (0:
+    /// `tolerance` everywhere). Dim blocks — particles a few levels above a
+    /// suppressed background — then go exact, bright ones are flattened.
+    pub contrast: u16,
 }
 
 impl Default for Lossy {
@@ -43,14 +53,16 @@ impl Default for Lossy {
         Lossy {
             block: 8,
             tolerance: 12,
+            contrast: 4,
         }
     }
 }
 
-/// Scratch samples the sparse codec needs for a tile (its background grid).
+/// Scratch samples the sparse codec needs for a tile: its background grid
+/// and, when encoding, a tolerance per block.
 pub fn sparse_scratch(width: u16, rows: u16, block: u8) -> usize {
     let b = usize::from(block.max(1));
-    usize::from(width).div_ceil(b) * usize::from(rows).div_ceil(b)
+    2 * usize::from(width).div_ceil(b) * usize::from(rows).div_ceil(b)
 }
 
 struct BitWriter<'a> {
@@ -273,7 +285,8 @@ fn encode_rice<G: Gray>(samples: &[G], w: usize, out: &mut [u8]) -> Result<usize
     Ok(bw.bytes())
 }
 
-/// Background of a block: the mean of its samples at or below its mean.
+/// Background of a block — the mean of its samples at or below its mean —
+/// and its brightest sample.
 fn block_level<G: Gray>(
     samples: &[G],
     w: usize,
@@ -281,12 +294,13 @@ fn block_level<G: Gray>(
     x1: usize,
     y0: usize,
     y1: usize,
-) -> u16 {
-    let (mut sum, mut n) = (0u64, 0u64);
+) -> (u16, u16) {
+    let (mut sum, mut n, mut max) = (0u64, 0u64, 0u16);
     for y in y0..y1 {
         for &s in &samples[y * w + x0..y * w + x1] {
             sum += u64::from(s.level());
             n += 1;
+            max = max.max(s.level());
         }
     }
     let m1 = sum / n.max(1);
@@ -299,7 +313,7 @@ fn block_level<G: Gray>(
             }
         }
     }
-    (s2 / n2.max(1)) as u16
+    ((s2 / n2.max(1)) as u16, max)
 }
 
 /// Bilinear weights along one axis: the lower grid index and the weight
@@ -349,10 +363,19 @@ fn encode_sparse<G: Gray>(
     }
     let (w, h, b) = (usize::from(width), usize::from(rows), usize::from(block));
     let (gw, gh) = (w.div_ceil(b), h.div_ceil(b));
-    let g = scratch.get_mut(..gw * gh).ok_or(WireError::TooLarge)?;
-    for (j, cell) in g.iter_mut().enumerate() {
+    let cells = gw * gh;
+    let (g, tols) = scratch
+        .get_mut(..2 * cells)
+        .ok_or(WireError::TooLarge)?
+        .split_at_mut(cells);
+    for (j, (cell, tol)) in g.iter_mut().zip(tols.iter_mut()).enumerate() {
         let (y0, x0) = ((j / gw) * b, (j % gw) * b);
-        *cell = block_level(samples, w, x0, (x0 + b).min(w), y0, (y0 + b).min(h));
+        let (level, max) = block_level(samples, w, x0, (x0 + b).min(w), y0, (y0 + b).min(h));
+        *cell = level;
+        *tol = match lossy.contrast {
+            0 => lossy.tolerance,
+            c => lossy.tolerance.min(max.saturating_sub(level) / c),
+        };
     }
     let (head, body) = out.split_at_mut_checked(2).ok_or(WireError::TooLarge)?;
     head[0] = block;
@@ -364,13 +387,15 @@ fn encode_sparse<G: Gray>(
         ad_grid.put(&mut bw, zigzag(i32::from(v) - prev))?;
         prev = i32::from(v);
     }
-    let g = &*g;
-    let tol = i32::from(lossy.tolerance);
+    let (g, tols) = (&*g, &*tols);
     let (mut ad_bg, mut ad_ex, mut ad_val) = (Adapt::new(), Adapt::new(), Adapt::new());
     for y in 0..h {
         let row = &samples[y * w..(y + 1) * w];
-        let exact =
-            |x: usize| (i32::from(row[x].level()) - background(g, gw, gh, b, x, y)).abs() > tol;
+        let tol_row = &tols[(y / b) * gw..(y / b + 1) * gw];
+        let exact = |x: usize| {
+            (i32::from(row[x].level()) - background(g, gw, gh, b, x, y)).abs()
+                > i32::from(tol_row[x / b])
+        };
         let mut x = 0;
         while x < w {
             let start = x;
@@ -570,7 +595,11 @@ mod tests {
     fn sparse_is_within_tolerance_and_particles_exact() {
         let (w, h) = (64u16, 24u16);
         let s = scene(64, 24);
-        let lossy = Lossy::default();
+        // A fixed tolerance everywhere (the contrast rule has its own test).
+        let lossy = Lossy {
+            contrast: 0,
+            ..Lossy::default()
+        };
         let mut scratch = [0u16; 64];
         let mut buf = [0u8; 4096];
         let (enc, len) = encode_tile(
@@ -593,6 +622,64 @@ mod tests {
                 assert_eq!(a, b);
             }
         }
+    }
+
+    /// Dim particles (4 levels over a background of 0–1, as in a
+    /// window-capped band of an adaptive frame) survive the contrast rule and
+    /// are erased by a fixed tolerance.
+    #[test]
+    fn contrast_rule_keeps_dim_particles() {
+        let (w, h) = (64usize, 24usize);
+        let mut s = [0u8; 64 * 24];
+        for (i, v) in s.iter_mut().enumerate() {
+            let (x, y) = (i % w, i / w);
+            *v = u8::from((x * 5 + y * 3) % 7 == 0);
+            if (x % 12 == 5 || x % 12 == 6) && (y % 8 == 3 || y % 8 == 4) {
+                *v = 4;
+            }
+        }
+        let run = |contrast: u16| {
+            let lossy = Lossy {
+                contrast,
+                ..Lossy::default()
+            };
+            let mut scratch = [0u16; 64];
+            let mut buf = [0u8; 4096];
+            let (enc, len) = encode_tile(
+                Encoding::Sparse,
+                &s[..],
+                w as u16,
+                h as u16,
+                &lossy,
+                &mut scratch,
+                &mut buf,
+            )
+            .unwrap();
+            let mut back = [0u8; 64 * 24];
+            decode_tile(
+                enc,
+                &buf[..len],
+                w as u16,
+                h as u16,
+                &mut scratch,
+                &mut back,
+            )
+            .unwrap();
+            back
+        };
+        let kept = run(4);
+        for (a, b) in s.iter().zip(kept.iter()) {
+            // Tolerance 4/4 = 1 in a particle block: noise may go, particles stay.
+            assert!(a.abs_diff(*b) <= 1);
+            if *a == 4 {
+                assert_eq!(*b, 4, "a dim particle sample was lost");
+            }
+        }
+        let flat = run(0);
+        assert!(
+            s.iter().zip(flat.iter()).any(|(a, b)| *a == 4 && *b < 2),
+            "a fixed tolerance of 12 erases 4-level particles"
+        );
     }
 
     #[test]

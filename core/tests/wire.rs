@@ -120,7 +120,7 @@ proptest! {
 
     #[test]
     fn tiles_round_trip(w in 1u16..90, h in 1u16..20, seed in any::<u64>(), peak in 0u16..=u16::MAX,
-                        block in 2u8..=16, tolerance in 0u16..40) {
+                        block in 2u8..=16, tolerance in 0u16..40, contrast in 0u16..40) {
         let n = usize::from(w) * usize::from(h);
         let mut s = seed | 1;
         let data: Vec<u16> = (0..n).map(|_| {
@@ -128,7 +128,7 @@ proptest! {
             // Mostly a flat noisy background, some bright spots.
             if s % 11 == 0 { (s >> 20) as u16 % (peak.max(1)) } else { 20 + (s >> 40) as u16 % 6 }
         }).collect();
-        let lossy = Lossy { block, tolerance };
+        let lossy = Lossy { block, tolerance, contrast, ..Lossy::default() };
         let mut scratch = vec![0u16; sparse_scratch(w, h, block)];
         let mut buf = vec![0u8; 4 * n + 64];
         for want in [Encoding::Raw8, Encoding::Raw16, Encoding::Rice, Encoding::Sparse] {

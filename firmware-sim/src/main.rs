@@ -66,6 +66,10 @@ struct Args {
     /// Sparse mode: largest error of a background sample, gray levels.
     #[arg(long, default_value_t = 12)]
     tolerance: u16,
+    /// Sparse mode: a block's tolerance is at most its contrast (brightest
+    /// sample above background) over this, so dim particles stay exact; 0: off.
+    #[arg(long, default_value_t = 4)]
+    contrast: u16,
     /// Frame method: adaptive or tfp.
     #[arg(long, default_value = "adaptive")]
     method: String,
@@ -151,6 +155,7 @@ fn config(a: &Args, dt: u32) -> Result<Config, Error> {
         }
     };
     cfg.lossy.tolerance = a.tolerance;
+    cfg.lossy.contrast = a.contrast;
     let window = match cfg.method {
         Method::Adaptive => cfg.params.n_max,
         Method::Tfp(n) => n,

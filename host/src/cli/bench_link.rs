@@ -38,6 +38,10 @@ pub struct LinkArgs {
     /// Lossy mode: largest error of a background sample, gray levels.
     #[arg(long, default_value_t = 12)]
     tolerance: u16,
+    /// Lossy mode: the tolerance in a block is at most its contrast (its
+    /// brightest sample above its background) over this; 0: off.
+    #[arg(long, default_value_t = 4)]
+    contrast: u16,
     /// Adaptive window cap against streaks (as `spiv run --dwell-cap`), px
     /// of blur, or "off" for the paper's one n_max everywhere.
     #[arg(long, default_value = "8")]
@@ -108,6 +112,7 @@ pub fn run(a: &LinkArgs) -> Result<(), CliError> {
             base.params = job.core;
             base.pairs = Some(a.pairs);
             base.lossy.tolerance = a.tolerance;
+            base.lossy.contrast = a.contrast;
             let max_every = a.every.iter().max().copied().unwrap_or(4) * dt;
             let mut req = Request::new(p.clone(), seed);
             req.ticks = Some(ticks_for(
