@@ -18,6 +18,7 @@
 //! | [`q`] | the fixed-point formats, in one place |
 //! | [`wire`] | the sidecar link: message header, COBS framing, CRC, stream decoder |
 //! | [`compress`] | tile codecs: raw, lossless Rice, lossy sparse |
+//! | [`sender`] | the pair schedule and the messages that carry a frame |
 //!
 //! Units: time in **ticks** (one spike plane), space in **pixels** of the
 //! camera's stored row order (the Vidar layout stores image rows bottom-up: the
@@ -41,6 +42,7 @@ pub mod params;
 pub mod plane;
 pub mod q;
 pub mod segment;
+pub mod sender;
 pub mod state;
 pub mod suppress;
 pub mod window;

@@ -1,19 +1,19 @@
 //! The sidecar firmware loop, simulated: spike planes in, one by one, into
 //! the core's history ring; at the scheduled ticks an integrated frame
-//! through the core (adaptive or TFP), cut into bands of rows, coded
-//! ([`spiv_core::compress`]) and framed ([`spiv_core::wire`]) into a
-//! [`Link`]. SPEC section 8: pairs `(k, k + dt)`, one pair every `every`
+//! through the core (adaptive or TFP), sent by the core's
+//! [`spiv_core::sender`] — bands of rows coded ([`spiv_core::compress`]) and
+//! framed ([`spiv_core::wire`]) — into a [`Link`]; the schedule is the
+//! core's [`Schedule`], so firmware on a device sends the same bytes. SPEC section 8: pairs `(k, k + dt)`, one pair every `every`
 //! ticks (default `4·dt`).
 //!
 //! Everything per message is bounded: one band of at most 16 KiB payload, one
 //! message buffer. The frame buffer is one frame of u16 (a device with a
 //! strip workspace would send each strip as it is done).
 
-use spiv_core::compress::{decode_tile, encode_tile, sparse_scratch, Lossy};
+use spiv_core::compress::{sparse_scratch, Lossy};
+use spiv_core::sender::{tile_rows, FrameInfo, Schedule, SendBuffers, SendError, Sender, Slot};
 use spiv_core::window::tfp;
-use spiv_core::wire::{
-    encode_message, frame_crc, Encoding, FrameEnd, Header, Kind, Status, MAX_ENCODED, MAX_PAYLOAD,
-};
+use spiv_core::wire::{Encoding, MAX_ENCODED, MAX_PAYLOAD};
 use spiv_core::{reconstruct_adaptive, Params, PlaneView};
 
 use crate::buffers::{HistoryBuf, WorkspaceBuf};
@@ -131,6 +131,25 @@ impl<W: std::io::Write> Link for Plain<W> {
     }
 }
 
+/// The core's sender writes through this.
+struct CoreLink<'a, L: Link>(&'a mut L);
+
+impl<L: Link> spiv_core::sender::Link for CoreLink<'_, L> {
+    type Error = std::io::Error;
+    fn send(&mut self, message: &[u8]) -> std::io::Result<()> {
+        self.0.send(message)
+    }
+}
+
+impl From<SendError<std::io::Error>> for FirmwareError {
+    fn from(e: SendError<std::io::Error>) -> Self {
+        match e {
+            SendError::Wire(w) => FirmwareError::Wire(w),
+            SendError::Link(l) => FirmwareError::Link(l),
+        }
+    }
+}
+
 /// Messages kept in memory (for in-process runs and tests).
 impl Link for Vec<u8> {
     fn send(&mut self, message: &[u8]) -> std::io::Result<()> {
@@ -157,20 +176,9 @@ pub struct SentFrame {
     pub data: Vec<u16>,
 }
 
-/// The firmware's counters (also sent as [`Status`]).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct Counters {
-    /// Planes ingested.
-    pub planes: u32,
-    /// Frames sent.
-    pub frames: u32,
-    /// Messages sent.
-    pub messages: u32,
-    /// Bytes sent.
-    pub bytes: u64,
-    /// Tiles per encoding actually used: raw8, raw16, rice, sparse.
-    pub tiles: [u32; 4],
-}
+/// The firmware's counters (also sent as a status message): the core
+/// sender's.
+pub type Counters = spiv_core::sender::Sent;
 
 /// The loop.
 #[derive(Debug)]
@@ -186,12 +194,10 @@ pub struct Firmware<L: Link> {
     payload: Vec<u8>,
     wire: Vec<u8>,
     scratch: Vec<u16>,
-    decoded: Vec<u16>,
-    tile_rows: u16,
-    seq: u32,
+    sender: Sender,
+    schedule: Schedule,
     next: u64,
     next_tick: u32,
-    counters: Counters,
     link: L,
     /// Keep copies of what was sent (tests, in-process comparison).
     pub keep: Option<Vec<SentFrame>>,
@@ -213,19 +219,19 @@ impl<L: Link> Firmware<L> {
             )));
         }
         cfg.params.validate(cfg.params.n_max.max(window))?;
-        let bytes = if cfg.params.full_scale > 255 { 2 } else { 1 };
-        let max_rows = MAX_PAYLOAD / (usize::from(width) * bytes).max(1);
-        if max_rows == 0 {
+        let tile_rows = tile_rows(width, height, cfg.params.full_scale > 255, cfg.lossy.block);
+        if tile_rows == 0 {
             return Err(FirmwareError::Config(format!(
                 "a row of {width} px does not fit one {MAX_PAYLOAD}-byte payload"
             )));
         }
-        let b = usize::from(cfg.lossy.block.max(1));
-        let mut tile_rows = max_rows.min(usize::from(height));
-        if tile_rows >= b && tile_rows < usize::from(height) {
-            tile_rows -= tile_rows % b;
-        }
-        let tile_rows = tile_rows as u16;
+        let sender = Sender::new(width, height, tile_rows)?;
+        let schedule = Schedule {
+            first: cfg.first,
+            dt: cfg.dt,
+            every: cfg.every,
+            pairs: cfg.pairs,
+        };
         let depth = window.max(cfg.params.n_max).max(2);
         let hist = HistoryBuf::new(width, height, depth)?;
         let px = usize::from(width) * usize::from(height);
@@ -244,12 +250,10 @@ impl<L: Link> Firmware<L> {
             payload: vec![0; MAX_PAYLOAD],
             wire: vec![0; MAX_ENCODED],
             scratch: vec![0; sparse_scratch(width, tile_rows, cfg.lossy.block)],
-            decoded: vec![0; usize::from(width) * usize::from(tile_rows)],
-            tile_rows,
-            seq: 0,
+            sender,
+            schedule,
             next: 0,
             next_tick: 0,
-            counters: Counters::default(),
             cfg,
             link,
             keep: None,
@@ -258,30 +262,17 @@ impl<L: Link> Firmware<L> {
 
     /// Rows per tile message.
     pub fn tile_rows(&self) -> u16 {
-        self.tile_rows
+        self.sender.tile_rows()
     }
 
     /// The counters so far.
     pub fn counters(&self) -> Counters {
-        self.counters
+        self.sender.sent
     }
 
     /// The link (to take a memory link back).
     pub fn into_link(self) -> L {
         self.link
-    }
-
-    /// The (tick, pair, member) of frame number `n` of the schedule.
-    fn scheduled(&self, n: u64) -> Option<(u32, u32, u8)> {
-        let pair = u32::try_from(n / 2).ok()?;
-        if self.cfg.pairs.is_some_and(|p| pair >= p) {
-            return None;
-        }
-        let member = (n % 2) as u8;
-        let k = u64::from(self.cfg.first)
-            + u64::from(pair) * u64::from(self.cfg.every)
-            + u64::from(member) * u64::from(self.cfg.dt);
-        Some((u32::try_from(k).ok()?, pair, member))
     }
 
     /// Ingests the next plane (stored row order, `width·height/8` bytes) and
@@ -294,16 +285,18 @@ impl<L: Link> Firmware<L> {
             self.next_tick = hist.next_tick();
             t
         };
-        self.counters.planes += 1;
+        self.sender.sent.planes += 1;
         let window = self.cfg.method.window(&self.cfg.params);
-        let ahead = u32::from(window - window / 2) - 1;
-        while let Some((k, pair, member)) = self.scheduled(self.next) {
-            if k.saturating_add(ahead) > newest {
+        while let Some(slot) = self.schedule.slot(self.next) {
+            if !Schedule::ready(slot.tick, window, newest) {
                 break;
             }
             self.next += 1;
-            self.send_frame(k, pair, member)?;
-            if member == 1 && self.cfg.status_every > 0 && (pair + 1) % self.cfg.status_every == 0 {
+            self.send_frame(slot)?;
+            if slot.member == 1
+                && self.cfg.status_every > 0
+                && (slot.pair + 1) % self.cfg.status_every == 0
+            {
                 self.send_status()?;
             }
         }
@@ -312,14 +305,14 @@ impl<L: Link> Firmware<L> {
 
     /// True once every scheduled pair was sent.
     pub fn done(&self) -> bool {
-        self.scheduled(self.next).is_none()
+        self.schedule.slot(self.next).is_none()
     }
 
     /// Sends the final status and flushes the link.
     pub fn finish(&mut self) -> Result<Counters, FirmwareError> {
         self.send_status()?;
         self.link.flush()?;
-        Ok(self.counters)
+        Ok(self.sender.sent)
     }
 
     fn make_frame(&mut self, k: u32) -> Result<(), FirmwareError> {
@@ -359,71 +352,35 @@ impl<L: Link> Firmware<L> {
         Ok(())
     }
 
-    fn send_frame(&mut self, k: u32, pair: u32, member: u8) -> Result<(), FirmwareError> {
-        self.make_frame(k)?;
-        let frame_id = self.counters.frames;
-        let w = usize::from(self.width);
-        let mut tiles = 0u16;
-        let mut lossy = 0u8;
-        let mut row0 = 0u16;
-        while row0 < self.height {
-            let rows = self.tile_rows.min(self.height - row0);
-            let span = usize::from(row0) * w..(usize::from(row0) + usize::from(rows)) * w;
-            let (enc, len) = encode_tile(
-                self.cfg.encoding,
-                &self.frame[span.clone()],
-                self.width,
-                rows,
-                &self.cfg.lossy,
-                &mut self.scratch,
-                &mut self.payload,
-            )?;
-            if enc == Encoding::Sparse {
-                // The receiver sees the decoded samples: keep those, so the
-                // frame CRC and any copy match what arrives.
-                let n = usize::from(rows) * w;
-                decode_tile(
-                    enc,
-                    &self.payload[..len],
-                    self.width,
-                    rows,
-                    &mut self.scratch,
-                    &mut self.decoded[..n],
-                )?;
-                self.frame[span].copy_from_slice(&self.decoded[..n]);
-                lossy = 1;
-            }
-            let slot = match enc {
-                Encoding::Raw8 => 0,
-                Encoding::Raw16 => 1,
-                Encoding::Rice => 2,
-                _ => 3,
-            };
-            self.counters.tiles[slot] += 1;
-            let h = self.header(Kind::FrameTile, frame_id, k, row0, rows, enc);
-            self.emit_payload(&h, len)?;
-            tiles += 1;
-            row0 += rows;
-        }
-        let end = FrameEnd {
-            pair,
-            member,
+    fn send_frame(&mut self, slot: Slot) -> Result<(), FirmwareError> {
+        self.make_frame(slot.tick)?;
+        let frame_id = self.sender.sent.frames;
+        let info = FrameInfo {
+            slot,
             method: self.cfg.method.code(),
             full_scale: self.cfg.params.full_scale,
             dt: self.cfg.dt,
-            tiles,
-            lossy,
-            frame_crc: frame_crc(&self.frame),
         };
-        let h = self.header(Kind::FrameEnd, frame_id, k, 0, 0, Encoding::None);
-        self.emit(&h, &end.to_bytes())?;
-        self.counters.frames += 1;
+        let (encoding, lossy) = (self.cfg.encoding, self.cfg.lossy);
+        let mut buf = SendBuffers {
+            payload: &mut self.payload,
+            wire: &mut self.wire,
+            scratch: &mut self.scratch,
+        };
+        self.sender.send_frame(
+            &mut buf,
+            &mut self.frame,
+            &info,
+            encoding,
+            &lossy,
+            &mut CoreLink(&mut self.link),
+        )?;
         if let Some(keep) = &mut self.keep {
             keep.push(SentFrame {
                 frame_id,
-                tick: k,
-                pair,
-                member,
+                tick: slot.tick,
+                pair: slot.pair,
+                member: slot.member,
                 data: self.frame.clone(),
             });
         }
@@ -431,55 +388,13 @@ impl<L: Link> Firmware<L> {
     }
 
     fn send_status(&mut self) -> Result<(), FirmwareError> {
-        let s = Status {
-            planes: self.counters.planes,
-            frames: self.counters.frames,
-            messages: self.counters.messages + 1,
-            dropped_planes: 0,
-            bytes: self.counters.bytes,
+        let mut buf = SendBuffers {
+            payload: &mut self.payload,
+            wire: &mut self.wire,
+            scratch: &mut self.scratch,
         };
-        let h = self.header(Kind::Status, 0, 0, 0, 0, Encoding::None);
-        self.emit(&h, &s.to_bytes())
-    }
-
-    fn header(
-        &self,
-        kind: Kind,
-        frame_id: u32,
-        tick: u32,
-        row0: u16,
-        rows: u16,
-        encoding: Encoding,
-    ) -> Header {
-        Header {
-            kind,
-            seq: self.seq,
-            frame_id,
-            tick,
-            width: self.width,
-            height: self.height,
-            row0,
-            rows,
-            encoding,
-            payload_len: 0,
-        }
-    }
-
-    fn emit_payload(&mut self, h: &Header, len: usize) -> Result<(), FirmwareError> {
-        let n = encode_message(h, &self.payload[..len], &mut self.wire)?;
-        self.sent(n)
-    }
-
-    fn emit(&mut self, h: &Header, payload: &[u8]) -> Result<(), FirmwareError> {
-        let n = encode_message(h, payload, &mut self.wire)?;
-        self.sent(n)
-    }
-
-    fn sent(&mut self, n: usize) -> Result<(), FirmwareError> {
-        self.link.send(&self.wire[..n])?;
-        self.seq = self.seq.wrapping_add(1);
-        self.counters.messages += 1;
-        self.counters.bytes += n as u64;
+        self.sender
+            .send_status(&mut buf, &mut CoreLink(&mut self.link))?;
         Ok(())
     }
 }
