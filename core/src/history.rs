@@ -28,10 +28,11 @@ pub struct History<'a> {
 
 impl<'a> History<'a> {
     /// Words of storage a history needs, or `None` on overflow.
-    pub fn words_needed(width: u16, rows: u16, depth: u16) -> Option<usize> {
-        words_per_row(width)
-            .checked_mul(usize::from(rows))?
-            .checked_mul(usize::from(depth))
+    pub const fn words_needed(width: u16, rows: u16, depth: u16) -> Option<usize> {
+        match words_per_row(width).checked_mul(rows as usize) {
+            Some(n) => n.checked_mul(depth as usize),
+            None => None,
+        }
     }
 
     /// A history of `depth` planes (1..=256) for the band of stored rows

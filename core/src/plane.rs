@@ -22,8 +22,8 @@ pub fn plane_bytes(width: u16, height: u16) -> Option<usize> {
 
 /// Words of 64 pixels that hold one row of `width` pixels.
 #[inline]
-pub fn words_per_row(width: u16) -> usize {
-    usize::from(width).div_ceil(64)
+pub const fn words_per_row(width: u16) -> usize {
+    (width as usize).div_ceil(64)
 }
 
 impl<'a> PlaneView<'a> {

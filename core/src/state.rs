@@ -21,6 +21,11 @@ use crate::label::Region;
 use crate::plane::words_per_row;
 use crate::window::check_len;
 
+/// The per-pixel state, in thousandths of a byte per pixel: 5.375 bytes
+/// (`counts` 1, `c_t` 1, `class` 1, `labels` 2, three mask bits 0.375),
+/// for widths that are a multiple of 64.
+pub const STATE_MILLIBYTES_PER_PIXEL: usize = 5375;
+
 /// Sizes of the buffers a [`Workspace`] needs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -39,38 +44,56 @@ impl WorkspaceSizes {
     /// A workspace for `rows × width` pixels with room for one region per
     /// 64 pixels and one provisional label per 8 pixels (capped at 32766,
     /// the labeller's limit).
-    pub fn for_strip(width: u16, rows: u16) -> Self {
-        let px = usize::from(width) * usize::from(rows);
+    pub const fn for_strip(width: u16, rows: u16) -> Self {
+        const fn clamp(v: usize, lo: usize, hi: usize) -> usize {
+            if v < lo {
+                lo
+            } else if v > hi {
+                hi
+            } else {
+                v
+            }
+        }
+        let px = width as usize * rows as usize;
         WorkspaceSizes {
             width,
             rows,
-            max_regions: (px / 64).clamp(16, 65535) as u16,
-            max_provisional: (px / 8).clamp(64, 32766) as u16,
+            max_regions: clamp(px / 64, 16, 65535) as u16,
+            max_provisional: clamp(px / 8, 64, 32766) as u16,
         }
     }
     /// Pixels of the strip.
-    pub fn pixels(&self) -> usize {
-        usize::from(self.width) * usize::from(self.rows)
+    pub const fn pixels(&self) -> usize {
+        self.width as usize * self.rows as usize
     }
     /// Words of the three mask planes.
-    pub fn mask_words(&self) -> usize {
-        3 * words_per_row(self.width) * usize::from(self.rows)
+    pub const fn mask_words(&self) -> usize {
+        3 * words_per_row(self.width) * self.rows as usize
     }
     /// Bytes of the tile-median table.
-    pub fn tiles(&self) -> usize {
-        usize::from(self.width).div_ceil(16) * (usize::from(self.rows).div_ceil(16) + 1)
+    pub const fn tiles(&self) -> usize {
+        (self.width as usize).div_ceil(16) * ((self.rows as usize).div_ceil(16) + 1)
     }
     /// Entries of the union-find table.
-    pub fn parents(&self) -> usize {
-        usize::from(self.max_provisional) + 1
+    pub const fn parents(&self) -> usize {
+        self.max_provisional as usize + 1
+    }
+    /// Regions of the region table.
+    pub const fn regions(&self) -> usize {
+        self.max_regions as usize
+    }
+    /// Bytes of the per-pixel buffers (`counts`, `c_t`, `class`, `labels`,
+    /// `masks`): [`STATE_MILLIBYTES_PER_PIXEL`] / 1000 per pixel when the
+    /// width is a multiple of 64, more with the masks' row padding.
+    pub const fn per_pixel_bytes(&self) -> usize {
+        self.pixels() * 5 + self.mask_words() * 8
     }
     /// Total bytes of all buffers.
-    pub fn total_bytes(&self) -> usize {
-        self.pixels() * 5
-            + self.mask_words() * 8
+    pub const fn total_bytes(&self) -> usize {
+        self.per_pixel_bytes()
             + self.tiles()
             + self.parents() * 2
-            + usize::from(self.max_regions) * core::mem::size_of::<Region>()
+            + self.max_regions as usize * core::mem::size_of::<Region>()
     }
 }
 
@@ -156,5 +179,28 @@ impl<'a> Workspace<'a> {
     /// The regions of the last strip processed.
     pub fn regions(&self, n: usize) -> &[Region] {
         self.regions.get(..n).unwrap_or(self.regions)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The documented 5.375 bytes per pixel is what the buffers take.
+    #[test]
+    fn per_pixel_bytes_match_the_documented_figure() {
+        for (w, h) in [(64u16, 1u16), (128, 32), (448, 250), (1024, 1000)] {
+            let s = WorkspaceSizes::for_strip(w, h);
+            assert_eq!(
+                s.per_pixel_bytes() * 1000,
+                STATE_MILLIBYTES_PER_PIXEL * s.pixels(),
+                "{w}x{h}"
+            );
+        }
+        // Row padding of the masks only adds.
+        let s = WorkspaceSizes::for_strip(400, 250);
+        assert!(s.per_pixel_bytes() * 1000 >= STATE_MILLIBYTES_PER_PIXEL * s.pixels());
+        const SIZES: WorkspaceSizes = WorkspaceSizes::for_strip(128, 32);
+        assert_eq!(SIZES.regions(), 64);
     }
 }

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use clap::Parser;
-use spiv_core::wire::Encoding;
+use spiv_core::wire::{frame_crc, Encoding, CRC};
 use spiv_firmware_sim::firmware::{
     run_on_dat, run_on_scene, Config, Counters, DriveError, Faults, Faulty, Method, Plain,
 };
@@ -79,6 +79,25 @@ struct Args {
     /// Do not print the throughput line.
     #[arg(long)]
     quiet: bool,
+    /// Send nothing; print one line with the counts, the CRC-32 of the whole
+    /// message stream and of every frame — the line the Cortex-M4 firmware
+    /// (`firmware-sim/cortex-m4`) prints for the same input, to compare.
+    #[arg(long, conflicts_with_all = ["tcp", "out", "fault"])]
+    checksum: bool,
+}
+
+/// The message stream, kept for `--checksum`.
+#[derive(Debug, Clone, Default)]
+struct Shared(std::rc::Rc<std::cell::RefCell<Vec<u8>>>);
+
+impl Write for Shared {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.0.borrow_mut().extend_from_slice(buf);
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -176,7 +195,10 @@ fn config(a: &Args, dt: u32) -> Result<Config, Error> {
 }
 
 /// Where messages go: stdout, a file or the first TCP client.
-fn open_link(a: &Args) -> Result<Box<dyn Write>, Error> {
+fn open_link(a: &Args, shared: &Shared) -> Result<Box<dyn Write>, Error> {
+    if a.checksum {
+        return Ok(Box::new(shared.clone()));
+    }
     Ok(match (&a.tcp, &a.out) {
         (Some(addr), _) => {
             let l = std::net::TcpListener::bind(addr)
@@ -207,6 +229,8 @@ fn run(a: &Args) -> Result<(), Error> {
         None => Faults::default(),
     };
     let t0 = Instant::now();
+    let shared = Shared::default();
+    let kept;
     let (counters, width, height, fault_counts) = if let Some(name) = &a.scene {
         let kind = SceneKind::from_name(name).ok_or_else(|| {
             let names: Vec<&str> = SceneKind::ALL.iter().map(|(n, _)| *n).collect();
@@ -230,8 +254,9 @@ fn run(a: &Args) -> Result<(), Error> {
         let mut cfg = config(a, p.pair_dt)?;
         cfg.pairs = Some(a.pairs.unwrap_or(4).max(1));
         let req = Request::new(p, a.seed);
-        let link = Faulty::new(Plain(open_link(a)?), faults, a.seed);
-        let (fw, _) = run_on_scene(&req, cfg, link, false, |_, _| {})?;
+        let link = Faulty::new(Plain(open_link(a, &shared)?), faults, a.seed);
+        let (mut fw, _) = run_on_scene(&req, cfg, link, a.checksum, |_, _| {})?;
+        kept = fw.keep.take().unwrap_or_default();
         let c = fw.counters();
         let fc = fw.into_link().counts;
         (c, w, h, fc)
@@ -256,12 +281,22 @@ fn run(a: &Args) -> Result<(), Error> {
                 .unwrap_or(13)
                 .max(1);
         let cfg = config(a, dt)?;
-        let link = Faulty::new(Plain(open_link(a)?), faults, a.seed);
-        let fw = run_on_dat(path, w, h, DatOptions::default(), cfg, link, false)?;
+        let link = Faulty::new(Plain(open_link(a, &shared)?), faults, a.seed);
+        let mut fw = run_on_dat(path, w, h, DatOptions::default(), cfg, link, a.checksum)?;
+        kept = fw.keep.take().unwrap_or_default();
         let c = fw.counters();
         let fc = fw.into_link().counts;
         (c, w, h, fc)
     };
+    if a.checksum {
+        let stream = shared.0.borrow();
+        let frames: Vec<u32> = kept.iter().map(|f| frame_crc(&f.data)).collect();
+        println!(
+            "{}",
+            checksum_line(&counters, CRC.checksum(&stream), &frames)
+        );
+        return Ok(());
+    }
     if !a.quiet {
         report(&counters, width, height, t0.elapsed().as_secs_f64());
         if faults != Faults::default() {
@@ -276,6 +311,19 @@ fn run(a: &Args) -> Result<(), Error> {
         }
     }
     Ok(())
+}
+
+/// The parity line; `firmware-sim/cortex-m4` prints the same format.
+fn checksum_line(c: &Counters, stream_crc: u32, frames: &[u32]) -> String {
+    let frames: Vec<String> = frames.iter().map(|f| format!("{f:08x}")).collect();
+    format!(
+        "planes={} frames={} messages={} bytes={} stream_crc={stream_crc:08x} frame_crcs={}",
+        c.planes,
+        c.frames,
+        c.messages,
+        c.bytes,
+        frames.join(",")
+    )
 }
 
 fn report(c: &Counters, w: u16, h: u16, secs: f64) {

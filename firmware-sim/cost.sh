@@ -1,0 +1,136 @@
+#!/usr/bin/env bash
+# Exact cost of spiv-core's sidecar kernels, on the emulated Cortex-M4F
+# (Thumb-2, counted from QEMU's one-instruction-per-block execution trace)
+# and on the host (x86-64, callgrind), for the committed 128x64 px strip
+# (firmware-sim/cortex-m4/data): ingest of 141 spike planes, two adaptive
+# frames (n_max = 128), and sending them (Rice tiles, COBS, CRC-32).
+# Also: the firmware's RAM, its parity line, and what the counts mean for a
+# 400 MHz Cortex-M7-class MCU at 20 kHz.
+#
+#   firmware-sim/cost.sh            print the table
+#   firmware-sim/cost.sh --check    also fail when a Thumb-2 count rises more
+#                                   than 10 % above cortex-m4/cost-baseline.txt
+#
+# Needs qemu-system-arm, the thumbv7em-none-eabihf target, valgrind, awk.
+set -euo pipefail
+cd "$(dirname "$0")"
+check=0
+[ "${1:-}" = "--check" ] && check=1
+
+m4=$PWD/cortex-m4
+(cd "$m4" && cargo build --release -q)
+bin=$m4/target/thumbv7em-none-eabihf/release/spiv-firmware-m4
+qemu=(qemu-system-arm -cpu cortex-m4 -machine mps2-an386 -nographic
+      -semihosting-config enable=on,target=native)
+# One instruction per translation block (the option's name changed in 8.1).
+ver=$(qemu-system-arm --version | sed -n 's/.*version \([0-9]*\)\.\([0-9]*\).*/\1 \2/p')
+read -r vmaj vmin <<<"$ver"
+if [ "$vmaj" -gt 8 ] || { [ "$vmaj" -eq 8 ] && [ "$vmin" -ge 1 ]; }; then
+  one=(-accel tcg,one-insn-per-tb=on)
+else
+  one=(-singlestep)
+fi
+
+run=$(timeout 120 "${qemu[@]}" -kernel "$bin")
+echo "$run"
+parity=$(grep '^planes=' <<<"$run")
+get() { sed -n "s/.*\b$1=\([0-9a-f]*\).*/\1/p" <<<"$parity"; }
+planes=$(get planes); frames=$(get frames); bytes=$(get bytes)
+px=$((128 * 64))
+# The final status message: 58 bytes, 59 after COBS, plus the delimiter.
+frame_bytes=$((bytes - 60))
+
+fifo=$(mktemp -u)
+mkfifo "$fifo"
+trap 'rm -f "$fifo"' EXIT
+counts=$(mktemp)
+awk '
+  { s = $NF }
+  s == "spiv_mark_ingest_begin" { st = "ingest"; next }
+  s == "spiv_mark_frame_begin"  { st = "frame";  next }
+  s == "spiv_mark_send_begin"   { st = "send";   next }
+  s == "spiv_mark_link_begin"   { saved = st; st = "link"; next }
+  s == "spiv_mark_link_end"     { st = saved; next }
+  s ~ /^spiv_mark_.*_end$/      { st = ""; next }
+  st != ""                      { n[st]++ }
+  END { printf "%d %d %d %d\n", n["ingest"], n["frame"], n["send"], n["link"] }
+' <"$fifo" >"$counts" &
+timeout 900 "${qemu[@]}" "${one[@]}" -d exec,nochain -D "$fifo" -kernel "$bin" >/dev/null
+wait
+read -r t_ingest t_frame t_send t_link <"$counts"
+
+# Host: the same kernels, callgrind bracketing each function.
+(cd .. && cargo build --release -q -p spiv-firmware-sim --example strip_kernels)
+host=../target/release/examples/strip_kernels
+host_parity=$("$host")
+callgrind() {
+  valgrind --tool=callgrind --toggle-collect="strip_kernels::$1" \
+    --callgrind-out-file=/dev/null "$host" 2>&1 | sed -n 's/.*I *refs: *//p' | tr -d ,
+}
+x_ingest=$(callgrind kernel_ingest)
+x_frame=$(callgrind kernel_frame)
+x_send=$(callgrind kernel_send)
+
+ratio() { awk -v a="$1" -v b="$2" -v d="$3" 'BEGIN { printf "%.*f", d, a / b }'; }
+echo
+echo "strip 128x64 px: $planes planes ingested, $frames adaptive frames (n_max 128), $frame_bytes bytes of frame messages"
+printf '%-34s %16s %16s %16s\n' kernel "Thumb-2 (M4)" "x86-64" unit
+printf '%-34s %16s %16s %16s\n' "ingest" "$(ratio "$t_ingest" $((px * planes)) 3)" "$(ratio "$x_ingest" $((px * planes)) 3)" "per pixel-plane"
+printf '%-34s %16s %16s %16s\n' "adaptive frame" "$(ratio "$t_frame" $((px * frames)) 1)" "$(ratio "$x_frame" $((px * frames)) 1)" "per pixel"
+printf '%-34s %16s %16s %16s\n' "send (Rice, COBS, CRC-32)" "$(ratio "$t_send" "$frame_bytes" 1)" "$(ratio "$x_send" "$frame_bytes" 1)" "per wire byte"
+printf '%-34s %16s %16s %16s\n' "send" "$(ratio "$t_send" $((px * frames)) 1)" "$(ratio "$x_send" $((px * frames)) 1)" "per pixel"
+printf '%-34s %16s\n' "(parity CRC of the stream)" "$(ratio "$t_link" "$bytes" 1) per byte"
+echo "totals: Thumb-2 ingest $t_ingest, frame $t_frame, send $t_send; x86-64 ingest $x_ingest, frame $x_frame, send $x_send"
+
+# Static RAM of the firmware image.
+sec() {
+  local hex
+  hex=$(readelf -S -W "$bin" | sed 's/^ *\[ *[0-9]*\] *//' | awk -v n="$1" '$1 == n { print $5 }')
+  echo $((16#${hex:-0}))
+}
+echo "static RAM: .data $(sec .data) B, .bss $(sec .bss) B (flash .text $(sec .text) B, .rodata $(sec .rodata) B)"
+
+# What it means at 20 kHz on a 400 MHz MCU retiring ~1 instruction per cycle:
+# ingest runs every tick; two frames and their sending every pair period
+# M = 4*dt = 52 ticks (2.6 ms).
+awk -v i="$t_ingest" -v f="$t_frame" -v s="$t_send" -v px=$px -v pl="$planes" -v fr="$frames" 'BEGIN {
+  ipp = i / (px * pl); fpp = f / (px * fr); spp = s / (px * fr);
+  per_px_s = ipp * 20000 + (fpp + spp) * 2 * 20000 / 52;
+  maxpx = 400e6 / per_px_s;
+  printf "400 MHz MCU at 20 kHz, M = 52 ticks: %.0f instructions per pixel per second (ingest %.0f, frames %.0f) -> at most %.0f px (%.1f%% of 400x250, %.2f%% of 1000x1000 at 40 kHz: %.0f px)\n",
+    per_px_s, ipp * 20000, (fpp + spp) * 2 * 20000 / 52, maxpx, 100 * maxpx / 100000,
+    100 * (400e6 / (ipp * 40000 + (fpp + spp) * 2 * 40000 / 52)) / 1e6, 400e6 / (ipp * 40000 + (fpp + spp) * 2 * 40000 / 52)
+}'
+
+# Parity: the firmware under QEMU, the host kernels, the native firmware
+# loop (`spiv-firmware-sim --checksum`) and the committed line agree.
+(cd .. && cargo build --release -q -p spiv-firmware-sim --bin spiv-firmware-sim)
+native=$(../target/release/spiv-firmware-sim --input "$m4/data/strip.dat" --pairs 1 --checksum)
+committed=$(cat "$m4/expected.txt")
+for other in "$host_parity" "$native" "$committed"; do
+  if [ "$parity" != "$other" ]; then
+    echo "!! parity: the Cortex-M4 and the host differ"
+    echo "   m4:        $parity"
+    echo "   kernels:   $host_parity"
+    echo "   native:    $native"
+    echo "   committed: $committed"
+    exit 1
+  fi
+done
+echo "parity: Cortex-M4, host kernels, native firmware loop and cortex-m4/expected.txt identical"
+
+if [ "$check" = 1 ]; then
+  base=$m4/cost-baseline.txt
+  fail=0
+  for k in ingest frame send; do
+    want=$(sed -n "s/^$k=//p" "$base")
+    got=$(eval echo "\$t_$k")
+    if [ "$got" -gt $((want + want / 10)) ]; then
+      echo "!! $k: $got Thumb-2 instructions, more than 10 % above the committed $want ($base)"
+      fail=1
+    else
+      echo "cost gate $k: $got instructions (committed $want, limit +10 %)"
+    fi
+  done
+  exit $fail
+fi
