@@ -128,15 +128,18 @@ pub fn correlate(plan: &Plan, s: &mut Scratch, method: Subpixel) -> Result<Peak,
     transpose(&s.z, &mut s.t, n);
     plan.fwd.process_with_scratch(&mut s.t, &mut s.fft);
     // Separate A and B and form conj(A)·B (the layout is symmetric under -k).
+    // (Index arithmetic without `%`: an integer division per sample cost
+    // more than the spectrum product itself.)
+    let mirror = |k: usize| if k == 0 { 0 } else { n - k };
     for p in 0..n {
-        let pm = (n - p) % n;
-        for q in 0..n {
-            let qm = (n - q) % n;
-            let zk = s.t[p * n + q];
-            let zm = s.t[pm * n + qm].conj();
+        let row = &s.t[p * n..(p + 1) * n];
+        let row_m = &s.t[mirror(p) * n..(mirror(p) + 1) * n];
+        let out = &mut s.z[p * n..(p + 1) * n];
+        for (q, (o, &zk)) in out.iter_mut().zip(row).enumerate() {
+            let zm = row_m[mirror(q)].conj();
             let a = (zk + zm) * 0.5;
             let b = (zk - zm) * Complex32::new(0.0, -0.5);
-            s.z[p * n + q] = a.conj() * b;
+            *o = a.conj() * b;
         }
     }
     // Inverse: columns (rows of the transposed layout), transpose, rows.
@@ -158,12 +161,13 @@ pub fn correlate(plan: &Plan, s: &mut Scratch, method: Subpixel) -> Result<Peak,
     let c = |i: usize, j: usize| f64::from(s.t[(i % n) * n + (j % n)].re) * norm;
     // The second peak: the maximum outside the 5×5 around the first.
     let mut second_raw = 0.0f32;
+    let dist = |k: usize, b: usize| if k >= b { k - b } else { k + n - b };
     for i in 0..n {
-        let di = (i + n - bi) % n;
+        let di = dist(i, bi);
         let row = &s.t[i * n..(i + 1) * n];
         if di <= 2 || di >= n - 2 {
             for (j, z) in row.iter().enumerate() {
-                let dj = (j + n - bj) % n;
+                let dj = dist(j, bj);
                 if dj > 2 && dj < n - 2 {
                     second_raw = second_raw.max(z.re);
                 }
@@ -218,6 +222,22 @@ pub fn correlate(plan: &Plan, s: &mut Scratch, method: Subpixel) -> Result<Peak,
 /// Makes `w` zero-mean over unmasked pixels; returns its energy Σw², its
 /// former mean and the number of unmasked pixels.
 fn zero_mean(w: &mut [f32], masked: &[bool]) -> (f64, f64, usize) {
+    if masked.is_empty() {
+        // No mask: the same sums without a lookup per pixel.
+        let sum: f64 = w.iter().fold(0.0, |acc, &v| acc + f64::from(v));
+        let cnt = w.len();
+        if cnt == 0 {
+            return (0.0, 0.0, 0);
+        }
+        let mean = sum / cnt as f64;
+        let m32 = mean as f32;
+        let mut e = 0.0f64;
+        for v in w.iter_mut() {
+            *v -= m32;
+            e += f64::from(*v) * f64::from(*v);
+        }
+        return (e, mean, cnt);
+    }
     let (mut sum, mut cnt) = (0.0f64, 0usize);
     for (k, &v) in w.iter().enumerate() {
         if masked.get(k).copied() != Some(true) {
