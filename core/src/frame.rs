@@ -88,6 +88,24 @@ pub fn reconstruct_adaptive<G: Gray>(
     ws: &mut Workspace<'_>,
     out: &mut [G],
 ) -> Result<FrameStats, Error> {
+    reconstruct_rows(hist, k, p, ws, (0, hist.rows()), out)
+}
+
+/// Rows `rows.0..rows.1` (stored order, within the band) of the adaptive
+/// frame at `k`, written to the same rows of `out` (a whole frame); other
+/// rows of `out` are left alone. Each strip is computed with `p.margin`
+/// extra rows on both sides, so regions crossing the range's edges are
+/// whole. Calling it band by band with a different `p.n_max` each gives a
+/// frame whose window limit varies with the row (the dwell cap, beyond the
+/// paper: SPEC 5).
+pub fn reconstruct_rows<G: Gray>(
+    hist: &History<'_>,
+    k: u32,
+    p: &Params,
+    ws: &mut Workspace<'_>,
+    rows: (u16, u16),
+    out: &mut [G],
+) -> Result<FrameStats, Error> {
     p.validate(hist.depth())?;
     if !hist.holds(k) {
         return Err(Error::TickUnavailable);
@@ -98,8 +116,10 @@ pub fn reconstruct_adaptive<G: Gray>(
     let width = usize::from(hist.width());
     let band = hist.rows();
     check_len(out.len(), width * usize::from(band))?;
+    let (r0, r1) = (rows.0.min(band), rows.1.min(band));
+    let whole = r0 == 0 && r1 == band;
     let cap = ws.sizes.rows;
-    let (inner, margin) = if cap >= band {
+    let (inner, margin) = if whole && cap >= band {
         (band, 0)
     } else {
         let inner = cap.saturating_sub(2 * p.margin);
@@ -133,9 +153,9 @@ pub fn reconstruct_adaptive<G: Gray>(
         tick: k,
         ..FrameStats::default()
     };
-    let mut e0 = 0u16;
-    while e0 < band {
-        let e1 = e0.saturating_add(inner).min(band);
+    let mut e0 = r0;
+    while e0 < r1 {
+        let e1 = e0.saturating_add(inner).min(r1);
         let s0 = e0.saturating_sub(margin);
         let s1 = e1.saturating_add(margin).min(band);
         strip(&ctx, ws, (s0, s1), (e0, e1), out, &mut stats);

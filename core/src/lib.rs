@@ -49,7 +49,7 @@ pub mod window;
 pub mod wire;
 
 pub use error::Error;
-pub use frame::{reconstruct_adaptive, FrameStats, Gray};
+pub use frame::{reconstruct_adaptive, reconstruct_rows, FrameStats, Gray};
 pub use history::History;
 pub use params::Params;
 pub use plane::PlaneView;

@@ -11,7 +11,9 @@ use spiv_core::q::{Beta, KSig, Sigma};
 use spiv_core::segment::saturation_times;
 use spiv_core::state::Buffers;
 use spiv_core::window::{tfi, tfp, Window};
-use spiv_core::{reconstruct_adaptive, History, Params, PlaneView, Workspace, WorkspaceSizes};
+use spiv_core::{
+    reconstruct_adaptive, reconstruct_rows, History, Params, PlaneView, Workspace, WorkspaceSizes,
+};
 
 /// How a random stream is made: every pixel fires with its own rate, or the
 /// whole stream is all zero / all one.
@@ -180,6 +182,52 @@ proptest! {
             // The only refusal possible here: a strip too short for its margins.
             Err(e) => prop_assert!(matches!(e, spiv_core::Error::BufferTooSmall { .. }), "{e:?}"),
         }
+    }
+
+    /// A row range: no panic, rows outside it untouched, rows inside in
+    /// range; the whole range is the whole frame.
+    #[test]
+    fn row_ranges_touch_only_their_rows(
+        (w, h) in dims(),
+        fill in fill(),
+        p in params(),
+        ticks in 1usize..200,
+        r0 in 0u16..48,
+        len in 0u16..48,
+    ) {
+        let depth = (ticks.min(256) as u16).max(p.n_max);
+        let planes = stream(w, h, ticks, &fill);
+        let plane = usize::from(w) * usize::from(h) / 8;
+        let mut hb = vec![0u64; History::words_needed(w, h, depth).unwrap()];
+        let mut hist = History::new(&mut hb, w, h, 0, h, depth).unwrap();
+        for bytes in planes.chunks_exact(plane) {
+            hist.push(&PlaneView::new(bytes, w, h).unwrap()).unwrap();
+        }
+        let k = hist.newest().unwrap();
+        let px = usize::from(w) * usize::from(h);
+        let mut owned = Owned::new(WorkspaceSizes::for_strip(w, h));
+        let mut out = vec![7777u16; px];
+        let (a, b) = (r0.min(h), r0.saturating_add(len).min(h));
+        let fs = p.full_scale;
+        match reconstruct_rows(&hist, k, &p, &mut owned.ws(), (r0, r0.saturating_add(len)), &mut out) {
+            Ok(_) => {
+                for (i, &g) in out.iter().enumerate() {
+                    let row = (i / usize::from(w)) as u16;
+                    if row >= a && row < b {
+                        prop_assert!(g <= fs);
+                    } else {
+                        prop_assert_eq!(g, 7777);
+                    }
+                }
+            }
+            Err(e) => prop_assert!(matches!(e, spiv_core::Error::BufferTooSmall { .. }), "{e:?}"),
+        }
+        let mut whole = vec![0u16; px];
+        let mut again = vec![0u16; px];
+        let r1 = reconstruct_adaptive(&hist, k, &p, &mut owned.ws(), &mut whole);
+        let r2 = reconstruct_rows(&hist, k, &p, &mut owned.ws(), (0, h), &mut again);
+        prop_assert_eq!(r1.is_ok(), r2.is_ok());
+        prop_assert_eq!(whole, again);
     }
 
     #[test]

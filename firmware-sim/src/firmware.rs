@@ -14,7 +14,7 @@ use spiv_core::compress::{sparse_scratch, Lossy};
 use spiv_core::sender::{tile_rows, FrameInfo, Schedule, SendBuffers, SendError, Sender, Slot};
 use spiv_core::window::tfp;
 use spiv_core::wire::{Encoding, MAX_ENCODED, MAX_PAYLOAD};
-use spiv_core::{reconstruct_adaptive, Params, PlaneView};
+use spiv_core::{reconstruct_adaptive, reconstruct_rows, Params, PlaneView};
 
 use crate::buffers::{HistoryBuf, WorkspaceBuf};
 
@@ -189,7 +189,6 @@ pub struct Firmware<L: Link> {
     hist: HistoryBuf,
     ws: WorkspaceBuf,
     frame: Vec<u16>,
-    tmp: Vec<u16>,
     counts: Vec<u8>,
     payload: Vec<u8>,
     wire: Vec<u8>,
@@ -241,11 +240,6 @@ impl<L: Link> Firmware<L> {
             hist,
             ws: WorkspaceBuf::whole(width, height),
             frame: vec![0; px],
-            tmp: if cfg.caps.is_empty() {
-                Vec::new()
-            } else {
-                vec![0; px]
-            },
             counts: vec![0; px],
             payload: vec![0; MAX_PAYLOAD],
             wire: vec![0; MAX_ENCODED],
@@ -326,26 +320,31 @@ impl<L: Link> Firmware<L> {
                 reconstruct_adaptive(hist, k, &p, &mut self.ws.workspace(), &mut self.frame)?;
             }
             Method::Adaptive => {
-                // One reconstruction per distinct cap; each band takes its rows.
-                let w = usize::from(self.width);
-                let h = usize::from(self.height);
-                let mut caps = self.cfg.caps.clone();
-                caps.sort_unstable();
-                caps.dedup();
-                for cap in caps {
+                // Band by band (CAP_BAND upright rows, top first), each with
+                // its own window limit and a margin of `p.margin` rows.
+                let h = self.height;
+                let bands = h.div_ceil(CAP_BAND);
+                for b in 0..bands {
+                    let cap = self
+                        .cfg
+                        .caps
+                        .get(usize::from(b))
+                        .copied()
+                        .unwrap_or(p.n_max);
                     let q = Params {
                         n_max: cap.clamp(1, p.n_max),
                         ..p
                     };
-                    reconstruct_adaptive(hist, k, &q, &mut self.ws.workspace(), &mut self.tmp)?;
-                    for s in 0..h {
-                        let band = (h - 1 - s) / usize::from(CAP_BAND);
-                        let c = self.cfg.caps.get(band).copied().unwrap_or(p.n_max);
-                        if c == cap {
-                            self.frame[s * w..(s + 1) * w]
-                                .copy_from_slice(&self.tmp[s * w..(s + 1) * w]);
-                        }
-                    }
+                    let e1 = h - b * CAP_BAND;
+                    let e0 = e1.saturating_sub(CAP_BAND);
+                    reconstruct_rows(
+                        hist,
+                        k,
+                        &q,
+                        &mut self.ws.workspace(),
+                        (e0, e1),
+                        &mut self.frame,
+                    )?;
                 }
             }
         }
