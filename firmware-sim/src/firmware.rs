@@ -320,32 +320,14 @@ impl<L: Link> Firmware<L> {
                 reconstruct_adaptive(hist, k, &p, &mut self.ws.workspace(), &mut self.frame)?;
             }
             Method::Adaptive => {
-                // Band by band (CAP_BAND upright rows, top first), each with
-                // its own window limit and a margin of `p.margin` rows.
-                let h = self.height;
-                let bands = h.div_ceil(CAP_BAND);
-                for b in 0..bands {
-                    let cap = self
-                        .cfg
-                        .caps
-                        .get(usize::from(b))
-                        .copied()
-                        .unwrap_or(p.n_max);
-                    let q = Params {
-                        n_max: cap.clamp(1, p.n_max),
-                        ..p
-                    };
-                    let e1 = h - b * CAP_BAND;
-                    let e0 = e1.saturating_sub(CAP_BAND);
-                    reconstruct_rows(
-                        hist,
-                        k,
-                        &q,
-                        &mut self.ws.workspace(),
-                        (e0, e1),
-                        &mut self.frame,
-                    )?;
-                }
+                capped_frame(
+                    hist,
+                    k,
+                    &p,
+                    &self.cfg.caps,
+                    &mut self.ws.workspace(),
+                    &mut self.frame,
+                )?;
             }
         }
         Ok(())
@@ -396,6 +378,34 @@ impl<L: Link> Firmware<L> {
             .send_status(&mut buf, &mut CoreLink(&mut self.link))?;
         Ok(())
     }
+}
+
+/// The adaptive frame at `k` with a window limit per band of [`CAP_BAND`]
+/// upright rows (`caps[0]` the top band; missing entries: `p.n_max`; each
+/// clamped to `1..=p.n_max`): each band is reconstructed once, with its own
+/// limit and a margin of `p.margin` rows ([`reconstruct_rows`]). The one
+/// implementation of the dwell cap, for the firmware and the host.
+pub fn capped_frame<G: spiv_core::Gray>(
+    hist: &spiv_core::History<'_>,
+    k: u32,
+    p: &Params,
+    caps: &[u16],
+    ws: &mut spiv_core::Workspace<'_>,
+    out: &mut [G],
+) -> Result<(), spiv_core::Error> {
+    let h = hist.rows();
+    for b in 0..h.div_ceil(CAP_BAND) {
+        let cap = caps.get(usize::from(b)).copied().unwrap_or(p.n_max);
+        let q = Params {
+            n_max: cap.clamp(1, p.n_max),
+            ..*p
+        };
+        // Upright band b is stored rows h − 32(b+1) .. h − 32b (bottom-up).
+        let e1 = h - b * CAP_BAND;
+        let e0 = e1.saturating_sub(CAP_BAND);
+        reconstruct_rows(hist, k, &q, ws, (e0, e1), out)?;
+    }
+    Ok(())
 }
 
 /// Faults a link can suffer, as probabilities per message.

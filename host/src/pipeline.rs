@@ -15,7 +15,7 @@ use spiv_firmware_sim::simulation::{simulate, Request, Simulated};
 use crate::link::{dwell_caps, transfer, Transfer};
 use crate::metrics::{region_error, row_profile, ProfileRow, RegionError};
 use crate::piv::{piv, PivError, Settings};
-use crate::reconstruct::{frame_from_planes, Method, Planes, ReconstructError};
+use crate::reconstruct::{Planes, ReconstructError};
 use spiv_firmware_sim::firmware::{Config, Method as FwMethod};
 
 /// What one run does.
@@ -62,47 +62,49 @@ impl Job {
     }
 }
 
-/// Rows per band of the capped adaptive reconstruction, and the margin
-/// reconstructed on each side so regions at a band edge are whole.
-pub const BAND: usize = 32;
-const BAND_MARGIN: usize = 16;
+/// Rows per band of the capped adaptive reconstruction (the firmware's
+/// [`spiv_firmware_sim::firmware::CAP_BAND`]; margins are `Params::margin`).
+pub const BAND: usize = spiv_firmware_sim::firmware::CAP_BAND as usize;
 
-/// The adaptive frame at `k` with each band of `BAND` rows reconstructed by
-/// the core with its own window limit `caps[band]`.
+/// The adaptive frame at `k` (upright) with each band of `BAND` rows
+/// reconstructed by the core with its own window limit `caps[band]`, as the
+/// sidecar firmware does ([`spiv_firmware_sim::firmware::capped_frame`]).
 pub fn adaptive_banded(
     planes: &Planes,
     k: u64,
     core: &Params,
     caps: &[u16],
 ) -> Result<Vec<u16>, JobError> {
-    let (w, h) = (usize::from(planes.width), usize::from(planes.height));
-    let rb = w / 8;
-    let pb = w * h / 8;
-    let mut out = vec![0u16; w * h];
-    for (b, &cap) in caps.iter().enumerate() {
-        let (r0, r1) = (b * BAND, ((b + 1) * BAND).min(h));
-        let (e0, e1) = (r0.saturating_sub(BAND_MARGIN), (r1 + BAND_MARGIN).min(h));
-        // Upright rows e0..e1 are stored rows h-e1..h-e0 (bottom-up).
-        let (s0, s1) = (h - e1, h - e0);
-        let mut data = Vec::with_capacity(planes.data.len() / h * (e1 - e0));
-        for plane in planes.data.chunks_exact(pb) {
-            data.extend_from_slice(&plane[s0 * rb..s1 * rb]);
-        }
-        let band = Planes {
-            width: planes.width,
-            height: (e1 - e0) as u16,
-            flip: true,
-            crop_width: planes.width,
-            first: planes.first,
-            data,
-        };
-        let f = frame_from_planes(&band, k, Method::Adaptive, cap, core)?;
-        for r in r0..r1 {
-            let src = (r - e0) * w;
-            out[r * w..(r + 1) * w].copy_from_slice(&f.data[src..src + w]);
-        }
+    let (w, h) = (planes.width, planes.height);
+    let pb = usize::from(w) * usize::from(h) / 8;
+    let n = planes.data.len() / pb.max(1);
+    let depth = n.clamp(usize::from(core.n_max.max(2)), 256) as u16;
+    let mut hb = crate::core_run::HistoryBuf::new(w, h, depth).map_err(ReconstructError::from)?;
+    let mut hist = hb.history().map_err(ReconstructError::from)?;
+    let skip = n.saturating_sub(usize::from(depth));
+    for chunk in planes.data.chunks_exact(pb).skip(skip) {
+        let view = spiv_core::PlaneView::new(chunk, w, h).map_err(ReconstructError::from)?;
+        hist.push(&view).map_err(ReconstructError::from)?;
     }
-    Ok(out)
+    let tick = k
+        .checked_sub(planes.first + skip as u64)
+        .and_then(|t| u32::try_from(t).ok())
+        .ok_or(ReconstructError::TickOutside {
+            tick: k,
+            planes: planes.first + n as u64,
+        })?;
+    let mut ws = crate::core_run::WorkspaceBuf::whole(w, h);
+    let mut out = vec![0u16; usize::from(w) * usize::from(h)];
+    spiv_firmware_sim::firmware::capped_frame(
+        &hist,
+        tick,
+        core,
+        caps,
+        &mut ws.workspace(),
+        &mut out,
+    )
+    .map_err(ReconstructError::from)?;
+    Ok(crate::reconstruct::upright(&out, w, planes.flip))
 }
 
 /// Window limit per band from a field: the budget over the fastest valid
