@@ -44,7 +44,10 @@ fn in_process_and_firmware_capped_frames_are_identical() {
     let sent = fw.keep.take().expect("kept");
     for (k, f) in [ka, kb].into_iter().zip(&sent) {
         let here = adaptive_banded(&planes, u64::from(k), &job.core, &caps).expect("banded");
-        assert!(here == upright(&f.data, w, true), "frame at tick {k} differs");
+        assert!(
+            here == upright(&f.data, w, true),
+            "frame at tick {k} differs"
+        );
         assert!(here.iter().any(|&g| g > 0), "an empty frame proves nothing");
     }
 }
