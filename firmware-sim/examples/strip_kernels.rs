@@ -8,11 +8,10 @@
 //! `cargo run --release -p spiv-firmware-sim --example strip_kernels`
 
 use spiv_core::compress::Lossy;
-use spiv_core::label::Region;
 use spiv_core::sender::{tile_rows, FrameInfo, Link, Schedule, SendBuffers, Sender};
-use spiv_core::state::Buffers;
 use spiv_core::wire::{frame_crc, Encoding, CRC, MAX_ENCODED, MAX_PAYLOAD};
-use spiv_core::{reconstruct_adaptive, History, Params, PlaneView, Workspace, WorkspaceSizes};
+use spiv_core::{reconstruct_adaptive, History, Params, PlaneView, Workspace};
+use spiv_firmware_sim::buffers::{HistoryBuf, WorkspaceBuf};
 
 const W: u16 = 128;
 const H: u16 = 64;
@@ -64,28 +63,10 @@ fn kernel_send(
 fn main() -> Result<(), spiv_core::Error> {
     let px = usize::from(W) * usize::from(H);
     let params = Params::default();
-    let mut hb = vec![0u64; History::words_needed(W, H, DEPTH).unwrap_or(0)];
-    let mut hist = History::new(&mut hb, W, H, 0, H, DEPTH)?;
-    let sizes = WorkspaceSizes::for_strip(W, H);
-    let (mut a, mut b, mut c) = (vec![0u8; px], vec![0u8; px], vec![0u8; px]);
-    let mut labels = vec![0u16; px];
-    let mut masks = vec![0u64; sizes.mask_words()];
-    let mut tiles = vec![0u8; sizes.tiles()];
-    let mut parents = vec![0u16; sizes.parents()];
-    let mut regions = vec![Region::default(); sizes.regions()];
-    let mut ws = Workspace::new(
-        sizes,
-        Buffers {
-            counts: &mut a,
-            c_t: &mut b,
-            class: &mut c,
-            labels: &mut labels,
-            masks: &mut masks,
-            tiles: &mut tiles,
-            parents: &mut parents,
-            regions: &mut regions,
-        },
-    )?;
+    let mut hb = HistoryBuf::new(W, H, DEPTH)?;
+    let mut hist = hb.history()?;
+    let mut wb = WorkspaceBuf::whole(W, H);
+    let mut ws = wb.workspace();
     let (mut payload, mut wire) = (vec![0u8; MAX_PAYLOAD], vec![0u8; MAX_ENCODED]);
     let mut buf = SendBuffers {
         payload: &mut payload,

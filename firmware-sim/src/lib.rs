@@ -8,6 +8,7 @@
 #![warn(missing_docs)]
 
 pub mod buffers;
+pub mod cli;
 pub mod firmware;
 pub mod formats;
 pub mod scene;

@@ -113,27 +113,7 @@ enum Error {
 }
 
 fn main() {
-    let args = match Args::try_parse() {
-        Ok(a) => a,
-        Err(e) => {
-            use clap::error::ErrorKind;
-            if matches!(
-                e.kind(),
-                ErrorKind::DisplayHelp
-                    | ErrorKind::DisplayVersion
-                    | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
-            ) {
-                e.exit();
-            }
-            let text = e.to_string();
-            let first = text.lines().next().unwrap_or("bad arguments");
-            eprintln!(
-                "spiv-firmware-sim: {} (see --help)",
-                first.trim_start_matches("error: ").trim()
-            );
-            std::process::exit(2);
-        }
-    };
+    let args: Args = spiv_firmware_sim::cli::parse_or_exit("spiv-firmware-sim");
     match run(&args) {
         Ok(()) => {}
         Err(Error::Drive(DriveError::Firmware(

@@ -8,7 +8,7 @@
 
 use std::path::Path;
 
-use crate::formats::csv::{write_profile, write_vectors, Vector};
+use crate::formats::csv::{write_profile, write_vectors};
 use crate::formats::dat::{plane_bytes, DatWriter};
 use crate::formats::image::{write_gray16, write_gray8};
 use crate::formats::meta::{Glare, SceneInfo, SceneMeta};
@@ -159,6 +159,21 @@ pub fn write_frame(
     }
 }
 
+/// [`simulate`] with the spike planes kept in memory, back to back (stored
+/// row order): for runs that use the stream more than once.
+pub fn simulate_planes(req: &Request) -> Result<(Vec<u8>, Simulated), FormatError> {
+    let mut planes = Vec::new();
+    let sim = simulate(
+        req,
+        |_, _| {},
+        |plane| {
+            planes.extend_from_slice(plane);
+            Ok(())
+        },
+    )?;
+    Ok((planes, sim))
+}
+
 /// Runs `req` and writes its files into `dir` (created if missing).
 /// `progress` is called with (planes done, planes in all).
 pub fn simulate_to_dir(
@@ -176,18 +191,7 @@ pub fn simulate_to_dir(
     }
     let pair = sim.meta.pair;
     let dt = f64::from(pair[1] - pair[0]);
-    let truth: Vec<Vector> = sim
-        .scene
-        .truth(&vector_grid(w, h, 32, 16), dt)
-        .into_iter()
-        .map(|(x, y, u, v)| Vector {
-            x,
-            y,
-            u,
-            v,
-            flag: 0,
-        })
-        .collect();
+    let truth = sim.scene.truth_vectors(&vector_grid(w, h, 32, 16), dt);
     write_vectors(&dir.join("truth.csv"), &truth)?;
     write_profile(&dir.join("profile.csv"), &sim.scene.profile(dt))?;
     sim.meta.write(&dir.join("scene.json"))?;

@@ -71,9 +71,8 @@ pub fn transfer(
     height: u16,
     cfg: Config,
 ) -> Result<Transfer, LinkError> {
-    let fw = run_on_planes(planes, width, height, cfg, Vec::new(), true)?;
+    let mut fw = run_on_planes(planes, width, height, cfg, Vec::new(), true)?;
     let counters = fw.counters();
-    let mut fw = fw;
     let sent = fw.keep.take().unwrap_or_default();
     let bytes = fw.into_link();
     let mut pairs = Vec::new();
@@ -113,11 +112,7 @@ pub fn receiver_settings(windows: Vec<usize>) -> Settings {
 
 /// A received frame upright as PIV input.
 pub fn upright_f32(f: &ReceivedFrame) -> Array2<f32> {
-    let up = f.upright();
-    let w = usize::from(f.width);
-    Array2::from_shape_fn((usize::from(f.height), w), |(i, j)| {
-        f32::from(up[i * w + j])
-    })
+    crate::pipeline::to_f32(&f.upright(), usize::from(f.width), usize::from(f.height))
 }
 
 /// PIV on every pair.

@@ -33,29 +33,7 @@ enum Command {
 }
 
 fn main() {
-    let cli = match Cli::try_parse() {
-        Ok(c) => c,
-        Err(e) => {
-            use clap::error::ErrorKind;
-            if matches!(
-                e.kind(),
-                ErrorKind::DisplayHelp
-                    | ErrorKind::DisplayVersion
-                    | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
-            ) {
-                e.exit();
-            }
-            // One line, as for every other error (clap's own message adds
-            // usage lines; `--help` has them).
-            let text = e.to_string();
-            let first = text.lines().next().unwrap_or("bad arguments");
-            eprintln!(
-                "spiv: {} (see --help)",
-                first.trim_start_matches("error: ").trim()
-            );
-            std::process::exit(2);
-        }
-    };
+    let cli: Cli = spiv_firmware_sim::cli::parse_or_exit("spiv");
     let result = match &cli.command {
         Command::Run(a) => cli::run::run(a),
         Command::Simulate(a) => cli::simulate::run(a),

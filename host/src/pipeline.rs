@@ -10,7 +10,7 @@ use spiv_core::Params;
 use spiv_firmware_sim::formats::csv::Vector;
 use spiv_firmware_sim::formats::FormatError;
 use spiv_firmware_sim::scene::{vector_grid, SceneParams};
-use spiv_firmware_sim::simulation::{simulate, Request, Simulated};
+use spiv_firmware_sim::simulation::{simulate_planes, Request, Simulated};
 
 use crate::link::{dwell_caps, transfer, Transfer};
 use crate::metrics::{region_error, row_profile, ProfileRow, RegionError};
@@ -60,6 +60,14 @@ impl Job {
             lossy: spiv_core::compress::Lossy::default(),
         }
     }
+}
+
+/// The centres of the vectors `s` reports on a `w × h` image (its last
+/// pass's window and step), where the truth is compared.
+pub fn piv_grid(s: &Settings, w: u16, h: u16) -> Vec<(f64, f64)> {
+    let win = s.windows.last().copied().unwrap_or(32);
+    let step = ((win as f64) * (1.0 - s.overlap)).round().max(1.0) as u16;
+    vector_grid(w, h, win as u16, step)
 }
 
 /// Rows per band of the capped adaptive reconstruction (the firmware's
@@ -227,7 +235,8 @@ pub struct LinkSummary {
     pub bit_exact: bool,
 }
 
-fn to_f32(data: &[u16], w: usize, h: usize) -> Array2<f32> {
+/// An upright `w × h` gray image as PIV input.
+pub fn to_f32(data: &[u16], w: usize, h: usize) -> Array2<f32> {
     Array2::from_shape_fn((h, w), |(i, j)| f32::from(data[i * w + j]))
 }
 
@@ -237,15 +246,7 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
     stage("simulating both cameras");
     let p = &job.request.scene;
     let (w, h) = (p.width, p.height);
-    let mut data = Vec::new();
-    let sim = simulate(
-        &job.request,
-        |_, _| {},
-        |plane| {
-            data.extend_from_slice(plane);
-            Ok(())
-        },
-    )?;
+    let (data, sim) = simulate_planes(&job.request)?;
     let t_sim = t0.elapsed().as_secs_f64() * 1e3;
 
     stage("sidecar: core and wire");
@@ -298,20 +299,7 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
 
     stage("PIV on three pairs");
     let dt = f64::from(sim.meta.pair[1] - sim.meta.pair[0]);
-    let win = job.piv.windows.last().copied().unwrap_or(32);
-    let step = ((win as f64) * (1.0 - job.piv.overlap)).round().max(1.0) as u16;
-    let truth: Vec<Vector> = sim
-        .scene
-        .truth(&vector_grid(w, h, win as u16, step), dt)
-        .into_iter()
-        .map(|(x, y, u, v)| Vector {
-            x,
-            y,
-            u,
-            v,
-            flag: 0,
-        })
-        .collect();
+    let truth = sim.scene.truth_vectors(&piv_grid(&job.piv, w, h), dt);
     let glare_limit = 2.0 * p.glare_sigma;
     let (wu, hu) = (usize::from(w), usize::from(h));
     let cam_max = job.request.camera.max_dn();

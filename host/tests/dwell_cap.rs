@@ -4,7 +4,7 @@
 
 use spiv_firmware_sim::firmware::{run_on_planes, Config};
 use spiv_firmware_sim::scene::{SceneKind, SceneParams};
-use spiv_firmware_sim::simulation::simulate;
+use spiv_firmware_sim::simulation::simulate_planes;
 use spiv_host::pipeline::{adaptive_banded, Job};
 use spiv_host::reconstruct::{upright, Planes};
 
@@ -15,16 +15,7 @@ fn in_process_and_firmware_capped_frames_are_identical() {
     sp.height = 112;
     let job = Job::new(sp, 2);
     let (w, h) = (job.request.scene.width, job.request.scene.height);
-    let mut data = Vec::new();
-    let sim = simulate(
-        &job.request,
-        |_, _| {},
-        |p| {
-            data.extend_from_slice(p);
-            Ok(())
-        },
-    )
-    .expect("simulate");
+    let (data, sim) = simulate_planes(&job.request).expect("simulate");
     let [ka, kb] = sim.meta.pair;
     // Four bands (the last one short), one without a cap (n_max).
     let caps = vec![6u16, 12, 40];

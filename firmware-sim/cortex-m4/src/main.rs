@@ -101,48 +101,28 @@ impl Link for CrcLink {
     }
 }
 
-// Cost markers: distinct bodies so the linker never folds them together.
-#[inline(never)]
-#[no_mangle]
-extern "C" fn spiv_mark_ingest_begin() {
-    core::hint::black_box(1u32);
-}
-#[inline(never)]
-#[no_mangle]
-extern "C" fn spiv_mark_ingest_end() {
-    core::hint::black_box(2u32);
-}
-#[inline(never)]
-#[no_mangle]
-extern "C" fn spiv_mark_frame_begin() {
-    core::hint::black_box(3u32);
-}
-#[inline(never)]
-#[no_mangle]
-extern "C" fn spiv_mark_frame_end() {
-    core::hint::black_box(4u32);
-}
-#[inline(never)]
-#[no_mangle]
-extern "C" fn spiv_mark_send_begin() {
-    core::hint::black_box(5u32);
-}
-#[inline(never)]
-#[no_mangle]
-extern "C" fn spiv_mark_send_end() {
-    core::hint::black_box(6u32);
+/// Cost markers for `cost.sh`: empty functions with stable symbols, given
+/// distinct bodies so the linker never folds them together.
+macro_rules! markers {
+    ($($name:ident = $id:literal),* $(,)?) => {$(
+        #[inline(never)]
+        #[no_mangle]
+        extern "C" fn $name() {
+            core::hint::black_box($id as u32);
+        }
+    )*};
 }
 
-#[inline(never)]
-#[no_mangle]
-extern "C" fn spiv_mark_link_begin() {
-    core::hint::black_box(7u32);
-}
-#[inline(never)]
-#[no_mangle]
-extern "C" fn spiv_mark_link_end() {
-    core::hint::black_box(8u32);
-}
+markers!(
+    spiv_mark_ingest_begin = 1,
+    spiv_mark_ingest_end = 2,
+    spiv_mark_frame_begin = 3,
+    spiv_mark_frame_end = 4,
+    spiv_mark_send_begin = 5,
+    spiv_mark_send_end = 6,
+    spiv_mark_link_begin = 7,
+    spiv_mark_link_end = 8,
+);
 
 #[entry]
 fn main() -> ! {

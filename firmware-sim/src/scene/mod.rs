@@ -375,6 +375,24 @@ impl Scene {
             .collect()
     }
 
+    /// [`Scene::truth`] as vector-field rows (flag 0), as PIV writes them.
+    pub fn truth_vectors(
+        &self,
+        points: &[(f64, f64)],
+        dt: f64,
+    ) -> Vec<crate::formats::csv::Vector> {
+        self.truth(points, dt)
+            .into_iter()
+            .map(|(x, y, u, v)| crate::formats::csv::Vector {
+                x,
+                y,
+                u,
+                v,
+                flag: 0,
+            })
+            .collect()
+    }
+
     /// The analytic profile u(y) for a pair `dt` ticks apart, one value per
     /// pixel row: `(y up from the wall, u px per pair)`; empty for the vortex.
     pub fn profile(&self, dt: f64) -> Vec<(f64, f64)> {

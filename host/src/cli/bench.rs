@@ -10,9 +10,9 @@ use ndarray::Array2;
 use plotters::prelude::*;
 use serde_json::json;
 use spiv_firmware_sim::scene::{vector_grid, SceneKind, SceneParams};
-use spiv_firmware_sim::simulation::simulate;
+use spiv_firmware_sim::simulation::simulate_planes;
 use spiv_host::metrics::{mean_ci, region_error, row_profile, MeanCi};
-use spiv_host::pipeline::{run as run_job, Job, Source};
+use spiv_host::pipeline::{run as run_job, to_f32, Job, Source};
 use spiv_host::piv::{piv, Interp, Settings};
 use spiv_host::reconstruct::{frame_from_planes, Method, Planes};
 use spiv_host::reference::{adaptive_frame, SpikeVolume};
@@ -230,15 +230,7 @@ fn speed(plot_path: &PathBuf) -> Result<(), CliError> {
     let job = Job::new(SceneParams::new(SceneKind::PaperLinear), 1);
     let p = &job.request.scene;
     let (w, h) = (p.width, p.height);
-    let mut data = Vec::new();
-    let sim = simulate(
-        &job.request,
-        |_, _| {},
-        |plane| {
-            data.extend_from_slice(plane);
-            Ok(())
-        },
-    )?;
+    let (data, sim) = simulate_planes(&job.request)?;
     let planes = Planes {
         width: w,
         height: h,
@@ -249,20 +241,9 @@ fn speed(plot_path: &PathBuf) -> Result<(), CliError> {
     };
     let [ka, kb] = sim.meta.pair.map(u64::from);
     let dt = (kb - ka) as f64;
-    let truth: Vec<_> = sim
-        .scene
-        .truth(&vector_grid(w, h, 32, 16), dt)
-        .into_iter()
-        .map(|(x, y, u, v)| spiv_firmware_sim::formats::csv::Vector {
-            x,
-            y,
-            u,
-            v,
-            flag: 0,
-        })
-        .collect();
+    let truth = sim.scene.truth_vectors(&vector_grid(w, h, 32, 16), dt);
     let (wu, hu) = (usize::from(w), usize::from(h));
-    let to = |d: &[u16]| Array2::from_shape_fn((hu, wu), |(i, j)| f32::from(d[i * wu + j]));
+    let to = |d: &[u16]| to_f32(d, wu, hu);
     let err = |a: &Array2<f32>, b: &Array2<f32>, s: &Settings| -> Result<(f64, f64), CliError> {
         let t = Instant::now();
         let f = piv(a, b, None, s)?;

@@ -14,12 +14,11 @@ use clap::Args;
 use serde::Serialize;
 use spiv_core::wire::Encoding;
 use spiv_firmware_sim::firmware::{ticks_for, Config};
-use spiv_firmware_sim::formats::csv::Vector;
-use spiv_firmware_sim::scene::{vector_grid, SceneKind, SceneParams};
-use spiv_firmware_sim::simulation::{simulate, Request};
+use spiv_firmware_sim::scene::{SceneKind, SceneParams};
+use spiv_firmware_sim::simulation::{simulate_planes, Request};
 use spiv_host::link::{dwell_caps, piv_pairs, transfer, LinkError};
 use spiv_host::metrics::{region_error, row_profile};
-use spiv_host::pipeline::Job;
+use spiv_host::pipeline::{piv_grid, Job};
 
 use super::CliError;
 
@@ -122,29 +121,10 @@ pub fn run(a: &LinkArgs) -> Result<(), CliError> {
                 },
                 a.pairs,
             ));
-            let mut planes = Vec::new();
-            let sim = simulate(
-                &req,
-                |_, _| {},
-                |pl| {
-                    planes.extend_from_slice(pl);
-                    Ok(())
-                },
-            )?;
-            let win = job.piv.windows.last().copied().unwrap_or(32);
-            let step = ((win as f64) * (1.0 - job.piv.overlap)).round().max(1.0) as u16;
-            let truth: Vec<Vector> = sim
+            let (planes, sim) = simulate_planes(&req)?;
+            let truth = sim
                 .scene
-                .truth(&vector_grid(w, h, win as u16, step), f64::from(dt))
-                .into_iter()
-                .map(|(x, y, u, v)| Vector {
-                    x,
-                    y,
-                    u,
-                    v,
-                    flag: 0,
-                })
-                .collect();
+                .truth_vectors(&piv_grid(&job.piv, w, h), f64::from(dt));
             if let Some(budget) = dwell_cap {
                 // The caps come from a TFP pair sent through the link first,
                 // as a sidecar would be told them over the control endpoint.

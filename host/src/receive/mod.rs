@@ -162,10 +162,8 @@ mod tests {
         (fw.into_link().into_inner(), kept)
     }
 
-    #[test]
-    fn clean_link_delivers_every_frame_bit_exact() {
-        let (bytes, sent) = run_fw(Faults::default());
-        assert_eq!(sent.len(), 8);
+    /// Receives `bytes`; returns the report and the frames delivered.
+    fn frames_of(bytes: Vec<u8>) -> (Report, Vec<ReceivedFrame>) {
         let mut got = Vec::new();
         let r = receive::<SourceError>(
             &mut Bytes(std::io::Cursor::new(bytes)),
@@ -178,6 +176,14 @@ mod tests {
             |_| {},
         )
         .unwrap();
+        (r, got)
+    }
+
+    #[test]
+    fn clean_link_delivers_every_frame_bit_exact() {
+        let (bytes, sent) = run_fw(Faults::default());
+        assert_eq!(sent.len(), 8);
+        let (r, got) = frames_of(bytes);
         assert_eq!(
             (r.frames, r.pairs, r.lost_frames, r.corrupted),
             (8, 4, 0, 0)
@@ -192,18 +198,7 @@ mod tests {
     fn faulty_link_loses_frames_but_never_delivers_a_wrong_one() {
         let faults = Faults::parse("drop=0.05,corrupt=0.05,truncate=0.05,reorder=0.1").unwrap();
         let (bytes, sent) = run_fw(faults);
-        let mut got = Vec::new();
-        let r = receive::<SourceError>(
-            &mut Bytes(std::io::Cursor::new(bytes)),
-            |e| {
-                if let Event::Frame(f) = e {
-                    got.push(f);
-                }
-                Ok(())
-            },
-            |_| {},
-        )
-        .unwrap();
+        let (r, got) = frames_of(bytes);
         assert_eq!(r.frames + r.lost_frames, sent.len() as u64, "{r:?}");
         for g in &got {
             let s = &sent[g.frame_id as usize];
