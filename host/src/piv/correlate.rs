@@ -47,6 +47,8 @@ pub struct Scratch {
     z: Vec<Complex32>,
     t: Vec<Complex32>,
     fft: Vec<Complex32>,
+    /// The real correlation plane (row-major n×n, lag 0 at index 0).
+    c: Vec<f32>,
     /// The window of image A, then of B, zero-mean (row-major n×n).
     pub a: Vec<f32>,
     /// The window of image B.
@@ -67,6 +69,7 @@ impl Scratch {
             z: vec![Complex32::default(); n2],
             t: vec![Complex32::default(); n2],
             fft: vec![Complex32::default(); len],
+            c: vec![0.0; n2],
             a: vec![0.0; n2],
             b: vec![0.0; n2],
             masked: Vec::new(),
@@ -108,6 +111,10 @@ const FLAT: f64 = 1e-3;
 /// set to the mean, so they add nothing); the correlation is normalised by
 /// both energies. Sub-pixel: 3-point Gaussian per axis, the 3-point parabola
 /// where a value is not positive, 0 where neither has a maximum.
+///
+/// The loops over the window are written so that the compiler vectorises
+/// them (independent lane accumulators, no index arithmetic per sample):
+/// at 32×32 px the scalar versions cost three times the FFTs.
 pub fn correlate(plan: &Plan, s: &mut Scratch, method: Subpixel) -> Result<Peak, NoPeak> {
     let n = plan.n;
     let (ea, ma, ka) = zero_mean(&mut s.a, &s.masked);
@@ -127,55 +134,58 @@ pub fn correlate(plan: &Plan, s: &mut Scratch, method: Subpixel) -> Result<Peak,
     plan.fwd.process_with_scratch(&mut s.z, &mut s.fft);
     transpose(&s.z, &mut s.t, n);
     plan.fwd.process_with_scratch(&mut s.t, &mut s.fft);
-    // Separate A and B and form conj(A)·B (the layout is symmetric under -k).
-    // (Index arithmetic without `%`: an integer division per sample cost
-    // more than the spectrum product itself.)
-    let mirror = |k: usize| if k == 0 { 0 } else { n - k };
+    // With Z = FFT(a + i·b) and W = Z(−k), the cross spectrum is
+    // conj(A)·B = ½·Im(Z·W) − ¼·i·(|Z|² − |W|²): no separation of A and B
+    // needed (the layout is symmetric under −k, so transposed is fine).
     for p in 0..n {
+        let pm = if p == 0 { 0 } else { n - p };
         let row = &s.t[p * n..(p + 1) * n];
-        let row_m = &s.t[mirror(p) * n..(mirror(p) + 1) * n];
+        let row_m = &s.t[pm * n..(pm + 1) * n];
         let out = &mut s.z[p * n..(p + 1) * n];
-        for (q, (o, &zk)) in out.iter_mut().zip(row).enumerate() {
-            let zm = row_m[mirror(q)].conj();
-            let a = (zk + zm) * 0.5;
-            let b = (zk - zm) * Complex32::new(0.0, -0.5);
-            *o = a.conj() * b;
+        out[0] = cross(row[0], row_m[0]);
+        for ((o, &zk), &w) in out[1..]
+            .iter_mut()
+            .zip(&row[1..])
+            .zip(row_m[1..].iter().rev())
+        {
+            *o = cross(zk, w);
         }
     }
     // Inverse: columns (rows of the transposed layout), transpose, rows.
     plan.inv.process_with_scratch(&mut s.z, &mut s.fft);
     transpose(&s.z, &mut s.t, n);
     plan.inv.process_with_scratch(&mut s.t, &mut s.fft);
-    let norm = 1.0 / (n2 * (ea * eb).sqrt());
-    let (mut best_k, mut best_raw) = (0usize, f32::NEG_INFINITY);
-    for (k, z) in s.t.iter().enumerate() {
-        if z.re > best_raw {
-            (best_k, best_raw) = (k, z.re);
-        }
+    for (c, z) in s.c.iter_mut().zip(&s.t) {
+        *c = z.re;
     }
-    let (bi, bj) = (best_k / n, best_k % n);
+    let cp = &s.c;
+    let norm = 1.0 / (n2 * (ea * eb).sqrt());
+    let best_raw = max_of(cp, f32::NEG_INFINITY);
     let best = f64::from(best_raw) * norm;
     if !best.is_finite() || best <= 0.0 {
         return Err(NoPeak::NoPeak);
     }
-    let c = |i: usize, j: usize| f64::from(s.t[(i % n) * n + (j % n)].re) * norm;
+    let best_k = cp
+        .iter()
+        .position(|&v| v == best_raw)
+        .ok_or(NoPeak::NoPeak)?;
+    let (bi, bj) = (best_k / n, best_k % n);
+    let c = |i: usize, j: usize| f64::from(cp[(i % n) * n + (j % n)]) * norm;
     // The second peak: the maximum outside the 5×5 around the first.
     let mut second_raw = 0.0f32;
     let dist = |k: usize, b: usize| if k >= b { k - b } else { k + n - b };
     for i in 0..n {
         let di = dist(i, bi);
-        let row = &s.t[i * n..(i + 1) * n];
+        let row = &cp[i * n..(i + 1) * n];
         if di <= 2 || di >= n - 2 {
-            for (j, z) in row.iter().enumerate() {
+            for (j, &v) in row.iter().enumerate() {
                 let dj = dist(j, bj);
                 if dj > 2 && dj < n - 2 {
-                    second_raw = second_raw.max(z.re);
+                    second_raw = second_raw.max(v);
                 }
             }
         } else {
-            for z in row {
-                second_raw = second_raw.max(z.re);
-            }
+            second_raw = max_of(row, second_raw);
         }
     }
     let second = f64::from(second_raw) * norm;
@@ -219,47 +229,87 @@ pub fn correlate(plan: &Plan, s: &mut Scratch, method: Subpixel) -> Result<Peak,
     })
 }
 
+/// conj(A)·B at one frequency from Z = FFT(a + i·b) there and W at −k.
+#[inline(always)]
+fn cross(z: Complex32, w: Complex32) -> Complex32 {
+    Complex32::new(
+        0.5 * (z.re * w.im + z.im * w.re),
+        -0.25 * (z.norm_sqr() - w.norm_sqr()),
+    )
+}
+
+/// The largest of `v` and `init` (NaNs ignored), in 8 independent lanes so
+/// that it vectorises.
+pub(crate) fn max_of(v: &[f32], init: f32) -> f32 {
+    let mut acc = [init; 8];
+    let mut chunks = v.chunks_exact(8);
+    for ch in &mut chunks {
+        for (a, &x) in acc.iter_mut().zip(ch) {
+            *a = if x > *a { x } else { *a };
+        }
+    }
+    let tail = chunks.remainder().iter().fold(init, |m, &x| m.max(x));
+    acc.iter().fold(tail, |m, &x| m.max(x))
+}
+
+/// Σ f(v) over 16 independent f32 lanes (vectorises), the lanes added in
+/// f64. Each lane sums 1/16 of a window, so the worst-case relative error
+/// is n/16·2⁻²⁴: 1.5e-5 for a 64² window, 4e-3 for the largest (1024²).
+/// It only scales the normalised height a little and leaves a residual
+/// constant in the zero-mean window, which moves no peak.
+fn sum_lanes(v: &[f32], f: impl Fn(f32) -> f32) -> f64 {
+    let mut acc = [0.0f32; 16];
+    let mut chunks = v.chunks_exact(16);
+    for ch in &mut chunks {
+        for (a, &x) in acc.iter_mut().zip(ch) {
+            *a += f(x);
+        }
+    }
+    let tail: f64 = chunks.remainder().iter().map(|&x| f64::from(f(x))).sum();
+    acc.iter().map(|&a| f64::from(a)).sum::<f64>() + tail
+}
+
 /// Makes `w` zero-mean over unmasked pixels; returns its energy Σw², its
 /// former mean and the number of unmasked pixels.
 fn zero_mean(w: &mut [f32], masked: &[bool]) -> (f64, f64, usize) {
     if masked.is_empty() {
         // No mask: the same sums without a lookup per pixel.
-        let sum: f64 = w.iter().fold(0.0, |acc, &v| acc + f64::from(v));
         let cnt = w.len();
         if cnt == 0 {
             return (0.0, 0.0, 0);
         }
-        let mean = sum / cnt as f64;
+        let mean = sum_lanes(w, |v| v) / cnt as f64;
         let m32 = mean as f32;
-        let mut e = 0.0f64;
         for v in w.iter_mut() {
             *v -= m32;
-            e += f64::from(*v) * f64::from(*v);
         }
+        let e = sum_lanes(w, |v| v * v);
         return (e, mean, cnt);
     }
-    let (mut sum, mut cnt) = (0.0f64, 0usize);
-    for (k, &v) in w.iter().enumerate() {
-        if masked.get(k).copied() != Some(true) {
-            sum += f64::from(v);
-            cnt += 1;
-        }
+    // (A mask shorter than the window leaves the rest unmasked.)
+    let k = masked.len().min(w.len());
+    let (head, _) = w.split_at_mut(k);
+    let masked = &masked[..k];
+    // Masked pixels to 0 first, so the sums run over the whole window
+    // without a branch (the loops vectorise).
+    for (v, &m) in head.iter_mut().zip(masked) {
+        *v = if m { 0.0 } else { *v };
     }
+    let cnt = w.len() - masked.iter().filter(|&&m| m).count();
     if cnt == 0 {
         w.fill(0.0);
         return (0.0, 0.0, 0);
     }
-    let mean = sum / cnt as f64;
+    let mean = sum_lanes(w, |v| v) / cnt as f64;
     let m32 = mean as f32;
-    let mut e = 0.0f64;
-    for (k, v) in w.iter_mut().enumerate() {
-        *v = if masked.get(k).copied() == Some(true) {
-            0.0
-        } else {
-            *v - m32
-        };
-        e += f64::from(*v) * f64::from(*v);
+    let (head, tail) = w.split_at_mut(k);
+    for (v, &m) in head.iter_mut().zip(masked) {
+        *v = if m { 0.0 } else { *v - m32 };
     }
+    for v in tail {
+        *v -= m32;
+    }
+    let e = sum_lanes(w, |v| v * v);
     (e, mean, cnt)
 }
 
@@ -362,6 +412,74 @@ mod tests {
             );
             assert!(p.height > 0.5 && p.height <= 1.0 + 1e-6);
         }
+    }
+
+    /// The FFT path against the cyclic cross-correlation summed directly:
+    /// same integer peak, same normalised height and peak ratio.
+    #[test]
+    fn matches_the_direct_cyclic_correlation() {
+        let n = 16;
+        let plan = Plan::new(n);
+        let mut s = Scratch::new(&plan);
+        let mut rng = 12345u64;
+        let mut next = || {
+            rng = rng
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (rng >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let a: Vec<f32> = (0..n * n).map(|_| 100.0 * next()).collect();
+        // B: A moved by (dx 3, dy −2) cyclically, plus noise.
+        let b: Vec<f32> = (0..n * n)
+            .map(|k| {
+                let (i, j) = (k / n, k % n);
+                a[((i + 2) % n) * n + (j + n - 3) % n] + 30.0 * next()
+            })
+            .collect();
+        s.a.copy_from_slice(&a);
+        s.b.copy_from_slice(&b);
+        let p = correlate(&plan, &mut s, Subpixel::Parabolic).expect("peak");
+        let zm = |v: &[f32]| {
+            let m = v.iter().map(|&x| f64::from(x)).sum::<f64>() / v.len() as f64;
+            v.iter().map(|&x| f64::from(x) - m).collect::<Vec<f64>>()
+        };
+        let (a0, b0) = (zm(&a), zm(&b));
+        let e = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>();
+        let norm = (e(&a0) * e(&b0)).sqrt();
+        let mut c = vec![0.0; n * n];
+        for dy in 0..n {
+            for dx in 0..n {
+                let mut acc = 0.0;
+                for i in 0..n {
+                    for j in 0..n {
+                        acc += a0[i * n + j] * b0[((i + dy) % n) * n + (j + dx) % n];
+                    }
+                }
+                c[dy * n + dx] = acc / norm;
+            }
+        }
+        let (k, &best) = c
+            .iter()
+            .enumerate()
+            .max_by(|x, y| x.1.total_cmp(y.1))
+            .expect("max");
+        assert_eq!((k / n, k % n), (n - 2, 3));
+        assert!((p.height - best).abs() < 1e-5, "{} vs {best}", p.height);
+        assert_eq!((p.dx.round(), p.dy.round()), (3.0, -2.0));
+        let second = (0..n * n)
+            .filter(|&q| {
+                let d = |u: usize, v: usize| (u + n - v) % n;
+                let (di, dj) = (d(q / n, k / n), d(q % n, k % n));
+                !((di <= 2 || di >= n - 2) && (dj <= 2 || dj >= n - 2))
+            })
+            .map(|q| c[q])
+            .fold(0.0f64, f64::max);
+        assert!(
+            (p.ratio - best / second).abs() < 1e-3 * p.ratio,
+            "{} vs {}",
+            p.ratio,
+            best / second
+        );
     }
 
     #[test]

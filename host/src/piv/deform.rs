@@ -3,8 +3,9 @@
 //! by half of it (central difference), so the next pass correlates what is
 //! left.
 
-use ndarray::{Array2, Axis};
+use ndarray::{Array2, Axis, ShapeBuilder};
 use rayon::prelude::*;
+use wide::f32x4;
 
 use super::grid::Grid;
 
@@ -26,15 +27,26 @@ pub enum Interp {
 
 /// An image ready to be resampled: the gray values, or for
 /// [`Interp::Bspline`] their B-spline coefficients (computed once).
+///
+/// The values are stored with a border of [`PAD`] px already extended as
+/// the kernel extends the image (mirrored for B-splines, clamped
+/// otherwise), so samples up to `PAD − 3` px outside the image take the
+/// fast path too: at the edges of a 400×250 image the general path cost
+/// as much as all the interior.
 #[derive(Debug, Clone)]
 pub struct Resampler {
-    img: Array2<f32>,
-    /// The same values, row-major, for the unchecked-free fast path.
+    /// The values (or coefficients) with the border, row-major
+    /// `(h + 2·PAD) × (w + 2·PAD)`.
     data: Vec<f32>,
     w: usize,
     h: usize,
+    /// Padded row length, `w + 2·PAD`.
+    pw: usize,
     interp: Interp,
 }
+
+/// Border of a [`Resampler`]'s stored image, px.
+const PAD: usize = 8;
 
 impl Resampler {
     /// Prepares `img` for `interp`.
@@ -42,17 +54,48 @@ impl Resampler {
         let img = match interp {
             Interp::Bspline => bspline_coefficients(img, &CUBIC_POLES),
             Interp::Bspline5 => bspline_coefficients(img, &QUINTIC_POLES),
-            _ => img.clone(),
+            _ => img.as_standard_layout().into_owned(),
         };
         let (h, w) = img.dim();
-        let data = img.iter().copied().collect();
+        let (pw, ph) = (w + 2 * PAD, h + 2 * PAD);
+        let extend: fn(isize, usize) -> usize = match interp {
+            Interp::Bspline | Interp::Bspline5 => mirror,
+            Interp::Bilinear | Interp::Bicubic => |k, n| k.clamp(0, n as isize - 1) as usize,
+        };
+        let cols: Vec<usize> = (0..pw)
+            .map(|j| extend(j as isize - PAD as isize, w))
+            .collect();
+        let mut data = Vec::with_capacity(pw * ph);
+        for i in 0..ph {
+            let row = img.row(extend(i as isize - PAD as isize, h));
+            data.extend(cols.iter().map(|&j| row[j]));
+        }
         Resampler {
-            img,
             data,
             w,
             h,
+            pw,
             interp,
         }
+    }
+
+    /// The image without its border.
+    fn view(&self) -> Option<ndarray::ArrayView2<'_, f32>> {
+        let start = PAD * self.pw + PAD;
+        ndarray::ArrayView2::from_shape(
+            (self.h, self.w).strides((self.pw, 1)),
+            self.data.get(start..)?,
+        )
+        .ok()
+    }
+
+    /// Start of the 4×4 taps around (xi, yi) (whole px, the tap at −1, −1)
+    /// in the padded buffer, if they lie in it.
+    #[inline(always)]
+    fn taps4(&self, xi: i64, yi: i64) -> Option<usize> {
+        let (x, y) = (xi + PAD as i64 - 1, yi + PAD as i64 - 1);
+        let (pw, ph) = (self.pw as i64, (self.h + 2 * PAD) as i64);
+        (x >= 0 && y >= 0 && x + 4 <= pw && y + 4 <= ph).then(|| y as usize * self.pw + x as usize)
     }
 
     /// The value at (x right, y down) px, mirrored at the edges for
@@ -60,48 +103,154 @@ impl Resampler {
     ///
     /// Hand-written fast path (the deformation's hot loop): where the 4×4
     /// taps lie inside the image, they are read straight from the row-major
-    /// buffer in f32; elsewhere the general edge-handling path runs.
-    #[inline]
+    /// buffer in f32, four rows accumulated as one 4-lane vector before the
+    /// horizontal weights; elsewhere the general edge-handling path runs.
+    #[inline(always)]
     pub fn at(&self, x: f64, y: f64) -> f32 {
         let (x0, y0) = (x.floor(), y.floor());
-        let inside = x0 >= 1.0 && y0 >= 1.0 && x0 + 2.0 < self.w as f64 && y0 + 2.0 < self.h as f64;
-        if self.interp == Interp::Bspline5 {
-            let inside5 =
-                x0 >= 2.0 && y0 >= 2.0 && x0 + 3.0 < self.w as f64 && y0 + 3.0 < self.h as f64;
-            if !inside5 {
-                return sample(&self.img, x, y, self.interp);
-            }
-            let (wx, wy) = (quintic_weights(x - x0), quintic_weights(y - y0));
-            let wx = wx.map(|v| v as f32);
-            let base = (y0 as usize - 2) * self.w + x0 as usize - 2;
-            let mut acc = 0.0f32;
-            for (r, &wr) in wy.iter().enumerate() {
-                let o = base + r * self.w;
-                let row = &self.data[o..o + 6];
-                let mut s = 0.0f32;
-                for k in 0..6 {
-                    s += wx[k] * row[k];
+        // Saturating casts: NaN and far-out positions fail the tests below.
+        let (xi, yi) = (x0 as i64, y0 as i64);
+        match self.interp {
+            Interp::Bspline | Interp::Bicubic => {
+                if let Some(base) = self.taps4(xi, yi) {
+                    let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
+                    let k = if self.interp == Interp::Bicubic {
+                        &KEYS4
+                    } else {
+                        &BSPLINE4
+                    };
+                    if let Some(blk) = self.data.get(base..base + 3 * self.pw + 4) {
+                        return dot4(blk, self.pw, weights4(k, fx), weights4(k, fy));
+                    }
                 }
-                acc += wr as f32 * s;
             }
-            return acc;
+            Interp::Bspline5 => {
+                // The 6×6 taps from (xi − 2, yi − 2): inside the padded
+                // buffer when the 4×4 block from (xi − 1, yi − 1) and one
+                // more pixel each side are.
+                if let (Some(_), Some(_)) = (self.taps4(xi - 1, yi - 1), self.taps4(xi + 1, yi + 1))
+                {
+                    let (wx, wy) = (quintic_weights(x - x0), quintic_weights(y - y0));
+                    let base =
+                        (yi + PAD as i64 - 2) as usize * self.pw + (xi + PAD as i64 - 2) as usize;
+                    let mut acc = [0.0f32; 6];
+                    for (r, &wr) in wy.iter().enumerate() {
+                        let o = base + r * self.pw;
+                        let row = &self.data[o..o + 6];
+                        for (a, &v) in acc.iter_mut().zip(row) {
+                            *a += wr as f32 * v;
+                        }
+                    }
+                    return acc.iter().zip(wx).map(|(a, w)| a * w as f32).sum();
+                }
+            }
+            Interp::Bilinear => {}
         }
-        if !inside || self.interp == Interp::Bilinear {
-            return sample(&self.img, x, y, self.interp);
+        match self.view() {
+            Some(img) => sample(&img, x, y, self.interp),
+            None => 0.0,
         }
-        let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
-        let (wx, wy) = match self.interp {
-            Interp::Bicubic => (keys32(fx), keys32(fy)),
-            _ => (bspline32(fx), bspline32(fy)),
-        };
-        let base = (y0 as usize - 1) * self.w + x0 as usize - 1;
-        let mut acc = 0.0f32;
-        for (r, wr) in wy.iter().enumerate() {
-            let o = base + r * self.w;
-            let row = &self.data[o..o + 4];
-            acc += wr * (wx[0] * row[0] + wx[1] * row[1] + wx[2] * row[2] + wx[3] * row[3]);
+    }
+}
+
+/// Σ wy[r]·wx[k]·blk[r·pw + k] over the 4×4 taps; a row beyond `blk`
+/// counts as 0.
+///
+/// Written with explicit 4-lane vectors (`wide`): the four rows scaled by
+/// their y weights and summed, then one horizontal dot with the x weights.
+/// This is the deformation's innermost loop (two calls per pixel), and the
+/// compiler turned the same arithmetic on arrays into 60 scalar
+/// instructions.
+#[inline(always)]
+fn dot4(blk: &[f32], pw: usize, wx: f32x4, wy: f32x4) -> f32 {
+    let wy = wy.to_array();
+    let row = |r: usize| match blk.get(r * pw..r * pw + 4) {
+        Some(&[a, b, c, d]) => f32x4::new([a, b, c, d]) * f32x4::splat(wy[r]),
+        _ => f32x4::ZERO,
+    };
+    let acc = (row(0) + row(1)) + (row(2) + row(3));
+    (acc * wx).reduce_add()
+}
+
+/// A 4-tap kernel as the coefficients of its weights' cubic polynomials:
+/// the weights of the taps at −1, 0, 1, 2 for fraction t are
+/// `((C[3]·t + C[2])·t + C[1])·t + C[0]`, one lane per tap.
+type Kernel4 = [[f32; 4]; 4];
+
+/// Cubic B-spline: (1−t)³/6, (3t³−6t²+4)/6, (−3t³+3t²+3t+1)/6, t³/6.
+const BSPLINE4: Kernel4 = [
+    [1.0 / 6.0, 2.0 / 3.0, 1.0 / 6.0, 0.0],
+    [-0.5, 0.0, 0.5, 0.0],
+    [0.5, -1.0, 0.5, 0.0],
+    [-1.0 / 6.0, 0.5, -0.5, 1.0 / 6.0],
+];
+
+/// Keys' cubic convolution, a = −½.
+const KEYS4: Kernel4 = [
+    [0.0, 1.0, 0.0, 0.0],
+    [-0.5, 0.0, 0.5, 0.0],
+    [1.0, -2.5, 2.0, -0.5],
+    [-0.5, 1.5, -1.5, 0.5],
+];
+
+/// The four tap weights of `k` at fraction `t`, one per lane.
+#[inline(always)]
+fn weights4(k: &Kernel4, t: f32) -> f32x4 {
+    let t = f32x4::splat(t);
+    ((f32x4::new(k[3]) * t + f32x4::new(k[2])) * t + f32x4::new(k[1])) * t + f32x4::new(k[0])
+}
+
+impl Resampler {
+    /// Row `i` of the image resampled at (j + s·u[j], i + s·v[j]) for every
+    /// column j, into `out` (`u`, `v` in px; `s` = ±½ for the symmetric
+    /// deformation).
+    ///
+    /// The 4-tap kernels run one tight loop per pixel: offset, weights as
+    /// 4-lane polynomials, the taps from the padded buffer; a pixel whose
+    /// taps leave it takes [`Resampler::at`]. Other kernels call `at` per
+    /// pixel.
+    pub fn row(&self, i: usize, u: &[f32], v: &[f32], s: f32, out: &mut [f32]) {
+        match self.interp {
+            Interp::Bspline => self.row4(i, u, v, s, out, &BSPLINE4),
+            Interp::Bicubic => self.row4(i, u, v, s, out, &KEYS4),
+            Interp::Bilinear | Interp::Bspline5 => {
+                for (j, ((o, &du), &dv)) in out.iter_mut().zip(u).zip(v).enumerate() {
+                    *o = self.at(j as f64 + f64::from(s * du), i as f64 + f64::from(s * dv));
+                }
+            }
         }
-        acc
+    }
+
+    /// [`Resampler::row`] for a 4-tap kernel.
+    ///
+    /// x and y go through the same 4-lane vector (offset, floor, whole
+    /// part, fraction); the tap block's origin is tested with one unsigned
+    /// compare per axis (a negative origin wraps to a huge one).
+    #[inline(always)]
+    fn row4(&self, i: usize, u: &[f32], v: &[f32], s: f32, out: &mut [f32], k: &Kernel4) {
+        let (pw, ph) = (self.pw, self.h + 2 * PAD);
+        let (last_x, last_y) = (pw as u64 - 4, ph as u64 - 4);
+        let sv = f32x4::splat(s);
+        let origin = PAD as i64 - 1;
+        for (j, ((o, &du), &dv)) in out.iter_mut().zip(u).zip(v).enumerate() {
+            let d = f32x4::new([du, dv, 0.0, 0.0]) * sv;
+            let f = d.floor();
+            // (NaN or beyond ±2³¹ px: i32::MIN on x86, far outside.)
+            let kk = f.fast_trunc_int().to_array();
+            let x = (j as i64 + i64::from(kk[0]) + origin) as u64;
+            let y = (i as i64 + i64::from(kk[1]) + origin) as u64;
+            *o = if x <= last_x && y <= last_y {
+                let t = (d - f).to_array();
+                let base = y as usize * pw + x as usize;
+                match self.data.get(base..base + 3 * pw + 4) {
+                    Some(blk) => dot4(blk, pw, weights4(k, t[0]), weights4(k, t[1])),
+                    None => 0.0,
+                }
+            } else {
+                let d = d.to_array();
+                self.at(j as f64 + f64::from(d[0]), i as f64 + f64::from(d[1]))
+            };
+        }
     }
 }
 
@@ -119,7 +268,7 @@ fn mirror(k: isize, n: usize) -> usize {
     k as usize
 }
 
-fn bspline_at(c: &Array2<f32>, x: f64, y: f64) -> f32 {
+fn bspline_at(c: &ndarray::ArrayView2<f32>, x: f64, y: f64) -> f32 {
     let (h, w) = c.dim();
     let (x0, y0) = (x.floor(), y.floor());
     let (wx, wy) = (bspline_weights(x - x0), bspline_weights(y - y0));
@@ -137,23 +286,6 @@ fn bspline_at(c: &Array2<f32>, x: f64, y: f64) -> f32 {
     acc as f32
 }
 
-fn bspline32(t: f32) -> [f32; 4] {
-    const SIXTH: f32 = 1.0 / 6.0;
-    let t2 = t * t;
-    let t3 = t2 * t;
-    let u = 1.0 - t;
-    let w3 = t3 * SIXTH;
-    let w0 = u * u * u * SIXTH;
-    // w1 = (3t³ − 6t² + 4)/6; w2 = 1 − w0 − w1 − w3 (partition of unity).
-    let w1 = 0.5 * t3 - t2 + 2.0 / 3.0;
-    [w0, w1, 1.0 - w0 - w1 - w3, w3]
-}
-
-fn keys32(t: f32) -> [f32; 4] {
-    let k = keys(f64::from(t));
-    k.map(|v| v as f32)
-}
-
 fn bspline_weights(t: f64) -> [f64; 4] {
     let t2 = t * t;
     let t3 = t2 * t;
@@ -168,61 +300,82 @@ fn bspline_weights(t: f64) -> [f64; 4] {
 
 /// Cubic B-spline coefficients of an image (separable recursive prefilter,
 /// mirror boundaries; Unser 1999, Thévenaz et al. 2000).
+///
+/// Rows and columns both run as blocks with one lane per line, in f32
+/// (see [`columns_prefilter`] and `filter::for_row_blocks`): a recursion
+/// along one line is a chain of dependent operations, eight or more lines
+/// side by side vectorise, and no transpose of the whole image is needed.
 pub fn bspline_coefficients(img: &Array2<f32>, poles: &[f64]) -> Array2<f32> {
-    // Rows, transpose, rows again (= columns), transpose back; rows in
-    // parallel.
-    let filter_rows = |m: &mut Array2<f32>| {
-        m.axis_iter_mut(Axis(0))
-            .into_par_iter()
-            .for_each(|mut row| {
-                let mut line: Vec<f64> = row.iter().map(|&v| f64::from(v)).collect();
-                prefilter(&mut line, poles);
-                for (o, v) in row.iter_mut().zip(line) {
-                    *o = v as f32;
-                }
-            });
-    };
-    let mut c = img.to_owned();
-    filter_rows(&mut c);
-    let mut t = c.t().as_standard_layout().into_owned();
-    filter_rows(&mut t);
-    t.t().as_standard_layout().into_owned()
+    let mut c = img.as_standard_layout().into_owned();
+    let lines = |block: &mut [f32], w: usize| columns_prefilter(block, w, poles);
+    super::filter::for_row_blocks(&mut c, lines);
+    super::filter::for_column_blocks(&mut c, lines);
+    c
+}
+
+/// The B-spline prefilter (gain, then per pole a causal and an
+/// anti-causal first-order recursion with the exact mirror-boundary
+/// initialisation of Unser 1999) down every column of a row-major block `w`
+/// wide, with the column index as the vector lane.
+fn columns_prefilter(block: &mut [f32], w: usize, poles: &[f64]) {
+    let h = block.len() / w.max(1);
+    if h < 2 {
+        return;
+    }
+    let gain: f64 = poles.iter().map(|&z| (1.0 - z) * (1.0 - 1.0 / z)).product();
+    let gain = gain as f32;
+    for v in block.iter_mut() {
+        *v *= gain;
+    }
+    let mut sum = vec![0.0f32; w];
+    for &z in poles {
+        // Causal initialisation, mirror boundary, exact: row k enters with
+        // weight z^k + z^(2h−2−k).
+        let iz = 1.0 / z;
+        let mut zn = z;
+        let mut z2n = z.powi(h as i32 - 1);
+        let (first, last) = (&block[..w], &block[(h - 1) * w..]);
+        for ((s, &a), &b) in sum.iter_mut().zip(first).zip(last) {
+            *s = a + z2n as f32 * b;
+        }
+        z2n = z2n * z2n * iz;
+        for k in 1..h - 1 {
+            let wk = (zn + z2n) as f32;
+            for (s, &v) in sum.iter_mut().zip(&block[k * w..(k + 1) * w]) {
+                *s += wk * v;
+            }
+            zn *= z;
+            z2n *= iz;
+        }
+        let inv = (1.0 / (1.0 - zn * zn)) as f32;
+        for (o, &s) in block[..w].iter_mut().zip(&sum) {
+            *o = s * inv;
+        }
+        let zf = z as f32;
+        for k in 1..h {
+            let (prev, cur) = block[(k - 1) * w..(k + 1) * w].split_at_mut(w);
+            for (c, &p) in cur.iter_mut().zip(prev.iter()) {
+                *c += zf * p;
+            }
+        }
+        let end = (z / (z * z - 1.0)) as f32;
+        {
+            let (prev, cur) = block[(h - 2) * w..h * w].split_at_mut(w);
+            for (c, &p) in cur.iter_mut().zip(prev.iter()) {
+                *c = end * (zf * p + *c);
+            }
+        }
+        for k in (0..h - 1).rev() {
+            let (cur, next) = block[k * w..(k + 2) * w].split_at_mut(w);
+            for (c, &nx) in cur.iter_mut().zip(next.iter()) {
+                *c = zf * (nx - *c);
+            }
+        }
+    }
 }
 
 const CUBIC_POLES: [f64; 1] = [-0.267_949_192_431_122_7];
 const QUINTIC_POLES: [f64; 2] = [-0.430_575_347_099_973, -0.043_096_288_203_264_7];
-
-fn prefilter(c: &mut [f64], poles: &[f64]) {
-    let n = c.len();
-    if n < 2 {
-        return;
-    }
-    let gain: f64 = poles.iter().map(|&z| (1.0 - z) * (1.0 - 1.0 / z)).product();
-    for v in c.iter_mut() {
-        *v *= gain;
-    }
-    for &z in poles {
-        // Causal initialisation, mirror boundary, exact.
-        let iz = 1.0 / z;
-        let mut zn = z;
-        let mut z2n = z.powi(n as i32 - 1);
-        let mut sum = c[0] + z2n * c[n - 1];
-        z2n = z2n * z2n * iz;
-        for &v in &c[1..n - 1] {
-            sum += (zn + z2n) * v;
-            zn *= z;
-            z2n *= iz;
-        }
-        c[0] = sum / (1.0 - zn * zn);
-        for k in 1..n {
-            c[k] += z * c[k - 1];
-        }
-        c[n - 1] = (z / (z * z - 1.0)) * (z * c[n - 2] + c[n - 1]);
-        for k in (0..n - 1).rev() {
-            c[k] = z * (c[k + 1] - c[k]);
-        }
-    }
-}
 
 /// Quintic B-spline weights for the taps at −2..=3 (Thévenaz et al.).
 fn quintic_weights(t: f64) -> [f64; 6] {
@@ -242,7 +395,7 @@ fn quintic_weights(t: f64) -> [f64; 6] {
     [w0, t0 + t1, x2, x3, t0 - t1, w5]
 }
 
-fn quintic_at(c: &Array2<f32>, x: f64, y: f64) -> f32 {
+fn quintic_at(c: &ndarray::ArrayView2<f32>, x: f64, y: f64) -> f32 {
     let (h, w) = c.dim();
     let (x0, y0) = (x.floor(), y.floor());
     let (wx, wy) = (quintic_weights(x - x0), quintic_weights(y - y0));
@@ -262,7 +415,7 @@ fn quintic_at(c: &Array2<f32>, x: f64, y: f64) -> f32 {
 
 /// Samples `img` at (x right, y down) px; edges are clamped (mirrored for
 /// B-splines, where `img` holds the coefficients).
-fn sample(img: &Array2<f32>, x: f64, y: f64, interp: Interp) -> f32 {
+fn sample(img: &ndarray::ArrayView2<f32>, x: f64, y: f64, interp: Interp) -> f32 {
     let (h, w) = img.dim();
     let clamp = |k: isize, n: usize| k.clamp(0, n as isize - 1) as usize;
     let (x0, y0) = (x.floor(), y.floor());
@@ -424,6 +577,7 @@ pub fn deform(
     let mut oa = Array2::<f32>::zeros((h, w));
     let mut ob = Array2::<f32>::zeros((h, w));
     let mut out = Array2::from_elem((h, w), false);
+    let inside = |x: f64, y: f64| (-0.5..=xmax).contains(&x) && (-0.5..=ymax).contains(&y);
     oa.axis_iter_mut(Axis(0))
         .into_par_iter()
         .zip(ob.axis_iter_mut(Axis(0)))
@@ -431,16 +585,34 @@ pub fn deform(
         .enumerate()
         .for_each(|(i, ((mut ra, mut rb), mut ro))| {
             let (ru, rv) = (du.row(i), dv.row(i));
-            let y = i as f64;
-            for j in 0..w {
-                let (hx, hy) = (0.5 * f64::from(ru[j]), 0.5 * f64::from(rv[j]));
-                let x = j as f64;
-                let (xa, ya, xb, yb) = (x - hx, y - hy, x + hx, y + hy);
-                ra[j] = a.at(xa, ya);
-                rb[j] = b.at(xb, yb);
-                let inside =
-                    |x: f64, y: f64| (-0.5..=xmax).contains(&x) && (-0.5..=ymax).contains(&y);
-                ro[j] = !(inside(xa, ya) && inside(xb, yb));
+            let rows = (
+                ra.as_slice_mut(),
+                rb.as_slice_mut(),
+                ro.as_slice_mut(),
+                ru.as_slice(),
+                rv.as_slice(),
+            );
+            // Standard-layout arrays (all made here or by `dense`) always
+            // give slices; the per-pixel loop is the general fallback.
+            if let (Some(ra), Some(rb), Some(ro), Some(ru), Some(rv)) = rows {
+                a.row(i, ru, rv, -0.5, ra);
+                b.row(i, ru, rv, 0.5, rb);
+                let y = i as f64;
+                for (j, ((o, &u), &v)) in ro.iter_mut().zip(ru).zip(rv).enumerate() {
+                    let (hx, hy) = (0.5 * f64::from(u), 0.5 * f64::from(v));
+                    let x = j as f64;
+                    *o = !(inside(x - hx, y - hy) && inside(x + hx, y + hy));
+                }
+            } else {
+                let y = i as f64;
+                for j in 0..w {
+                    let (hx, hy) = (0.5 * f64::from(ru[j]), 0.5 * f64::from(rv[j]));
+                    let x = j as f64;
+                    let (xa, ya, xb, yb) = (x - hx, y - hy, x + hx, y + hy);
+                    ra[j] = a.at(xa, ya);
+                    rb[j] = b.at(xb, yb);
+                    ro[j] = !(inside(xa, ya) && inside(xb, yb));
+                }
             }
         });
     (oa, ob, out)
@@ -450,12 +622,45 @@ pub fn deform(
 mod tests {
     use super::*;
 
+    /// The line prefilter in f64 (the reference for the lane version).
+    fn prefilter(c: &mut [f64], poles: &[f64]) {
+        let n = c.len();
+        if n < 2 {
+            return;
+        }
+        let gain: f64 = poles.iter().map(|&z| (1.0 - z) * (1.0 - 1.0 / z)).product();
+        for v in c.iter_mut() {
+            *v *= gain;
+        }
+        for &z in poles {
+            // Causal initialisation, mirror boundary, exact.
+            let iz = 1.0 / z;
+            let mut zn = z;
+            let mut z2n = z.powi(n as i32 - 1);
+            let mut sum = c[0] + z2n * c[n - 1];
+            z2n = z2n * z2n * iz;
+            for &v in &c[1..n - 1] {
+                sum += (zn + z2n) * v;
+                zn *= z;
+                z2n *= iz;
+            }
+            c[0] = sum / (1.0 - zn * zn);
+            for k in 1..n {
+                c[k] += z * c[k - 1];
+            }
+            c[n - 1] = (z / (z * z - 1.0)) * (z * c[n - 2] + c[n - 1]);
+            for k in (0..n - 1).rev() {
+                c[k] = z * (c[k + 1] - c[k]);
+            }
+        }
+    }
+
     #[test]
     fn interpolators_are_exact_at_nodes_and_on_linear_ramps() {
         let img = Array2::from_shape_fn((8, 9), |(i, j)| (2 * i + 3 * j) as f32);
         for interp in [Interp::Bilinear, Interp::Bicubic] {
-            assert_eq!(sample(&img, 4.0, 3.0, interp), 18.0);
-            let v = sample(&img, 4.25, 3.5, interp);
+            assert_eq!(sample(&img.view(), 4.0, 3.0, interp), 18.0);
+            let v = sample(&img.view(), 4.25, 3.5, interp);
             assert!((v - (7.0 + 12.75)).abs() < 1e-4, "{interp:?} {v}");
         }
         // B-splines interpolate (exact at nodes) and reproduce a ramp away
@@ -468,7 +673,38 @@ mod tests {
         let v = r.at(15.25, 16.5);
         assert!((v - (33.0 + 45.75)).abs() < 1e-3, "{v}");
         // Clamped outside.
-        assert_eq!(sample(&img, -5.0, -5.0, Interp::Bilinear), 0.0);
+        assert_eq!(sample(&img.view(), -5.0, -5.0, Interp::Bilinear), 0.0);
+    }
+
+    /// The column blocks give the coefficients of the f64 line prefilter
+    /// run down every column (within f32 rounding: 2e-6 of the largest
+    /// coefficient), for both spline orders.
+    #[test]
+    fn column_prefilter_matches_the_line_prefilter() {
+        let img = Array2::from_shape_fn((37, 150), |(i, j)| {
+            (((i * 7 + j * 13) % 23) as f32) * 9.0 + if (i + j) % 5 == 0 { 200.0 } else { 0.0 }
+        });
+        for poles in [&CUBIC_POLES[..], &QUINTIC_POLES[..]] {
+            let got = bspline_coefficients(&img, poles);
+            let mut want = img.mapv(f64::from);
+            for mut row in want.rows_mut() {
+                let mut l = row.to_vec();
+                prefilter(&mut l, poles);
+                row.assign(&ndarray::Array1::from(l));
+            }
+            for mut col in want.columns_mut() {
+                let mut l = col.to_vec();
+                prefilter(&mut l, poles);
+                col.assign(&ndarray::Array1::from(l));
+            }
+            let err = got
+                .iter()
+                .zip(&want)
+                .map(|(&g, &w)| (f64::from(g) - w).abs())
+                .fold(0.0, f64::max);
+            let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            assert!(err < 2e-6 * scale, "max error {err} of {scale}");
+        }
     }
 
     #[test]

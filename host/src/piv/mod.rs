@@ -74,15 +74,10 @@ impl Clip {
             Clip::Off => None,
             Clip::Level(l) => Some(l),
             Clip::Auto => {
-                let (max, at) = img.iter().fold((f32::NEG_INFINITY, 0usize), |(m, n), &v| {
-                    if v > m {
-                        (v, 1)
-                    } else if v == m {
-                        (m, n + 1)
-                    } else {
-                        (m, n)
-                    }
-                });
+                let v = img.as_standard_layout();
+                let v = v.as_slice().unwrap_or_default();
+                let max = correlate::max_of(v, f32::NEG_INFINITY);
+                let at = v.iter().filter(|&&x| x == max).count();
                 (max > 0.0 && at >= 16 && at * 1000 >= img.len()).then_some(max)
             }
         }
@@ -227,42 +222,96 @@ fn check(s: &Settings, (h, w): (usize, usize)) -> Result<(), PivError> {
 fn clipped_areas(img: &Array2<f32>, level: Option<f32>, grow: usize) -> Option<Array2<bool>> {
     let l = level?;
     let clipped = img.mapv(|v| v >= l);
-    let core = box_count(&clipped, CLIP_CORE);
     let full = (2 * CLIP_CORE + 1).pow(2) as u32;
-    let eroded = core.mapv(|c| c == full);
-    Some(box_count(&eroded, CLIP_CORE + grow).mapv(|c| c > 0))
+    let eroded = box_count(&clipped, CLIP_CORE, |c| c == full);
+    Some(box_count(&eroded, CLIP_CORE + grow, |c| c > 0))
 }
 
 /// Radius of the erosion that tells a clipped area from a clipped particle.
 const CLIP_CORE: usize = 3;
 
-/// For every pixel, how many set pixels lie within `r` (a (2r+1)² square,
-/// clipped at the image edge): running sums along rows, then along columns,
-/// rows in parallel.
-fn box_count(m: &Array2<bool>, r: usize) -> Array2<u32> {
-    let sum_rows = |src: &Array2<u32>| -> Array2<u32> {
-        let mut out = Array2::<u32>::zeros(src.dim());
-        out.axis_iter_mut(ndarray::Axis(0))
-            .into_par_iter()
-            .zip(src.axis_iter(ndarray::Axis(0)))
-            .for_each(|(mut o, s)| {
-                let n = s.len();
-                let mut acc: u32 = s.iter().take(r.min(n)).sum();
-                for j in 0..n {
-                    if j + r < n {
-                        acc += s[j + r];
-                    }
-                    o[j] = acc;
-                    if j >= r {
-                        acc -= s[j - r];
-                    }
+/// For every pixel, whether the count of set pixels within `r` (a (2r+1)²
+/// square, clipped at the image edge) passes `test`. Separable: a running
+/// count along each row (rows in parallel), then a running sum of those
+/// counts down the columns with one lane per column (vectorises).
+fn box_count(m: &Array2<bool>, r: usize, test: impl Fn(u32) -> bool + Sync) -> Array2<bool> {
+    let (h, w) = m.dim();
+    let mut rows = Array2::<u32>::zeros((h, w));
+    rows.axis_iter_mut(ndarray::Axis(0))
+        .into_par_iter()
+        .zip(m.axis_iter(ndarray::Axis(0)))
+        .for_each(|(mut o, s)| {
+            let mut acc: u32 = s.iter().take(r.min(w)).map(|&b| u32::from(b)).sum();
+            for j in 0..w {
+                if j + r < w {
+                    acc += u32::from(s[j + r]);
                 }
-            });
-        out
-    };
-    let rows = sum_rows(&m.mapv(u32::from));
-    let cols = sum_rows(&rows.t().as_standard_layout().into_owned());
-    cols.t().as_standard_layout().into_owned()
+                o[j] = acc;
+                if j >= r {
+                    acc -= u32::from(s[j - r]);
+                }
+            }
+        });
+    let mut out = Array2::from_elem((h, w), false);
+    let mut sum = vec![0u32; w];
+    for k in 0..r.min(h) {
+        for (s, &v) in sum.iter_mut().zip(rows.row(k)) {
+            *s += v;
+        }
+    }
+    for i in 0..h {
+        if i + r < h {
+            for (s, &v) in sum.iter_mut().zip(rows.row(i + r)) {
+                *s += v;
+            }
+        }
+        for (o, &s) in out.row_mut(i).iter_mut().zip(&sum) {
+            *o = test(s);
+        }
+        if i >= r {
+            for (s, &v) in sum.iter_mut().zip(rows.row(i - r)) {
+                *s -= v;
+            }
+        }
+    }
+    out
+}
+
+/// Counts of set pixels in any square, from a summed-area table.
+struct SummedArea {
+    /// (h + 1) × (w + 1) running sums, row-major: `s[i][j]` counts the set
+    /// pixels above row i and left of column j.
+    s: Vec<u32>,
+    w1: usize,
+}
+
+impl SummedArea {
+    fn new(m: &Array2<bool>) -> SummedArea {
+        let (h, w) = m.dim();
+        let w1 = w + 1;
+        let mut s = vec![0u32; (h + 1) * w1];
+        for (i, row) in m.rows().into_iter().enumerate() {
+            let mut acc = 0u32;
+            let (above, here) = s.split_at_mut((i + 1) * w1);
+            let above = &above[i * w1..];
+            for (j, &v) in row.iter().enumerate() {
+                acc += u32::from(v);
+                here[j + 1] = above[j + 1] + acc;
+            }
+        }
+        SummedArea { s, w1 }
+    }
+
+    /// Set pixels in the `n × n` square at row `y0`, column `x0`.
+    fn count(&self, y0: usize, x0: usize, n: usize) -> u32 {
+        self.rect(y0, y0 + n, x0, x0 + n)
+    }
+
+    /// Set pixels in rows `i0..i1`, columns `j0..j1`.
+    fn rect(&self, i0: usize, i1: usize, j0: usize, j1: usize) -> u32 {
+        let at = |i: usize, j: usize| self.s[i * self.w1 + j];
+        (at(i1, j1) + at(i0, j0)) - (at(i0, j1) + at(i1, j0))
+    }
 }
 
 /// Runs PIV on a pair; the field lives on the last pass's grid.
@@ -383,6 +432,7 @@ fn pass(
 ) -> (Field, f64) {
     let plan = Plan::new(grid.size);
     let n = grid.size;
+    let excluded_sat = excluded.map(SummedArea::new);
     let results: Vec<(f64, f64, f64, f64, Option<NoPeak>)> = (0..grid.len())
         .into_par_iter()
         .map_init(
@@ -394,11 +444,14 @@ fn pass(
                 if mask.is_some_and(|m| m[[yc.min(m.dim().0 - 1), xc.min(m.dim().1 - 1)]]) {
                     return (0.0, 0.0, 0.0, 0.0, Some(NoPeak::NoSignal));
                 }
-                if let Some(m) = excluded {
-                    sc.masked.clear();
-                    for i in 0..n {
-                        for j in 0..n {
-                            sc.masked.push(m[[y0 + i, x0 + j]]);
+                sc.masked.clear();
+                if let (Some(m), Some(sat)) = (excluded, &excluded_sat) {
+                    // Most windows hold no excluded pixel: the summed-area
+                    // table says so in four lookups.
+                    if sat.count(y0, x0, n) > 0 {
+                        for i in 0..n {
+                            let row = m.row(y0 + i);
+                            sc.masked.extend((0..n).map(|j| row[x0 + j]));
                         }
                     }
                 }
@@ -494,4 +547,32 @@ fn pass(
         peak_height: height,
     };
     (field, support)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The separable running counts against counting every square.
+    #[test]
+    fn box_count_matches_brute_force() {
+        let (h, w) = (23, 37);
+        let m = Array2::from_shape_fn((h, w), |(i, j)| (i * 7 + j * 11 + i * j) % 5 < 2);
+        let sat = SummedArea::new(&m);
+        for r in [0, 1, 2, 5, 30] {
+            let got = box_count(&m, r, |c| c % 3 == 1);
+            for i in 0..h {
+                for j in 0..w {
+                    let (i0, i1) = (i.saturating_sub(r), (i + r + 1).min(h));
+                    let (j0, j1) = (j.saturating_sub(r), (j + r + 1).min(w));
+                    let n = (i0..i1)
+                        .flat_map(|a| (j0..j1).map(move |b| (a, b)))
+                        .filter(|&p| m[p])
+                        .count() as u32;
+                    assert_eq!(sat.rect(i0, i1, j0, j1), n);
+                    assert_eq!(got[[i, j]], n % 3 == 1, "r {r} at {i},{j}");
+                }
+            }
+        }
+    }
 }
