@@ -372,6 +372,31 @@ fn piv_on_a_simulated_pair_and_its_errors() {
     // 128x96 with 32-px windows every 16 px: 7 x 5.
     assert_eq!(v.len(), 35);
     assert!(v.iter().all(|x| x.u.is_finite() && x.v.is_finite()));
+    // --repeat times several runs and writes the same vectors once.
+    let out3 = tmp.path().join("v3.csv");
+    let args = |o: &Path| {
+        vec![
+            "piv".to_string(),
+            p(&sim.join("frame_a.png")).to_string(),
+            p(&sim.join("frame_b.png")).to_string(),
+            "-o".into(),
+            p(o).to_string(),
+            "--windows".into(),
+            "32,32".into(),
+        ]
+    };
+    let mut a3 = args(&out3);
+    a3.extend(["--repeat".into(), "3".into()]);
+    let msg = ok(&a3.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(msg.contains("(median of 3)"), "{msg}");
+    assert_eq!(
+        std::fs::read(&out).expect("v"),
+        std::fs::read(&out3).expect("v3")
+    );
+    let mut a0 = args(&out3);
+    a0.extend(["--repeat".into(), "0".into()]);
+    let e = fails(&a0.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(e.contains("--repeat"), "{e}");
 
     // A pair of different sizes, a missing image, an image smaller than the
     // window, a bad window list.

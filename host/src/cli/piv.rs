@@ -59,6 +59,10 @@ pub struct PivArgs {
     /// Minimum correlation peak ratio (1 disables).
     #[arg(long, default_value_t = 1.5)]
     min_peak_ratio: f64,
+    /// Run the PIV this many times (1..=1000) and report the median time:
+    /// for benchmarks (the images are read once, the vectors written once).
+    #[arg(long, default_value_t = 1)]
+    repeat: usize,
 }
 
 /// Runs it.
@@ -113,17 +117,35 @@ pub fn run(a: &PivArgs) -> Result<(), CliError> {
     let ia = load_image(&a.a)?;
     let ib = load_image(&a.b)?;
     let mask = a.mask.as_deref().map(load_mask).transpose()?;
-    let start = std::time::Instant::now();
-    let field = piv(&ia, &ib, mask.as_ref(), &settings)?;
-    let took = start.elapsed();
+    if !(1..=1000).contains(&a.repeat) {
+        return Err(CliError::Usage(format!(
+            "--repeat {}: expected 1..=1000",
+            a.repeat
+        )));
+    }
+    let mut times = Vec::with_capacity(a.repeat);
+    let mut field = None;
+    for _ in 0..a.repeat {
+        let start = std::time::Instant::now();
+        field = Some(piv(&ia, &ib, mask.as_ref(), &settings)?);
+        times.push(start.elapsed());
+    }
+    times.sort();
+    let took = times.get(times.len() / 2).copied().unwrap_or_default();
+    let field = field.ok_or_else(|| CliError::Usage("--repeat 0".into()))?;
     write_vectors(&a.out, &field.vectors())?;
     let (valid, replaced, invalid) = field.counts();
     println!(
-        "{} vectors ({}x{}): {valid} valid, {replaced} replaced, {invalid} invalid; {:.1} ms -> {}",
+        "{} vectors ({}x{}): {valid} valid, {replaced} replaced, {invalid} invalid; {:.1} ms{} -> {}",
         field.grid.len(),
         field.grid.nx,
         field.grid.ny,
         took.as_secs_f64() * 1e3,
+        if a.repeat > 1 {
+            format!(" (median of {})", a.repeat)
+        } else {
+            String::new()
+        },
         a.out.display()
     );
     Ok(())

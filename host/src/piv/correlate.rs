@@ -6,7 +6,7 @@
 //! and one inverse 2-D transform. Plans are made once per window size and
 //! shared by all threads; each thread owns a [`Scratch`].
 
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, OnceLock};
 
 use rustfft::num_complex::Complex32;
 use rustfft::{Fft, FftPlanner};
@@ -26,8 +26,14 @@ impl std::fmt::Debug for Plan {
 
 impl Plan {
     /// Plans for `n × n` windows (any n ≥ 4; powers of two are fastest).
+    /// Plans come from one planner shared by the process, which keeps
+    /// every size it has made: later passes and pairs reuse them.
     pub fn new(n: usize) -> Plan {
-        let mut planner = FftPlanner::new();
+        static PLANNER: OnceLock<Mutex<FftPlanner<f32>>> = OnceLock::new();
+        let planner = PLANNER.get_or_init(|| Mutex::new(FftPlanner::new()));
+        // A poisoned lock only means another thread panicked while
+        // planning; the planner's cache is still valid.
+        let mut planner = planner.lock().unwrap_or_else(|e| e.into_inner());
         Plan {
             n,
             fwd: planner.plan_fft_forward(n),

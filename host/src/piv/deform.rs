@@ -254,6 +254,82 @@ impl Resampler {
     }
 }
 
+/// Row `i` of the symmetric deformation: A resampled at (j − d/2) into
+/// `oa` and B at (j + d/2) into `ob`, d = (u[j], v[j]) px.
+///
+/// For the 4-tap kernels (when both images use the same one) one loop does
+/// both: the kernels are symmetric, so A's fraction is 1 − B's and its
+/// weights are B's reversed (tap block one pixel further left) — one set of
+/// weight polynomials per pixel instead of two.
+pub fn row_pair(
+    a: &Resampler,
+    b: &Resampler,
+    i: usize,
+    u: &[f32],
+    v: &[f32],
+    oa: &mut [f32],
+    ob: &mut [f32],
+) {
+    let k = match (a.interp, b.interp) {
+        (Interp::Bspline, Interp::Bspline) => &BSPLINE4,
+        (Interp::Bicubic, Interp::Bicubic) => &KEYS4,
+        _ => {
+            a.row(i, u, v, -0.5, oa);
+            b.row(i, u, v, 0.5, ob);
+            return;
+        }
+    };
+    let (pw, ph) = (a.pw, a.h + 2 * PAD);
+    if (b.pw, b.h) != (pw, a.h) {
+        a.row(i, u, v, -0.5, oa);
+        b.row(i, u, v, 0.5, ob);
+        return;
+    }
+    let (last_x, last_y) = (pw as u64 - 4, ph as u64 - 4);
+    let origin = PAD as i64 - 1;
+    let half = f32x4::splat(0.5);
+    for (j, (((pa, pb), &du), &dv)) in oa.iter_mut().zip(ob.iter_mut()).zip(u).zip(v).enumerate() {
+        let d = f32x4::new([du, dv, 0.0, 0.0]) * half;
+        let f = d.floor();
+        let t = (d - f).to_array();
+        // (NaN or beyond ±2³¹ px: i32::MIN on x86, far outside.)
+        let kk = f.fast_trunc_int().to_array();
+        let (kx, ky) = (i64::from(kk[0]), i64::from(kk[1]));
+        // B's tap block from (j + kx − 1, i + ky − 1); A's from
+        // (j − kx − 2, i − ky − 2) with the reversed weights.
+        let (xb, yb) = (
+            (j as i64 + kx + origin) as u64,
+            (i as i64 + ky + origin) as u64,
+        );
+        let (xa, ya) = (
+            (j as i64 - kx - 1 + origin) as u64,
+            (i as i64 - ky - 1 + origin) as u64,
+        );
+        let fast = xb <= last_x && yb <= last_y && xa <= last_x && ya <= last_y;
+        if fast {
+            let (wx, wy) = (weights4(k, t[0]), weights4(k, t[1]));
+            let rev = |w: f32x4| {
+                let [w0, w1, w2, w3] = w.to_array();
+                f32x4::new([w3, w2, w1, w0])
+            };
+            let tap = |r: &Resampler, x: u64, y: u64, wx: f32x4, wy: f32x4| {
+                let base = y as usize * pw + x as usize;
+                match r.data.get(base..base + 3 * pw + 4) {
+                    Some(blk) => dot4(blk, pw, wx, wy),
+                    None => 0.0,
+                }
+            };
+            *pb = tap(b, xb, yb, wx, wy);
+            *pa = tap(a, xa, ya, rev(wx), rev(wy));
+        } else {
+            let dd = d.to_array();
+            let (x, y) = (j as f64, i as f64);
+            *pa = a.at(x - f64::from(dd[0]), y - f64::from(dd[1]));
+            *pb = b.at(x + f64::from(dd[0]), y + f64::from(dd[1]));
+        }
+    }
+}
+
 /// Mirror index into 0..n (whole-sample symmetric).
 fn mirror(k: isize, n: usize) -> usize {
     let n = n as isize;
@@ -468,14 +544,23 @@ pub fn dense(
     let pos = |p: f64, n: usize| ((p - first) / step).clamp(-1.0, n as f64);
     // Every pixel column's four taps into the extended grid row (two
     // linearly extrapolated nodes on each side) and their weights: the same
-    // for every row, so computed once.
-    let taps: Vec<(usize, [f64; 4])> = (0..w)
-        .map(|j| {
-            let p = pos(j as f64, grid.nx);
-            let k = p.floor();
-            ((k as isize + 1) as usize, catmull_rom(p - k))
-        })
-        .collect();
+    // for every row, so computed once. Columns sharing taps form a segment;
+    // the weights are kept per column in four arrays, so that within a
+    // segment the loop over pixels vectorises.
+    let mut weights: [Vec<f32>; 4] = Default::default();
+    let mut segments: Vec<(usize, usize, usize)> = Vec::new(); // (k, j0, j1)
+    for j in 0..w {
+        let p = pos(j as f64, grid.nx);
+        let kf = p.floor();
+        let k = (kf as isize + 1) as usize;
+        for (wv, c) in weights.iter_mut().zip(catmull_rom(p - kf)) {
+            wv.push(c as f32);
+        }
+        match segments.last_mut() {
+            Some(seg) if seg.0 == k => seg.2 = j + 1,
+            _ => segments.push((k, j, j + 1)),
+        }
+    }
     let mut du = Array2::<f32>::zeros((h, w));
     let mut dv = Array2::<f32>::zeros((h, w));
     du.axis_iter_mut(Axis(0))
@@ -494,10 +579,28 @@ pub fn dense(
                 extend(&row)
             };
             let (bu, bv) = (blend(u), blend(v));
-            for (j, (k, wt)) in taps.iter().enumerate() {
-                let (a, b) = (&bu[*k..*k + 4], &bv[*k..*k + 4]);
-                ru[j] = (wt[0] * a[0] + wt[1] * a[1] + wt[2] * a[2] + wt[3] * a[3]) as f32;
-                rv[j] = (wt[0] * b[0] + wt[1] * b[1] + wt[2] * b[2] + wt[3] * b[3]) as f32;
+            for (out, nodes) in [(&mut ru, &bu), (&mut rv, &bv)] {
+                for &(k, j0, j1) in &segments {
+                    let a = match nodes.get(k..k + 4) {
+                        Some(&[a0, a1, a2, a3]) => [a0 as f32, a1 as f32, a2 as f32, a3 as f32],
+                        _ => continue,
+                    };
+                    let o = out.slice_mut(ndarray::s![j0..j1]);
+                    let ws = [
+                        &weights[0][j0..j1],
+                        &weights[1][j0..j1],
+                        &weights[2][j0..j1],
+                        &weights[3][j0..j1],
+                    ];
+                    ndarray::Zip::from(o)
+                        .and(ws[0])
+                        .and(ws[1])
+                        .and(ws[2])
+                        .and(ws[3])
+                        .for_each(|o, &w0, &w1, &w2, &w3| {
+                            *o = w0 * a[0] + w1 * a[1] + w2 * a[2] + w3 * a[3];
+                        });
+                }
             }
         });
     (du, dv)
@@ -595,13 +698,16 @@ pub fn deform(
             // Standard-layout arrays (all made here or by `dense`) always
             // give slices; the per-pixel loop is the general fallback.
             if let (Some(ra), Some(rb), Some(ro), Some(ru), Some(rv)) = rows {
-                a.row(i, ru, rv, -0.5, ra);
-                b.row(i, ru, rv, 0.5, rb);
-                let y = i as f64;
+                row_pair(a, b, i, ru, rv, ra, rb);
+                // A at x − d/2 and B at x + d/2 are both inside when
+                // x − |d|/2 and x + |d|/2 are (f32 compares, vectorised).
+                let (y, xmax, ymax) = (i as f32, xmax as f32, ymax as f32);
                 for (j, ((o, &u), &v)) in ro.iter_mut().zip(ru).zip(rv).enumerate() {
-                    let (hx, hy) = (0.5 * f64::from(u), 0.5 * f64::from(v));
-                    let x = j as f64;
-                    *o = !(inside(x - hx, y - hy) && inside(x + hx, y + hy));
+                    let (hx, hy) = ((0.5 * u).abs(), (0.5 * v).abs());
+                    let x = j as f32;
+                    let inside =
+                        x - hx >= -0.5 && x + hx <= xmax && y - hy >= -0.5 && y + hy <= ymax;
+                    *o = !inside;
                 }
             } else {
                 let y = i as f64;
@@ -704,6 +810,44 @@ mod tests {
                 .fold(0.0, f64::max);
             let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
             assert!(err < 2e-6 * scale, "max error {err} of {scale}");
+        }
+    }
+
+    /// The paired loop (A's weights mirrored from B's) gives what each
+    /// image's own row gives, inside and at the edges, for both kernels.
+    #[test]
+    fn paired_rows_match_single_rows() {
+        let (h, w) = (40, 53);
+        let img = Array2::from_shape_fn((h, w), |(i, j)| {
+            ((i * 7 + j * 13) % 31) as f32 + (i as f32).sin()
+        });
+        let img2 = img.mapv(|v| 2.0 * v + 1.0);
+        for interp in [Interp::Bspline, Interp::Bicubic] {
+            let (ra, rb) = (Resampler::new(&img, interp), Resampler::new(&img2, interp));
+            for i in [0, 1, 17, h - 1] {
+                // Offsets from −20 to +20 px, integers included.
+                let u: Vec<f32> = (0..w).map(|j| (j as f32 - 26.0) * 0.77).collect();
+                let v: Vec<f32> = (0..w).map(|j| ((j % 9) as f32 - 4.0) * 0.5).collect();
+                let (mut pa, mut pb) = (vec![0.0; w], vec![0.0; w]);
+                row_pair(&ra, &rb, i, &u, &v, &mut pa, &mut pb);
+                let (mut sa, mut sb) = (vec![0.0; w], vec![0.0; w]);
+                ra.row(i, &u, &v, -0.5, &mut sa);
+                rb.row(i, &u, &v, 0.5, &mut sb);
+                for j in 0..w {
+                    assert!(
+                        (pa[j] - sa[j]).abs() < 1e-3,
+                        "{interp:?} A {i},{j}: {} vs {}",
+                        pa[j],
+                        sa[j]
+                    );
+                    assert!(
+                        (pb[j] - sb[j]).abs() < 1e-3,
+                        "{interp:?} B {i},{j}: {} vs {}",
+                        pb[j],
+                        sb[j]
+                    );
+                }
+            }
         }
     }
 
