@@ -218,11 +218,25 @@ fn check(s: &Settings, (h, w): (usize, usize)) -> Result<(), PivError> {
 /// The clipped areas of `img` (pixels at or above `level`): those that
 /// survive an erosion by `CLIP_CORE` px — so a particle with a clipped core
 /// keeps its pixels — grown back by `grow` px to cover the rim where the
-/// high-pass filter rings at the area's static edge. `None` without a level.
+/// high-pass filter rings at the area's static edge. `None` without a level
+/// or without any area.
 fn clipped_areas(img: &Array2<f32>, level: Option<f32>, grow: usize) -> Option<Array2<bool>> {
     let l = level?;
     let clipped = img.mapv(|v| v >= l);
-    let full = (2 * CLIP_CORE + 1).pow(2) as u32;
+    // An area needs a row with 2·CLIP_CORE + 1 clipped pixels in a row;
+    // clipped particle cores (a few px) have none, and then no area exists.
+    let side = 2 * CLIP_CORE + 1;
+    let has_run = clipped.rows().into_iter().any(|row| {
+        let mut run = 0;
+        row.iter().any(|&c| {
+            run = if c { run + 1 } else { 0 };
+            run >= side
+        })
+    });
+    if !has_run {
+        return None;
+    }
+    let full = (side * side) as u32;
     let eroded = box_count(&clipped, CLIP_CORE, |c| c == full);
     Some(box_count(&eroded, CLIP_CORE + grow, |c| c > 0))
 }
@@ -304,14 +318,14 @@ pub fn piv(
     // either raw image (a clipped area is large next to a residual
     // displacement, so its undeformed outline serves every pass).
     let (la, lb) = (s.clip.level(a), s.clip.level(b));
-    let base = (mask.is_some() || la.is_some() || lb.is_some()).then(|| {
+    let grow = 3 * (s.highpass.max(0.0).round() as usize);
+    let (ca, cb) = rayon::join(|| clipped_areas(a, la, grow), || clipped_areas(b, lb, grow));
+    let base = (mask.is_some() || ca.is_some() || cb.is_some()).then(|| {
         let mut ex = mask
             .cloned()
             .unwrap_or_else(|| Array2::from_elem((h, w), false));
-        let grow = 3 * (s.highpass.max(0.0).round() as usize);
-        let (ca, cb) = rayon::join(|| clipped_areas(a, la, grow), || clipped_areas(b, lb, grow));
-        for c in [ca, cb].into_iter().flatten() {
-            ex.zip_mut_with(&c, |e, &c| *e |= c);
+        for c in [&ca, &cb].into_iter().flatten() {
+            ex.zip_mut_with(c, |e, &c| *e |= c);
         }
         ex
     });
