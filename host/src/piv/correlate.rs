@@ -55,7 +55,8 @@ pub struct Scratch {
     fft: Vec<Complex32>,
     /// The real correlation plane (row-major n×n, lag 0 at index 0).
     c: Vec<f32>,
-    /// The window of image A, then of B, zero-mean (row-major n×n).
+    /// The window of image A (row-major n×n, gray values); masked pixels
+    /// are overwritten with the window's mean.
     pub a: Vec<f32>,
     /// The window of image B.
     pub b: Vec<f32>,
@@ -114,8 +115,8 @@ const FLAT: f64 = 1e-3;
 /// Correlates the windows already in `s.a` and `s.b` (raw gray values).
 ///
 /// Each window is made zero-mean over its unmasked pixels (masked pixels are
-/// set to the mean, so they add nothing); the correlation is normalised by
-/// both energies. Sub-pixel: 3-point Gaussian per axis, the 3-point parabola
+/// set to the mean, so they add nothing) on its way into the FFT buffer; the
+/// correlation is normalised by both energies. Sub-pixel: 3-point Gaussian per axis, the 3-point parabola
 /// where a value is not positive, 0 where neither has a maximum.
 ///
 /// The loops over the window are written so that the compiler vectorises
@@ -123,18 +124,15 @@ const FLAT: f64 = 1e-3;
 /// at 32×32 px the scalar versions cost three times the FFTs.
 pub fn correlate(plan: &Plan, s: &mut Scratch, method: Subpixel) -> Result<Peak, NoPeak> {
     let n = plan.n;
-    let (ea, ma, ka) = zero_mean(&mut s.a, &s.masked);
-    let (eb, mb, kb) = zero_mean(&mut s.b, &s.masked);
+    let (ma, mb, k) = means(&mut s.a, &mut s.b, &s.masked);
+    let (ea, eb) = fill_z(&mut s.z, &s.a, &s.b, ma as f32, mb as f32);
     let n2 = (n * n) as f64;
     // Too few pixels left (an eighth of the window) or no contrast.
-    let flat = |e: f64, m: f64, k: usize| {
+    let flat = |e: f64, m: f64| {
         k < (n * n / 8).max(2) || e / k as f64 <= (FLAT * m.abs().max(1.0)).powi(2)
     };
-    if flat(ea, ma, ka) || flat(eb, mb, kb) {
+    if flat(ea, ma) || flat(eb, mb) {
         return Err(NoPeak::NoSignal);
-    }
-    for ((z, &a), &b) in s.z.iter_mut().zip(&s.a).zip(&s.b) {
-        *z = Complex32::new(a, b);
     }
     // Forward 2-D FFT; the result is left transposed (rows = frequency kx).
     plan.fwd.process_with_scratch(&mut s.z, &mut s.fft);
@@ -161,12 +159,9 @@ pub fn correlate(plan: &Plan, s: &mut Scratch, method: Subpixel) -> Result<Peak,
     plan.inv.process_with_scratch(&mut s.z, &mut s.fft);
     transpose(&s.z, &mut s.t, n);
     plan.inv.process_with_scratch(&mut s.t, &mut s.fft);
-    for (c, z) in s.c.iter_mut().zip(&s.t) {
-        *c = z.re;
-    }
+    let best_raw = real_parts_max(&s.t, &mut s.c);
     let cp = &s.c;
     let norm = 1.0 / (n2 * (ea * eb).sqrt());
-    let best_raw = max_of(cp, f32::NEG_INFINITY);
     let best = f64::from(best_raw) * norm;
     if !best.is_finite() || best <= 0.0 {
         return Err(NoPeak::NoPeak);
@@ -275,48 +270,84 @@ fn sum_lanes(v: &[f32], f: impl Fn(f32) -> f32) -> f64 {
     acc.iter().map(|&a| f64::from(a)).sum::<f64>() + tail
 }
 
-/// Makes `w` zero-mean over unmasked pixels; returns its energy Σw², its
-/// former mean and the number of unmasked pixels.
-fn zero_mean(w: &mut [f32], masked: &[bool]) -> (f64, f64, usize) {
-    if masked.is_empty() {
-        // No mask: the same sums without a lookup per pixel.
-        let cnt = w.len();
-        if cnt == 0 {
-            return (0.0, 0.0, 0);
-        }
-        let mean = sum_lanes(w, |v| v) / cnt as f64;
-        let m32 = mean as f32;
-        for v in w.iter_mut() {
-            *v -= m32;
-        }
-        let e = sum_lanes(w, |v| v * v);
-        return (e, mean, cnt);
-    }
-    // (A mask shorter than the window leaves the rest unmasked.)
-    let k = masked.len().min(w.len());
-    let (head, _) = w.split_at_mut(k);
+/// The means of `a` and `b` over unmasked pixels, and how many there are;
+/// masked pixels are set to the mean, so that after subtracting it they add
+/// nothing. (A mask shorter than the window leaves the rest unmasked.)
+fn means(a: &mut [f32], b: &mut [f32], masked: &[bool]) -> (f64, f64, usize) {
+    let n = a.len().min(b.len());
+    let k = masked.len().min(n);
     let masked = &masked[..k];
-    // Masked pixels to 0 first, so the sums run over the whole window
-    // without a branch (the loops vectorise).
-    for (v, &m) in head.iter_mut().zip(masked) {
-        *v = if m { 0.0 } else { *v };
+    if k > 0 {
+        for ((x, y), &m) in a.iter_mut().zip(b.iter_mut()).zip(masked) {
+            (*x, *y) = if m { (0.0, 0.0) } else { (*x, *y) };
+        }
     }
-    let cnt = w.len() - masked.iter().filter(|&&m| m).count();
+    let cnt = n - masked.iter().filter(|&&m| m).count();
     if cnt == 0 {
-        w.fill(0.0);
         return (0.0, 0.0, 0);
     }
-    let mean = sum_lanes(w, |v| v) / cnt as f64;
-    let m32 = mean as f32;
-    let (head, tail) = w.split_at_mut(k);
-    for (v, &m) in head.iter_mut().zip(masked) {
-        *v = if m { 0.0 } else { *v - m32 };
+    let (ma, mb) = (
+        sum_lanes(a, |v| v) / cnt as f64,
+        sum_lanes(b, |v| v) / cnt as f64,
+    );
+    if k > 0 {
+        let (fa, fb) = (ma as f32, mb as f32);
+        for ((x, y), &m) in a.iter_mut().zip(b.iter_mut()).zip(masked) {
+            (*x, *y) = if m { (fa, fb) } else { (*x, *y) };
+        }
     }
-    for v in tail {
-        *v -= m32;
+    (ma, mb, cnt)
+}
+
+/// `z = (a − ma) + i·(b − mb)`, and the energies Σ(a − ma)², Σ(b − mb)² in
+/// 8 f32 lanes each (one pass, vectorised).
+fn fill_z(z: &mut [Complex32], a: &[f32], b: &[f32], ma: f32, mb: f32) -> (f64, f64) {
+    let (mut ea, mut eb) = ([0.0f32; 8], [0.0f32; 8]);
+    let (mut ta, mut tb) = (0.0f64, 0.0f64);
+    let mut zc = z.chunks_exact_mut(8);
+    let (mut ac, mut bc) = (a.chunks_exact(8), b.chunks_exact(8));
+    for ((zs, xs), ys) in (&mut zc).zip(&mut ac).zip(&mut bc) {
+        for l in 0..8 {
+            let (x, y) = (xs[l] - ma, ys[l] - mb);
+            zs[l] = Complex32::new(x, y);
+            ea[l] += x * x;
+            eb[l] += y * y;
+        }
     }
-    let e = sum_lanes(w, |v| v * v);
-    (e, mean, cnt)
+    for ((zv, &x), &y) in zc
+        .into_remainder()
+        .iter_mut()
+        .zip(ac.remainder())
+        .zip(bc.remainder())
+    {
+        let (x, y) = (x - ma, y - mb);
+        *zv = Complex32::new(x, y);
+        ta += f64::from(x * x);
+        tb += f64::from(y * y);
+    }
+    let sum = |e: [f32; 8]| e.iter().map(|&v| f64::from(v)).sum::<f64>();
+    (sum(ea) + ta, sum(eb) + tb)
+}
+
+/// Copies the real parts of `t` into `c` and returns their maximum (NaNs
+/// ignored), in 8 lanes.
+fn real_parts_max(t: &[Complex32], c: &mut [f32]) -> f32 {
+    let mut acc = [f32::NEG_INFINITY; 8];
+    let mut cc = c.chunks_exact_mut(8);
+    let mut tc = t.chunks_exact(8);
+    for (cs, ts) in (&mut cc).zip(&mut tc) {
+        for l in 0..8 {
+            let v = ts[l].re;
+            cs[l] = v;
+            acc[l] = if v > acc[l] { v } else { acc[l] };
+        }
+    }
+    let mut m = acc.iter().fold(f32::NEG_INFINITY, |m, &x| m.max(x));
+    for (cv, tv) in cc.into_remainder().iter_mut().zip(tc.remainder()) {
+        *cv = tv.re;
+        m = m.max(tv.re);
+    }
+    m
 }
 
 fn transpose(src: &[Complex32], dst: &mut [Complex32], n: usize) {
