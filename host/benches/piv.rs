@@ -11,6 +11,10 @@ use spiv_firmware_sim::sensor::{FrameCamera, FrameCameraParams};
 use spiv_host::piv::{piv, Interp, Settings};
 use std::hint::black_box;
 
+/// The allocator of the `spiv` binary, so that the numbers are the CLI's.
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 struct Case {
     name: &'static str,
     a: Array2<f32>,

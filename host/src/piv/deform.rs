@@ -111,14 +111,10 @@ impl Resampler {
         // Saturating casts: NaN and far-out positions fail the tests below.
         let (xi, yi) = (x0 as i64, y0 as i64);
         match self.interp {
-            Interp::Bspline | Interp::Bicubic => {
+            Interp::Bspline | Interp::Bicubic | Interp::Bilinear => {
                 if let Some(base) = self.taps4(xi, yi) {
                     let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
-                    let k = if self.interp == Interp::Bicubic {
-                        &KEYS4
-                    } else {
-                        &BSPLINE4
-                    };
+                    let k = kernel4(self.interp).unwrap_or(&BSPLINE4);
                     if let Some(blk) = self.data.get(base..base + 3 * self.pw + 4) {
                         return dot4(blk, self.pw, weights4(k, fx), weights4(k, fy));
                     }
@@ -144,7 +140,6 @@ impl Resampler {
                     return acc.iter().zip(wx).map(|(a, w)| a * w as f32).sum();
                 }
             }
-            Interp::Bilinear => {}
         }
         match self.view() {
             Some(img) => sample(&img, x, y, self.interp),
@@ -193,6 +188,24 @@ const KEYS4: Kernel4 = [
     [-0.5, 1.5, -1.5, 0.5],
 ];
 
+/// Bilinear as a 4-tap kernel: 0, 1 − t, t, 0.
+const BILINEAR4: Kernel4 = [
+    [0.0, 1.0, 0.0, 0.0],
+    [0.0, -1.0, 1.0, 0.0],
+    [0.0; 4],
+    [0.0; 4],
+];
+
+/// The 4-tap polynomial form of `interp`, if it has one (not the quintic).
+fn kernel4(interp: Interp) -> Option<&'static Kernel4> {
+    match interp {
+        Interp::Bspline => Some(&BSPLINE4),
+        Interp::Bicubic => Some(&KEYS4),
+        Interp::Bilinear => Some(&BILINEAR4),
+        Interp::Bspline5 => None,
+    }
+}
+
 /// The four tap weights of `k` at fraction `t`, one per lane.
 #[inline(always)]
 fn weights4(k: &Kernel4, t: f32) -> f32x4 {
@@ -210,10 +223,9 @@ impl Resampler {
     /// taps leave it takes [`Resampler::at`]. Other kernels call `at` per
     /// pixel.
     pub fn row(&self, i: usize, u: &[f32], v: &[f32], s: f32, out: &mut [f32]) {
-        match self.interp {
-            Interp::Bspline => self.row4(i, u, v, s, out, &BSPLINE4),
-            Interp::Bicubic => self.row4(i, u, v, s, out, &KEYS4),
-            Interp::Bilinear | Interp::Bspline5 => {
+        match kernel4(self.interp) {
+            Some(k) => self.row4(i, u, v, s, out, k),
+            None => {
                 for (j, ((o, &du), &dv)) in out.iter_mut().zip(u).zip(v).enumerate() {
                     *o = self.at(j as f64 + f64::from(s * du), i as f64 + f64::from(s * dv));
                 }
@@ -270,9 +282,8 @@ pub fn row_pair(
     oa: &mut [f32],
     ob: &mut [f32],
 ) {
-    let k = match (a.interp, b.interp) {
-        (Interp::Bspline, Interp::Bspline) => &BSPLINE4,
-        (Interp::Bicubic, Interp::Bicubic) => &KEYS4,
+    let k = match (kernel4(a.interp), a.interp == b.interp) {
+        (Some(k), true) => k,
         _ => {
             a.row(i, u, v, -0.5, oa);
             b.row(i, u, v, 0.5, ob);
@@ -780,6 +791,28 @@ mod tests {
         assert!((v - (33.0 + 45.75)).abs() < 1e-3, "{v}");
         // Clamped outside.
         assert_eq!(sample(&img.view(), -5.0, -5.0, Interp::Bilinear), 0.0);
+        // The padded fast path of bilinear and bicubic agrees with the
+        // general path, inside, at the edges and beyond the border.
+        let wavy = Array2::from_shape_fn((20, 23), |(i, j)| {
+            ((i * 5 + j * 3) % 11) as f32 + 0.1 * i as f32
+        });
+        for interp in [Interp::Bilinear, Interp::Bicubic] {
+            let r = Resampler::new(&wavy, interp);
+            for (x, y) in [
+                (3.3, 4.7),
+                (0.2, 0.9),
+                (22.6, 19.4),
+                (-3.5, 7.25),
+                (25.0, -2.2),
+                (-40.0, 50.0),
+            ] {
+                let (got, want) = (r.at(x, y), sample(&wavy.view(), x, y, interp));
+                assert!(
+                    (got - want).abs() < 1e-4,
+                    "{interp:?} at {x},{y}: {got} vs {want}"
+                );
+            }
+        }
     }
 
     /// The column blocks give the coefficients of the f64 line prefilter
@@ -822,7 +855,7 @@ mod tests {
             ((i * 7 + j * 13) % 31) as f32 + (i as f32).sin()
         });
         let img2 = img.mapv(|v| 2.0 * v + 1.0);
-        for interp in [Interp::Bspline, Interp::Bicubic] {
+        for interp in [Interp::Bspline, Interp::Bicubic, Interp::Bilinear] {
             let (ra, rb) = (Resampler::new(&img, interp), Resampler::new(&img2, interp));
             for i in [0, 1, 17, h - 1] {
                 // Offsets from −20 to +20 px, integers included.
