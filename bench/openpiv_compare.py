@@ -7,7 +7,8 @@ pipeline of windef.process_image_pair: validation, replacement, symmetric
 deformation, cubic interpolation) and `spiv piv` with the same windows and
 overlap, and prints one table: RMS error against the truth, vectors used,
 and the median wall time of the correlation (images already loaded, no
-file output) over --repeat runs in one process for each engine.
+file output, warm) over --repeat interleaved rounds: OpenPIV, spiv on all
+cores, spiv on one core (OpenPIV's numpy pipeline runs on one).
 
 Both engines use the same windows, so vector k of each is compared to truth
 vector k (OpenPIV labels a window's centre half a pixel lower-right than the
@@ -16,6 +17,7 @@ pixel-centre convention of FORMATS.md; the windows are identical).
 import argparse
 import csv
 import json
+import os
 import pathlib
 import re
 import statistics
@@ -95,7 +97,7 @@ def main():
     ap.add_argument("--spiv", default="target/release/spiv")
     ap.add_argument("--windows", default="64,32,32")
     ap.add_argument("--overlap", type=float, default=0.5)
-    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--repeat", type=int, default=7)
     ap.add_argument("--json", type=pathlib.Path)
     ap.add_argument("--spiv-args", default="", help="extra options for spiv piv")
     args = ap.parse_args()
@@ -107,42 +109,56 @@ def main():
         sys.exit("openpiv is not installed: run bench/openpiv_compare.sh --install")
 
     out = []
-    hdr = f"{'case':<22}{'size':>11}{'vectors':>9}{'OpenPIV rms px':>16}{'spiv rms px':>13}{'OpenPIV ms':>12}{'spiv ms':>9}{'speed-up':>10}"
-    print(f"OpenPIV {version} windef vs spiv, windows {args.windows}, overlap {args.overlap}, median of {args.repeat}")
+    hdr = (f"{'case':<22}{'size':>11}{'vectors':>9}{'OpenPIV rms px':>16}{'spiv rms px':>13}"
+           f"{'OpenPIV ms':>12}{'spiv ms':>9}{'speed-up':>10}{'spiv 1T ms':>12}{'1T speed-up':>13}")
+    print(f"OpenPIV {version} windef vs spiv, windows {args.windows}, overlap {args.overlap}; "
+          f"medians of {args.repeat} interleaved rounds")
     print(hdr)
     print("-" * len(hdr))
     for case in args.cases:
         a, b = load(case / "frame_a.png"), load(case / "frame_b.png")
         tx, ty, tu, tv = read_truth(case / "truth.csv")
-        times = []
+        vec = case / "spiv_vectors.csv"
+
+        def spiv_ms(threads):
+            # One process, the images read once, the PIV run 3 times: the
+            # median of warm runs (spiv piv --repeat), OpenPIV likewise warm.
+            env = dict(os.environ)
+            if threads:
+                env["RAYON_NUM_THREADS"] = str(threads)
+            r = subprocess.run(
+                [args.spiv, "piv", str(case / "frame_a.png"), str(case / "frame_b.png"),
+                 "-o", str(vec), "--windows", args.windows, "--overlap", str(args.overlap),
+                 "--repeat", "3"] + args.spiv_args.split(),
+                check=True, capture_output=True, text=True, env=env)
+            return float(re.search(r"([0-9.]+) ms", r.stdout).group(1))
+
+        # Interleaved rounds (OpenPIV, spiv on all cores, spiv on one), so
+        # that load on a shared machine falls on all three alike.
+        o_times, s_times, s1_times = [], [], []
         for _ in range(args.repeat):
             t0 = time.perf_counter()
             ox, oy, ou, ov = openpiv_run(a, b, windows, args.overlap)
-            times.append(time.perf_counter() - t0)
-        o_ms = statistics.median(times) * 1e3
+            o_times.append(time.perf_counter() - t0)
+            s_times.append(spiv_ms(None))
+            s1_times.append(spiv_ms(1))
+        o_ms = statistics.median(o_times) * 1e3
+        s_ms, s1_ms = statistics.median(s_times), statistics.median(s1_times)
         ou, ov = ou.ravel(), ov.ravel()
         if ou.size != tu.size:
             sys.exit(f"{case}: OpenPIV gave {ou.size} vectors, truth has {tu.size}")
         o_rms, o_n = rms(ou - tu, ov - tv)
-
-        vec = case / "spiv_vectors.csv"
-        # One process, the images read once, the PIV run --repeat times:
-        # the median of warm runs, as for OpenPIV above.
-        r = subprocess.run(
-            [args.spiv, "piv", str(case / "frame_a.png"), str(case / "frame_b.png"),
-             "-o", str(vec), "--windows", args.windows, "--overlap", str(args.overlap),
-             "--repeat", str(args.repeat)] + args.spiv_args.split(),
-            check=True, capture_output=True, text=True)
-        s_ms = float(re.search(r"([0-9.]+) ms", r.stdout).group(1))
         su, sv, flag = read_spiv(vec)
         du, dv = su - tu, sv - tv
         du[flag == 2] = np.nan
         s_rms, s_n = rms(du, dv)
         h, w = a.shape
-        print(f"{case.name:<22}{f'{w}x{h}':>11}{tu.size:>9}{o_rms:>16.4f}{s_rms:>13.4f}{o_ms:>12.1f}{s_ms:>9.1f}{o_ms / s_ms:>9.1f}x")
+        print(f"{case.name:<22}{f'{w}x{h}':>11}{tu.size:>9}{o_rms:>16.4f}{s_rms:>13.4f}"
+              f"{o_ms:>12.1f}{s_ms:>9.1f}{o_ms / s_ms:>9.1f}x{s1_ms:>12.1f}{o_ms / s1_ms:>12.1f}x")
         out.append(dict(case=case.name, width=w, height=h, vectors=int(tu.size),
                         openpiv_rms=o_rms, openpiv_used=o_n, spiv_rms=s_rms, spiv_used=s_n,
-                        openpiv_ms=o_ms, spiv_ms=s_ms))
+                        openpiv_ms=o_ms, spiv_ms=s_ms, spiv_1thread_ms=s1_ms,
+                        cores=os.cpu_count()))
     if args.json:
         args.json.write_text(json.dumps(out, indent=2))
 

@@ -17,7 +17,7 @@ pub enum InterpArg {
     Bspline5,
     /// Keys' bicubic.
     Bicubic,
-    /// Bilinear (fastest).
+    /// Bilinear (least accurate).
     Bilinear,
 }
 

@@ -48,12 +48,36 @@ impl Default for Validation {
 }
 
 fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
+    v.sort_unstable_by(f64::total_cmp);
     let n = v.len();
+    if n == 0 {
+        return 0.0;
+    }
     if n % 2 == 1 {
         v[n / 2]
     } else {
         0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// Up to 8 neighbour values on the stack (the test runs for every vector
+/// of every pass: no allocation per vector).
+#[derive(Default)]
+struct Neighbours {
+    v: [f64; 8],
+    n: usize,
+}
+
+impl Neighbours {
+    fn push(&mut self, x: f64) {
+        if let Some(slot) = self.v.get_mut(self.n) {
+            *slot = x;
+            self.n += 1;
+        }
+    }
+
+    fn values(&mut self) -> &mut [f64] {
+        &mut self.v[..self.n]
     }
 }
 
@@ -75,15 +99,14 @@ pub fn median_test(
     let (ny, nx) = u.dim();
     let before = state.clone();
     let mut rejected = 0;
-    let mut nu = Vec::with_capacity(8);
-    let mut nv = Vec::with_capacity(8);
+    let mut nu = Neighbours::default();
+    let mut nv = Neighbours::default();
     for r in 0..ny {
         for c in 0..nx {
             if before[[r, c]] != State::Valid {
                 continue;
             }
-            nu.clear();
-            nv.clear();
+            (nu.n, nv.n) = (0, 0);
             for dr in -1isize..=1 {
                 for dc in -1isize..=1 {
                     if dr == 0 && dc == 0 {
@@ -125,7 +148,7 @@ pub fn median_test(
                     }
                 }
             }
-            if nu.len() < 2 {
+            if nu.n < 2 {
                 // Unsupported: no neighbour agrees or disagrees. A lone
                 // vector among rejected ones is as likely noise as not.
                 state[[r, c]] = State::Invalid;
@@ -134,9 +157,13 @@ pub fn median_test(
             }
             let mut fails = false;
             for (vals, x) in [(&mut nu, u[[r, c]]), (&mut nv, v[[r, c]])] {
+                let vals = vals.values();
                 let m = median(vals);
-                let mut res: Vec<f64> = vals.iter().map(|y| (y - m).abs()).collect();
-                let rm = median(&mut res);
+                let mut res = [0.0f64; 8];
+                for (o, y) in res.iter_mut().zip(vals.iter()) {
+                    *o = (y - m).abs();
+                }
+                let rm = median(&mut res[..vals.len()]);
                 if (x - m).abs() / (rm + eps) > threshold {
                     fails = true;
                 }
