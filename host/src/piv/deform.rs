@@ -390,7 +390,7 @@ fn bspline_weights(t: f64) -> [f64; 4] {
 ///
 /// Rows and columns both run as blocks with one lane per line, in f32
 /// (see [`columns_prefilter`] and `filter::for_row_blocks`): a recursion
-/// along one line is a chain of dependent operations, eight or more lines
+/// along one line is a chain of dependent operations, 32 or more lines
 /// side by side vectorise, and no transpose of the whole image is needed.
 pub fn bspline_coefficients(img: &Array2<f32>, poles: &[f64]) -> Array2<f32> {
     let mut c = img.as_standard_layout().into_owned();
