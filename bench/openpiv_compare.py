@@ -121,7 +121,7 @@ def main():
         vec = case / "spiv_vectors.csv"
 
         def spiv_ms(threads):
-            # One process, the images read once, the PIV run 3 times: the
+            # One process, the images read once, the PIV run 5 times: the
             # median of warm runs (spiv piv --repeat), OpenPIV likewise warm.
             env = dict(os.environ)
             if threads:
@@ -129,7 +129,7 @@ def main():
             r = subprocess.run(
                 [args.spiv, "piv", str(case / "frame_a.png"), str(case / "frame_b.png"),
                  "-o", str(vec), "--windows", args.windows, "--overlap", str(args.overlap),
-                 "--repeat", "3"] + args.spiv_args.split(),
+                 "--repeat", "5"] + args.spiv_args.split(),
                 check=True, capture_output=True, text=True, env=env)
             return float(re.search(r"([0-9.]+) ms", r.stdout).group(1))
 
