@@ -24,6 +24,17 @@ enum Fill {
     One,
 }
 
+/// A history over the whole frame in `hb`, with every plane of `planes`
+/// pushed.
+fn filled<'a>(hb: &'a mut [u64], w: u16, h: u16, depth: u16, planes: &[u8]) -> History<'a> {
+    let plane = usize::from(w) * usize::from(h) / 8;
+    let mut hist = History::new(hb, w, h, 0, h, depth).unwrap();
+    for bytes in planes.chunks_exact(plane) {
+        hist.push(&PlaneView::new(bytes, w, h).unwrap()).unwrap();
+    }
+    hist
+}
+
 fn stream(w: u16, h: u16, ticks: usize, fill: &Fill) -> Vec<u8> {
     let bytes = usize::from(w) * usize::from(h) / 8;
     match fill {
@@ -150,12 +161,8 @@ proptest! {
     ) {
         let depth = (ticks.min(256) as u16).max(p.n_max);
         let planes = stream(w, h, ticks, &fill);
-        let plane = usize::from(w) * usize::from(h) / 8;
         let mut hb = vec![0u64; History::words_needed(w, h, depth).unwrap()];
-        let mut hist = History::new(&mut hb, w, h, 0, h, depth).unwrap();
-        for bytes in planes.chunks_exact(plane) {
-            hist.push(&PlaneView::new(bytes, w, h).unwrap()).unwrap();
-        }
+        let hist = filled(&mut hb, w, h, depth, &planes);
         let (old, new) = (hist.oldest().unwrap(), hist.newest().unwrap());
         let k = old + ((new - old) as f64 * k_frac) as u32;
         let mut sizes = WorkspaceSizes::for_strip(w, strip_rows.min(h + 3));
@@ -197,12 +204,8 @@ proptest! {
     ) {
         let depth = (ticks.min(256) as u16).max(p.n_max);
         let planes = stream(w, h, ticks, &fill);
-        let plane = usize::from(w) * usize::from(h) / 8;
         let mut hb = vec![0u64; History::words_needed(w, h, depth).unwrap()];
-        let mut hist = History::new(&mut hb, w, h, 0, h, depth).unwrap();
-        for bytes in planes.chunks_exact(plane) {
-            hist.push(&PlaneView::new(bytes, w, h).unwrap()).unwrap();
-        }
+        let hist = filled(&mut hb, w, h, depth, &planes);
         let k = hist.newest().unwrap();
         let px = usize::from(w) * usize::from(h);
         let mut owned = Owned::new(WorkspaceSizes::for_strip(w, h));
@@ -240,12 +243,8 @@ proptest! {
     ) {
         let depth = 256u16;
         let planes = stream(w, h, ticks, &fill);
-        let plane = usize::from(w) * usize::from(h) / 8;
         let mut hb = vec![0u64; History::words_needed(w, h, depth).unwrap()];
-        let mut hist = History::new(&mut hb, w, h, 0, h, depth).unwrap();
-        for bytes in planes.chunks_exact(plane) {
-            hist.push(&PlaneView::new(bytes, w, h).unwrap()).unwrap();
-        }
+        let hist = filled(&mut hb, w, h, depth, &planes);
         let (old, new) = (hist.oldest().unwrap(), hist.newest().unwrap());
         let k = old + ((new - old) as f64 * k_frac) as u32;
         let px = usize::from(w) * usize::from(h);
@@ -280,15 +279,11 @@ proptest! {
         let a = stream(w, h, ticks, &Fill::Rates(seed_a));
         let extra = stream(w, h, ticks, &Fill::Rates(seed_b));
         let b: Vec<u8> = a.iter().zip(&extra).map(|(x, y)| x | y).collect();
-        let plane = usize::from(w) * usize::from(h) / 8;
         let px = usize::from(w) * usize::from(h);
         let depth = (ticks.min(256) as u16).max(p.n_max);
         let t_bgmax = |planes: &[u8]| {
             let mut hb = vec![0u64; History::words_needed(w, h, depth).unwrap()];
-            let mut hist = History::new(&mut hb, w, h, 0, h, depth).unwrap();
-            for bytes in planes.chunks_exact(plane) {
-                hist.push(&PlaneView::new(bytes, w, h).unwrap()).unwrap();
-            }
+            let hist = filled(&mut hb, w, h, depth, planes);
             let (old, new) = (hist.oldest().unwrap(), hist.newest().unwrap());
             let k = old + ((new - old) as f64 * k_frac) as u32;
             let mut counts = vec![0u8; px];
@@ -326,12 +321,8 @@ proptest! {
 fn longest_window_extreme_parameters_all_one_planes() {
     let (w, h) = (64u16, 32u16);
     let planes = stream(w, h, 256, &Fill::One);
-    let plane = usize::from(w) * usize::from(h) / 8;
     let mut hb = vec![0u64; History::words_needed(w, h, 256).unwrap()];
-    let mut hist = History::new(&mut hb, w, h, 0, h, 256).unwrap();
-    for bytes in planes.chunks_exact(plane) {
-        hist.push(&PlaneView::new(bytes, w, h).unwrap()).unwrap();
-    }
+    let hist = filled(&mut hb, w, h, 256, &planes);
     let p = Params {
         n0: 1,
         n_max: 255,

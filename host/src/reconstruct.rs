@@ -76,6 +76,21 @@ pub struct Planes {
     pub data: Vec<u8>,
 }
 
+impl Planes {
+    /// Planes of a simulation held in memory (`simulate_planes`): stored
+    /// bottom-up like the sensor's file, from tick 0, no padding columns.
+    pub fn simulated(width: u16, height: u16, data: Vec<u8>) -> Planes {
+        Planes {
+            width,
+            height,
+            flip: true,
+            crop_width: width,
+            first: 0,
+            data,
+        }
+    }
+}
+
 /// Runs `method` at file tick `at` over `planes` (which must hold the window).
 pub fn frame_from_planes(
     planes: &Planes,

@@ -19,14 +19,7 @@ fn in_process_and_firmware_capped_frames_are_identical() {
     let [ka, kb] = sim.meta.pair;
     // Four bands (the last one short), one without a cap (n_max).
     let caps = vec![6u16, 12, 40];
-    let planes = Planes {
-        width: w,
-        height: h,
-        flip: true,
-        crop_width: w,
-        first: 0,
-        data: data.clone(),
-    };
+    let planes = Planes::simulated(w, h, data.clone());
     let mut cfg = Config::new(ka, kb - ka);
     cfg.params = job.core;
     cfg.pairs = Some(1);

@@ -231,14 +231,7 @@ fn speed(plot_path: &PathBuf) -> Result<(), CliError> {
     let p = &job.request.scene;
     let (w, h) = (p.width, p.height);
     let (data, sim) = simulate_planes(&job.request)?;
-    let planes = Planes {
-        width: w,
-        height: h,
-        flip: true,
-        crop_width: w,
-        first: 0,
-        data,
-    };
+    let planes = Planes::simulated(w, h, data);
     let [ka, kb] = sim.meta.pair.map(u64::from);
     let dt = (kb - ka) as f64;
     let truth = sim.scene.truth_vectors(&vector_grid(w, h, 32, 16), dt);

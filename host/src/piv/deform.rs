@@ -215,53 +215,12 @@ fn weights4(k: &Kernel4, t: f32) -> f32x4 {
 
 impl Resampler {
     /// Row `i` of the image resampled at (j + s·u[j], i + s·v[j]) for every
-    /// column j, into `out` (`u`, `v` in px; `s` = ±½ for the symmetric
-    /// deformation).
-    ///
-    /// The 4-tap kernels run one tight loop per pixel: offset, weights as
-    /// 4-lane polynomials, the taps from the padded buffer; a pixel whose
-    /// taps leave it takes [`Resampler::at`]. Other kernels call `at` per
-    /// pixel.
+    /// column j, into `out` (`u`, `v` in px), one [`Resampler::at`] per
+    /// pixel: the general path of [`row_pair`] (two images of different
+    /// kernels or sizes, the quintic B-spline).
     pub fn row(&self, i: usize, u: &[f32], v: &[f32], s: f32, out: &mut [f32]) {
-        match kernel4(self.interp) {
-            Some(k) => self.row4(i, u, v, s, out, k),
-            None => {
-                for (j, ((o, &du), &dv)) in out.iter_mut().zip(u).zip(v).enumerate() {
-                    *o = self.at(j as f64 + f64::from(s * du), i as f64 + f64::from(s * dv));
-                }
-            }
-        }
-    }
-
-    /// [`Resampler::row`] for a 4-tap kernel.
-    ///
-    /// x and y go through the same 4-lane vector (offset, floor, whole
-    /// part, fraction); the tap block's origin is tested with one unsigned
-    /// compare per axis (a negative origin wraps to a huge one).
-    #[inline(always)]
-    fn row4(&self, i: usize, u: &[f32], v: &[f32], s: f32, out: &mut [f32], k: &Kernel4) {
-        let (pw, ph) = (self.pw, self.h + 2 * PAD);
-        let (last_x, last_y) = (pw as u64 - 4, ph as u64 - 4);
-        let sv = f32x4::splat(s);
-        let origin = PAD as i64 - 1;
         for (j, ((o, &du), &dv)) in out.iter_mut().zip(u).zip(v).enumerate() {
-            let d = f32x4::new([du, dv, 0.0, 0.0]) * sv;
-            let f = d.floor();
-            // (NaN or beyond ±2³¹ px: i32::MIN on x86, far outside.)
-            let kk = f.fast_trunc_int().to_array();
-            let x = (j as i64 + i64::from(kk[0]) + origin) as u64;
-            let y = (i as i64 + i64::from(kk[1]) + origin) as u64;
-            *o = if x <= last_x && y <= last_y {
-                let t = (d - f).to_array();
-                let base = y as usize * pw + x as usize;
-                match self.data.get(base..base + 3 * pw + 4) {
-                    Some(blk) => dot4(blk, pw, weights4(k, t[0]), weights4(k, t[1])),
-                    None => 0.0,
-                }
-            } else {
-                let d = d.to_array();
-                self.at(j as f64 + f64::from(d[0]), i as f64 + f64::from(d[1]))
-            };
+            *o = self.at(j as f64 + f64::from(s * du), i as f64 + f64::from(s * dv));
         }
     }
 }
@@ -272,7 +231,11 @@ impl Resampler {
 /// For the 4-tap kernels (when both images use the same one) one loop does
 /// both: the kernels are symmetric, so A's fraction is 1 − B's and its
 /// weights are B's reversed (tap block one pixel further left) — one set of
-/// weight polynomials per pixel instead of two.
+/// weight polynomials per pixel instead of two. x and y go through the
+/// same 4-lane vector (offset, floor, whole part, fraction); a tap block's
+/// origin is tested with one unsigned compare per axis (a negative origin
+/// wraps to a huge one); a pixel whose taps leave the padded buffer takes
+/// [`Resampler::at`].
 pub fn row_pair(
     a: &Resampler,
     b: &Resampler,
@@ -847,7 +810,8 @@ mod tests {
     }
 
     /// The paired loop (A's weights mirrored from B's) gives what each
-    /// image's own row gives, inside and at the edges, for both kernels.
+    /// image's own per-pixel samples give, inside and at the edges, for the
+    /// three 4-tap kernels.
     #[test]
     fn paired_rows_match_single_rows() {
         let (h, w) = (40, 53);
