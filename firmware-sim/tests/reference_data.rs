@@ -1,21 +1,18 @@
-//! The reader against every reference number of `shared/data/spike/README.md`.
-//! Data: `SPIV_DATA`, else `<repo>/../shared/data`; missing data fails loudly.
+//! The reader against every reference number of `data/spike/README.md`.
+//! Data: `SPIV_DATA`, else the repository's `data/`; missing data fails loudly.
 
 use std::path::PathBuf;
 
 use spiv_firmware_sim::formats::dat::{count_upright, DatOptions, DatReader};
 use spiv_firmware_sim::formats::image::read_gray;
 use spiv_firmware_sim::formats::npz::read_npz_spikes;
+use spiv_firmware_sim::formats::reference_data_dir;
 
 fn data_dir() -> PathBuf {
-    let dir = std::env::var_os("SPIV_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data"))
-        });
+    let dir = reference_data_dir();
     assert!(
         dir.join("spike").is_dir(),
-        "shared data not found at {} (set SPIV_DATA)",
+        "reference data not found at {} (set SPIV_DATA)",
         dir.display()
     );
     dir.join("spike")

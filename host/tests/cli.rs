@@ -285,19 +285,17 @@ fn truncated_last_plane_is_refused_or_read_on_request() {
     assert_eq!(img.dimensions(), (16, 8));
 }
 
-/// The shared real capture, when present (SPEC section 9: `SPIV_DATA` or
-/// `../../shared/data` from the crate); missing data fails the test.
-fn shared_data() -> Option<PathBuf> {
-    let dir = std::env::var_os("SPIV_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data"));
-    dir.join("spike").is_dir().then_some(dir)
+/// The reference captures (`SPIV_DATA`, else the repository's `data/`);
+/// missing data fails the test.
+fn reference_data() -> PathBuf {
+    let dir = spiv_firmware_sim::formats::reference_data_dir();
+    assert!(dir.join("spike").is_dir(), "no spike/ in {}", dir.display());
+    dir
 }
 
 #[test]
 fn reconstructs_the_real_reference_capture() {
-    let data =
-        shared_data().expect("shared data not found: set SPIV_DATA to the folder holding spike/");
+    let data = reference_data();
     let tmp = tempfile::tempdir().expect("tempdir");
     let out = tmp.path().join("tfp.png");
     let dat = data.join("spike/spikezoo_base_reds_400x250_301f.dat");

@@ -9,6 +9,15 @@ pub mod npz;
 
 use std::path::PathBuf;
 
+/// The largest frame or plane any reader accepts, px (8192 × 8192): sizes
+/// from a file or a command line are checked against it before anything is
+/// allocated for them.
+pub const MAX_FRAME_PIXELS: u64 = 8192 * 8192;
+
+/// The most spike samples (ticks × pixels) an unpacked `.npz` capture may
+/// declare: 2^30, one byte each before packing (1 GiB).
+pub const MAX_NPZ_SAMPLES: u64 = 1 << 30;
+
 /// Everything reading or writing a file can refuse.
 #[derive(Debug, thiserror::Error)]
 pub enum FormatError {
@@ -19,6 +28,16 @@ pub enum FormatError {
         path: PathBuf,
         /// What went wrong.
         source: std::io::Error,
+    },
+    /// A size beyond what the readers accept (see [`MAX_FRAME_PIXELS`]).
+    #[error("{what}: {got} exceeds the limit of {limit}")]
+    TooLarge {
+        /// What is too large.
+        what: String,
+        /// Its size.
+        got: u64,
+        /// The limit.
+        limit: u64,
     },
     /// A `.dat` with no bytes.
     #[error("{0}: empty file, no spike planes")]
@@ -70,6 +89,15 @@ pub enum FormatError {
         /// What went wrong.
         msg: String,
     },
+}
+
+/// The folder of the reference spike files (`spike/` inside it): `SPIV_DATA`
+/// when set, else the repository's own `data/` (committed with its license,
+/// `data/spike/README.md`), so a clone tests itself with nothing beside it.
+pub fn reference_data_dir() -> PathBuf {
+    std::env::var_os("SPIV_DATA")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../data")))
 }
 
 pub(crate) fn io_err(path: &std::path::Path) -> impl FnOnce(std::io::Error) -> FormatError + '_ {
