@@ -9,7 +9,7 @@ use spiv_firmware_sim::firmware::{run_on_planes, Config, FirmwareError, Method, 
 use spiv_firmware_sim::formats::csv::Vector;
 
 use crate::piv::{piv, PivError, Settings};
-use crate::receive::{receive, Event, ReceivedFrame, Report, Source, SourceError};
+use crate::receive::{receive, Event, FrameLimit, ReceivedFrame, Report, Source, SourceError};
 
 /// Errors of an in-process link run.
 #[derive(Debug, thiserror::Error)]
@@ -78,6 +78,7 @@ pub fn transfer(
     let mut pairs = Vec::new();
     let report = receive::<LinkError>(
         &mut Memory::new(bytes),
+        FrameLimit::default(),
         |e| {
             if let Event::Pair(p) = e {
                 pairs.push(*p);

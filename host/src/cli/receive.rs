@@ -9,7 +9,7 @@ use spiv_firmware_sim::formats::image::{write_gray16, write_gray8};
 use spiv_host::link::{receiver_settings, upright_f32};
 use spiv_host::piv::piv;
 use spiv_host::receive::source::{open, parse_vid_pid};
-use spiv_host::receive::{receive, Event, ReceivedFrame, Spec};
+use spiv_host::receive::{receive, Event, FrameLimit, ReceivedFrame, Spec};
 
 use super::CliError;
 
@@ -38,6 +38,10 @@ pub struct ReceiveArgs {
     /// PIV window side of each pass, px.
     #[arg(long, value_delimiter = ',', default_value = "64,32,32")]
     windows: Vec<usize>,
+    /// Largest frame accepted, WxH px: a message claiming a larger (or an
+    /// empty) frame is counted as corrupt before anything is allocated.
+    #[arg(long, value_name = "WxH", default_value = "8192x8192")]
+    max_frame: FrameLimit,
     /// Print the final counts as JSON instead of a line.
     #[arg(long)]
     json: bool,
@@ -69,6 +73,7 @@ pub fn run(a: &ReceiveArgs) -> Result<(), CliError> {
     let mut vectors = 0usize;
     let report = receive::<CliError>(
         source.as_mut(),
+        a.max_frame,
         |e| {
             match e {
                 Event::Frame(f) => {

@@ -2,6 +2,13 @@
 //! its rows arrived and the CRC of the reassembled samples matches the one
 //! its frame-end message carries, so every delivered frame is bit-exact with
 //! what the sidecar sent; anything else is counted as lost.
+//!
+//! Memory is bounded before anything is allocated: a message whose header
+//! claims a frame of zero pixels or larger than the receiver's
+//! [`FrameLimit`] is counted as rejected (and its frame as lost), and at
+//! most `OPEN_BEHIND + 1` = 3 frames are open at once, so the assembler
+//! holds at most 3 × limit × 2 bytes of samples (400 MB at the default
+//! 8192 × 8192).
 
 use std::collections::BTreeMap;
 
@@ -41,8 +48,11 @@ pub struct AssemblyStats {
     pub lost_frames: u64,
     /// Of those, frames whose CRC did not match.
     pub crc_mismatch: u64,
-    /// Tiles whose payload did not decode, or that disagree with their frame.
-    pub bad_tiles: u64,
+    /// Messages with a valid CRC that were refused all the same: a frame of
+    /// zero pixels or over the [`FrameLimit`], rows outside the frame, a
+    /// size that disagrees with the frame's other messages, a tile payload
+    /// that does not decode, a malformed frame end.
+    pub rejected: u64,
     /// Status messages.
     pub status: u64,
 }
@@ -57,9 +67,52 @@ struct Partial {
     end: Option<FrameEnd>,
 }
 
+/// The largest frame a receiver accepts, px. Default 8192 × 8192.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FrameLimit {
+    /// Widest frame, px.
+    pub width: u16,
+    /// Tallest frame, px.
+    pub height: u16,
+}
+
+impl Default for FrameLimit {
+    fn default() -> Self {
+        FrameLimit {
+            width: 8192,
+            height: 8192,
+        }
+    }
+}
+
+impl FrameLimit {
+    /// Whether a `width × height` frame is non-empty and within the limit.
+    pub fn admits(&self, width: u16, height: u16) -> bool {
+        width > 0 && height > 0 && width <= self.width && height <= self.height
+    }
+}
+
+impl std::str::FromStr for FrameLimit {
+    type Err = String;
+    /// `WxH`, both in `1..=65535`.
+    fn from_str(s: &str) -> Result<Self, String> {
+        let bad = || format!("frame limit {s:?}: expected WxH, each 1..=65535 (e.g. 8192x8192)");
+        let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
+        let (width, height) = (
+            w.trim().parse::<u16>().map_err(|_| bad())?,
+            h.trim().parse::<u16>().map_err(|_| bad())?,
+        );
+        if width == 0 || height == 0 {
+            return Err(bad());
+        }
+        Ok(FrameLimit { width, height })
+    }
+}
+
 /// Frames in, from messages.
 #[derive(Debug, Default)]
 pub struct Assembler {
+    limit: FrameLimit,
     partial: BTreeMap<u32, Partial>,
     closed: std::collections::BTreeSet<u32>,
     highest: Option<u32>,
@@ -73,9 +126,22 @@ pub struct Assembler {
 const OPEN_BEHIND: u32 = 2;
 
 impl Assembler {
-    /// An empty assembler.
-    pub fn new() -> Self {
-        Self::default()
+    /// An empty assembler that accepts frames up to `limit`.
+    pub fn new(limit: FrameLimit) -> Self {
+        Assembler {
+            limit,
+            ..Self::default()
+        }
+    }
+
+    /// Refuses a message; a frame that has nothing open yet is lost with it
+    /// (closed, so its other messages are not counted twice).
+    fn reject(&mut self, id: u32) -> Option<ReceivedFrame> {
+        self.stats.rejected += 1;
+        if !self.partial.contains_key(&id) && self.closed.insert(id) {
+            self.stats.lost_frames += 1;
+        }
+        None
     }
 
     /// Counts so far.
@@ -106,15 +172,15 @@ impl Assembler {
                 }
             }
         }
+        // A size no frame can have is refused whatever its frame's state.
+        if !self.limit.admits(h.width, h.height) {
+            return self.reject(id);
+        }
         if self.closed.contains(&id) {
             return None;
         }
         self.evict(id);
         let px = usize::from(h.width) * usize::from(h.height);
-        if px == 0 {
-            self.stats.bad_tiles += 1;
-            return None;
-        }
         let p = self.partial.entry(id).or_insert_with(|| Partial {
             tick: h.tick,
             width: h.width,
@@ -124,16 +190,14 @@ impl Assembler {
             end: None,
         });
         if p.width != h.width || p.height != h.height || p.tick != h.tick {
-            self.stats.bad_tiles += 1;
-            return None;
+            return self.reject(id);
         }
         match h.kind {
             Kind::FrameTile => {
                 let (r0, rows) = (usize::from(h.row0), usize::from(h.rows));
                 let w = usize::from(h.width);
                 if rows == 0 || r0 + rows > usize::from(h.height) {
-                    self.stats.bad_tiles += 1;
-                    return None;
+                    return self.reject(id);
                 }
                 let need = sparse_scratch(h.width, h.rows, 2);
                 if self.scratch.len() < need {
@@ -150,17 +214,13 @@ impl Assembler {
                 )
                 .is_err()
                 {
-                    self.stats.bad_tiles += 1;
-                    return None;
+                    return self.reject(id);
                 }
                 p.rows[r0..r0 + rows].fill(true);
             }
             Kind::FrameEnd => match FrameEnd::parse(m.payload) {
                 Ok(e) => p.end = Some(e),
-                Err(_) => {
-                    self.stats.bad_tiles += 1;
-                    return None;
-                }
+                Err(_) => return self.reject(id),
             },
             Kind::Status => return None,
         }

@@ -8,7 +8,7 @@ pub mod source;
 use serde::Serialize;
 use spiv_core::wire::{Decoder, MAX_ENCODED};
 
-pub use assemble::{Assembler, AssemblyStats, Pairer, ReceivedFrame};
+pub use assemble::{Assembler, AssemblyStats, FrameLimit, Pairer, ReceivedFrame};
 pub use source::{Source, SourceError, Spec};
 
 /// Final counts of a reception.
@@ -18,7 +18,10 @@ pub struct Report {
     pub bytes: u64,
     /// Valid messages.
     pub messages: u64,
-    /// Chunks that were not valid messages (COBS, CRC, header, overlong).
+    /// Chunks that were not valid messages (COBS, CRC, header, overlong),
+    /// and valid messages refused by the assembler (a frame of zero pixels
+    /// or over the [`FrameLimit`], rows outside their frame, a tile that
+    /// does not decode).
     pub corrupted: u64,
     /// Messages missing by sequence number.
     pub lost_messages: u64,
@@ -45,10 +48,12 @@ pub enum Event {
     Pair(Box<[ReceivedFrame; 2]>),
 }
 
-/// Reads `source` to its end; calls `on` with every frame and pair, and
-/// `progress` with the running report after every read.
+/// Reads `source` to its end, accepting frames up to `limit`; calls `on`
+/// with every frame and pair, and `progress` with the running report after
+/// every read.
 pub fn receive<E>(
     source: &mut dyn Source,
+    limit: FrameLimit,
     mut on: impl FnMut(Event) -> Result<(), E>,
     mut progress: impl FnMut(&Report),
 ) -> Result<Report, E>
@@ -57,7 +62,7 @@ where
 {
     let mut rx = vec![0u8; MAX_ENCODED];
     let mut dec = Decoder::new(&mut rx);
-    let mut asm = Assembler::new();
+    let mut asm = Assembler::new(limit);
     let mut pairer = Pairer::default();
     let mut buf = vec![0u8; 64 * 1024];
     let mut report = Report::default();
@@ -93,7 +98,7 @@ fn fill(r: &mut Report, dec: &Decoder<'_>, asm: &Assembler, pairer: &Pairer) {
     let a = asm.stats();
     r.bytes = d.bytes;
     r.messages = d.messages;
-    r.corrupted = d.corrupt + d.overflow;
+    r.corrupted = d.corrupt + d.overflow + a.rejected;
     r.lost_messages = d.lost;
     r.late_messages = d.late;
     r.frames = a.frames;
@@ -167,6 +172,7 @@ mod tests {
         let mut got = Vec::new();
         let r = receive::<SourceError>(
             &mut Bytes(std::io::Cursor::new(bytes)),
+            FrameLimit::default(),
             |e| {
                 if let Event::Frame(f) = e {
                     got.push(f);
@@ -199,10 +205,98 @@ mod tests {
         let faults = Faults::parse("drop=0.05,corrupt=0.05,truncate=0.05,reorder=0.1").unwrap();
         let (bytes, sent) = run_fw(faults);
         let (r, got) = frames_of(bytes);
+        // The faults hit: frames were lost and chunks were corrupt, so the
+        // accounting below is tested on a damaged stream.
+        assert!(r.lost_frames > 0 && r.corrupted > 0, "{r:?}");
+        assert!(r.frames > 0, "{r:?}");
         assert_eq!(r.frames + r.lost_frames, sent.len() as u64, "{r:?}");
         for g in &got {
             let s = &sent[g.frame_id as usize];
             assert_eq!(g.data, s.data);
         }
+    }
+
+    /// A tile and a frame end of one frame of `w × h`, well formed (COBS,
+    /// CRC, magic, version), with a raw 8-bit payload of `rows` rows.
+    fn crafted(w: u16, h: u16, rows: u16) -> Vec<u8> {
+        use spiv_core::wire::{encode_message, Encoding, FrameEnd, Header, Kind};
+        let payload = vec![7u8; usize::from(w) * usize::from(rows)];
+        let mut tile = Header {
+            kind: Kind::FrameTile,
+            seq: 0,
+            frame_id: 0,
+            tick: 64,
+            width: w,
+            height: h,
+            row0: 0,
+            rows,
+            encoding: Encoding::Raw8,
+            payload_len: 0,
+        };
+        let end = FrameEnd {
+            pair: 0,
+            member: 0,
+            method: 0,
+            full_scale: 255,
+            dt: 13,
+            tiles: 1,
+            lossy: 0,
+            frame_crc: spiv_core::wire::frame_crc(&vec![7u16; payload.len()]),
+        };
+        let mut out = vec![0u8; 2 * MAX_ENCODED];
+        let n = encode_message(&tile, &payload, &mut out).unwrap();
+        tile.kind = Kind::FrameEnd;
+        tile.seq = 1;
+        tile.rows = 0;
+        let m = encode_message(&tile, &end.to_bytes(), &mut out[n..]).unwrap();
+        out.truncate(n + m);
+        out
+    }
+
+    #[test]
+    fn a_frame_claiming_65535_squared_pixels_is_refused_before_allocation() {
+        // 92 bytes that once made the receiver allocate 8.6 GB and abort.
+        let bytes = crafted(65535, 65535, 0);
+        assert_eq!(bytes.len(), 92);
+        let (r, got) = frames_of(bytes);
+        assert!(got.is_empty());
+        assert_eq!(
+            (r.messages, r.corrupted, r.frames, r.lost_frames),
+            (2, 2, 0, 1)
+        );
+    }
+
+    #[test]
+    fn an_empty_frame_is_counted_not_dropped_silently() {
+        let (r, got) = frames_of(crafted(0, 0, 0));
+        assert!(got.is_empty());
+        assert_eq!(
+            (r.messages, r.corrupted, r.frames, r.lost_frames),
+            (2, 2, 0, 1)
+        );
+        let (r, _) = frames_of(crafted(16, 0, 0));
+        assert_eq!((r.corrupted, r.lost_frames), (2, 1));
+    }
+
+    #[test]
+    fn the_frame_limit_is_the_callers() {
+        // A well-formed 16 × 4 frame is delivered under the default limit …
+        let (r, got) = frames_of(crafted(16, 4, 4));
+        assert_eq!((r.frames, r.corrupted, r.lost_frames), (1, 0, 0));
+        assert_eq!(got[0].data, vec![7u16; 64]);
+        // … and refused, counted, under a 8 × 8 one.
+        let mut asm = Assembler::new("8x8".parse().unwrap());
+        let bytes = crafted(16, 4, 4);
+        let mut rx = vec![0u8; MAX_ENCODED];
+        let mut dec = Decoder::new(&mut rx);
+        let mut input = &bytes[..];
+        while let Some(m) = dec.feed(&mut input) {
+            assert!(asm.push(&m.unwrap()).is_none());
+        }
+        let s = asm.finish();
+        assert_eq!((s.frames, s.rejected, s.lost_frames), (0, 2, 1));
+        assert!("0x8".parse::<FrameLimit>().is_err());
+        assert!("8x65536".parse::<FrameLimit>().is_err());
+        assert!("8".parse::<FrameLimit>().is_err());
     }
 }
