@@ -38,7 +38,8 @@ impl Default for DatOptions {
     }
 }
 
-/// Bytes of one plane, or the error for sizes that are not whole bytes.
+/// Bytes of one plane, or the error for sizes that are not whole bytes or
+/// exceed [`MAX_FRAME_PIXELS`](super::MAX_FRAME_PIXELS).
 pub fn plane_bytes(width: u16, height: u16) -> Result<usize, FormatError> {
     let px = usize::from(width) * usize::from(height);
     if px == 0 || px % 8 != 0 {
@@ -47,14 +48,22 @@ pub fn plane_bytes(width: u16, height: u16) -> Result<usize, FormatError> {
             height: u32::from(height),
         });
     }
+    if px as u64 > super::MAX_FRAME_PIXELS {
+        return Err(FormatError::TooLarge {
+            what: format!("a {width}x{height} plane"),
+            got: px as u64,
+            limit: super::MAX_FRAME_PIXELS,
+        });
+    }
     Ok(px / 8)
 }
 
-/// A streaming `.dat` reader.
+/// A streaming `.dat` reader over a file (or, with
+/// [`DatReader::from_reader`], any seekable bytes).
 #[derive(Debug)]
-pub struct DatReader {
+pub struct DatReader<R = BufReader<File>> {
     path: PathBuf,
-    file: BufReader<File>,
+    file: R,
     file_width: u16,
     width: u16,
     height: u16,
@@ -74,6 +83,27 @@ impl DatReader {
         height: u16,
         opts: DatOptions,
     ) -> Result<DatReader, FormatError> {
+        let file = File::open(path).map_err(io_err(path))?;
+        DatReader::from_reader(
+            BufReader::with_capacity(1 << 16, file),
+            path,
+            width,
+            height,
+            opts,
+        )
+    }
+}
+
+impl<R: Read + Seek> DatReader<R> {
+    /// Reads planes of `width × height` from `source`; `name` names it in
+    /// errors. Sizes are checked before the one plane buffer is allocated.
+    pub fn from_reader(
+        mut source: R,
+        name: &Path,
+        width: u16,
+        height: u16,
+        opts: DatOptions,
+    ) -> Result<DatReader<R>, FormatError> {
         let pb = plane_bytes(width, height)?;
         if opts.strip_head >= width {
             return Err(FormatError::HeadTooWide {
@@ -85,32 +115,24 @@ impl DatReader {
         if opts.strip_head > 0 {
             plane_bytes(out_w, height)?;
         }
-        let file = File::open(path).map_err(io_err(path))?;
-        let len = file.metadata().map_err(io_err(path))?.len();
+        let len = source.seek(SeekFrom::End(0)).map_err(io_err(name))?;
+        source.seek(SeekFrom::Start(0)).map_err(io_err(name))?;
         if len == 0 {
-            return Err(FormatError::Empty(path.to_path_buf()));
+            return Err(FormatError::Empty(name.to_path_buf()));
         }
         let planes = len / pb as u64;
         let extra = len % pb as u64;
-        if extra != 0 && !opts.allow_truncated {
+        if planes == 0 || (extra != 0 && !opts.allow_truncated) {
             return Err(FormatError::Truncated {
-                path: path.to_path_buf(),
-                planes,
-                plane_bytes: pb,
-                extra,
-            });
-        }
-        if planes == 0 {
-            return Err(FormatError::Truncated {
-                path: path.to_path_buf(),
+                path: name.to_path_buf(),
                 planes,
                 plane_bytes: pb,
                 extra,
             });
         }
         Ok(DatReader {
-            path: path.to_path_buf(),
-            file: BufReader::with_capacity(1 << 16, file),
+            path: name.to_path_buf(),
+            file: source,
             file_width: width,
             width: out_w,
             height,
@@ -160,6 +182,16 @@ impl DatReader {
     /// Reads the next plane into `out` (stored row order, head stripped,
     /// `out_plane_bytes()` bytes). `Ok(false)` after the last plane.
     pub fn read_plane(&mut self, out: &mut [u8]) -> Result<bool, FormatError> {
+        if out.len() != self.out_plane_bytes() {
+            return Err(FormatError::Parse {
+                path: self.path.clone(),
+                msg: format!(
+                    "a plane buffer of {} bytes, expected {}",
+                    out.len(),
+                    self.out_plane_bytes()
+                ),
+            });
+        }
         if self.next >= self.planes {
             return Ok(false);
         }
@@ -299,5 +331,47 @@ impl DatWriter {
     pub fn finish(mut self) -> Result<u64, FormatError> {
         self.file.flush().map_err(io_err(&self.path))?;
         Ok(self.planes)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Cursor;
+
+    fn reader(bytes: Vec<u8>, w: u16, h: u16) -> Result<DatReader<Cursor<Vec<u8>>>, FormatError> {
+        DatReader::from_reader(
+            Cursor::new(bytes),
+            Path::new("t.dat"),
+            w,
+            h,
+            DatOptions::default(),
+        )
+    }
+
+    #[test]
+    fn sizes_are_bounded_before_the_plane_buffer_is_allocated() {
+        let e = reader(vec![0; 8], 65535, 65528).unwrap_err();
+        assert!(matches!(e, FormatError::TooLarge { .. }), "{e}");
+        assert!(plane_bytes(8192, 8192).is_ok());
+        assert!(plane_bytes(8200, 8192).is_err());
+        assert!(matches!(
+            reader(Vec::new(), 8, 8).unwrap_err(),
+            FormatError::Empty(_)
+        ));
+        assert!(matches!(
+            reader(vec![0; 7], 8, 8).unwrap_err(),
+            FormatError::Truncated { .. }
+        ));
+    }
+
+    #[test]
+    fn a_plane_buffer_of_the_wrong_size_is_an_error_not_a_panic() {
+        let mut r = reader(vec![0xff; 16], 8, 8).unwrap();
+        assert_eq!(r.planes(), 2);
+        assert!(r.read_plane(&mut [0u8; 3]).is_err());
+        let mut p = [0u8; 8];
+        assert!(r.read_plane(&mut p).unwrap());
+        assert_eq!(p, [0xff; 8]);
     }
 }

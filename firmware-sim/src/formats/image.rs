@@ -4,7 +4,7 @@ use std::path::Path;
 
 use image::{DynamicImage, ImageBuffer, Luma};
 
-use super::FormatError;
+use super::{FormatError, MAX_FRAME_PIXELS};
 
 /// A gray image, upright, row-major.
 #[derive(Debug, Clone, PartialEq)]
@@ -46,9 +46,48 @@ pub fn write_gray16(path: &Path, width: u32, height: u32, data: &[u16]) -> Resul
     buf.save(path).map_err(img_err(path))
 }
 
-/// Reads any gray or color image as gray; 16-bit sources stay 16-bit.
+/// Reads any gray or color image as gray; 16-bit sources stay 16-bit. The
+/// format is told by the content (the extension only where the content
+/// does not tell), and the size is checked against [`MAX_FRAME_PIXELS`]
+/// from the header, before the pixels are decoded.
 pub fn read_gray(path: &Path) -> Result<Gray, FormatError> {
-    let img = image::open(path).map_err(img_err(path))?;
+    let reader = image::ImageReader::open(path).map_err(|e| FormatError::Io {
+        path: path.to_path_buf(),
+        source: e,
+    })?;
+    decode_gray(reader, path)
+}
+
+/// [`read_gray`] over image bytes in memory; `name` names them in errors.
+pub fn read_gray_bytes(bytes: &[u8], name: &Path) -> Result<Gray, FormatError> {
+    decode_gray(image::ImageReader::new(std::io::Cursor::new(bytes)), name)
+}
+
+fn decode_gray<R: std::io::BufRead + std::io::Seek>(
+    mut reader: image::ImageReader<R>,
+    path: &Path,
+) -> Result<Gray, FormatError> {
+    use image::ImageDecoder;
+    // The decoders' own allocation cap: the largest frame at 8 bytes a
+    // pixel (RGBA16), so no image within the pixel limit is refused by it.
+    let mut limits = image::Limits::default();
+    limits.max_alloc = Some(MAX_FRAME_PIXELS * 8);
+    reader.limits(limits);
+    let reader = reader.with_guessed_format().map_err(|e| FormatError::Io {
+        path: path.to_path_buf(),
+        source: e,
+    })?;
+    let decoder = reader.into_decoder().map_err(img_err(path))?;
+    let (width, height) = decoder.dimensions();
+    let px = u64::from(width) * u64::from(height);
+    if px > MAX_FRAME_PIXELS {
+        return Err(FormatError::TooLarge {
+            what: format!("{}: a {width}x{height} image", path.display()),
+            got: px,
+            limit: MAX_FRAME_PIXELS,
+        });
+    }
+    let img = DynamicImage::from_decoder(decoder).map_err(img_err(path))?;
     let (width, height) = (img.width(), img.height());
     let sixteen = matches!(
         img,
@@ -76,5 +115,47 @@ pub fn read_gray(path: &Path) -> Result<Gray, FormatError> {
                 .collect(),
             bits: 8,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A valid 8 × 8 PNG whose header is then made to claim `w × h` (CRC
+    /// fixed, so only the size is wrong).
+    fn png_claiming(w: u32, h: u32) -> Vec<u8> {
+        let mut bytes = Vec::new();
+        image::GrayImage::new(8, 8)
+            .write_to(
+                &mut std::io::Cursor::new(&mut bytes),
+                image::ImageFormat::Png,
+            )
+            .unwrap();
+        // Signature (8), IHDR length (4), "IHDR" (4), width, height, …, CRC.
+        bytes[16..20].copy_from_slice(&w.to_be_bytes());
+        bytes[20..24].copy_from_slice(&h.to_be_bytes());
+        let crc = spiv_core::wire::CRC.checksum(&bytes[12..29]);
+        bytes[29..33].copy_from_slice(&crc.to_be_bytes());
+        bytes
+    }
+
+    #[test]
+    fn an_image_header_over_the_limit_is_refused_before_decoding() {
+        let name = Path::new("big.png");
+        let ok = read_gray_bytes(&png_claiming(8, 8), name).unwrap();
+        assert_eq!((ok.width, ok.height, ok.bits), (8, 8, 8));
+        for (w, h) in [(65535, 65535), (8193, 8192), (1 << 30, 1)] {
+            let e = read_gray_bytes(&png_claiming(w, h), name).unwrap_err();
+            assert!(
+                matches!(e, FormatError::TooLarge { .. } | FormatError::Image { .. }),
+                "{w}x{h}: {e}"
+            );
+        }
+        let e = read_gray_bytes(&png_claiming(65535, 65535), name).unwrap_err();
+        assert!(matches!(e, FormatError::TooLarge { .. }), "{e}");
+        // Bytes of no image format, and a truncated PNG.
+        assert!(read_gray_bytes(b"not an image at all", name).is_err());
+        assert!(read_gray_bytes(&png_claiming(8, 8)[..40], name).is_err());
     }
 }

@@ -4,6 +4,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
+use spiv_firmware_sim::formats::MAX_FRAME_PIXELS;
 use spiv_firmware_sim::scene::{SceneKind, SceneParams};
 use spiv_firmware_sim::simulation::{simulate_to_dir, Request};
 
@@ -64,9 +65,16 @@ pub fn run(a: &SimulateArgs) -> Result<(), CliError> {
             p.width, p.height
         )));
     }
+    let px = u64::from(p.width) * u64::from(p.height);
+    if px > MAX_FRAME_PIXELS {
+        return Err(CliError::Usage(format!(
+            "--width {} --height {}: {px} px, at most {MAX_FRAME_PIXELS}",
+            p.width, p.height
+        )));
+    }
     if let Some(dt) = a.dt {
-        if dt == 0 {
-            return Err(CliError::Usage("--dt must be at least 1 tick".into()));
+        if !(1..=1_000_000).contains(&dt) {
+            return Err(CliError::Usage("--dt must be in 1..=1000000 ticks".into()));
         }
         p.pair_dt = dt;
     }
