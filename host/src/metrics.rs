@@ -54,7 +54,7 @@ pub fn row_profile(field: &[Vector], truth: &[Vector], height: f64) -> Vec<Profi
 /// Errors over the rows of one region.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct RegionError {
-    /// Σ|v − v̂| / Σ|v|.
+    /// Σ|v − v̂| / Σ|v|; NaN (undefined) when Σ|v| = 0.
     pub rmae: f64,
     /// sqrt(mean((v − v̂)²)), px per pair.
     pub rmse: f64,
@@ -79,10 +79,24 @@ pub fn region_error(rows: &[ProfileRow], select: impl Fn(f64) -> bool) -> Region
         n += 1;
     }
     RegionError {
-        rmae: if norm > 0.0 { abs / norm } else { 0.0 },
+        // Undefined, not perfect, where the truth is all zero (or no row
+        // was selected): NaN, printed as NaN and written to JSON as null.
+        rmae: if norm > 0.0 { abs / norm } else { f64::NAN },
         rmse: (sq / n.max(1) as f64).sqrt(),
         rows: n,
         lost,
+    }
+}
+
+/// `a / b` for two RMAEs (frame / spike): infinite when `b` is 0 (a perfect
+/// spike measurement), NaN when either is undefined.
+pub fn rmae_ratio(a: f64, b: f64) -> f64 {
+    if b.is_nan() || a.is_nan() {
+        f64::NAN
+    } else if b > 0.0 {
+        a / b
+    } else {
+        f64::INFINITY
     }
 }
 
@@ -189,6 +203,24 @@ mod tests {
         let low = region_error(&rows, |y| y < 15.0);
         assert_eq!(low.rows, 1);
         assert!((low.rmae - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn rmae_of_an_all_zero_truth_is_undefined_not_perfect() {
+        let truth = [v(0.0, 10.0, 0.0, 0), v(1.0, 10.0, 0.0, 0)];
+        let field = [v(0.0, 10.0, 0.5, 0), v(1.0, 10.0, 0.3, 0)];
+        let e = region_error(&row_profile(&field, &truth, 30.0), |_| true);
+        assert!(e.rmae.is_nan(), "{e:?}");
+        assert!((e.rmse - 0.4).abs() < 1e-12);
+        // No row selected at all: undefined too.
+        assert!(region_error(&[], |_| true).rmae.is_nan());
+        // Ratios carry the undefined value instead of hiding it.
+        assert!(rmae_ratio(0.5, f64::NAN).is_nan());
+        assert!(rmae_ratio(f64::NAN, 0.5).is_nan());
+        assert_eq!(rmae_ratio(0.5, 0.0), f64::INFINITY);
+        assert_eq!(rmae_ratio(0.5, 0.25), 2.0);
+        // JSON has no NaN: it is written as null.
+        assert_eq!(serde_json::to_string(&e.rmae).unwrap(), "null");
     }
 
     #[test]

@@ -11,7 +11,7 @@ use plotters::prelude::*;
 use serde_json::json;
 use spiv_firmware_sim::scene::{vector_grid, SceneKind, SceneParams};
 use spiv_firmware_sim::simulation::simulate_planes;
-use spiv_host::metrics::{mean_ci, region_error, row_profile, MeanCi};
+use spiv_host::metrics::{mean_ci, region_error, rmae_ratio, row_profile, MeanCi};
 use spiv_host::pipeline::{run as run_job, to_f32, Job, Source};
 use spiv_host::piv::{piv, Interp, Settings};
 use spiv_host::reconstruct::{frame_from_planes, Method, Planes};
@@ -122,8 +122,8 @@ fn paper(seeds: u64, json_out: Option<&PathBuf>, dwell_cap: Option<f64>) -> Resu
             }
             let f = &o.measured[0];
             for (k, x) in o.measured[1..].iter().enumerate() {
-                ratios[k][0].push(f.glare.rmae / x.glare.rmae.max(1e-12));
-                ratios[k][1].push(f.rest.rmae / x.rest.rmae.max(1e-12));
+                ratios[k][0].push(rmae_ratio(f.glare.rmae, x.glare.rmae));
+                ratios[k][1].push(rmae_ratio(f.rest.rmae, x.rest.rmae));
             }
             b.inc(1);
         }

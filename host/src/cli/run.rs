@@ -10,6 +10,7 @@ use spiv_firmware_sim::formats::csv::write_vectors;
 use spiv_firmware_sim::formats::image::{write_gray16, write_gray8};
 use spiv_firmware_sim::scene::{SceneKind, SceneParams, PIXEL_MM, TICK_HZ};
 use spiv_firmware_sim::simulation::write_frame;
+use spiv_host::metrics::rmae_ratio;
 use spiv_host::pipeline::{run as run_job, Job, Measured, Outcome, Source};
 use spiv_host::plot::{self, Series};
 
@@ -133,18 +134,10 @@ pub fn print_table(o: &Outcome, job: &Job) {
         println!(
             "{:<20} | {:>6.3} {:>22} | {:>6.3}",
             format!("frame / {}", x.source.name()),
-            ratio(f.glare.rmae, x.glare.rmae),
+            rmae_ratio(f.glare.rmae, x.glare.rmae),
             "",
-            ratio(f.rest.rmae, x.rest.rmae)
+            rmae_ratio(f.rest.rmae, x.rest.rmae)
         );
-    }
-}
-
-fn ratio(a: f64, b: f64) -> f64 {
-    if b > 0.0 {
-        a / b
-    } else {
-        f64::INFINITY
     }
 }
 
@@ -252,8 +245,8 @@ pub fn run(a: &RunArgs) -> Result<(), CliError> {
             "piv_ms": x.piv_ms,
         })).collect::<Vec<_>>(),
         "frame_over_adaptive_rmae": {
-            "glare": ratio(o.measured[0].glare.rmae, o.measured[2].glare.rmae),
-            "rest": ratio(o.measured[0].rest.rmae, o.measured[2].rest.rmae),
+            "glare": rmae_ratio(o.measured[0].glare.rmae, o.measured[2].glare.rmae),
+            "rest": rmae_ratio(o.measured[0].rest.rmae, o.measured[2].rest.rmae),
         },
         "stage_ms": { "simulate": o.stage_ms[0], "sidecar": o.stage_ms[1], "piv": o.stage_ms[2] },
         "wire": {
