@@ -53,6 +53,10 @@ pub enum ParamError {
     Gain,
     /// The window length of TFP must be in `1..=depth`.
     Window,
+    /// `full_scale` must be at least 1.
+    FullScale,
+    /// `margin` must be at most [`crate::params::MAX_MARGIN`].
+    Margin,
 }
 
 impl core::fmt::Display for Error {

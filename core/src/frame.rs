@@ -19,7 +19,7 @@ use crate::history::History;
 use crate::integrate::{adapt_region, region_gray};
 use crate::label::{label, LabelStats};
 use crate::params::{Params, MAX_LEVELS};
-use crate::segment::{decode, segment, SegmentStats, Thresholds};
+use crate::segment::{decode, pixel_saturation, segment, Class, SegmentStats, Thresholds};
 use crate::state::Workspace;
 use crate::suppress::background_gray;
 use crate::window::{check_len, Span, Window};
@@ -122,7 +122,7 @@ pub fn reconstruct_rows<G: Gray>(
     let (inner, margin) = if whole && cap >= band {
         (band, 0)
     } else {
-        let inner = cap.saturating_sub(2 * p.margin);
+        let inner = cap.saturating_sub(p.margin.saturating_mul(2));
         if inner == 0 {
             return Err(Error::BufferTooSmall {
                 needed: (2 * usize::from(p.margin) + 1) * width,
@@ -203,17 +203,28 @@ fn strip<G: Gray>(
     stats.labels.noise_regions += lab.noise_regions;
     stats.labels.overflow_regions += lab.overflow_regions;
     stats.labels.dropped_pixels += lab.dropped_pixels;
-    // Background, and particle pixels left outside any region.
+    // Background, and particle pixels left outside any region: those are
+    // background too, at their own saturation time (see
+    // `segment::pixel_saturation`).
     let first = usize::from(e0 - s0) * width;
     let last = usize::from(e1 - s0) * width;
     let out_base = usize::from(e0) * width;
+    let nlev = levels.iter().take_while(|&&n| n != 0).count();
     for i in first..last {
-        let (_, lev) = decode(ws.class[i]);
-        let lev = usize::from(lev);
-        let t = levels.get(lev).copied().unwrap_or(p.n_max);
-        let len = lens.get(lev).copied().unwrap_or(0);
+        let (class, lev) = decode(ws.class[i]);
+        let (c, t, len) = if class == Class::Particle && ws.labels[i] == 0 {
+            let (r, col) = (s0 + (i / width) as u16, (i % width) as u16);
+            pixel_saturation(ctx, &levels[..nlev], r, col)
+        } else {
+            let lev = usize::from(lev);
+            (
+                ws.c_t[i],
+                levels.get(lev).copied().unwrap_or(p.n_max),
+                lens.get(lev).copied().unwrap_or(0),
+            )
+        };
         if let Some(o) = out.get_mut(out_base + i - first) {
-            *o = G::from_level(background_gray(ws.c_t[i], t, len, p, fs));
+            *o = G::from_level(background_gray(c, t, len, p, fs));
         }
     }
     // "Any region" bits, for the rings.

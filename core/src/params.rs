@@ -26,11 +26,11 @@ pub struct Params {
     pub sigma_fpn: Sigma,
     /// Photoelectrons per spike `g` (shot-noise term `b/g`), `>= 1`.
     pub electrons_per_spike: u16,
-    /// Full-scale gray level of the output: 255 for 8-bit, up to 65535.
+    /// Full-scale gray level of the output, `1..=65535` (255 for 8-bit).
     pub full_scale: u16,
     /// Rows computed beyond each side of a strip so regions crossing the
     /// strip's edge are whole (only used when the workspace is smaller than
-    /// the band).
+    /// the band), `0..=MAX_MARGIN`.
     pub margin: u16,
 }
 
@@ -53,8 +53,14 @@ impl Default for Params {
 /// Most segmentation levels: n0 = 1 gives 1, 2, 4, …, 128, 255.
 pub const MAX_LEVELS: usize = 9;
 
+/// Largest strip margin, rows: a strip is `2·margin + 1` rows at least, and
+/// that must fit a `u16` row count.
+pub const MAX_MARGIN: u16 = (u16::MAX - 1) / 2;
+
 impl Params {
     /// Checks every range above; `depth` is the history depth in planes.
+    /// Whatever passes is safe for every computation of the core (the
+    /// property tests draw each field from its type's whole range).
     pub fn validate(&self, depth: u16) -> Result<(), Error> {
         let bad = |p| Err(Error::BadParam(p));
         if self.n_max == 0 || self.n_max > 255 || self.n_max > depth {
@@ -74,6 +80,12 @@ impl Params {
         }
         if self.electrons_per_spike == 0 {
             return bad(ParamError::Gain);
+        }
+        if self.full_scale == 0 {
+            return bad(ParamError::FullScale);
+        }
+        if self.margin > MAX_MARGIN {
+            return bad(ParamError::Margin);
         }
         Ok(())
     }
@@ -143,5 +155,29 @@ mod tests {
         }
         .validate(255)
         .is_err());
+        for (p, e) in [
+            (
+                Params {
+                    margin: 40000,
+                    ..Params::default()
+                },
+                ParamError::Margin,
+            ),
+            (
+                Params {
+                    full_scale: 0,
+                    ..Params::default()
+                },
+                ParamError::FullScale,
+            ),
+        ] {
+            assert_eq!(p.validate(255), Err(Error::BadParam(e)));
+        }
+        assert!(Params {
+            margin: MAX_MARGIN,
+            ..Params::default()
+        }
+        .validate(255)
+        .is_ok());
     }
 }

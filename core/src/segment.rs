@@ -149,6 +149,56 @@ pub fn is_saturated(c: u8, win: &Window, n_fs: u16) -> bool {
     win.len > 0 && u32::from(c) * u32::from(win.nominal) >= u32::from(n_fs) * u32::from(win.len)
 }
 
+/// The saturation time of one pixel (band row `row`, column `col`) by its
+/// own spikes: the first level whose window count reaches `N_fs` (rate-scaled
+/// when clipped), else the last. Returns `(count, t_bgmax, window length)`,
+/// the inputs of [`crate::suppress::background_gray`].
+///
+/// For particle pixels that no region took (noise regions under 3 px,
+/// regions past a full table, pixels past a full label table): their
+/// segmentation stopped at detection, so they never got a `t_bgmax`; shown
+/// with their detection window they would be dark pits in a suppressed
+/// background. They are background, so they are suppressed like it. Cost:
+/// about 2·n_max bit reads, paid only for such pixels.
+pub(crate) fn pixel_saturation(
+    ctx: &crate::frame::Ctx<'_, '_>,
+    levels: &[u16],
+    row: u16,
+    col: u16,
+) -> (u8, u16, u16) {
+    let (hist, span, p) = (ctx.hist, ctx.span, ctx.p);
+    let word = usize::from(row) * hist.words_per_row() + usize::from(col) / 64;
+    let shift = col % 64;
+    let bits = |a: u32, e: u32| -> u8 {
+        let n = span
+            .range(a, e)
+            .iter()
+            .filter(|pl| pl.get(word).is_some_and(|w| (w >> shift) & 1 == 1))
+            .count();
+        n.min(255) as u8
+    };
+    // Windows are nested: each level adds the ticks its window has beyond
+    // the previous one (as `saturation_times` counts).
+    let mut last = (0u8, p.n_max, 0u16);
+    let mut prev: Option<Window> = None;
+    for &n in levels {
+        let win = Window::in_history(hist, ctx.k, n);
+        let c = match prev {
+            None => bits(win.start, win.end()),
+            Some(pw) => last
+                .0
+                .saturating_add(bits(win.start, pw.start))
+                .saturating_add(bits(pw.end(), win.end())),
+        };
+        last = (c, n, win.len);
+        prev = Some(win);
+        if is_saturated(c, &win, p.n_fs) {
+            break;
+        }
+    }
+    last
+}
+
 /// Tile geometry of a strip: tiles are 16×16 and aligned to band row 0.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Tiles {

@@ -68,7 +68,8 @@ fn fill() -> impl Strategy<Value = Fill> {
     prop_oneof![6 => any::<u64>().prop_map(Fill::Rates), 1 => Just(Fill::Zero), 1 => Just(Fill::One)]
 }
 
-fn params() -> impl Strategy<Value = Params> {
+/// Parameters in the ranges the algorithm is meant for, with their edges.
+fn sane_params() -> impl Strategy<Value = Params> {
     (
         1u16..=255,
         1u16..=8,
@@ -91,6 +92,65 @@ fn params() -> impl Strategy<Value = Params> {
             full_scale: fs,
             margin,
         })
+}
+
+/// Sane parameters with one field drawn from its type's whole range (often
+/// out of its documented range, with the others valid, so the refusal of
+/// that one field is what is tested), or every field drawn so.
+fn any_params() -> impl Strategy<Value = Params> {
+    let edge = || {
+        prop_oneof![
+            any::<u16>(),
+            Just(0u16),
+            Just(u16::MAX),
+            Just(spiv_core::params::MAX_MARGIN + 1)
+        ]
+    };
+    prop_oneof![
+        (sane_params(), 0usize..9, edge()).prop_map(|(mut p, field, v)| {
+            match field {
+                0 => p.n0 = v,
+                1 => p.n_max = v,
+                2 => p.n_fs = v,
+                3 => p.beta = Beta::from_bits(v),
+                4 => p.k_sig = KSig::from_bits(v),
+                5 => p.sigma_fpn = Sigma::from_bits(v),
+                6 => p.electrons_per_spike = v,
+                7 => p.full_scale = v,
+                _ => p.margin = v,
+            }
+            p
+        }),
+        (any::<[u16; 9]>()).prop_map(|[n0, n_max, n_fs, beta, k, s, g, fs, margin]| Params {
+            n0,
+            n_max,
+            n_fs,
+            beta: Beta::from_bits(beta),
+            k_sig: KSig::from_bits(k),
+            sigma_fpn: Sigma::from_bits(s),
+            electrons_per_spike: g,
+            full_scale: fs,
+            margin,
+        }),
+    ]
+}
+
+fn params() -> impl Strategy<Value = Params> {
+    prop_oneof![3 => sane_params(), 1 => any_params()]
+}
+
+/// The ranges `Params`'s documentation states, written out independently of
+/// `Params::validate`.
+fn documented(p: &Params, depth: u16) -> bool {
+    (1..=255).contains(&p.n_max)
+        && p.n_max <= depth
+        && (1..=p.n_max).contains(&p.n0)
+        && p.n_fs >= 1
+        && p.beta.to_bits() > 0
+        && p.k_sig.to_bits() > 0
+        && p.electrons_per_spike >= 1
+        && p.full_scale >= 1
+        && 2 * u32::from(p.margin) < u32::from(u16::MAX)
 }
 
 struct Owned {
@@ -159,7 +219,7 @@ proptest! {
         max_prov in 0u16..40,
         wide in any::<bool>(),
     ) {
-        let depth = (ticks.min(256) as u16).max(p.n_max);
+        let depth = (ticks.min(256) as u16).max(p.n_max.min(256));
         let planes = stream(w, h, ticks, &fill);
         let mut hb = vec![0u64; History::words_needed(w, h, depth).unwrap()];
         let hist = filled(&mut hb, w, h, depth, &planes);
@@ -186,9 +246,12 @@ proptest! {
                 prop_assert!(stats.regions_out == 0 || stats.n_star_sum >= u64::from(stats.regions_out));
                 prop_assert!(stats.n_star_sum <= u64::from(stats.regions_out) * u64::from(p.n_max));
             }
-            // The only refusal possible here: a strip too short for its margins.
+            // Refusals: parameters out of their documented ranges, or a
+            // strip too short for its margins.
+            Err(spiv_core::Error::BadParam(_)) => prop_assert!(!documented(&p, depth)),
             Err(e) => prop_assert!(matches!(e, spiv_core::Error::BufferTooSmall { .. }), "{e:?}"),
         }
+        prop_assert_eq!(p.validate(depth).is_ok(), documented(&p, depth));
     }
 
     /// A row range: no panic, rows outside it untouched, rows inside in
@@ -202,7 +265,7 @@ proptest! {
         r0 in 0u16..48,
         len in 0u16..48,
     ) {
-        let depth = (ticks.min(256) as u16).max(p.n_max);
+        let depth = (ticks.min(256) as u16).max(p.n_max.min(256));
         let planes = stream(w, h, ticks, &fill);
         let mut hb = vec![0u64; History::words_needed(w, h, depth).unwrap()];
         let hist = filled(&mut hb, w, h, depth, &planes);
@@ -223,14 +286,9 @@ proptest! {
                     }
                 }
             }
+            Err(spiv_core::Error::BadParam(_)) => prop_assert!(!documented(&p, depth)),
             Err(e) => prop_assert!(matches!(e, spiv_core::Error::BufferTooSmall { .. }), "{e:?}"),
         }
-        let mut whole = vec![0u16; px];
-        let mut again = vec![0u16; px];
-        let r1 = reconstruct_adaptive(&hist, k, &p, &mut owned.ws(), &mut whole);
-        let r2 = reconstruct_rows(&hist, k, &p, &mut owned.ws(), (0, h), &mut again);
-        prop_assert_eq!(r1.is_ok(), r2.is_ok());
-        prop_assert_eq!(whole, again);
     }
 
     #[test]
@@ -272,7 +330,7 @@ proptest! {
         (w, h) in dims(),
         seed_a in any::<u64>(),
         seed_b in any::<u64>(),
-        p in params(),
+        p in sane_params(),
         ticks in 1usize..260,
         k_frac in 0.0f64..1.0,
     ) {
@@ -280,7 +338,7 @@ proptest! {
         let extra = stream(w, h, ticks, &Fill::Rates(seed_b));
         let b: Vec<u8> = a.iter().zip(&extra).map(|(x, y)| x | y).collect();
         let px = usize::from(w) * usize::from(h);
-        let depth = (ticks.min(256) as u16).max(p.n_max);
+        let depth = (ticks.min(256) as u16).max(p.n_max.min(256));
         let t_bgmax = |planes: &[u8]| {
             let mut hb = vec![0u64; History::words_needed(w, h, depth).unwrap()];
             let hist = filled(&mut hb, w, h, depth, planes);
@@ -396,4 +454,41 @@ fn a_full_region_table_leaves_regions_as_background_and_counts_them() {
         (0..10).map(centre).collect::<Vec<_>>()
     );
     assert!((4..10).all(|b| centre(b) < 255));
+}
+
+#[test]
+fn particle_pixels_outside_any_region_are_suppressed_like_background_not_pits() {
+    // A background firing every third tick and a 2-px blob firing every
+    // tick: the blob is segmented as particle but is too small for a region
+    // (noise, < 3 px). It must render as suppressed background (between
+    // FS/β and 2·FS/β, like every saturated pixel), not at the count of its
+    // detection window (≈ 3 gray: a dark pit in a background of 33).
+    let (w, h) = (64u16, 32u16);
+    let plane = usize::from(w) * usize::from(h) / 8;
+    let blob = [10 * usize::from(w) + 20, 10 * usize::from(w) + 21];
+    let mut planes = Vec::new();
+    for t in 0..128usize {
+        let mut bytes = vec![0u8; plane];
+        for p in 0..usize::from(w) * usize::from(h) {
+            if (t + p * 7) % 3 == 0 || blob.contains(&p) {
+                bytes[p / 8] |= 1 << (p % 8);
+            }
+        }
+        planes.extend(bytes);
+    }
+    let mut hb = vec![0u64; History::words_needed(w, h, 128).unwrap()];
+    let hist = filled(&mut hb, w, h, 128, &planes);
+    let mut owned = Owned::new(WorkspaceSizes::for_strip(w, h));
+    let mut out = vec![0u8; usize::from(w) * usize::from(h)];
+    let p = Params::default();
+    let stats = reconstruct_adaptive(&hist, 64, &p, &mut owned.ws(), &mut out).unwrap();
+    assert!(stats.labels.noise_regions >= 1, "{stats:?}");
+    assert_eq!(stats.labels.regions, 0, "{stats:?}");
+    // Background pixel (5, 5) fires at t ≡ 2 (mod 3): 42 spikes over
+    // t_bgmax = 128, 255·42/(10·32) = 33.5 → 33.
+    assert_eq!(out[5 * usize::from(w) + 5], 33);
+    // The blob saturates at n = 32 with 32 spikes: 255/10 = 25.5.
+    for &i in &blob {
+        assert_eq!(out[i], 26, "blob pixel {i}");
+    }
 }

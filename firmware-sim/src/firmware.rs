@@ -393,11 +393,15 @@ pub fn capped_frame<G: spiv_core::Gray>(
     ws: &mut spiv_core::Workspace<'_>,
     out: &mut [G],
 ) -> Result<(), spiv_core::Error> {
+    p.validate(hist.depth())?;
     let h = hist.rows();
     for b in 0..h.div_ceil(CAP_BAND) {
         let cap = caps.get(usize::from(b)).copied().unwrap_or(p.n_max);
+        let n_max = cap.min(p.n_max).max(1);
+        // A cap below n0 starts the segmentation at the cap itself.
         let q = Params {
-            n_max: cap.clamp(1, p.n_max),
+            n_max,
+            n0: p.n0.min(n_max),
             ..*p
         };
         // Upright band b is stored rows h − 32(b+1) .. h − 32b (bottom-up).

@@ -86,7 +86,9 @@ pub fn adaptive_banded(
     let (w, h) = (planes.width, planes.height);
     let pb = usize::from(w) * usize::from(h) / 8;
     let n = planes.data.len() / pb.max(1);
-    let depth = n.clamp(usize::from(core.n_max.max(2)), 256) as u16;
+    // At least the window limit, at most the 256 planes the core holds
+    // (`max` then `min`: the bounds may cross; the core refuses n_max > 255).
+    let depth = n.max(usize::from(core.n_max.max(2))).min(256) as u16;
     let mut hb = crate::core_run::HistoryBuf::new(w, h, depth).map_err(ReconstructError::from)?;
     let mut hist = hb.history().map_err(ReconstructError::from)?;
     let skip = n.saturating_sub(usize::from(depth));
@@ -131,7 +133,9 @@ pub fn band_caps(field: &[Vector], h: usize, dt: f64, budget: f64, core: &Params
             } else {
                 f64::from(core.n_max)
             };
-            n.clamp(f64::from(2 * core.n0), f64::from(core.n_max)) as u16
+            // Within [2·n0, n_max]; n_max wins where the two cross (n0 near
+            // n_max), and the core then checks n0 ≤ n_max as always.
+            n.max(2.0 * f64::from(core.n0)).min(f64::from(core.n_max)) as u16
         })
         .collect()
 }

@@ -108,7 +108,9 @@ pub fn frame_from_planes(
             planes: planes.first + n,
         });
     }
-    let depth = n.clamp(u64::from(window.max(2)), 256) as u16;
+    // At least the window, at most the 256 planes the core holds (the
+    // bounds cross for window > 256, which the core then refuses).
+    let depth = n.max(u64::from(window.max(2))).min(256) as u16;
     let mut hb = HistoryBuf::new(w, h, depth)?;
     let mut hist = hb.history()?;
     // History ticks count from 0 at the first plane pushed; push the last `depth`.

@@ -8,10 +8,11 @@
 //! regions, windows) and computes intensities in `f64`.
 //!
 //! **Tolerance** (held by `host/tests/reference_parity.rs` on realistic
-//! scenes): classes, saturation times and region windows n* identical for
-//! every pixel; output gray levels within 1 level of 255 for at least 99.9 %
-//! of pixels (the core rounds exact rationals once, so in practice the
-//! difference is at most 1 and almost always 0).
+//! scenes, whole bands, strips with margins and the banded dwell-cap path):
+//! classes, saturation times, labels and region windows n* identical for
+//! every pixel; every output gray level within 1 level of the reference's
+//! unrounded value (the core rounds exact rationals once, so the difference
+//! is at most ½ level plus `f64` rounding).
 
 use spiv_core::Params;
 
@@ -125,23 +126,67 @@ pub fn levels(p: &Params) -> Vec<u16> {
 
 /// The adaptive frame at tick `k` (full-scale `fs`), the way SPEC section 5 reads.
 pub fn adaptive_frame(vol: &SpikeVolume, k: u32, p: &Params, fs: f64) -> RefFrame {
+    adaptive_rows(vol, k, p, fs, (0, vol.rows))
+}
+
+/// The adaptive frame computed on rows `s0..s1` of `vol` alone, as a strip
+/// of the core computes them (its rows and their margins): regions, rings
+/// and tile medians see only these rows, and the 16×16 tiles stay aligned
+/// to row 0 of `vol` (a tile cut by the strip's edge has only its rows in
+/// it; bilinear weights are constant beyond the strip's first and last
+/// tile). The frame returned holds the `s1 − s0` rows.
+pub fn adaptive_rows(
+    vol: &SpikeVolume,
+    k: u32,
+    p: &Params,
+    fs: f64,
+    (s0, s1): (usize, usize),
+) -> RefFrame {
+    let s1 = s1.min(vol.rows);
+    let s0 = s0.min(s1);
+    let w = vol.width;
+    let plane = vol.rows * w;
+    let mut data = Vec::with_capacity(vol.ticks * (s1 - s0) * w);
+    for t in 0..vol.ticks {
+        data.extend_from_slice(&vol.data[t * plane + s0 * w..t * plane + s1 * w]);
+    }
+    let strip = SpikeVolume {
+        width: w,
+        rows: s1 - s0,
+        first: vol.first,
+        ticks: vol.ticks,
+        data,
+    };
+    strip_frame(&strip, s0, k, p, fs)
+}
+
+/// The algorithm on one strip whose first row is row `row0` of the band.
+fn strip_frame(vol: &SpikeVolume, row0: usize, k: u32, p: &Params, fs: f64) -> RefFrame {
     let (w, h) = (vol.width, vol.rows);
     let (k_sig, beta, sigma, g) = params_f64(p);
     let levels = levels(p);
     // Classes, and for each decided pixel the count and window that decided it.
     let mut class: Vec<Option<RefClass>> = vec![None; w * h];
     let mut decided = vec![(0u32, 0u16, 0u32); w * h]; // (count, n, len)
-    let (tx, ty) = (w.div_ceil(16), h.div_ceil(16));
+                                                       // Tiles y0..=y1 of the band (16 rows each from band row 0) meet the strip.
+    let (tile_y0, tile_y1) = (row0 / 16, (row0 + h.max(1) - 1) / 16);
+    let (tx, ty) = (w.div_ceil(16), tile_y1 - tile_y0 + 1);
     for (j, &n) in levels.iter().enumerate() {
         let (_, len) = vol.window(k, n);
         let counts: Vec<u32> = (0..w * h).map(|i| vol.count(k, n, i / w, i % w)).collect();
-        // Lower median of the non-particle counts of each 16×16 tile.
+        // Lower median of the non-particle counts of each 16×16 tile (its
+        // rows inside the strip).
         let mut med = vec![0.0f64; tx * ty];
         for a in 0..ty {
+            let band_r0 = 16 * (a + tile_y0);
+            let (lo, hi) = (
+                band_r0.max(row0) - row0,
+                (band_r0 + 16).min(row0 + h) - row0,
+            );
             for b in 0..tx {
                 let mut all = Vec::new();
                 let mut bg = Vec::new();
-                for r in 16 * a..(16 * a + 16).min(h) {
+                for r in lo..hi {
                     for c in 16 * b..(16 * b + 16).min(w) {
                         all.push(counts[r * w + c]);
                         if !matches!(class[r * w + c], Some(RefClass::Particle(_))) {
@@ -154,12 +199,14 @@ pub fn adaptive_frame(vol: &SpikeVolume, k: u32, p: &Params, fs: f64) -> RefFram
                 med[a * tx + b] = f64::from(v[(v.len() - 1) / 2]);
             }
         }
-        // Bilinear between tile centres (16·t + 8), constant beyond the edges.
-        let interp = |pos: f64, tiles: usize| -> (usize, usize, f64) {
+        // Bilinear between tile centres (16·t + 8), constant beyond the
+        // edges; `first` is the band tile index of local tile 0.
+        let interp = |pos: f64, first: usize, tiles: usize| -> (usize, usize, f64) {
             let u = (pos - 8.0) / 16.0;
             let t0 = u.floor();
             let f = u - t0;
-            let cl = |t: f64| t.clamp(0.0, (tiles - 1) as f64) as usize;
+            let (lo, hi) = (first as f64, (first + tiles - 1) as f64);
+            let cl = |t: f64| (t.max(lo).min(hi) - lo) as usize;
             (cl(t0), cl(t0 + 1.0), f)
         };
         let last = j + 1 == levels.len();
@@ -169,8 +216,8 @@ pub fn adaptive_frame(vol: &SpikeVolume, k: u32, p: &Params, fs: f64) -> RefFram
                 if class[i].is_some() {
                     continue;
                 }
-                let (a0, a1, fy) = interp(r as f64 + 0.5, ty);
-                let (b0, b1, fx) = interp(c as f64 + 0.5, tx);
+                let (a0, a1, fy) = interp((row0 + r) as f64 + 0.5, tile_y0, ty);
+                let (b0, b1, fx) = interp(c as f64 + 0.5, 0, tx);
                 let m = |a: usize, b: usize| med[a * tx + b];
                 let bgd = (1.0 - fy) * ((1.0 - fx) * m(a0, b0) + fx * m(a0, b1))
                     + fy * ((1.0 - fx) * m(a1, b0) + fx * m(a1, b1));
@@ -229,6 +276,26 @@ pub fn adaptive_frame(vol: &SpikeVolume, k: u32, p: &Params, fs: f64) -> RefFram
     for (id, pix) in regions.iter().enumerate() {
         for &i in pix {
             labels[i] = id as u32 + 1;
+        }
+    }
+
+    // Particle pixels that no region took (noise regions under 3 px) are
+    // background: their segmentation stopped at detection, so they get
+    // their own saturation time here — the first level whose window rate
+    // reaches N_fs per n, else n_max — and are suppressed like background.
+    for i in 0..w * h {
+        if labels[i] != 0 || !matches!(class[i], RefClass::Particle(_)) {
+            continue;
+        }
+        for (j, &n) in levels.iter().enumerate() {
+            let (_, len) = vol.window(k, n);
+            let cnt = vol.count(k, n, i / w, i % w);
+            let saturated =
+                len > 0 && f64::from(cnt) / f64::from(len) >= f64::from(p.n_fs) / f64::from(n);
+            if saturated || j + 1 == levels.len() {
+                decided[i] = (cnt, n, len);
+                break;
+            }
         }
     }
 
