@@ -14,8 +14,12 @@ use spiv_firmware_sim::firmware::{
 };
 use spiv_firmware_sim::formats::dat::DatOptions;
 use spiv_firmware_sim::formats::meta::SceneMeta;
+use spiv_firmware_sim::formats::MAX_FRAME_PIXELS;
 use spiv_firmware_sim::scene::{SceneKind, SceneParams};
 use spiv_firmware_sim::simulation::Request;
+
+/// Largest pair separation accepted, ticks (as `spiv simulate --dt`).
+const MAX_DT: u32 = 1_000_000;
 
 #[derive(Debug, Parser)]
 #[command(
@@ -130,6 +134,11 @@ fn main() {
 }
 
 fn config(a: &Args, dt: u32) -> Result<Config, Error> {
+    if !(1..=MAX_DT).contains(&dt) {
+        return Err(Error::Usage(format!(
+            "dt {dt}: expected 1..={MAX_DT} ticks between the frames of a pair"
+        )));
+    }
     let mut cfg = Config::new(0, dt);
     cfg.method = match a.method.as_str() {
         "adaptive" => Method::Adaptive,
@@ -221,12 +230,16 @@ fn run(a: &Args) -> Result<(), Error> {
         })?;
         let mut p = SceneParams::new(kind);
         if let Some(dt) = a.dt {
-            p.pair_dt = dt.max(1);
+            p.pair_dt = dt;
         }
         let (w, h) = (a.width.unwrap_or(p.width), a.height.unwrap_or(p.height));
-        if w < 8 || h < 8 || (usize::from(w) * usize::from(h)) % 8 != 0 {
+        if w < 8
+            || h < 8
+            || (usize::from(w) * usize::from(h)) % 8 != 0
+            || u64::from(w) * u64::from(h) > MAX_FRAME_PIXELS
+        {
             return Err(Error::Usage(format!(
-                "--width {w} --height {h}: both at least 8 and width*height a multiple of 8"
+                "--width {w} --height {h}: both at least 8, width*height a multiple of 8 and at most {MAX_FRAME_PIXELS}"
             )));
         }
         p.width = w;
@@ -256,10 +269,11 @@ fn run(a: &Args) -> Result<(), Error> {
                 )))
             }
         };
+        // scene.json is input too: a pair listed backwards is refused by
+        // `config`'s range check, not wrapped.
         let dt =
-            a.dt.or_else(|| meta.as_ref().map(|m| m.pair[1] - m.pair[0]))
-                .unwrap_or(13)
-                .max(1);
+            a.dt.or_else(|| meta.as_ref().map(|m| m.pair[1].saturating_sub(m.pair[0])))
+                .unwrap_or(13);
         let cfg = config(a, dt)?;
         let link = Faulty::new(Plain(open_link(a, &shared)?), faults, a.seed);
         let mut fw = run_on_dat(path, w, h, DatOptions::default(), cfg, link, a.checksum)?;
