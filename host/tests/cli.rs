@@ -521,42 +521,11 @@ fn bench_paper_with_one_seed() {
 
 #[test]
 fn receive_counts_crafted_frames_as_corrupt_and_never_allocates_them() {
-    use spiv_core::wire::{encode_message, Encoding, FrameEnd, Header, Kind, MAX_ENCODED};
     // A tile and a frame end claiming a 65535 x 65535 frame: valid COBS,
     // CRC, magic and version, 92 bytes (it once aborted the receiver on an
-    // 8.6 GB allocation).
-    let mut h = Header {
-        kind: Kind::FrameTile,
-        seq: 0,
-        frame_id: 0,
-        tick: 64,
-        width: 65535,
-        height: 65535,
-        row0: 0,
-        rows: 0,
-        encoding: Encoding::Raw8,
-        payload_len: 0,
-    };
-    let end = FrameEnd {
-        pair: 0,
-        member: 0,
-        method: 0,
-        full_scale: 255,
-        dt: 13,
-        tiles: 1,
-        lossy: 0,
-        frame_crc: 0,
-    };
-    let mut buf = vec![0u8; 2 * MAX_ENCODED];
-    let n = encode_message(&h, &[], &mut buf).expect("tile");
-    h.kind = Kind::FrameEnd;
-    h.seq = 1;
-    let m = encode_message(&h, &end.to_bytes(), &mut buf[n..]).expect("end");
-    buf.truncate(n + m);
-    assert_eq!(buf.len(), 92);
-    let tmp = tempfile::tempdir().expect("tempdir");
-    let file = tmp.path().join("crafted.bin");
-    std::fs::write(&file, &buf).expect("write");
+    // 8.6 GB allocation). The receiver's unit tests build the same bytes.
+    let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/frame_65535x65535.bin");
+    assert_eq!(std::fs::metadata(&file).expect("fixture").len(), 92);
     let out = ok(&["receive", "--file", p(&file)]);
     assert!(
         out.contains("received 0 frames")

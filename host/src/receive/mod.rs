@@ -258,6 +258,9 @@ mod tests {
         // 92 bytes that once made the receiver allocate 8.6 GB and abort.
         let bytes = crafted(65535, 65535, 0);
         assert_eq!(bytes.len(), 92);
+        // The same bytes `spiv receive` is tested on (host/tests/cli.rs).
+        let fixture = include_bytes!("../../tests/data/frame_65535x65535.bin");
+        assert_eq!(&bytes[..], &fixture[..]);
         let (r, got) = frames_of(bytes);
         assert!(got.is_empty());
         assert_eq!(
