@@ -81,17 +81,35 @@ fn sane_params() -> impl Strategy<Value = Params> {
         prop_oneof![Just(255u16), Just(65535u16), 1u16..=u16::MAX],
         0u16..=20,
     )
-        .prop_map(|(n_max, n0_div, n_fs, beta, k, s, g, fs, margin)| Params {
-            n0: (n_max / n0_div).max(1),
-            n_max,
-            n_fs,
-            beta: Beta::from_bits(beta),
-            k_sig: KSig::from_bits(k),
-            sigma_fpn: Sigma::from_bits(s),
-            electrons_per_spike: g,
-            full_scale: fs,
-            margin,
+        .prop_map(|(n_max, n0_div, n_fs, beta, k, s, g, fs, margin)| {
+            from_fields([
+                (n_max / n0_div).max(1),
+                n_max,
+                n_fs,
+                beta,
+                k,
+                s,
+                g,
+                fs,
+                margin,
+            ])
         })
+}
+
+/// Parameters from raw fields: n0, n_max, n_fs, β, k_sig and σ_fpn (as
+/// fixed-point bits), g, full scale, margin.
+fn from_fields([n0, n_max, n_fs, beta, k, s, g, fs, margin]: [u16; 9]) -> Params {
+    Params {
+        n0,
+        n_max,
+        n_fs,
+        beta: Beta::from_bits(beta),
+        k_sig: KSig::from_bits(k),
+        sigma_fpn: Sigma::from_bits(s),
+        electrons_per_spike: g,
+        full_scale: fs,
+        margin,
+    }
 }
 
 /// Sane parameters with one field drawn from its type's whole range (often
@@ -121,17 +139,7 @@ fn any_params() -> impl Strategy<Value = Params> {
             }
             p
         }),
-        (any::<[u16; 9]>()).prop_map(|[n0, n_max, n_fs, beta, k, s, g, fs, margin]| Params {
-            n0,
-            n_max,
-            n_fs,
-            beta: Beta::from_bits(beta),
-            k_sig: KSig::from_bits(k),
-            sigma_fpn: Sigma::from_bits(s),
-            electrons_per_spike: g,
-            full_scale: fs,
-            margin,
-        }),
+        any::<[u16; 9]>().prop_map(from_fields),
     ]
 }
 
