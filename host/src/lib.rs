@@ -1,8 +1,18 @@
 //! # spiv-host — the host half of spiv
 //!
-//! Frames from spike files through the core ([`reconstruct`]), owned buffers
-//! for the no_std core ([`core_run`]), and the `f64` reference of the core's
-//! algorithm ([`reference`]). The `spiv` binary's subcommands live in `cli`.
+//! | module | owns |
+//! |---|---|
+//! | [`receive`] | byte sources (USB, TCP, pipe, file), the stream decoder, frame reassembly within a size limit, pairing, loss counts |
+//! | [`link`] | the sidecar link in process: the firmware loop's messages through the receiver |
+//! | [`reconstruct`] | frames from spike files (`.dat`, `.npz`) through the core: TFP, TFI, adaptive |
+//! | [`core_run`] | owned buffers for the no_std core |
+//! | [`reference`] | the `f64` reference of the core's algorithm, and its tolerance |
+//! | [`piv`] | the PIV engine: filters, deformation, FFT correlation, sub-pixel peaks, validation |
+//! | [`pipeline`] | the main job (`spiv run`): scene → both cameras → sidecar → PIV → metrics |
+//! | [`metrics`] | the paper's row-profile RMAE / RMSE and confidence intervals |
+//! | [`plot`] | profile and vector-field plots |
+//!
+//! The `spiv` binary's subcommands live in `cli`, one file each.
 #![warn(missing_docs)]
 
 pub mod core_run;
