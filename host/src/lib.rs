@@ -6,7 +6,7 @@
 //! | [`link`] | the sidecar link in process: the firmware loop's messages through the receiver |
 //! | [`reconstruct`] | frames from spike files (`.dat`, `.npz`) through the core: TFP, TFI, adaptive |
 //! | [`core_run`] | owned buffers for the no_std core |
-//! | [`reference`] | the `f64` reference of the core's algorithm, and its tolerance |
+//! | [`reference`](mod@reference) | the `f64` reference of the core's algorithm, and its tolerance |
 //! | [`piv`] | the PIV engine: filters, deformation, FFT correlation, sub-pixel peaks, validation |
 //! | [`pipeline`] | the main job (`spiv run`): scene → both cameras → sidecar → PIV → metrics |
 //! | [`metrics`] | the paper's row-profile RMAE / RMSE and confidence intervals |
