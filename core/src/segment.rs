@@ -159,7 +159,8 @@ pub fn is_saturated(c: u8, win: &Window, n_fs: u16) -> bool {
 /// segmentation stopped at detection, so they never got a `t_bgmax`; shown
 /// with their detection window they would be dark pits in a suppressed
 /// background. They are background, so they are suppressed like it. Cost:
-/// about 2·n_max bit reads, paid only for such pixels.
+/// one word read per tick of the deciding window (at most n_max), paid only
+/// for such pixels.
 pub(crate) fn pixel_saturation(
     ctx: &crate::frame::Ctx<'_, '_>,
     levels: &[u16],
