@@ -27,7 +27,7 @@
 //! The encoder falls back to a lossless mode when a compressed payload would
 //! not fit the buffer or would be larger than raw.
 
-use crate::frame::Gray;
+use crate::gray::Gray;
 use crate::wire::{Encoding, WireError};
 
 const ESCAPE: u32 = 24;

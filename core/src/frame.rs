@@ -14,49 +14,18 @@
 //! `margin` extra rows on both sides so that regions crossing a strip edge
 //! are whole. With a workspace as tall as the band the result is one pass.
 
+use crate::context::Ctx;
 use crate::error::Error;
+use crate::gray::Gray;
 use crate::history::History;
 use crate::integrate::{adapt_region, region_gray};
 use crate::label::{label, LabelStats};
 use crate::params::{Params, MAX_LEVELS};
-use crate::segment::{decode, pixel_saturation, segment, Class, SegmentStats, Thresholds};
+use crate::particle::Thresholds;
+use crate::segment::{decode, pixel_saturation, segment, Class, SegmentStats};
 use crate::state::Workspace;
 use crate::suppress::background_gray;
 use crate::window::{check_len, Span, Window};
-
-/// An output pixel type: 8- or 16-bit gray.
-pub trait Gray: Copy + Default {
-    /// Largest level.
-    const MAX: u16;
-    /// From a level already clamped to `[0, MAX]`.
-    fn from_level(v: u16) -> Self;
-    /// The level.
-    fn level(self) -> u16;
-}
-
-impl Gray for u8 {
-    const MAX: u16 = 255;
-    #[inline]
-    fn from_level(v: u16) -> Self {
-        v.min(255) as u8
-    }
-    #[inline]
-    fn level(self) -> u16 {
-        u16::from(self)
-    }
-}
-
-impl Gray for u16 {
-    const MAX: u16 = u16::MAX;
-    #[inline]
-    fn from_level(v: u16) -> Self {
-        v
-    }
-    #[inline]
-    fn level(self) -> u16 {
-        self
-    }
-}
 
 /// What one frame found.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -163,18 +132,6 @@ pub fn reconstruct_rows<G: Gray>(
         e0 = e1;
     }
     Ok(stats)
-}
-
-/// What every strip of one frame shares.
-pub(crate) struct Ctx<'a, 'h> {
-    pub hist: &'a History<'h>,
-    pub span: &'a Span<'a>,
-    pub k: u32,
-    pub p: &'a Params,
-    pub th: &'a Thresholds,
-    pub levels: &'a [u16; MAX_LEVELS],
-    pub lens: &'a [u16; MAX_LEVELS],
-    pub fs: u16,
 }
 
 fn strip<G: Gray>(

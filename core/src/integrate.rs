@@ -14,8 +14,8 @@
 
 use core::cmp::Ordering;
 
-use crate::label::Region;
 use crate::params::Params;
+use crate::region::Region;
 use crate::state::Workspace;
 use crate::window::Window;
 
@@ -97,13 +97,13 @@ struct Bounds {
 /// fills the region's window fields and leaves `c_{n*}` in `ws.counts` for
 /// each of its pixels. `ws.masks` plane 0 must hold "any region" bits.
 pub(crate) fn adapt_region(
-    ctx: &crate::frame::Ctx<'_, '_>,
+    ctx: &crate::context::Ctx<'_, '_>,
     ws: &mut Workspace<'_>,
     s0: u16,
     strip_rows: u16,
     idx: usize,
 ) -> Region {
-    let crate::frame::Ctx {
+    let crate::context::Ctx {
         hist, span, k, p, ..
     } = *ctx;
     let mut reg = ws.regions[idx];

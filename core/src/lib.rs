@@ -9,11 +9,15 @@
 //! | [`plane`] | zero-copy view of one bit-packed Vidar spike plane |
 //! | [`history`] | the ingest: a ring of the last `depth` planes of a band of rows |
 //! | [`window`] | centred windows, bit-parallel window counts, TFP and TFI |
+//! | [`particle`] | the particle test against the local background, exact, with per-frame tables |
 //! | [`segment`] | saturation time `t_bgmax` and particle/background segmentation |
 //! | [`label`] | 8-connected region labelling with a bounded region table |
+//! | [`region`] | one particle region: size, bounding box, ring, adaptive window |
 //! | [`integrate`] | per-region SNR(n) and the optimal window n* |
 //! | [`suppress`] | background suppression `alpha = beta / t_bgmax` |
 //! | [`frame`] | one adaptive frame at any tick, in row strips |
+//! | `context` | what every strip of one frame shares (crate-private) |
+//! | [`gray`] | the output pixel type: 8- or 16-bit gray levels |
 //! | [`state`] | the caller-owned per-pixel working memory |
 //! | [`q`] | the fixed-point formats, in one place |
 //! | [`wire`] | the sidecar link: message header, COBS framing, CRC, stream decoder |
@@ -33,14 +37,18 @@
 #![warn(missing_docs)]
 
 pub mod compress;
+mod context;
 pub mod error;
 pub mod frame;
+pub mod gray;
 pub mod history;
 pub mod integrate;
 pub mod label;
 pub mod params;
+pub mod particle;
 pub mod plane;
 pub mod q;
+pub mod region;
 pub mod segment;
 pub mod sender;
 pub mod state;
@@ -49,7 +57,8 @@ pub mod window;
 pub mod wire;
 
 pub use error::Error;
-pub use frame::{reconstruct_adaptive, reconstruct_rows, FrameStats, Gray};
+pub use frame::{reconstruct_adaptive, reconstruct_rows, FrameStats};
+pub use gray::Gray;
 pub use history::History;
 pub use params::Params;
 pub use plane::PlaneView;

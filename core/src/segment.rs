@@ -16,7 +16,6 @@
 
 use crate::history::History;
 use crate::params::Params;
-use crate::q::B_FRAC_BITS;
 use crate::state::Workspace;
 use crate::window::{add_counts, add_plane_counts, Window};
 
@@ -68,81 +67,6 @@ pub struct SegmentStats {
     pub saturated_pixels: u32,
 }
 
-/// The exact particle test `c > b ∧ (c − b)² > k²·(1/4 + σ²b² + b/g)` for a
-/// count `c` and a background `b = b_q10 / 1024`, evaluated in `u128` after
-/// multiplying both sides by `2^88·g` (saturating: a saturated right side is
-/// larger than any left side, which stays below 2^120).
-#[inline]
-pub fn is_particle(c: u8, b_q10: u32, p: &Params) -> bool {
-    let cq = u128::from(c) << B_FRAC_BITS;
-    let b = u128::from(b_q10);
-    if cq <= b {
-        return false;
-    }
-    let d = cq - b;
-    let g = u128::from(p.electrons_per_spike.max(1));
-    let q = u128::from(p.k_sig.to_bits());
-    let s = u128::from(p.sigma_fpn.to_bits());
-    let lhs = (d * d).saturating_mul(g << 68);
-    let var = (g << 70)
-        .saturating_add((g << 20).saturating_mul(s * s).saturating_mul(b * b))
-        .saturating_add(b << 62);
-    lhs > var.saturating_mul(q * q)
-}
-
-/// Per-frame tables that decide the particle test without `u128` for almost
-/// every pixel. The test is monotone: harder as `b` grows, easier as `c`
-/// grows. So for `b` in `[1024·f, 1024·f + 1024)`, `c < lo[f]` is never a
-/// particle and `c ≥ hi[f]` always is; only `lo[f] ≤ c < hi[f]` needs the
-/// exact test. Exact, not an approximation. 1 KiB.
-#[derive(Debug, Clone)]
-pub struct Thresholds {
-    lo: [u16; 256],
-    hi: [u16; 256],
-}
-
-impl Thresholds {
-    /// Builds the tables for `p` (about 4000 exact tests).
-    pub fn new(p: &Params) -> Thresholds {
-        let cmin = |b_q10: u32| -> u16 {
-            // Smallest c in 0..=255 that passes (256: none); monotone in c.
-            let (mut lo, mut hi) = (0u16, 256u16);
-            while lo < hi {
-                let mid = (lo + hi) / 2;
-                if is_particle(mid as u8, b_q10, p) {
-                    hi = mid;
-                } else {
-                    lo = mid + 1;
-                }
-            }
-            lo
-        };
-        let mut t = Thresholds {
-            lo: [256; 256],
-            hi: [256; 256],
-        };
-        for f in 0..256u32 {
-            t.lo[f as usize] = cmin(f << B_FRAC_BITS);
-            t.hi[f as usize] = cmin((f << B_FRAC_BITS) + (1 << B_FRAC_BITS) - 1);
-        }
-        t
-    }
-
-    /// Same answer as [`is_particle`].
-    #[inline]
-    pub fn is_particle(&self, c: u8, b_q10: u32, p: &Params) -> bool {
-        let f = ((b_q10 >> B_FRAC_BITS) as usize).min(255);
-        let c16 = u16::from(c);
-        if c16 < self.lo[f] {
-            false
-        } else if c16 >= self.hi[f] {
-            true
-        } else {
-            is_particle(c, b_q10, p)
-        }
-    }
-}
-
 /// Saturation: `c` spikes over `len` of `n` ticks reach `N_fs` spikes per n.
 #[inline]
 pub fn is_saturated(c: u8, win: &Window, n_fs: u16) -> bool {
@@ -162,7 +86,7 @@ pub fn is_saturated(c: u8, win: &Window, n_fs: u16) -> bool {
 /// one word read per tick of the deciding window (at most n_max), paid only
 /// for such pixels.
 pub(crate) fn pixel_saturation(
-    ctx: &crate::frame::Ctx<'_, '_>,
+    ctx: &crate::context::Ctx<'_, '_>,
     levels: &[u16],
     row: u16,
     col: u16,
@@ -284,12 +208,12 @@ pub(crate) fn tile_pos(i: usize, lo: usize, hi: usize) -> (usize, usize, u32) {
 /// tick `k`. Leaves every pixel's class and `c_t` (count at its deciding
 /// window); `span` holds the planes of the n_max window.
 pub(crate) fn segment(
-    ctx: &crate::frame::Ctx<'_, '_>,
+    ctx: &crate::context::Ctx<'_, '_>,
     ws: &mut Workspace<'_>,
     s0: u16,
     s1: u16,
 ) -> SegmentStats {
-    let crate::frame::Ctx {
+    let crate::context::Ctx {
         hist,
         span,
         k,
@@ -441,32 +365,6 @@ pub fn saturation_times(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn test_f64(c: u8, b_q10: u32, p: &Params) -> bool {
-        let b = f64::from(b_q10) / 1024.0;
-        let c = f64::from(c);
-        let k = p.k_sig.to_num::<f64>();
-        let s = p.sigma_fpn.to_num::<f64>();
-        let g = f64::from(p.electrons_per_spike);
-        c > b && (c - b).powi(2) > k * k * (0.25 + (s * b).powi(2) + b / g)
-    }
-
-    #[test]
-    fn particle_test_matches_f64() {
-        let p = Params::default();
-        for c in 0..=255u8 {
-            for b_q10 in (0..255 * 1024).step_by(97) {
-                assert_eq!(
-                    is_particle(c, b_q10, &p),
-                    test_f64(c, b_q10, &p),
-                    "c={c} b={b_q10}"
-                );
-            }
-        }
-        // Poisson would call c = 3 over b = 1 a 2-sigma event; here it is 4 sigma.
-        assert!(is_particle(3, 1024, &p));
-        assert!(!is_particle(2, 1024, &p));
-    }
 
     #[test]
     fn tile_positions() {

@@ -8,7 +8,7 @@
 //! ([`SendBuffers`]); bytes leave through the caller's [`Link`].
 
 use crate::compress::{decode_tile, encode_tile, Lossy};
-use crate::frame::Gray;
+use crate::gray::Gray;
 use crate::wire::{
     encode_message, frame_crc, Encoding, FrameEnd, Header, Kind, Status, WireError, MAX_PAYLOAD,
 };

@@ -17,8 +17,8 @@
 //! ([`Region`], 28 bytes each).
 
 use crate::error::Error;
-use crate::label::Region;
 use crate::plane::words_per_row;
+use crate::region::Region;
 use crate::window::check_len;
 
 /// The per-pixel state, in thousandths of a byte per pixel: 5.375 bytes

@@ -196,7 +196,7 @@ pub(crate) fn scale(full_scale: u16, num: u64, den: u64) -> u16 {
 /// ticks, at most the history depth) centred on `k`. `counts` is scratch of
 /// `rows × width` bytes; `out` receives `rows × width` gray levels (stored
 /// row order). Returns the window actually used.
-pub fn tfp<G: crate::frame::Gray>(
+pub fn tfp<G: crate::gray::Gray>(
     hist: &History<'_>,
     k: u32,
     n: u16,
@@ -239,7 +239,7 @@ pub(crate) fn check_len(got: usize, needed: usize) -> Result<(), Error> {
 /// `k` to the first spike after `k`, both searched within
 /// `[k − ⌊n_max/2⌋, k − ⌊n_max/2⌋ + n_max)`; a pixel missing either spike gets
 /// isi = n_max (never a division by zero). `out` receives `rows × width`.
-pub fn tfi<G: crate::frame::Gray>(
+pub fn tfi<G: crate::gray::Gray>(
     hist: &History<'_>,
     k: u32,
     n_max: u16,

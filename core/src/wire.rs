@@ -501,7 +501,7 @@ impl Status {
 }
 
 /// CRC-32 of frame samples as little-endian u16 (the [`FrameEnd`] check).
-pub fn frame_crc<G: crate::Gray>(samples: &[G]) -> u32 {
+pub fn frame_crc<G: crate::gray::Gray>(samples: &[G]) -> u32 {
     let mut d = CRC.digest();
     for s in samples {
         d.update(&s.level().to_le_bytes());

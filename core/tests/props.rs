@@ -6,8 +6,8 @@
 #![allow(clippy::needless_range_loop)]
 
 use proptest::prelude::*;
-use spiv_core::label::Region;
 use spiv_core::q::{Beta, KSig, Sigma};
+use spiv_core::region::Region;
 use spiv_core::segment::saturation_times;
 use spiv_core::state::Buffers;
 use spiv_core::window::{tfi, tfp, Window};

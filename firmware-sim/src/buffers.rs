@@ -1,7 +1,7 @@
 //! Owned buffers for `spiv-core` on the host: the core takes caller-supplied
 //! slices (a sidecar passes static arrays); here they are `Vec`s.
 
-use spiv_core::label::Region;
+use spiv_core::region::Region;
 use spiv_core::state::Buffers;
 use spiv_core::{History, Workspace, WorkspaceSizes};
 

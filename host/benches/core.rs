@@ -5,7 +5,7 @@
 //! `cargo bench -p spiv-host --bench core`.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use spiv_core::label::Region;
+use spiv_core::region::Region;
 use spiv_core::state::Buffers;
 use spiv_core::window::tfp;
 use spiv_core::{reconstruct_adaptive, History, Params, PlaneView, Workspace, WorkspaceSizes};

@@ -4,7 +4,7 @@
 //!
 //! `cargo run --release -p spiv-host --example core_kernels [frames]`
 
-use spiv_core::label::Region;
+use spiv_core::region::Region;
 use spiv_core::state::Buffers;
 use spiv_core::{reconstruct_adaptive, History, Params, PlaneView, Workspace, WorkspaceSizes};
 use spiv_firmware_sim::scene::{Scene, SceneKind, SceneParams};

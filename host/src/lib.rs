@@ -8,6 +8,7 @@
 //! | [`core_run`] | owned buffers for the no_std core |
 //! | [`reference`](mod@reference) | the `f64` reference of the core's algorithm, and its tolerance |
 //! | [`piv`] | the PIV engine: filters, deformation, FFT correlation, sub-pixel peaks, validation |
+//! | [`dwell`] | the dwell cap: window limits per band from a predicted field, and the banded adaptive frame |
 //! | [`pipeline`] | the main job (`spiv run`): scene → both cameras → sidecar → PIV → metrics |
 //! | [`metrics`] | the paper's row-profile RMAE / RMSE and confidence intervals |
 //! | [`plot`] | profile and vector-field plots |
@@ -16,6 +17,7 @@
 #![warn(missing_docs)]
 
 pub mod core_run;
+pub mod dwell;
 pub mod link;
 pub mod metrics;
 pub mod pipeline;

@@ -113,7 +113,7 @@ pub fn receiver_settings(windows: Vec<usize>) -> Settings {
 
 /// A received frame upright as PIV input.
 pub fn upright_f32(f: &ReceivedFrame) -> Array2<f32> {
-    crate::pipeline::to_f32(&f.upright(), usize::from(f.width), usize::from(f.height))
+    crate::piv::to_f32(&f.upright(), usize::from(f.width), usize::from(f.height))
 }
 
 /// PIV on every pair.
@@ -154,7 +154,7 @@ pub fn dwell_caps(
         return Ok((Vec::new(), t));
     };
     let field = piv(&upright_f32(a), &upright_f32(b), None, s)?.vectors();
-    let caps = crate::pipeline::band_caps(
+    let caps = crate::dwell::band_caps(
         &field,
         usize::from(height),
         f64::from(base.dt),

@@ -4,7 +4,6 @@
 //! baseline) and the host's receiver; PIV on the three pairs; the paper's
 //! metrics against the truth.
 
-use ndarray::Array2;
 use serde::Serialize;
 use spiv_core::Params;
 use spiv_firmware_sim::formats::csv::Vector;
@@ -14,8 +13,8 @@ use spiv_firmware_sim::simulation::{simulate_planes, Request, Simulated};
 
 use crate::link::{dwell_caps, transfer, Transfer};
 use crate::metrics::{region_error, row_profile, ProfileRow, RegionError};
-use crate::piv::{piv, PivError, Settings};
-use crate::reconstruct::{Planes, ReconstructError};
+use crate::piv::{piv, to_f32, PivError, Settings};
+use crate::reconstruct::ReconstructError;
 use spiv_firmware_sim::firmware::{Config, Method as FwMethod};
 
 /// What one run does.
@@ -68,76 +67,6 @@ pub fn piv_grid(s: &Settings, w: u16, h: u16) -> Vec<(f64, f64)> {
     let win = s.windows.last().copied().unwrap_or(32);
     let step = ((win as f64) * (1.0 - s.overlap)).round().max(1.0) as u16;
     vector_grid(w, h, win as u16, step)
-}
-
-/// Rows per band of the capped adaptive reconstruction (the firmware's
-/// [`spiv_firmware_sim::firmware::CAP_BAND`]; margins are `Params::margin`).
-pub const BAND: usize = spiv_firmware_sim::firmware::CAP_BAND as usize;
-
-/// The adaptive frame at `k` (upright) with each band of `BAND` rows
-/// reconstructed by the core with its own window limit `caps[band]`, as the
-/// sidecar firmware does ([`spiv_firmware_sim::firmware::capped_frame`]).
-pub fn adaptive_banded(
-    planes: &Planes,
-    k: u64,
-    core: &Params,
-    caps: &[u16],
-) -> Result<Vec<u16>, JobError> {
-    let (w, h) = (planes.width, planes.height);
-    let pb = usize::from(w) * usize::from(h) / 8;
-    let n = planes.data.len() / pb.max(1);
-    // At least the window limit, at most the 256 planes the core holds
-    // (`max` then `min`: the bounds may cross; the core refuses n_max > 255).
-    let depth = n.max(usize::from(core.n_max.max(2))).min(256) as u16;
-    let mut hb = crate::core_run::HistoryBuf::new(w, h, depth).map_err(ReconstructError::from)?;
-    let mut hist = hb.history().map_err(ReconstructError::from)?;
-    let skip = n.saturating_sub(usize::from(depth));
-    for chunk in planes.data.chunks_exact(pb).skip(skip) {
-        let view = spiv_core::PlaneView::new(chunk, w, h).map_err(ReconstructError::from)?;
-        hist.push(&view).map_err(ReconstructError::from)?;
-    }
-    let tick = k
-        .checked_sub(planes.first + skip as u64)
-        .and_then(|t| u32::try_from(t).ok())
-        .ok_or(ReconstructError::TickOutside {
-            tick: k,
-            planes: planes.first + n as u64,
-        })?;
-    let mut ws = crate::core_run::WorkspaceBuf::whole(w, h);
-    let mut out = vec![0u16; usize::from(w) * usize::from(h)];
-    spiv_firmware_sim::firmware::capped_frame(
-        &hist,
-        tick,
-        core,
-        caps,
-        &mut ws.workspace(),
-        &mut out,
-    )
-    .map_err(ReconstructError::from)?;
-    Ok(crate::reconstruct::upright(&out, w, planes.flip))
-}
-
-/// Window limit per band from a field: the budget over the fastest valid
-/// vector near the band, px per tick, as ticks within [2·n0, n_max].
-pub fn band_caps(field: &[Vector], h: usize, dt: f64, budget: f64, core: &Params) -> Vec<u16> {
-    (0..h.div_ceil(BAND))
-        .map(|b| {
-            let (lo, hi) = ((b * BAND) as f64 - 16.0, ((b + 1) * BAND) as f64 + 16.0);
-            let vmax = field
-                .iter()
-                .filter(|v| v.flag < 2 && v.y >= lo && v.y < hi)
-                .map(|v| v.u.hypot(v.v))
-                .fold(0.0, f64::max);
-            let n = if vmax > 0.0 {
-                budget / (vmax / dt)
-            } else {
-                f64::from(core.n_max)
-            };
-            // Within [2·n0, n_max]; n_max wins where the two cross (n0 near
-            // n_max), and the core then checks n0 ≤ n_max as always.
-            n.max(2.0 * f64::from(core.n0)).min(f64::from(core.n_max)) as u16
-        })
-        .collect()
 }
 
 /// Errors of a run.
@@ -237,11 +166,6 @@ pub struct LinkSummary {
     pub lost_frames: u64,
     /// Whether the received frames equal what the firmware made.
     pub bit_exact: bool,
-}
-
-/// An upright `w × h` gray image as PIV input.
-pub fn to_f32(data: &[u16], w: usize, h: usize) -> Array2<f32> {
-    Array2::from_shape_fn((h, w), |(i, j)| f32::from(data[i * w + j]))
 }
 
 /// Runs `job`; `stage` is told the name of each stage as it starts.

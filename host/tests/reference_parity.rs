@@ -7,7 +7,7 @@
 // Pixel loops index several parallel arrays; an index reads clearest.
 #![allow(clippy::needless_range_loop)]
 
-use spiv_core::label::Region;
+use spiv_core::region::Region;
 use spiv_core::segment::{decode, Class};
 use spiv_core::state::Buffers;
 use spiv_core::{
@@ -15,7 +15,7 @@ use spiv_core::{
 };
 use spiv_firmware_sim::scene::{Scene, SceneKind, SceneParams};
 use spiv_firmware_sim::sensor::{simulate, SensorParams};
-use spiv_host::pipeline::adaptive_banded;
+use spiv_host::dwell::adaptive_banded;
 use spiv_host::reconstruct::{upright, Planes};
 use spiv_host::reference::{adaptive_frame, adaptive_rows, RefClass, SpikeVolume};
 
@@ -238,7 +238,7 @@ fn strips_with_margins_match_the_reference() {
 
 #[test]
 fn the_dwell_capped_frame_spiv_run_ships_matches_the_reference() {
-    // `pipeline::adaptive_banded`: each 32-row band (upright) with its own
+    // `dwell::adaptive_banded`: each 32-row band (upright) with its own
     // window limit and 16-row margins, the fourth band without a cap.
     let (w, h) = (160u16, 112u16);
     let packed = scene_stream(SceneKind::PaperLinear, 2, w, h, 150);

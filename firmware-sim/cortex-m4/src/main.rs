@@ -26,7 +26,7 @@ use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
 use panic_semihosting as _;
 use spiv_core::compress::Lossy;
-use spiv_core::label::Region;
+use spiv_core::region::Region;
 use spiv_core::sender::{tile_rows, FrameInfo, Link, Schedule, SendBuffers, Sender};
 use spiv_core::state::{Buffers, STATE_MILLIBYTES_PER_PIXEL};
 use spiv_core::wire::{frame_crc, Encoding, MAX_ENCODED, MAX_PAYLOAD};

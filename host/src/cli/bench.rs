@@ -5,20 +5,19 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use clap::{Args, Subcommand};
-use indicatif::{ProgressBar, ProgressStyle};
 use ndarray::Array2;
 use plotters::prelude::*;
 use serde_json::json;
 use spiv_firmware_sim::scene::{vector_grid, SceneKind, SceneParams};
 use spiv_firmware_sim::simulation::simulate_planes;
 use spiv_host::metrics::{mean_ci, region_error, rmae_ratio, row_profile, MeanCi};
-use spiv_host::pipeline::{run as run_job, to_f32, Job, Source};
-use spiv_host::piv::{piv, Interp, Settings};
+use spiv_host::pipeline::{run as run_job, Job, Source};
+use spiv_host::piv::{piv, to_f32, Interp, Settings};
 use spiv_host::reconstruct::{frame_from_planes, Method, Planes};
 use spiv_host::reference::{adaptive_frame, SpikeVolume};
 
 use super::run::label;
-use super::CliError;
+use super::{bar, CliError};
 
 /// Benchmarks.
 #[derive(Debug, Args)]
@@ -74,15 +73,6 @@ pub fn run(a: &BenchArgs) -> Result<(), CliError> {
         Which::Speed { plot } => speed(plot),
         Which::Link(l) => super::bench_link::run(l),
     }
-}
-
-pub(super) fn bar(len: u64, what: &str) -> ProgressBar {
-    let b = ProgressBar::new(len);
-    b.set_style(
-        ProgressStyle::with_template(&format!("{what} {{bar:30}} {{pos}}/{{len}} {{elapsed}}"))
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
-    b
 }
 
 fn fmt(m: MeanCi) -> String {
@@ -314,9 +304,9 @@ fn speed(plot_path: &PathBuf) -> Result<(), CliError> {
         let t = Instant::now();
         let (_, ta, tb) = recon(Method::Tfp, 8)?;
         let tfp_field = piv(&ta, &tb, None, &piv_cfgs[0].1)?;
-        let caps = spiv_host::pipeline::band_caps(&tfp_field.vectors(), hu, dt, cap, &job.core);
-        let a = spiv_host::pipeline::adaptive_banded(&planes, ka, &job.core, &caps)?;
-        let bb = spiv_host::pipeline::adaptive_banded(&planes, kb, &job.core, &caps)?;
+        let caps = spiv_host::dwell::band_caps(&tfp_field.vectors(), hu, dt, cap, &job.core);
+        let a = spiv_host::dwell::adaptive_banded(&planes, ka, &job.core, &caps)?;
+        let bb = spiv_host::dwell::adaptive_banded(&planes, kb, &job.core, &caps)?;
         let rec_ms = t.elapsed().as_secs_f64() * 1e3;
         let (ms, e) = err(&to(&a), &to(&bb), &piv_cfgs[0].1)?;
         rows.push(Row {

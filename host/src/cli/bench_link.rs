@@ -96,7 +96,7 @@ pub fn run(a: &LinkArgs) -> Result<(), CliError> {
         SceneKind::PaperQuadratic,
         SceneKind::PaperLog,
     ];
-    let bar = super::bench::bar(
+    let bar = super::bar(
         scenes.len() as u64 * a.seeds,
         "link benchmark (scene x seed)",
     );

@@ -30,3 +30,15 @@ pub enum CliError {
     #[error("{0}")]
     Usage(String),
 }
+
+/// A progress bar for long work: `what`, the bar, position/length, time.
+fn bar(len: u64, what: &str) -> indicatif::ProgressBar {
+    let b = indicatif::ProgressBar::new(len);
+    b.set_style(
+        indicatif::ProgressStyle::with_template(&format!(
+            "{what} {{bar:30}} {{pos}}/{{len}} {{elapsed}}"
+        ))
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    b
+}

@@ -529,6 +529,11 @@ fn pass(
     (field, support)
 }
 
+/// An upright `w × h` gray image as PIV input.
+pub fn to_f32(data: &[u16], w: usize, h: usize) -> Array2<f32> {
+    Array2::from_shape_fn((h, w), |(i, j)| f32::from(data[i * w + j]))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

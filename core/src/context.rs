@@ -1,0 +1,22 @@
+//! What every strip of one frame shares: the history and the span of
+//! planes of the longest window, the frame's tick, the parameters, the
+//! particle test's tables, and the segmentation windows. Built once per
+//! frame by [`crate::frame`], read by the segmentation and the adaptive
+//! windows (so neither depends on the frame module that calls them).
+
+use crate::history::History;
+use crate::params::{Params, MAX_LEVELS};
+use crate::particle::Thresholds;
+use crate::window::Span;
+
+/// What every strip of one frame shares.
+pub(crate) struct Ctx<'a, 'h> {
+    pub hist: &'a History<'h>,
+    pub span: &'a Span<'a>,
+    pub k: u32,
+    pub p: &'a Params,
+    pub th: &'a Thresholds,
+    pub levels: &'a [u16; MAX_LEVELS],
+    pub lens: &'a [u16; MAX_LEVELS],
+    pub fs: u16,
+}

@@ -1,0 +1,79 @@
+//! The dwell cap (beyond the paper, SPEC 5): PIV of the TFP pair predicts
+//! each band's fastest particle, and each 32-row band's adaptive window is
+//! capped so that particle blurs by at most a budget of pixels. One
+//! implementation of the banded frame ([`spiv_firmware_sim::firmware::capped_frame`])
+//! serves the firmware and the in-process path.
+
+use spiv_core::Params;
+use spiv_firmware_sim::formats::csv::Vector;
+
+use crate::reconstruct::{Planes, ReconstructError};
+
+/// Rows per band of the capped adaptive reconstruction (the firmware's
+/// [`spiv_firmware_sim::firmware::CAP_BAND`]; margins are `Params::margin`).
+pub const BAND: usize = spiv_firmware_sim::firmware::CAP_BAND as usize;
+
+/// The adaptive frame at `k` (upright) with each band of `BAND` rows
+/// reconstructed by the core with its own window limit `caps[band]`, as the
+/// sidecar firmware does ([`spiv_firmware_sim::firmware::capped_frame`]).
+pub fn adaptive_banded(
+    planes: &Planes,
+    k: u64,
+    core: &Params,
+    caps: &[u16],
+) -> Result<Vec<u16>, ReconstructError> {
+    let (w, h) = (planes.width, planes.height);
+    let pb = usize::from(w) * usize::from(h) / 8;
+    let n = planes.data.len() / pb.max(1);
+    // At least the window limit, at most the 256 planes the core holds
+    // (`max` then `min`: the bounds may cross; the core refuses n_max > 255).
+    let depth = n.max(usize::from(core.n_max.max(2))).min(256) as u16;
+    let mut hb = crate::core_run::HistoryBuf::new(w, h, depth)?;
+    let mut hist = hb.history()?;
+    let skip = n.saturating_sub(usize::from(depth));
+    for chunk in planes.data.chunks_exact(pb).skip(skip) {
+        let view = spiv_core::PlaneView::new(chunk, w, h)?;
+        hist.push(&view)?;
+    }
+    let tick = k
+        .checked_sub(planes.first + skip as u64)
+        .and_then(|t| u32::try_from(t).ok())
+        .ok_or(ReconstructError::TickOutside {
+            tick: k,
+            planes: planes.first + n as u64,
+        })?;
+    let mut ws = crate::core_run::WorkspaceBuf::whole(w, h);
+    let mut out = vec![0u16; usize::from(w) * usize::from(h)];
+    spiv_firmware_sim::firmware::capped_frame(
+        &hist,
+        tick,
+        core,
+        caps,
+        &mut ws.workspace(),
+        &mut out,
+    )?;
+    Ok(crate::reconstruct::upright(&out, w, planes.flip))
+}
+
+/// Window limit per band from a field: the budget over the fastest valid
+/// vector near the band, px per tick, as ticks within [2·n0, n_max].
+pub fn band_caps(field: &[Vector], h: usize, dt: f64, budget: f64, core: &Params) -> Vec<u16> {
+    (0..h.div_ceil(BAND))
+        .map(|b| {
+            let (lo, hi) = ((b * BAND) as f64 - 16.0, ((b + 1) * BAND) as f64 + 16.0);
+            let vmax = field
+                .iter()
+                .filter(|v| v.flag < 2 && v.y >= lo && v.y < hi)
+                .map(|v| v.u.hypot(v.v))
+                .fold(0.0, f64::max);
+            let n = if vmax > 0.0 {
+                budget / (vmax / dt)
+            } else {
+                f64::from(core.n_max)
+            };
+            // Within [2·n0, n_max]; n_max wins where the two cross (n0 near
+            // n_max), and the core then checks n0 ≤ n_max as always.
+            n.max(2.0 * f64::from(core.n0)).min(f64::from(core.n_max)) as u16
+        })
+        .collect()
+}
