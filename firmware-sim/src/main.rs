@@ -221,13 +221,7 @@ fn run(a: &Args) -> Result<(), Error> {
     let shared = Shared::default();
     let kept;
     let (counters, width, height, fault_counts) = if let Some(name) = &a.scene {
-        let kind = SceneKind::from_name(name).ok_or_else(|| {
-            let names: Vec<&str> = SceneKind::ALL.iter().map(|(n, _)| *n).collect();
-            Error::Usage(format!(
-                "unknown scene '{name}' (one of: {})",
-                names.join(", ")
-            ))
-        })?;
+        let kind = SceneKind::parse(name).map_err(|e| Error::Usage(e.to_string()))?;
         let mut p = SceneParams::new(kind);
         if let Some(dt) = a.dt {
             p.pair_dt = dt;

@@ -10,7 +10,7 @@ use std::path::Path;
 
 use crate::formats::csv::{write_profile, write_vectors};
 use crate::formats::dat::{plane_bytes, DatWriter};
-use crate::formats::image::{write_gray16, write_gray8};
+use crate::formats::image::write_levels;
 use crate::formats::meta::{Glare, SceneInfo, SceneMeta};
 use crate::formats::FormatError;
 use crate::scene::{vector_grid, Scene, SceneParams, PIXEL_MM, TICK_HZ};
@@ -147,15 +147,14 @@ pub fn write_frame(
     f: &[u16],
 ) -> Result<(), FormatError> {
     if req.camera.bits <= 8 {
-        let v: Vec<u8> = f.iter().map(|&d| d.min(255) as u8).collect();
-        write_gray8(path, u32::from(w), u32::from(h), &v)
+        write_levels(path, u32::from(w), u32::from(h), f, 255)
     } else {
         let max = u32::from(req.camera.max_dn()).max(1);
         let v: Vec<u16> = f
             .iter()
             .map(|&d| ((u32::from(d) * 65535 + max / 2) / max) as u16)
             .collect();
-        write_gray16(path, u32::from(w), u32::from(h), &v)
+        write_levels(path, u32::from(w), u32::from(h), &v, u16::MAX)
     }
 }
 

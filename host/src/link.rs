@@ -97,17 +97,11 @@ pub fn transfer(
 }
 
 /// The PIV settings `spiv receive --piv` uses on each received pair: the
-/// given window of each pass (px), the default overlap and deformation, and
-/// a peak-ratio floor of 1.2 (received frames have no frame-camera noise
-/// floor, so a weaker second peak is the sign of a lost particle pattern).
+/// given window of each pass (px) and [`Settings::for_spike_frames`].
 pub fn receiver_settings(windows: Vec<usize>) -> Settings {
     Settings {
         windows,
-        validation: crate::piv::Validation {
-            min_peak_ratio: 1.2,
-            ..crate::piv::Validation::default()
-        },
-        ..Settings::default()
+        ..Settings::for_spike_frames()
     }
 }
 

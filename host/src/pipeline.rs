@@ -45,15 +45,7 @@ impl Job {
             request: Request::new(scene, seed),
             core: Params::default(),
             tfp_window: 8,
-            piv: Settings {
-                // Spike frames are noisier than camera frames: their true
-                // peaks often stand only 1.2–1.5× above the next one.
-                validation: crate::piv::Validation {
-                    min_peak_ratio: 1.2,
-                    ..crate::piv::Validation::default()
-                },
-                ..Settings::default()
-            },
+            piv: Settings::for_spike_frames(),
             dwell_cap: None,
             encoding: spiv_core::wire::Encoding::Rice,
             lossy: spiv_core::compress::Lossy::default(),

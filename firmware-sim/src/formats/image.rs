@@ -46,6 +46,24 @@ pub fn write_gray16(path: &Path, width: u32, height: u32, data: &[u16]) -> Resul
     buf.save(path).map_err(img_err(path))
 }
 
+/// Writes gray levels of a frame whose full scale is `full_scale`: 8-bit
+/// when it is at most 255 (levels above 255 saturate), else 16-bit as they
+/// are (PNG or TIFF; BMP has no 16-bit gray).
+pub fn write_levels(
+    path: &Path,
+    width: u32,
+    height: u32,
+    levels: &[u16],
+    full_scale: u16,
+) -> Result<(), FormatError> {
+    if full_scale <= 255 {
+        let v: Vec<u8> = levels.iter().map(|&g| g.min(255) as u8).collect();
+        write_gray8(path, width, height, &v)
+    } else {
+        write_gray16(path, width, height, levels)
+    }
+}
+
 /// Reads any gray or color image as gray; 16-bit sources stay 16-bit. The
 /// format is told by the content (the extension only where the content
 /// does not tell), and the size is checked against [`MAX_FRAME_PIXELS`]

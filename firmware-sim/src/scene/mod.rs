@@ -33,6 +33,11 @@ pub enum SceneKind {
     Vortex,
 }
 
+/// A scene name that is none of [`SceneKind::ALL`].
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown scene '{0}' (one of: {names})", names = SceneKind::ALL.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", "))]
+pub struct UnknownScene(pub String);
+
 impl SceneKind {
     /// Every scene, by name.
     pub const ALL: [(&'static str, SceneKind); 6] = [
@@ -47,6 +52,11 @@ impl SceneKind {
     /// The scene of a name, if any.
     pub fn from_name(name: &str) -> Option<SceneKind> {
         Self::ALL.iter().find(|(n, _)| *n == name).map(|&(_, k)| k)
+    }
+
+    /// The scene of a name, or the error that lists the names.
+    pub fn parse(name: &str) -> Result<SceneKind, UnknownScene> {
+        Self::from_name(name).ok_or_else(|| UnknownScene(name.to_string()))
     }
 
     /// Its name.
@@ -466,5 +476,10 @@ mod tests {
             assert_eq!(k.name(), n);
         }
         assert_eq!(SceneKind::from_name("nope"), None);
+        let e = SceneKind::parse("nope").unwrap_err().to_string();
+        assert!(
+            e.starts_with("unknown scene 'nope' (one of: paper-linear, "),
+            "{e}"
+        );
     }
 }

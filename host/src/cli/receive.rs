@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use spiv_firmware_sim::formats::csv::write_vectors;
-use spiv_firmware_sim::formats::image::{write_gray16, write_gray8};
+use spiv_firmware_sim::formats::image::write_levels;
 use spiv_host::link::{receiver_settings, upright_f32};
 use spiv_host::piv::piv;
 use spiv_host::receive::source::{open, parse_vid_pid};
@@ -148,11 +148,6 @@ fn save_frame(dir: &std::path::Path, f: &ReceivedFrame) -> Result<(), CliError> 
     ));
     let up = f.upright();
     let (w, h) = (u32::from(f.width), u32::from(f.height));
-    if f.end.full_scale <= 255 {
-        let v: Vec<u8> = up.iter().map(|&x| x.min(255) as u8).collect();
-        write_gray8(&path, w, h, &v)?;
-    } else {
-        write_gray16(&path, w, h, &up)?;
-    }
+    write_levels(&path, w, h, &up, f.end.full_scale)?;
     Ok(())
 }

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use clap::{Args, ValueEnum};
 use spiv_core::Params;
 use spiv_firmware_sim::formats::dat::DatOptions;
-use spiv_firmware_sim::formats::image::{write_gray16, write_gray8};
+use spiv_firmware_sim::formats::image::write_levels;
 use spiv_host::reconstruct::{frame_from_file, FileOptions, Method};
 
 use super::CliError;
@@ -92,12 +92,8 @@ pub fn run(a: &ReconstructArgs) -> Result<(), CliError> {
     };
     let f = frame_from_file(&a.input, a.at, method, window, &p, opts)?;
     let (w, h) = (u32::from(f.width), u32::from(f.height));
-    if a.bits == 8 {
-        let v: Vec<u8> = f.data.iter().map(|&g| g.min(255) as u8).collect();
-        write_gray8(&a.out, w, h, &v)?;
-    } else {
-        write_gray16(&a.out, w, h, &f.data)?;
-    }
+    let full_scale = if a.bits == 8 { 255 } else { u16::MAX };
+    write_levels(&a.out, w, h, &f.data, full_scale)?;
     match f.stats {
         Some(s) => println!(
             "{}: {w}x{h} adaptive at tick {}: {} regions (mean n* {:.1} ticks), {} saturated px -> {}",

@@ -7,7 +7,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use plotters::style::RGBColor;
 use serde_json::json;
 use spiv_firmware_sim::formats::csv::write_vectors;
-use spiv_firmware_sim::formats::image::{write_gray16, write_gray8};
+use spiv_firmware_sim::formats::image::write_levels;
 use spiv_firmware_sim::scene::{SceneKind, SceneParams, PIXEL_MM, TICK_HZ};
 use spiv_firmware_sim::simulation::write_frame;
 use spiv_host::metrics::rmae_ratio;
@@ -68,13 +68,7 @@ pub fn parse_dwell_cap(v: &str) -> Result<Option<f64>, CliError> {
 
 /// Parses a scene name into its defaults.
 pub fn scene_params(name: &str) -> Result<SceneParams, CliError> {
-    let kind = SceneKind::from_name(name).ok_or_else(|| {
-        let names: Vec<&str> = SceneKind::ALL.iter().map(|(n, _)| *n).collect();
-        CliError::Usage(format!(
-            "unknown scene '{name}' (one of: {})",
-            names.join(", ")
-        ))
-    })?;
+    let kind = SceneKind::parse(name).map_err(|e| CliError::Usage(e.to_string()))?;
     Ok(SceneParams::new(kind))
 }
 
@@ -144,12 +138,7 @@ pub fn print_table(o: &Outcome, job: &Job) {
 fn write_pair(dir: &Path, x: &Measured, w: u16, h: u16) -> Result<(), CliError> {
     for (suffix, img) in ["a", "b"].iter().zip(&x.pair) {
         let path = dir.join(format!("{}_{suffix}.png", x.source.name()));
-        if x.full_scale <= 255 {
-            let v: Vec<u8> = img.iter().map(|&g| g.min(255) as u8).collect();
-            write_gray8(&path, u32::from(w), u32::from(h), &v)?;
-        } else {
-            write_gray16(&path, u32::from(w), u32::from(h), img)?;
-        }
+        write_levels(&path, u32::from(w), u32::from(h), img, x.full_scale)?;
     }
     Ok(())
 }

@@ -44,14 +44,7 @@ pub struct SimulateArgs {
 
 /// Runs it.
 pub fn run(a: &SimulateArgs) -> Result<(), CliError> {
-    let kind = SceneKind::from_name(&a.scene).ok_or_else(|| {
-        let names: Vec<&str> = SceneKind::ALL.iter().map(|(n, _)| *n).collect();
-        CliError::Usage(format!(
-            "unknown scene '{}' (one of: {})",
-            a.scene,
-            names.join(", ")
-        ))
-    })?;
+    let kind = SceneKind::parse(&a.scene).map_err(|e| CliError::Usage(e.to_string()))?;
     let mut p = SceneParams::new(kind);
     if let Some(w) = a.width {
         p.width = w;

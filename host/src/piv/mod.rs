@@ -101,6 +101,21 @@ impl Default for Settings {
     }
 }
 
+impl Settings {
+    /// The defaults with a peak-ratio floor of 1.2, for spike frames (`spiv
+    /// run`, `spiv receive --piv`): they have no frame-camera noise floor,
+    /// and their true peaks often stand only 1.2–1.5× above the next one.
+    pub fn for_spike_frames() -> Settings {
+        Settings {
+            validation: Validation {
+                min_peak_ratio: 1.2,
+                ..Validation::default()
+            },
+            ..Settings::default()
+        }
+    }
+}
+
 /// What can go wrong before any correlation.
 #[derive(Debug, thiserror::Error)]
 pub enum PivError {
