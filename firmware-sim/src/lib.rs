@@ -1,10 +1,17 @@
 //! # spiv-firmware-sim — the spike camera, simulated, and its files
 //!
-//! The scene in front of the camera ([`scene`]: flows, particles, glare), the
-//! sensors that look at it ([`sensor`]: the integrate-and-fire spike sensor
-//! and the frame camera), and the camera's files ([`formats`]), so every
-//! test of spiv runs without hardware. Data flows one way: scene → light →
-//! sensor → packed spike planes → `spiv-core`.
+//! | module | owns |
+//! |---|---|
+//! | [`scene`] | the scene in front of the camera: flows, particles, glare, ground truth |
+//! | [`sensor`] | the integrate-and-fire spike sensor and the frame camera |
+//! | [`simulation`] | one scene through both cameras, in memory or as files (`spiv simulate`) |
+//! | [`formats`] | the camera's files: `.dat`, `.npz`, `scene.json`, images, CSVs, and the size limits of every reader |
+//! | [`firmware`] | the sidecar firmware loop around `spiv-core`, its links and fault injection |
+//! | [`buffers`] | owned buffers for the core on the host |
+//! | [`cli`] | what the two binaries share on the command line |
+//!
+//! So every test of spiv runs without hardware. Data flows one way: scene →
+//! light → sensor → packed spike planes → `spiv-core`.
 #![warn(missing_docs)]
 
 pub mod buffers;

@@ -506,7 +506,9 @@ fn keys(t: f64) -> [f64; 4] {
 }
 
 /// The field of `grid` (`u`, `v` at window centres) at every pixel of an
-/// `h × w` image: bilinear between centres, constant beyond the outer ones.
+/// `h × w` image: Catmull-Rom between centres (separable, 4 × 4 nodes),
+/// over a grid extended by two linearly extrapolated nodes on each side,
+/// positions clamped one node beyond the outer centres.
 pub fn dense(
     grid: &Grid,
     u: &Array2<f64>,
