@@ -59,17 +59,18 @@ timeout 900 "${qemu[@]}" "${one[@]}" -d exec,nochain -D "$fifo" -kernel "$bin" >
 wait
 read -r t_ingest t_frame t_send t_link <"$counts"
 
-# Host: the same kernels, callgrind bracketing each function.
+# Host: the same loop, callgrind bracketing each stage the loop keeps out of
+# line (spiv_core::sidecar::Sidecar::{ingest,make_frame,send_frame}).
 (cd .. && cargo build --release -q -p spiv-firmware-sim --example strip_kernels)
 host=../target/release/examples/strip_kernels
 host_parity=$("$host")
 callgrind() {
-  valgrind --tool=callgrind --toggle-collect="strip_kernels::$1" \
+  valgrind --tool=callgrind --toggle-collect="spiv_core::sidecar::Sidecar::$1" \
     --callgrind-out-file=/dev/null "$host" 2>&1 | sed -n 's/.*I *refs: *//p' | tr -d ,
 }
-x_ingest=$(callgrind kernel_ingest)
-x_frame=$(callgrind kernel_frame)
-x_send=$(callgrind kernel_send)
+x_ingest=$(callgrind ingest)
+x_frame=$(callgrind make_frame)
+x_send=$(callgrind send_frame)
 
 ratio() { awk -v a="$1" -v b="$2" -v d="$3" 'BEGIN { printf "%.*f", d, a / b }'; }
 echo

@@ -9,6 +9,7 @@
 //! | [`plane`] | zero-copy view of one bit-packed Vidar spike plane |
 //! | [`history`] | the ingest: a ring of the last `depth` planes of a band of rows |
 //! | [`window`] | centred windows, bit-parallel window counts, TFP and TFI |
+//! | [`method`] | how a frame is made: adaptive, TFP, TFI, and its wire code |
 //! | [`particle`] | the particle test against the local background, exact, with per-frame tables |
 //! | [`segment`] | saturation time `t_bgmax` and particle/background segmentation |
 //! | [`label`] | 8-connected region labelling with a bounded region table |
@@ -18,11 +19,11 @@
 //! | [`frame`] | one adaptive frame at any tick, in row strips |
 //! | `context` | what every strip of one frame shares (crate-private) |
 //! | [`gray`] | the output pixel type: 8- or 16-bit gray levels |
+//! | [`sidecar`] | the sidecar loop over borrowed memory: planes in, scheduled frames out through the sender; the dwell cap |
+//! | `buffers` | owned buffers of the history, the workspace and the loop (`std` feature) |
 //! | [`state`] | the caller-owned per-pixel working memory |
 //! | [`q`] | the fixed-point formats, in one place |
-//! | [`wire`] | the sidecar link: message header, COBS framing, CRC, stream decoder |
-//! | [`compress`] | tile codecs: raw, lossless Rice, lossy sparse |
-//! | [`sender`] | the pair schedule and the messages that carry a frame |
+//! | [`wire`] | the sidecar link: message header, COBS framing, CRC, stream decoder, tile codecs (`wire::codec`), the sender (`wire::sender`) |
 //!
 //! Units: time in **ticks** (one spike plane), space in **pixels** of the
 //! camera's stored row order (the Vidar layout stores image rows bottom-up: the
@@ -36,7 +37,8 @@
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 #![warn(missing_docs)]
 
-pub mod compress;
+#[cfg(feature = "std")]
+pub mod buffers;
 mod context;
 pub mod error;
 pub mod frame;
@@ -44,13 +46,14 @@ pub mod gray;
 pub mod history;
 pub mod integrate;
 pub mod label;
+pub mod method;
 pub mod params;
 pub mod particle;
 pub mod plane;
 pub mod q;
 pub mod region;
 pub mod segment;
-pub mod sender;
+pub mod sidecar;
 pub mod state;
 pub mod suppress;
 pub mod window;
@@ -60,6 +63,7 @@ pub use error::Error;
 pub use frame::{reconstruct_adaptive, reconstruct_rows, FrameStats};
 pub use gray::Gray;
 pub use history::History;
+pub use method::Method;
 pub use params::Params;
 pub use plane::PlaneView;
 pub use state::{Workspace, WorkspaceSizes};

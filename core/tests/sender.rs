@@ -1,8 +1,8 @@
 //! The sender: tile sizes, the pair schedule, and a frame through the
 //! decoder.
 
-use spiv_core::compress::Lossy;
-use spiv_core::sender::{
+use spiv_core::wire::codec::Lossy;
+use spiv_core::wire::sender::{
     tile_rows, FrameInfo, Link, Schedule, SendBuffers, SendError, Sender, Slot,
 };
 use spiv_core::wire::{
@@ -80,7 +80,7 @@ fn a_frame_arrives_as_tiles_and_an_end_with_its_crc() {
             pair: 0,
             member: 1,
         },
-        method: 0,
+        method: spiv_core::Method::Adaptive,
         full_scale: 255,
         dt: 13,
     };

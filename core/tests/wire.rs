@@ -5,7 +5,7 @@
 //! deterministic sweep feeds 10^6 mutated streams.
 
 use proptest::prelude::*;
-use spiv_core::compress::{decode_tile, encode_tile, sparse_scratch, Lossy};
+use spiv_core::wire::codec::{decode_tile, encode_tile, sparse_scratch, Lossy};
 use spiv_core::wire::{encode_message, Decoder, Encoding, Header, Kind, MAX_ENCODED};
 
 fn header(seq: u32) -> Header {

@@ -9,14 +9,15 @@ use std::time::Instant;
 
 use clap::Parser;
 use spiv_core::wire::{frame_crc, Encoding, CRC};
+use spiv_core::Method;
 use spiv_firmware_sim::firmware::{
-    run_on_dat, run_on_scene, Config, Counters, DriveError, Faults, Faulty, Method, Plain,
+    run_on_dat, run_on_scene, Config, Counters, DriveError, Faults, Faulty, Plain,
 };
-use spiv_firmware_sim::formats::dat::DatOptions;
-use spiv_firmware_sim::formats::meta::SceneMeta;
-use spiv_firmware_sim::formats::MAX_FRAME_PIXELS;
 use spiv_firmware_sim::scene::{SceneKind, SceneParams};
 use spiv_firmware_sim::simulation::Request;
+use spiv_formats::capture::Capture;
+use spiv_formats::dat::DatOptions;
+use spiv_formats::MAX_FRAME_PIXELS;
 
 /// Largest pair separation accepted, ticks (as `spiv simulate --dt`).
 const MAX_DT: u32 = 1_000_000;
@@ -74,10 +75,10 @@ struct Args {
     /// sample above background) over this, so dim particles stay exact; 0: off.
     #[arg(long, default_value_t = 4)]
     contrast: u16,
-    /// Frame method: adaptive or tfp.
+    /// Frame method: adaptive, tfp or tfi.
     #[arg(long, default_value = "adaptive")]
     method: String,
-    /// Adaptive window limit n_max, or the TFP window, ticks.
+    /// Adaptive/TFI window limit n_max, or the TFP window, ticks.
     #[arg(long)]
     window: Option<u16>,
     /// Do not print the throughput line.
@@ -111,7 +112,7 @@ enum Error {
     #[error(transparent)]
     Drive(#[from] DriveError),
     #[error(transparent)]
-    Format(#[from] spiv_firmware_sim::formats::FormatError),
+    Format(#[from] spiv_formats::FormatError),
     #[error("{0}")]
     Io(#[from] std::io::Error),
 }
@@ -140,17 +141,16 @@ fn config(a: &Args, dt: u32) -> Result<Config, Error> {
         )));
     }
     let mut cfg = Config::new(0, dt);
-    cfg.method = match a.method.as_str() {
-        "adaptive" => Method::Adaptive,
-        "tfp" => Method::Tfp(a.window.unwrap_or(8)),
-        m => {
-            return Err(Error::Usage(format!(
-                "unknown --method {m} (adaptive, tfp)"
-            )))
-        }
-    };
-    if let (Method::Adaptive, Some(n)) = (cfg.method, a.window) {
-        cfg.params.n_max = n;
+    cfg.method = Method::from_name(&a.method).ok_or_else(|| {
+        Error::Usage(format!(
+            "unknown --method {} (adaptive, tfp, tfi)",
+            a.method
+        ))
+    })?;
+    match (cfg.method, a.window) {
+        (Method::Tfp, Some(n)) => cfg.tfp_window = n,
+        (_, Some(n)) => cfg.params.n_max = n,
+        (_, None) => {}
     }
     cfg.encoding = match a.encoding.as_str() {
         "rice" => Encoding::Rice,
@@ -164,22 +164,20 @@ fn config(a: &Args, dt: u32) -> Result<Config, Error> {
     };
     cfg.lossy.tolerance = a.tolerance;
     cfg.lossy.contrast = a.contrast;
-    let window = match cfg.method {
-        Method::Adaptive => cfg.params.n_max,
-        Method::Tfp(n) => n,
-    };
+    let window = cfg.window();
     if !(1..=255).contains(&window) {
         return Err(Error::Usage(format!("--window {window}: expected 1..=255")));
     }
-    cfg.first = a.first.unwrap_or(u32::from(window / 2));
-    cfg.every = a.every.unwrap_or(4 * dt);
-    if cfg.every < dt {
+    let s = &mut cfg.schedule;
+    s.first = a.first.unwrap_or(u32::from(window / 2));
+    s.every = a.every.unwrap_or(4 * dt);
+    if s.every < dt {
         return Err(Error::Usage(format!(
             "--every {} must be at least dt = {dt}",
-            cfg.every
+            s.every
         )));
     }
-    cfg.pairs = a.pairs;
+    s.pairs = a.pairs;
     Ok(cfg)
 }
 
@@ -239,7 +237,7 @@ fn run(a: &Args) -> Result<(), Error> {
         p.width = w;
         p.height = h;
         let mut cfg = config(a, p.pair_dt)?;
-        cfg.pairs = Some(a.pairs.unwrap_or(4).max(1));
+        cfg.schedule.pairs = Some(a.pairs.unwrap_or(4).max(1));
         let req = Request::new(p, a.seed);
         let link = Faulty::new(Plain(open_link(a, &shared)?), faults, a.seed);
         let (mut fw, _) = run_on_scene(&req, cfg, link, a.checksum, |_, _| {})?;
@@ -252,7 +250,7 @@ fn run(a: &Args) -> Result<(), Error> {
             .input
             .as_ref()
             .ok_or_else(|| Error::Usage("--scene or --input".into()))?;
-        let meta = SceneMeta::beside(path)?;
+        let meta = Capture::beside(path)?;
         let (w, h) = match (a.width, a.height, &meta) {
             (Some(w), Some(h), _) => (w, h),
             (None, None, Some(m)) => (m.width, m.height),

@@ -8,13 +8,14 @@
 
 use std::path::Path;
 
-use crate::formats::csv::{write_profile, write_vectors};
-use crate::formats::dat::{plane_bytes, DatWriter};
-use crate::formats::image::write_levels;
-use crate::formats::meta::{Glare, SceneInfo, SceneMeta};
-use crate::formats::FormatError;
+use crate::meta::{Glare, SceneInfo, SceneMeta};
 use crate::scene::{vector_grid, Scene, SceneParams, PIXEL_MM, TICK_HZ};
 use crate::sensor::{FrameCamera, FrameCameraParams, SensorParams, SpikeSensor};
+use spiv_formats::capture::Capture;
+use spiv_formats::dat::{plane_bytes, DatWriter};
+use spiv_formats::image::write_levels;
+use spiv_formats::vectors::{write_profile, write_vectors};
+use spiv_formats::FormatError;
 
 /// What to simulate.
 #[derive(Debug, Clone)]
@@ -107,14 +108,16 @@ pub fn simulate(
         camera.capture(&scene, pair[1], req.seed.wrapping_add(1)),
     ];
     let meta = SceneMeta {
-        width: w,
-        height: h,
-        tick_hz: TICK_HZ,
-        pixel_mm: PIXEL_MM,
-        flip: true,
-        first_tick: 0,
-        planes: u64::from(ticks),
-        pair,
+        capture: Capture {
+            width: w,
+            height: h,
+            tick_hz: TICK_HZ,
+            pixel_mm: PIXEL_MM,
+            flip: true,
+            first_tick: 0,
+            planes: u64::from(ticks),
+            pair,
+        },
         scene: SceneInfo {
             name: p.kind.name().to_string(),
             params: p.clone(),
@@ -180,7 +183,7 @@ pub fn simulate_to_dir(
     dir: &Path,
     progress: impl FnMut(u32, u32),
 ) -> Result<Simulated, FormatError> {
-    std::fs::create_dir_all(dir).map_err(crate::formats::io_err(dir))?;
+    std::fs::create_dir_all(dir).map_err(spiv_formats::io_err(dir))?;
     let (w, h) = (req.scene.width, req.scene.height);
     let mut writer = DatWriter::create(&dir.join("spikes.dat"), w, h)?;
     let sim = simulate(req, progress, |plane| writer.write_planes(plane))?;
@@ -188,7 +191,7 @@ pub fn simulate_to_dir(
     for (name, f) in ["frame_a.png", "frame_b.png"].iter().zip(&sim.frames) {
         write_frame(&dir.join(name), req, w, h, f)?;
     }
-    let pair = sim.meta.pair;
+    let pair = sim.meta.capture.pair;
     let dt = f64::from(pair[1] - pair[0]);
     let truth = sim.scene.truth_vectors(&vector_grid(w, h, 32, 16), dt);
     write_vectors(&dir.join("truth.csv"), &truth)?;

@@ -1,12 +1,12 @@
 //! Round trips of every format, and each bad file's clear error.
 
-use spiv_firmware_sim::formats::csv::{read_vectors, write_vectors, Vector};
-use spiv_firmware_sim::formats::dat::{pack_row, unpack_upright, DatOptions, DatReader, DatWriter};
-use spiv_firmware_sim::formats::image::{read_gray, write_gray16, write_gray8};
-use spiv_firmware_sim::formats::meta::SceneMeta;
-use spiv_firmware_sim::formats::FormatError;
+use spiv_firmware_sim::meta::SceneMeta;
 use spiv_firmware_sim::scene::{SceneKind, SceneParams};
 use spiv_firmware_sim::simulation::{simulate_to_dir, Request};
+use spiv_formats::dat::{pack_row, unpack_upright, DatOptions, DatReader, DatWriter};
+use spiv_formats::image::{read_gray, write_gray16, write_gray8};
+use spiv_formats::vectors::{read_vectors, write_vectors, State, Vector};
+use spiv_formats::FormatError;
 
 fn planes(w: u16, h: u16, n: usize) -> Vec<u8> {
     let pb = usize::from(w) * usize::from(h) / 8;
@@ -151,22 +151,22 @@ fn vectors_round_trip_and_bad_csv_is_refused() {
             y: 15.5,
             u: 1.25,
             v: -0.5,
-            flag: 0,
+            state: State::Valid,
         },
         Vector {
             x: 31.5,
             y: 15.5,
             u: 9.0,
             v: 9.0,
-            flag: 2,
+            state: State::Invalid,
         },
     ];
     write_vectors(&p, &v).unwrap();
     let back = read_vectors(&p).unwrap();
     assert_eq!(back[0], v[0]);
     assert_eq!(
-        (back[1].u, back[1].v, back[1].flag),
-        (0.0, 0.0, 2),
+        (back[1].u, back[1].v, back[1].state),
+        (0.0, 0.0, State::Invalid),
         "flag 2 is written as u = v = 0"
     );
     std::fs::write(&p, "x,y,u,v,flag\n1,2,3,4,7\n").unwrap();
@@ -198,15 +198,18 @@ fn a_simulation_writes_every_file_and_scene_json_round_trips() {
     }
     let meta = SceneMeta::read(&dir.path().join("scene.json")).unwrap();
     assert_eq!(meta, sim.meta);
-    assert_eq!((meta.planes, meta.pair), (13 + 16 + 1, [8, 21]));
+    assert_eq!(
+        (meta.capture.planes, meta.capture.pair),
+        (13 + 16 + 1, [8, 21])
+    );
     let r = DatReader::open(
         &dir.path().join("spikes.dat"),
-        meta.width,
-        meta.height,
+        meta.capture.width,
+        meta.capture.height,
         DatOptions::default(),
     )
     .unwrap();
-    assert_eq!(r.planes(), meta.planes);
+    assert_eq!(r.planes(), meta.capture.planes);
     let truth = read_vectors(&dir.path().join("truth.csv")).unwrap();
     assert_eq!(truth.len(), 5 * 3);
     let peak = truth.iter().map(|v| v.u.hypot(v.v)).fold(0.0, f64::max);

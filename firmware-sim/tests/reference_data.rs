@@ -3,10 +3,10 @@
 
 use std::path::PathBuf;
 
-use spiv_firmware_sim::formats::dat::{count_upright, DatOptions, DatReader};
-use spiv_firmware_sim::formats::image::read_gray;
-use spiv_firmware_sim::formats::npz::read_npz_spikes;
-use spiv_firmware_sim::formats::reference_data_dir;
+use spiv_formats::dat::{count_upright, DatOptions, DatReader};
+use spiv_formats::image::read_gray;
+use spiv_formats::npz::read_npz_spikes;
+use spiv_formats::reference_data_dir;
 
 fn data_dir() -> PathBuf {
     let dir = reference_data_dir();

@@ -6,7 +6,7 @@ use std::io::Cursor;
 use std::path::Path;
 
 use libfuzzer_sys::fuzz_target;
-use spiv_firmware_sim::formats::dat::{DatOptions, DatReader};
+use spiv_formats::dat::{DatOptions, DatReader};
 
 fuzz_target!(|input: &[u8]| {
     if input.len() < 6 {

@@ -7,7 +7,7 @@
 use std::path::Path;
 
 use libfuzzer_sys::fuzz_target;
-use spiv_firmware_sim::formats::image::read_gray_bytes_within;
+use spiv_formats::image::read_gray_bytes_within;
 
 const LIMIT: u64 = 1 << 20;
 

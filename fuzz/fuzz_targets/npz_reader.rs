@@ -7,7 +7,7 @@ use std::io::Cursor;
 use std::path::Path;
 
 use libfuzzer_sys::fuzz_target;
-use spiv_firmware_sim::formats::npz::read_npz_spikes_from;
+use spiv_formats::npz::read_npz_spikes_from;
 
 fuzz_target!(|input: &[u8]| {
     if let Ok(s) = read_npz_spikes_from(Cursor::new(input), Path::new("fuzz.npz")) {

@@ -4,7 +4,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use spiv_core::compress::{decode_tile, sparse_scratch};
+use spiv_core::wire::codec::{decode_tile, sparse_scratch};
 use spiv_core::wire::Encoding;
 
 fuzz_target!(|input: &[u8]| {

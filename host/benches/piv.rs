@@ -54,7 +54,7 @@ fn rms(c: &Case, s: &Settings) -> f64 {
     let e: Vec<f64> = vs
         .iter()
         .zip(&truth)
-        .filter(|(v, _)| v.flag < 2)
+        .filter(|(v, _)| v.state.is_measured())
         .map(|(v, t)| (v.u - t.2).powi(2) + (v.v - t.3).powi(2))
         .collect();
     (e.iter().sum::<f64>() / e.len().max(1) as f64).sqrt()

@@ -1,21 +1,21 @@
 //! The dwell cap (beyond the paper, SPEC 5): PIV of the TFP pair predicts
 //! each band's fastest particle, and each 32-row band's adaptive window is
 //! capped so that particle blurs by at most a budget of pixels. One
-//! implementation of the banded frame ([`spiv_firmware_sim::firmware::capped_frame`])
+//! implementation of the banded frame ([`spiv_core::sidecar::capped_frame`])
 //! serves the firmware and the in-process path.
 
 use spiv_core::Params;
-use spiv_firmware_sim::formats::csv::Vector;
+use spiv_formats::vectors::Vector;
 
 use crate::reconstruct::{Planes, ReconstructError};
 
 /// Rows per band of the capped adaptive reconstruction (the firmware's
-/// [`spiv_firmware_sim::firmware::CAP_BAND`]; margins are `Params::margin`).
-pub const BAND: usize = spiv_firmware_sim::firmware::CAP_BAND as usize;
+/// [`spiv_core::sidecar::CAP_BAND`]; margins are `Params::margin`).
+pub const BAND: usize = spiv_core::sidecar::CAP_BAND as usize;
 
 /// The adaptive frame at `k` (upright) with each band of `BAND` rows
 /// reconstructed by the core with its own window limit `caps[band]`, as the
-/// sidecar firmware does ([`spiv_firmware_sim::firmware::capped_frame`]).
+/// sidecar firmware does ([`spiv_core::sidecar::capped_frame`]).
 pub fn adaptive_banded(
     planes: &Planes,
     k: u64,
@@ -28,7 +28,7 @@ pub fn adaptive_banded(
     // At least the window limit, at most the 256 planes the core holds
     // (`max` then `min`: the bounds may cross; the core refuses n_max > 255).
     let depth = n.max(usize::from(core.n_max.max(2))).min(256) as u16;
-    let mut hb = crate::core_run::HistoryBuf::new(w, h, depth)?;
+    let mut hb = spiv_core::buffers::HistoryBuf::new(w, h, depth)?;
     let mut hist = hb.history()?;
     let skip = n.saturating_sub(usize::from(depth));
     for chunk in planes.data.chunks_exact(pb).skip(skip) {
@@ -42,16 +42,9 @@ pub fn adaptive_banded(
             tick: k,
             planes: planes.first + n as u64,
         })?;
-    let mut ws = crate::core_run::WorkspaceBuf::whole(w, h);
+    let mut ws = spiv_core::buffers::WorkspaceBuf::whole(w, h);
     let mut out = vec![0u16; usize::from(w) * usize::from(h)];
-    spiv_firmware_sim::firmware::capped_frame(
-        &hist,
-        tick,
-        core,
-        caps,
-        &mut ws.workspace(),
-        &mut out,
-    )?;
+    spiv_core::sidecar::capped_frame(&hist, tick, core, caps, &mut ws.workspace(), &mut out)?;
     Ok(crate::reconstruct::upright(&out, w, planes.flip))
 }
 
@@ -63,7 +56,7 @@ pub fn band_caps(field: &[Vector], h: usize, dt: f64, budget: f64, core: &Params
             let (lo, hi) = ((b * BAND) as f64 - 16.0, ((b + 1) * BAND) as f64 + 16.0);
             let vmax = field
                 .iter()
-                .filter(|v| v.flag < 2 && v.y >= lo && v.y < hi)
+                .filter(|v| v.state.is_measured() && v.y >= lo && v.y < hi)
                 .map(|v| v.u.hypot(v.v))
                 .fold(0.0, f64::max);
             let n = if vmax > 0.0 {

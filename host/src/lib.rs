@@ -5,7 +5,6 @@
 //! | [`receive`] | byte sources (USB, TCP, pipe, file), the stream decoder, frame reassembly within a size limit, pairing, loss counts |
 //! | [`link`] | the sidecar link in process: the firmware loop's messages through the receiver |
 //! | [`reconstruct`] | frames from spike files (`.dat`, `.npz`) through the core: TFP, TFI, adaptive |
-//! | [`core_run`] | owned buffers for the no_std core |
 //! | [`reference`](mod@reference) | the `f64` reference of the core's algorithm, and its tolerance |
 //! | [`piv`] | the PIV engine: filters, deformation, FFT correlation, sub-pixel peaks, validation |
 //! | [`dwell`] | the dwell cap: window limits per band from a predicted field, and the banded adaptive frame |
@@ -16,7 +15,6 @@
 //! The `spiv` binary's subcommands live in `cli`, one file each.
 #![warn(missing_docs)]
 
-pub mod core_run;
 pub mod dwell;
 pub mod link;
 pub mod metrics;

@@ -5,8 +5,9 @@
 
 use ndarray::Array2;
 use spiv_core::wire::Encoding;
-use spiv_firmware_sim::firmware::{run_on_planes, Config, FirmwareError, Method, SentFrame};
-use spiv_firmware_sim::formats::csv::Vector;
+use spiv_core::Method;
+use spiv_firmware_sim::firmware::{run_on_planes, Config, FirmwareError, SentFrame};
+use spiv_formats::vectors::Vector;
 
 use crate::piv::{piv, PivError, Settings};
 use crate::receive::{receive, Event, FrameLimit, ReceivedFrame, Report, Source, SourceError};
@@ -64,14 +65,16 @@ pub struct Transfer {
     pub tiles: [u32; 4],
 }
 
-/// Runs the firmware with `cfg` over `planes` and receives its messages.
+/// Runs the firmware with `cfg` and window `caps` per band (empty: none)
+/// over `planes` and receives its messages.
 pub fn transfer(
     planes: &[u8],
     width: u16,
     height: u16,
     cfg: Config,
+    caps: Vec<u16>,
 ) -> Result<Transfer, LinkError> {
-    let mut fw = run_on_planes(planes, width, height, cfg, Vec::new(), true)?;
+    let mut fw = run_on_planes(planes, width, height, cfg, caps, Vec::new(), true)?;
     let counters = fw.counters();
     let sent = fw.keep.take().unwrap_or_default();
     let bytes = fw.into_link();
@@ -136,14 +139,14 @@ pub fn dwell_caps(
     budget: f64,
     s: &Settings,
 ) -> Result<(Vec<u16>, Transfer), LinkError> {
-    let cfg = Config {
-        method: Method::Tfp(tfp_window),
+    let mut cfg = Config {
+        method: Method::Tfp,
+        tfp_window,
         encoding: Encoding::Rice,
-        caps: Vec::new(),
-        pairs: Some(1),
-        ..base.clone()
+        ..*base
     };
-    let t = transfer(planes, width, height, cfg)?;
+    cfg.schedule.pairs = Some(1);
+    let t = transfer(planes, width, height, cfg, Vec::new())?;
     let Some([a, b]) = t.pairs.first() else {
         return Ok((Vec::new(), t));
     };
@@ -151,7 +154,7 @@ pub fn dwell_caps(
     let caps = crate::dwell::band_caps(
         &field,
         usize::from(height),
-        f64::from(base.dt),
+        f64::from(base.schedule.dt),
         budget,
         &base.params,
     );

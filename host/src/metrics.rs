@@ -5,7 +5,7 @@
 //! rest, with the mean and 95 % confidence half-width over seeds.
 
 use serde::Serialize;
-use spiv_firmware_sim::formats::csv::Vector;
+use spiv_formats::vectors::Vector;
 
 /// One row of vectors: its height above the wall, the measured mean u (None
 /// when every vector of the row is flagged 2) and the true mean u, px/pair.
@@ -34,7 +34,7 @@ pub fn row_profile(field: &[Vector], truth: &[Vector], height: f64) -> Vec<Profi
             }
         };
         let r = &mut rows[k];
-        if v.flag < 2 {
+        if v.state.is_measured() {
             r.1 += v.u;
             r.2 += 1;
         }
@@ -155,7 +155,7 @@ fn t95(df: usize) -> f64 {
 pub fn vector_rmse(field: &[Vector], truth: &[Vector]) -> (f64, usize) {
     let (mut sq, mut n) = (0.0, 0usize);
     for (v, t) in field.iter().zip(truth) {
-        if v.flag < 2 {
+        if v.state.is_measured() {
             sq += (v.u - t.u).powi(2) + (v.v - t.v).powi(2);
             n += 1;
         }
@@ -173,7 +173,7 @@ mod tests {
             y,
             u,
             v: 0.0,
-            flag,
+            state: spiv_formats::State::from_flag(flag).unwrap(),
         }
     }
 

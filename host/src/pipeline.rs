@@ -6,16 +6,17 @@
 
 use serde::Serialize;
 use spiv_core::Params;
-use spiv_firmware_sim::formats::csv::Vector;
-use spiv_firmware_sim::formats::FormatError;
 use spiv_firmware_sim::scene::{vector_grid, SceneParams};
 use spiv_firmware_sim::simulation::{simulate_planes, Request, Simulated};
+use spiv_formats::vectors::Vector;
+use spiv_formats::FormatError;
 
 use crate::link::{dwell_caps, transfer, Transfer};
 use crate::metrics::{region_error, row_profile, ProfileRow, RegionError};
 use crate::piv::{piv, to_f32, PivError, Settings};
 use crate::reconstruct::ReconstructError;
-use spiv_firmware_sim::firmware::{Config, Method as FwMethod};
+use spiv_core::Method;
+use spiv_firmware_sim::firmware::Config;
 
 /// What one run does.
 #[derive(Debug, Clone)]
@@ -35,7 +36,7 @@ pub struct Job {
     /// How the sidecar codes the frames it sends (lossless Rice by default).
     pub encoding: spiv_core::wire::Encoding,
     /// Lossy mode settings.
-    pub lossy: spiv_core::compress::Lossy,
+    pub lossy: spiv_core::wire::codec::Lossy,
 }
 
 impl Job {
@@ -48,7 +49,7 @@ impl Job {
             piv: Settings::for_spike_frames(),
             dwell_cap: None,
             encoding: spiv_core::wire::Encoding::Rice,
-            lossy: spiv_core::compress::Lossy::default(),
+            lossy: spiv_core::wire::codec::Lossy::default(),
         }
     }
 }
@@ -170,31 +171,24 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
     let t_sim = t0.elapsed().as_secs_f64() * 1e3;
 
     stage("sidecar: core and wire");
-    let [ka, kb] = sim.meta.pair;
+    let [ka, kb] = sim.meta.capture.pair;
     let mut base = Config::new(ka, kb - ka);
     base.params = job.core;
-    base.pairs = Some(1);
+    base.schedule.pairs = Some(1);
     base.encoding = job.encoding;
     base.lossy = job.lossy;
     let (caps, tfp_t) = match job.dwell_cap {
         Some(budget) => dwell_caps(&data, w, h, &base, job.tfp_window, budget, &job.piv)?,
         None => {
             let cfg = Config {
-                method: FwMethod::Tfp(job.tfp_window),
-                ..base.clone()
+                method: Method::Tfp,
+                tfp_window: job.tfp_window,
+                ..base
             };
-            (Vec::new(), transfer(&data, w, h, cfg)?)
+            (Vec::new(), transfer(&data, w, h, cfg, Vec::new())?)
         }
     };
-    let ad_t = transfer(
-        &data,
-        w,
-        h,
-        Config {
-            caps,
-            ..base.clone()
-        },
-    )?;
+    let ad_t = transfer(&data, w, h, base, caps)?;
     let exact = |t: &Transfer| {
         t.pairs.iter().flatten().all(|r| {
             t.sent
@@ -205,7 +199,7 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
     let link = LinkSummary {
         adaptive_bytes: ad_t.bytes,
         tfp_bytes: tfp_t.bytes,
-        raw_bytes_per_period: u64::from(base.every) * u64::from(w) * u64::from(h) / 8,
+        raw_bytes_per_period: u64::from(base.schedule.every) * u64::from(w) * u64::from(h) / 8,
         lost_frames: ad_t.report.lost_frames + tfp_t.report.lost_frames,
         bit_exact: exact(&ad_t) && exact(&tfp_t),
     };
@@ -218,7 +212,7 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
     let t_rec = t0.elapsed().as_secs_f64() * 1e3 - t_sim;
 
     stage("PIV on three pairs");
-    let dt = f64::from(sim.meta.pair[1] - sim.meta.pair[0]);
+    let dt = f64::from(sim.meta.capture.pair[1] - sim.meta.capture.pair[0]);
     let truth = sim.scene.truth_vectors(&piv_grid(&job.piv, w, h), dt);
     let glare_limit = 2.0 * p.glare_sigma;
     let (wu, hu) = (usize::from(w), usize::from(h));

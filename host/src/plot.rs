@@ -9,7 +9,7 @@ use plotters::prelude::*;
 use plotters::style::{register_font, FontStyle};
 
 use crate::metrics::ProfileRow;
-use spiv_firmware_sim::formats::csv::Vector;
+use spiv_formats::{State, Vector};
 
 /// A plotting failure, as text (plotters' errors are generic over backends).
 #[derive(Debug, thiserror::Error)]
@@ -169,12 +169,12 @@ pub fn vectors(
     for v in field {
         let (x0, y0) = ((v.x + 0.5) * kk, (v.y + 0.5) * kk);
         let p0 = (x0 as i32, y0 as i32);
-        if v.flag == 2 {
+        if v.state == State::Invalid {
             root.draw(&Circle::new(p0, 2, RED.filled()))
                 .map_err(|x| e(x.to_string()))?;
             continue;
         }
-        let color = if v.flag == 0 {
+        let color = if v.state == State::Valid {
             RGBColor(255, 221, 0)
         } else {
             RGBColor(255, 140, 0)

@@ -6,12 +6,12 @@ use std::path::Path;
 
 use spiv_core::window::{tfi, tfp};
 use spiv_core::{reconstruct_adaptive, FrameStats, Params, PlaneView};
-use spiv_firmware_sim::formats::dat::{DatOptions, DatReader};
-use spiv_firmware_sim::formats::meta::SceneMeta;
-use spiv_firmware_sim::formats::npz::read_npz_spikes;
-use spiv_firmware_sim::formats::FormatError;
+use spiv_formats::capture::Capture;
+use spiv_formats::dat::{DatOptions, DatReader};
+use spiv_formats::npz::read_npz_spikes;
+use spiv_formats::FormatError;
 
-use crate::core_run::{HistoryBuf, WorkspaceBuf};
+use spiv_core::buffers::{HistoryBuf, WorkspaceBuf};
 
 /// How a frame is made.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -218,7 +218,7 @@ pub fn frame_from_file(
             data: s.planes,
         }
     } else {
-        let meta = SceneMeta::beside(path)?;
+        let meta = Capture::beside(path)?;
         let (w, h) = match (opts.width, opts.height, &meta) {
             (Some(w), Some(h), _) => (w, h),
             (None, None, Some(m)) => (m.width, m.height),

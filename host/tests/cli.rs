@@ -288,7 +288,7 @@ fn truncated_last_plane_is_refused_or_read_on_request() {
 /// The reference captures (`SPIV_DATA`, else the repository's `data/`);
 /// missing data fails the test.
 fn reference_data() -> PathBuf {
-    let dir = spiv_firmware_sim::formats::reference_data_dir();
+    let dir = spiv_formats::reference_data_dir();
     assert!(dir.join("spike").is_dir(), "no spike/ in {}", dir.display());
     dir
 }
@@ -343,9 +343,8 @@ fn reconstructs_the_real_reference_capture() {
     let adaptive = image::open(&out).expect("npz out").to_luma8();
     assert_eq!(adaptive.dimensions(), (250, 250));
     // The capture's scene, upright: the spike count of all 200 planes.
-    let s = spiv_firmware_sim::formats::npz::read_npz_spikes(&npz).expect("npz");
-    let counts =
-        spiv_firmware_sim::formats::dat::count_upright(&s.planes, s.packed_width, s.height, false);
+    let s = spiv_formats::npz::read_npz_spikes(&npz).expect("npz");
+    let counts = spiv_formats::dat::count_upright(&s.planes, s.packed_width, s.height, false);
     let counts: Vec<f64> = counts.iter().map(|&c| f64::from(c)).collect();
     let a: Vec<f64> = adaptive.pixels().map(|x| f64::from(x.0[0])).collect();
     let flipped: Vec<f64> = adaptive
@@ -401,7 +400,7 @@ fn piv_on_a_simulated_pair_and_its_errors() {
         "32,32",
     ]);
     assert!(msg.contains("vectors"), "{msg}");
-    let v = spiv_firmware_sim::formats::csv::read_vectors(&out).expect("csv");
+    let v = spiv_formats::vectors::read_vectors(&out).expect("csv");
     // 128x96 with 32-px windows every 16 px: 7 x 5.
     assert_eq!(v.len(), 35);
     assert!(v.iter().all(|x| x.u.is_finite() && x.v.is_finite()));
@@ -434,7 +433,7 @@ fn piv_on_a_simulated_pair_and_its_errors() {
     // A pair of different sizes, a missing image, an image smaller than the
     // window, a bad window list.
     let small = tmp.path().join("small.png");
-    spiv_firmware_sim::formats::image::write_gray8(&small, 16, 16, &[0u8; 256]).expect("png");
+    spiv_formats::image::write_gray8(&small, 16, 16, &[0u8; 256]).expect("png");
     let a = sim.join("frame_a.png");
     let e = fails(&["piv", p(&a), p(&small), "-o", p(&out)]);
     assert!(e.contains("differ in size"), "{e}");

@@ -8,9 +8,9 @@ mod common;
 
 use common::{errors, pair, params, rms};
 use spiv_firmware_sim::scene::{SceneKind, SceneParams};
-use spiv_host::piv::{piv, Settings};
+use spiv_host::piv::{piv, Settings, State};
 
-fn uniform(shift: (f64, f64), seed: u64) -> Vec<(f64, f64, u8)> {
+fn uniform(shift: (f64, f64), seed: u64) -> Vec<(f64, f64, State)> {
     let p = SceneParams {
         shift,
         ..params(SceneKind::Uniform)
@@ -33,7 +33,7 @@ fn uniform_subpixel_displacements_have_no_peak_locking() {
         eprintln!(
             "shift {d:.1},{:.2}: bias {bu:+.4} {bv:+.4} rms {r:.4} invalid {}",
             0.5 * d,
-            e.iter().filter(|x| x.2 != 0).count()
+            e.iter().filter(|x| x.2 != State::Valid).count()
         );
         assert!(
             bu.abs() <= 0.02 && bv.abs() <= 0.02,
@@ -53,7 +53,7 @@ fn larger_uniform_displacements() {
     {
         let e = uniform(d, 40 + i as u64);
         let r = rms(&e);
-        let bad = e.iter().filter(|x| x.2 != 0).count();
+        let bad = e.iter().filter(|x| x.2 != State::Valid).count();
         eprintln!("shift {d:?}: rms {r:.4} flagged {bad}/{}", e.len());
         // Particles leave the image at the edges: a slightly looser bound.
         assert!(r <= 0.06, "rms at {d:?}: {r}");
@@ -61,7 +61,7 @@ fn larger_uniform_displacements() {
 }
 
 /// Vectors more than 1 px off the truth, whatever their flag.
-fn outliers(e: &[(f64, f64, u8)]) -> usize {
+fn outliers(e: &[(f64, f64, State)]) -> usize {
     e.iter()
         .filter(|x| (x.0 * x.0 + x.1 * x.1).sqrt() > 1.0)
         .count()

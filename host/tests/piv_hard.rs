@@ -22,7 +22,7 @@ fn all_zero_and_all_saturated_images_are_invalid_never_nan() {
         assert!(f
             .vectors()
             .iter()
-            .all(|v| v.flag == 2 && v.u == 0.0 && v.v == 0.0));
+            .all(|v| v.state == State::Invalid && v.u == 0.0 && v.v == 0.0));
     }
 }
 
@@ -52,11 +52,13 @@ fn saturated_patch_inside_a_good_image() {
         if covered {
             inside += 1;
             assert_eq!(
-                v.flag, 2,
+                v.state,
+                State::Invalid,
                 "window inside the clipped block at {},{}",
-                v.x, v.y
+                v.x,
+                v.y
             );
-        } else if v.flag == 0 {
+        } else if v.state == State::Valid {
             assert!(
                 (err.0 * err.0 + err.1 * err.1).sqrt() < 0.5,
                 "valid vector off by {err:?} at {},{}",
@@ -88,7 +90,7 @@ fn a_single_particle() {
     assert!(finite(&f));
     let mut found = 0;
     for v in f.vectors() {
-        if v.flag == 0 {
+        if v.state == State::Valid {
             found += 1;
             assert!((v.u - 2.8).abs() < 0.1 && (v.v + 1.2).abs() < 0.1, "{v:?}");
         }
@@ -107,7 +109,7 @@ fn displacements_beyond_the_window_are_recovered_or_flagged() {
     let pr = pair(p, 11);
     let f = piv(&pr.a, &pr.b, None, &Settings::default()).expect("runs");
     let e = errors(&f, &pr);
-    let valid: Vec<_> = e.iter().filter(|x| x.2 == 0).collect();
+    let valid: Vec<_> = e.iter().filter(|x| x.2 == State::Valid).collect();
     assert!(valid.len() > e.len() * 8 / 10);
     assert!(valid.iter().all(|x| x.0.hypot(x.1) < 0.5));
 
@@ -127,9 +129,9 @@ fn displacements_beyond_the_window_are_recovered_or_flagged() {
     let e = errors(&f, &pr);
     let wrong_valid = e
         .iter()
-        .filter(|x| x.2 == 0 && x.0.hypot(x.1) > 1.0)
+        .filter(|x| x.2 == State::Valid && x.0.hypot(x.1) > 1.0)
         .count();
-    let valid = e.iter().filter(|x| x.2 == 0).count();
+    let valid = e.iter().filter(|x| x.2 == State::Valid).count();
     eprintln!(
         "40 px with 32-px windows: {valid} valid, {wrong_valid} wrong among them, of {}",
         e.len()
@@ -184,8 +186,7 @@ fn sixteen_bit_images_and_masks() {
     let save = |img: &Array2<f32>, name: &str| {
         let data: Vec<u16> = img.iter().map(|&v| (v * 16.0) as u16).collect();
         let path = dir.path().join(name);
-        spiv_firmware_sim::formats::image::write_gray16(&path, w as u32, h as u32, &data)
-            .expect("write");
+        spiv_formats::image::write_gray16(&path, w as u32, h as u32, &data).expect("write");
         path
     };
     let (pa, pb) = (save(&pr.a, "a.png"), save(&pr.b, "b.tif"));
@@ -200,11 +201,14 @@ fn sixteen_bit_images_and_masks() {
     let f = piv(&a, &b, Some(&mask), &Settings::default()).expect("runs");
     for v in f.vectors() {
         if (v.x as usize) < w / 2 {
-            assert_eq!(v.flag, 2);
+            assert_eq!(v.state, State::Invalid);
         }
     }
     let e = errors(&f, &pr);
-    assert!(e.iter().filter(|x| x.2 == 0).all(|x| x.0.hypot(x.1) < 0.5));
+    assert!(e
+        .iter()
+        .filter(|x| x.2 == State::Valid)
+        .all(|x| x.0.hypot(x.1) < 0.5));
 }
 
 #[test]
@@ -222,7 +226,7 @@ fn strong_gradients() {
     let e = errors(&f, &pr);
     let bad = e
         .iter()
-        .filter(|x| x.2 == 0 && x.0.hypot(x.1) > 1.0)
+        .filter(|x| x.2 == State::Valid && x.0.hypot(x.1) > 1.0)
         .count();
     eprintln!(
         "shear 0.1 px/px: rms {:.3}, {bad} valid vectors off by > 1 px",

@@ -12,10 +12,10 @@ use std::process::Stdio;
 
 use ndarray::Array2;
 use spiv_firmware_sim::firmware::{run_on_scene, Config, SentFrame};
-use spiv_firmware_sim::formats::csv::write_vectors;
-use spiv_firmware_sim::formats::image::read_gray;
 use spiv_firmware_sim::scene::{SceneKind, SceneParams};
 use spiv_firmware_sim::simulation::Request;
+use spiv_formats::image::read_gray;
+use spiv_formats::vectors::write_vectors;
 use spiv_host::link::receiver_settings;
 use spiv_host::piv::piv;
 use spiv_host::reconstruct::upright;
@@ -58,9 +58,9 @@ fn in_process(pairs: u32, seed: u64) -> BTreeMap<(u32, u8), SentFrame> {
     p.height = H;
     let mut cfg = Config::new(0, p.pair_dt);
     cfg.params.n_max = WINDOW;
-    cfg.first = u32::from(WINDOW / 2);
-    cfg.every = 4 * p.pair_dt;
-    cfg.pairs = Some(pairs);
+    cfg.schedule.first = u32::from(WINDOW / 2);
+    cfg.schedule.every = 4 * p.pair_dt;
+    cfg.schedule.pairs = Some(pairs);
     let (mut fw, _) =
         run_on_scene(&Request::new(p, seed), cfg, Vec::new(), true, |_, _| {}).expect("firmware");
     let sent = fw.keep.take().expect("kept frames");
@@ -139,7 +139,12 @@ fn check_received(dir: &Path, sent: &BTreeMap<(u32, u8), SentFrame>) -> usize {
             "pair {pair}: vectors from the received frames differ from in-process PIV"
         );
         assert!(
-            field.vectors().iter().filter(|v| v.flag == 0).count() > 0,
+            field
+                .vectors()
+                .iter()
+                .filter(|v| v.state == spiv_formats::State::Valid)
+                .count()
+                > 0,
             "pair {pair}: no valid vector at all, the comparison would be empty"
         );
     }

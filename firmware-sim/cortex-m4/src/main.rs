@@ -1,8 +1,9 @@
 //! spiv-core on a Cortex-M4F (QEMU `mps2-an386`): the sidecar's real
 //! pipeline on a committed spike strip — planes into the history ring,
 //! segmentation, background suppression, adaptive integration, one frame
-//! pair, tile coding and wire framing — with the same schedule and sender
-//! as `spiv-firmware-sim`, so both print the same parity line:
+//! pair, tile coding and wire framing — through the core's sidecar loop
+//! (`spiv_core::sidecar`), the very loop `spiv-firmware-sim` runs, so both
+//! print the same parity line:
 //!
 //! ```text
 //! planes=… frames=… messages=… bytes=… stream_crc=… frame_crcs=…,…
@@ -11,8 +12,9 @@
 //! (`spiv-firmware-sim --input data/strip.dat --pairs 1 --checksum` on the
 //! host). It also prints the RAM it reserves and checks the core's
 //! documented bytes per pixel against it, then exits 0 through semihosting,
-//! or 1 on any error. The `spiv_mark_*` functions bracket the kernels for
-//! `cost.sh`, which counts QEMU's executed instructions between them.
+//! or 1 on any error. The `spiv_mark_*` functions, called by the loop's
+//! probe, bracket the kernels for `cost.sh`, which counts QEMU's executed
+//! instructions between them.
 //!
 //! All buffers are statics sized by the core's `const fn`s: no heap, no
 //! allocation, nothing sized at run time.
@@ -25,12 +27,12 @@ use core::convert::Infallible;
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
 use panic_semihosting as _;
-use spiv_core::compress::Lossy;
 use spiv_core::region::Region;
-use spiv_core::sender::{tile_rows, FrameInfo, Link, Schedule, SendBuffers, Sender};
+use spiv_core::sidecar::{Config, Memory, Probe, Sidecar, SidecarError, Stage};
 use spiv_core::state::{Buffers, STATE_MILLIBYTES_PER_PIXEL};
-use spiv_core::wire::{frame_crc, Encoding, MAX_ENCODED, MAX_PAYLOAD};
-use spiv_core::{reconstruct_adaptive, History, Params, PlaneView, Workspace, WorkspaceSizes};
+use spiv_core::wire::sender::{Link, SendBuffers, Slot};
+use spiv_core::wire::{frame_crc, MAX_ENCODED, MAX_PAYLOAD};
+use spiv_core::{History, Params, Workspace, WorkspaceSizes};
 
 /// The strip: 128 × 64 px of the default `paper-linear` scene (glare band
 /// and moving particles), 144 planes, stored row order (`data/scene.json`).
@@ -49,7 +51,6 @@ const HIST_WORDS: usize = match History::words_needed(W, H, DEPTH) {
     None => 0,
 };
 const SIZES: WorkspaceSizes = WorkspaceSizes::for_strip(W, H);
-const TILE_ROWS: u16 = tile_rows(W, H, false, 8);
 
 const EMPTY_REGION: Region = Region {
     pixels: 0,
@@ -113,6 +114,36 @@ macro_rules! markers {
     )*};
 }
 
+/// The loop's probe: cost markers around each stage, and the CRC of each
+/// frame as sent (for the parity line).
+struct Marks {
+    frame_crcs: [u32; 2],
+}
+
+impl Probe<u8> for Marks {
+    #[inline(always)]
+    fn enter(&mut self, stage: Stage) {
+        match stage {
+            Stage::Ingest => spiv_mark_ingest_begin(),
+            Stage::Frame => spiv_mark_frame_begin(),
+            Stage::Send => spiv_mark_send_begin(),
+        }
+    }
+    #[inline(always)]
+    fn leave(&mut self, stage: Stage) {
+        match stage {
+            Stage::Ingest => spiv_mark_ingest_end(),
+            Stage::Frame => spiv_mark_frame_end(),
+            Stage::Send => spiv_mark_send_end(),
+        }
+    }
+    fn sent(&mut self, _frame_id: u32, slot: Slot, frame: &[u8]) {
+        if let Some(c) = self.frame_crcs.get_mut(usize::from(slot.member)) {
+            *c = frame_crc(frame);
+        }
+    }
+}
+
 markers!(
     spiv_mark_ingest_begin = 1,
     spiv_mark_ingest_end = 2,
@@ -160,11 +191,13 @@ impl From<spiv_core::Error> for Failure {
     }
 }
 
-impl From<spiv_core::sender::SendError<Infallible>> for Failure {
-    fn from(e: spiv_core::sender::SendError<Infallible>) -> Self {
+impl From<SidecarError<Infallible>> for Failure {
+    fn from(e: SidecarError<Infallible>) -> Self {
         match e {
-            spiv_core::sender::SendError::Wire(w) => Failure::Wire(w),
-            spiv_core::sender::SendError::Link(never) => match never {},
+            SidecarError::Core(c) => Failure::Core(c),
+            SidecarError::Wire(w) => Failure::Wire(w),
+            SidecarError::Config(_) => Failure::Memory("configuration refused"),
+            SidecarError::Link(never) => match never {},
         }
     }
 }
@@ -193,83 +226,46 @@ fn run() -> Result<(), Failure> {
     .ok_or(Failure::Memory("RAM taken twice"))?;
     report_memory(ram)?;
 
+    // `spiv-firmware-sim`'s defaults: first frame at n_max/2, one pair.
     let params = Params::default();
-    let mut hist = History::new(&mut ram.history, W, H, 0, H, DEPTH)?;
-    let mut ws = Workspace::new(
-        SIZES,
-        Buffers {
-            counts: &mut ram.counts,
-            c_t: &mut ram.c_t,
-            class: &mut ram.class,
-            labels: &mut ram.labels,
-            masks: &mut ram.masks,
-            tiles: &mut ram.tiles,
-            parents: &mut ram.parents,
-            regions: &mut ram.regions,
+    let mut cfg = Config::new(u32::from(params.n_max / 2), DT);
+    cfg.schedule.pairs = Some(1);
+    let mut sidecar = Sidecar::new::<Infallible>(W, H, cfg)?;
+    let mut mem = Memory {
+        history: History::new(&mut ram.history, W, H, 0, H, DEPTH)?,
+        workspace: Workspace::new(
+            SIZES,
+            Buffers {
+                counts: &mut ram.counts,
+                c_t: &mut ram.c_t,
+                class: &mut ram.class,
+                labels: &mut ram.labels,
+                masks: &mut ram.masks,
+                tiles: &mut ram.tiles,
+                parents: &mut ram.parents,
+                regions: &mut ram.regions,
+            },
+        )?,
+        frame: &mut ram.frame,
+        counts: &mut [],
+        send: SendBuffers {
+            payload: &mut ram.payload,
+            wire: &mut ram.wire,
+            scratch: &mut [],
         },
-    )?;
-    let mut buf = SendBuffers {
-        payload: &mut ram.payload,
-        wire: &mut ram.wire,
-        scratch: &mut [],
+        caps: &[],
     };
-    let frame = &mut ram.frame;
-    let mut sender = Sender::new(W, H, TILE_ROWS)?;
     let mut link = CrcLink {
         digest: CRC32.digest(),
     };
-    // `spiv-firmware-sim`'s defaults: first frame at n_max/2, one pair.
-    let schedule = Schedule {
-        first: u32::from(params.n_max / 2),
-        dt: DT,
-        every: 4 * DT,
-        pairs: Some(1),
-    };
-    let status_every = 16;
-    let mut frame_crcs = [0u32; 2];
-    let mut next = 0u64;
+    let mut marks = Marks { frame_crcs: [0; 2] };
     for plane in STRIP.chunks_exact(PLANE_BYTES) {
-        if schedule.slot(next).is_none() {
+        if sidecar.done() {
             break;
         }
-        spiv_mark_ingest_begin();
-        let newest = hist.push(&PlaneView::new(plane, W, H)?)?;
-        spiv_mark_ingest_end();
-        sender.sent.planes += 1;
-        while let Some(slot) = schedule.slot(next) {
-            if !Schedule::ready(slot.tick, params.n_max, newest) {
-                break;
-            }
-            next += 1;
-            spiv_mark_frame_begin();
-            reconstruct_adaptive(&hist, slot.tick, &params, &mut ws, &mut frame[..])?;
-            spiv_mark_frame_end();
-            let info = FrameInfo {
-                slot,
-                method: 0,
-                full_scale: params.full_scale,
-                dt: DT,
-            };
-            spiv_mark_send_begin();
-            sender.send_frame(
-                &mut buf,
-                &mut frame[..],
-                &info,
-                Encoding::Rice,
-                &Lossy::default(),
-                &mut link,
-            )?;
-            spiv_mark_send_end();
-            if let Some(c) = frame_crcs.get_mut(slot.member as usize) {
-                *c = frame_crc(&frame[..]);
-            }
-            if slot.member == 1 && (slot.pair + 1) % status_every == 0 {
-                sender.send_status(&mut buf, &mut link)?;
-            }
-        }
+        sidecar.push_plane(&mut mem, plane, &mut link, &mut marks)?;
     }
-    sender.send_status(&mut buf, &mut link)?;
-    let s = sender.sent;
+    let s = sidecar.finish(&mut mem.send, &mut link)?;
     hprintln!(
         "planes={} frames={} messages={} bytes={} stream_crc={:08x} frame_crcs={:08x},{:08x}",
         s.planes,
@@ -277,8 +273,8 @@ fn run() -> Result<(), Failure> {
         s.messages,
         s.bytes,
         link.digest.finalize(),
-        frame_crcs[0],
-        frame_crcs[1]
+        marks.frame_crcs[0],
+        marks.frame_crcs[1]
     );
     Ok(())
 }

@@ -390,15 +390,15 @@ impl Scene {
         &self,
         points: &[(f64, f64)],
         dt: f64,
-    ) -> Vec<crate::formats::csv::Vector> {
+    ) -> Vec<spiv_formats::vectors::Vector> {
         self.truth(points, dt)
             .into_iter()
-            .map(|(x, y, u, v)| crate::formats::csv::Vector {
+            .map(|(x, y, u, v)| spiv_formats::vectors::Vector {
                 x,
                 y,
                 u,
                 v,
-                flag: 0,
+                state: spiv_formats::State::Valid,
             })
             .collect()
     }

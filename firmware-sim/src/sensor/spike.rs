@@ -296,7 +296,7 @@ impl SpikeSensor {
         plane.fill(0);
         for (i, row) in self.rows.iter().enumerate() {
             let stored = if flip { h - 1 - i } else { i };
-            crate::formats::dat::pack_row(&row.bits, stored, w, plane);
+            spiv_formats::dat::pack_row(&row.bits, stored, w, plane);
         }
         spikes
     }

@@ -180,7 +180,7 @@ fn blasius(seeds: u64) -> Result<(), CliError> {
         let mut job = Job::new(SceneParams::new(SceneKind::Blasius), seed);
         job.dwell_cap = Some(8.0);
         let o = run_job(&job, |_| {})?;
-        let dt = f64::from(o.sim.meta.pair[1] - o.sim.meta.pair[0]);
+        let dt = f64::from(o.sim.meta.capture.pair[1] - o.sim.meta.capture.pair[0]);
         u_pair = job.request.scene.top_speed * dt;
         for (k, x) in o.measured.iter().enumerate() {
             let used: Vec<f64> = x
@@ -222,7 +222,7 @@ fn speed(plot_path: &PathBuf) -> Result<(), CliError> {
     let (w, h) = (p.width, p.height);
     let (data, sim) = simulate_planes(&job.request)?;
     let planes = Planes::simulated(w, h, data);
-    let [ka, kb] = sim.meta.pair.map(u64::from);
+    let [ka, kb] = sim.meta.capture.pair.map(u64::from);
     let dt = (kb - ka) as f64;
     let truth = sim.scene.truth_vectors(&vector_grid(w, h, 32, 16), dt);
     let (wu, hu) = (usize::from(w), usize::from(h));
@@ -328,12 +328,12 @@ fn speed(plot_path: &PathBuf) -> Result<(), CliError> {
         let t = Instant::now();
         let mut base = Config::new(ka as u32, (kb - ka) as u32);
         base.params = job.core;
-        base.pairs = Some(1);
+        base.schedule.pairs = Some(1);
         base.encoding = enc;
         let (caps, _) =
             spiv_host::link::dwell_caps(&planes.data, w, h, &base, 8, 8.0, &piv_cfgs[0].1)
                 .map_err(|e| CliError::Usage(e.to_string()))?;
-        let ad_t = spiv_host::link::transfer(&planes.data, w, h, Config { caps, ..base })
+        let ad_t = spiv_host::link::transfer(&planes.data, w, h, base, caps)
             .map_err(|e| CliError::Usage(e.to_string()))?;
         let [a, bb] = ad_t
             .pairs

@@ -13,7 +13,7 @@ use std::path::PathBuf;
 use clap::Args;
 use serde::Serialize;
 use spiv_core::wire::Encoding;
-use spiv_firmware_sim::firmware::{ticks_for, Config};
+use spiv_firmware_sim::firmware::Config;
 use spiv_firmware_sim::scene::{SceneKind, SceneParams};
 use spiv_firmware_sim::simulation::{simulate_planes, Request};
 use spiv_host::link::{dwell_caps, piv_pairs, transfer, LinkError};
@@ -109,40 +109,37 @@ pub fn run(a: &LinkArgs) -> Result<(), CliError> {
             let job = Job::new(p.clone(), seed);
             let mut base = Config::new(u32::from(job.core.n_max / 2), dt);
             base.params = job.core;
-            base.pairs = Some(a.pairs);
+            base.schedule.pairs = Some(a.pairs);
             base.lossy.tolerance = a.tolerance;
             base.lossy.contrast = a.contrast;
             let max_every = a.every.iter().max().copied().unwrap_or(4) * dt;
             let mut req = Request::new(p.clone(), seed);
-            req.ticks = Some(ticks_for(
-                &Config {
-                    every: max_every,
-                    ..base.clone()
-                },
-                a.pairs,
-            ));
+            let mut longest = base;
+            longest.schedule.every = max_every;
+            req.ticks = Some(longest.ticks_for(a.pairs));
             let (planes, sim) = simulate_planes(&req)?;
             let truth = sim
                 .scene
                 .truth_vectors(&piv_grid(&job.piv, w, h), f64::from(dt));
+            let mut caps = Vec::new();
             if let Some(budget) = dwell_cap {
                 // The caps come from a TFP pair sent through the link first,
                 // as a sidecar would be told them over the control endpoint.
-                let (caps, _) = dwell_caps(&planes, w, h, &base, job.tfp_window, budget, &job.piv)
+                (caps, _) = dwell_caps(&planes, w, h, &base, job.tfp_window, budget, &job.piv)
                     .map_err(link_err)?;
-                base.caps = caps;
             }
             for (i, &f) in a.every.iter().enumerate() {
-                let mut cfg = base.clone();
-                cfg.every = f * dt;
+                let mut cfg = base;
+                cfg.schedule.every = f * dt;
                 let lossless = transfer(
                     &planes,
                     w,
                     h,
                     Config {
                         encoding: Encoding::Rice,
-                        ..cfg.clone()
+                        ..cfg
                     },
+                    caps.clone(),
                 )
                 .map_err(link_err)?;
                 let lossy = transfer(
@@ -153,6 +150,7 @@ pub fn run(a: &LinkArgs) -> Result<(), CliError> {
                         encoding: Encoding::Sparse,
                         ..cfg
                     },
+                    caps.clone(),
                 )
                 .map_err(link_err)?;
                 let exact = lossless.pairs.len() == a.pairs as usize

@@ -13,7 +13,7 @@ pub mod simulate;
 pub enum CliError {
     /// Reading or writing a file.
     #[error(transparent)]
-    Format(#[from] spiv_firmware_sim::formats::FormatError),
+    Format(#[from] spiv_formats::FormatError),
     /// Making a frame.
     #[error(transparent)]
     Reconstruct(#[from] spiv_host::reconstruct::ReconstructError),

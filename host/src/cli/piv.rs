@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
-use spiv_firmware_sim::formats::csv::write_vectors;
+use spiv_formats::vectors::write_vectors;
 use spiv_host::piv::{load_image, load_mask, piv, Clip, Interp, Settings, Subpixel, Validation};
 
 use super::CliError;

@@ -4,8 +4,8 @@ use std::path::PathBuf;
 
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use spiv_firmware_sim::formats::csv::write_vectors;
-use spiv_firmware_sim::formats::image::write_levels;
+use spiv_formats::image::write_levels;
+use spiv_formats::vectors::write_vectors;
 use spiv_host::link::{receiver_settings, upright_f32};
 use spiv_host::piv::piv;
 use spiv_host::receive::source::{open, parse_vid_pid};

@@ -5,8 +5,8 @@ use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
 use spiv_core::Params;
-use spiv_firmware_sim::formats::dat::DatOptions;
-use spiv_firmware_sim::formats::image::write_levels;
+use spiv_formats::dat::DatOptions;
+use spiv_formats::image::write_levels;
 use spiv_host::reconstruct::{frame_from_file, FileOptions, Method};
 
 use super::CliError;

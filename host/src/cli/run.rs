@@ -6,10 +6,10 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use plotters::style::RGBColor;
 use serde_json::json;
-use spiv_firmware_sim::formats::csv::write_vectors;
-use spiv_firmware_sim::formats::image::write_levels;
 use spiv_firmware_sim::scene::{SceneKind, SceneParams, PIXEL_MM, TICK_HZ};
 use spiv_firmware_sim::simulation::write_frame;
+use spiv_formats::image::write_levels;
+use spiv_formats::vectors::write_vectors;
 use spiv_host::metrics::rmae_ratio;
 use spiv_host::pipeline::{run as run_job, Job, Measured, Outcome, Source};
 use spiv_host::plot::{self, Series};
@@ -84,7 +84,7 @@ pub fn label(s: Source, tfp: u16) -> String {
 /// Prints the paper's Tables 1–2 layout for one run.
 pub fn print_table(o: &Outcome, job: &Job) {
     let m = &o.sim.meta;
-    let dt = f64::from(m.pair[1] - m.pair[0]);
+    let dt = f64::from(m.capture.pair[1] - m.capture.pair[0]);
     let to_ms = PIXEL_MM / 1000.0 / (dt / TICK_HZ);
     let g = &o.measured[0].glare;
     let r = &o.measured[0].rest;
@@ -92,9 +92,9 @@ pub fn print_table(o: &Outcome, job: &Job) {
         "{} seed {}: {}x{} px, pair at ticks {:?} ({} ticks = {:.2} ms apart), truth max {:.2} px/pair",
         m.scene.name,
         m.seed,
-        m.width,
-        m.height,
-        m.pair,
+        m.capture.width,
+        m.capture.height,
+        m.capture.pair,
         dt,
         dt / TICK_HZ * 1e3,
         o.truth.iter().map(|v| v.u.abs()).fold(0.0, f64::max)
@@ -158,7 +158,7 @@ pub fn run(a: &RunArgs) -> Result<(), CliError> {
     bar.enable_steady_tick(std::time::Duration::from_millis(100));
     let o = run_job(&job, |s| bar.set_message(s.to_string()))?;
     bar.set_message("writing images, vectors and plots");
-    let (w, h) = (o.sim.meta.width, o.sim.meta.height);
+    let (w, h) = (o.sim.meta.capture.width, o.sim.meta.capture.height);
     for (name, f) in ["frame_a.png", "frame_b.png"].iter().zip(&o.sim.frames) {
         write_frame(&a.out.join(name), &job.request, w, h, f)?;
     }
@@ -172,7 +172,7 @@ pub fn run(a: &RunArgs) -> Result<(), CliError> {
         )?;
     }
     write_vectors(&a.out.join("truth.csv"), &o.truth)?;
-    let dt = f64::from(o.sim.meta.pair[1] - o.sim.meta.pair[0]);
+    let dt = f64::from(o.sim.meta.capture.pair[1] - o.sim.meta.capture.pair[0]);
     let colors = [
         RGBColor(31, 119, 180),
         RGBColor(255, 127, 14),
@@ -219,7 +219,7 @@ pub fn run(a: &RunArgs) -> Result<(), CliError> {
         "seed": a.seed,
         "width": w,
         "height": h,
-        "pair": o.sim.meta.pair,
+        "pair": o.sim.meta.capture.pair,
         "dt_ticks": dt,
         "glare_rows_below_px": o.glare_limit,
         "core": { "n0": job.core.n0, "n_max": job.core.n_max, "n_fs": job.core.n_fs },

@@ -4,9 +4,9 @@ use std::path::PathBuf;
 
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use spiv_firmware_sim::formats::MAX_FRAME_PIXELS;
 use spiv_firmware_sim::scene::{SceneKind, SceneParams};
 use spiv_firmware_sim::simulation::{simulate_to_dir, Request};
+use spiv_formats::MAX_FRAME_PIXELS;
 
 use super::CliError;
 
@@ -109,12 +109,12 @@ pub fn run(a: &SimulateArgs) -> Result<(), CliError> {
     println!(
         "{}: {}x{} px, {} planes, pair {:?}, {} spikes (mean rate {:.4}/px/tick), seeding density {}/{} cells -> {}",
         m.scene.name,
-        m.width,
-        m.height,
-        m.planes,
-        m.pair,
+        m.capture.width,
+        m.capture.height,
+        m.capture.planes,
+        m.capture.pair,
         sim.spikes,
-        sim.spikes as f64 / (f64::from(m.width) * f64::from(m.height) * m.planes as f64),
+        sim.spikes as f64 / (f64::from(m.capture.width) * f64::from(m.capture.height) * m.capture.planes as f64),
         m.scene.density_reached.0,
         m.scene.density_reached.1,
         a.out.display()

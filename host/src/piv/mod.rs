@@ -17,9 +17,9 @@ use std::path::Path;
 
 use ndarray::Array2;
 use rayon::prelude::*;
-use spiv_firmware_sim::formats::csv::Vector;
-use spiv_firmware_sim::formats::image::read_gray;
-use spiv_firmware_sim::formats::FormatError;
+use spiv_formats::image::read_gray;
+use spiv_formats::vectors::Vector;
+use spiv_formats::FormatError;
 
 pub use deform::Interp;
 pub use grid::Grid;
@@ -160,13 +160,12 @@ impl Field {
         for r in 0..self.grid.ny {
             for c in 0..self.grid.nx {
                 let (x, y) = self.grid.centre(r, c);
-                let flag = self.state[[r, c]].flag();
                 out.push(Vector {
                     x,
                     y,
                     u: self.u[[r, c]],
                     v: self.v[[r, c]],
-                    flag,
+                    state: self.state[[r, c]],
                 });
             }
         }

@@ -4,27 +4,7 @@
 
 use ndarray::Array2;
 
-/// Vector state during and after validation (the CSV flag in brackets).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum State {
-    /// Passed every test (0).
-    Valid,
-    /// Rejected and replaced from its neighbours (1).
-    Replaced,
-    /// Masked, without signal, or rejected with nothing to replace it (2).
-    Invalid,
-}
-
-impl State {
-    /// The CSV flag.
-    pub fn flag(self) -> u8 {
-        match self {
-            State::Valid => 0,
-            State::Replaced => 1,
-            State::Invalid => 2,
-        }
-    }
-}
+pub use spiv_formats::State;
 
 /// Validation settings.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]

@@ -12,7 +12,7 @@
 
 use std::collections::BTreeMap;
 
-use spiv_core::compress::{decode_tile, sparse_scratch};
+use spiv_core::wire::codec::{decode_tile, sparse_scratch};
 use spiv_core::wire::{frame_crc, FrameEnd, Kind, Message, Status};
 
 /// A frame as received (stored row order: the camera's rows bottom-up).

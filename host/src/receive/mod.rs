@@ -155,8 +155,8 @@ mod tests {
     fn run_fw(faults: Faults) -> (Vec<u8>, Vec<spiv_firmware_sim::firmware::SentFrame>) {
         let (w, h) = (64u16, 48u16);
         let mut cfg = Config::new(64, 5);
-        cfg.every = 10;
-        cfg.pairs = Some(4);
+        cfg.schedule.every = 10;
+        cfg.schedule.pairs = Some(4);
         let mut fw = Firmware::new(w, h, cfg, Faulty::new(Vec::new(), faults, 7)).unwrap();
         fw.keep = Some(Vec::new());
         for p in planes(w, h, 64 + 35 + 64) {
@@ -236,7 +236,7 @@ mod tests {
         let end = FrameEnd {
             pair: 0,
             member: 0,
-            method: 0,
+            method: spiv_core::Method::Adaptive,
             full_scale: 255,
             dt: 13,
             tiles: 1,

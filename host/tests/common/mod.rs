@@ -4,7 +4,7 @@
 use ndarray::Array2;
 use spiv_firmware_sim::scene::{Scene, SceneKind, SceneParams};
 use spiv_firmware_sim::sensor::frame::{FrameCamera, FrameCameraParams};
-use spiv_host::piv::Field;
+use spiv_host::piv::{Field, State};
 
 /// A frame-camera pair of a scene, the scene, and the pair separation.
 pub struct Pair {
@@ -38,22 +38,22 @@ pub fn params(kind: SceneKind) -> SceneParams {
     }
 }
 
-/// Per-vector errors (u, v) of the field against the scene truth, with the flag.
-pub fn errors(f: &Field, pair: &Pair) -> Vec<(f64, f64, u8)> {
+/// Per-vector errors (u, v) of the field against the scene truth, with the state.
+pub fn errors(f: &Field, pair: &Pair) -> Vec<(f64, f64, State)> {
     let vs = f.vectors();
     let pts: Vec<(f64, f64)> = vs.iter().map(|v| (v.x, v.y)).collect();
     let truth = pair.scene.truth(&pts, f64::from(pair.dt));
     vs.iter()
         .zip(truth)
-        .map(|(v, t)| (v.u - t.2, v.v - t.3, v.flag))
+        .map(|(v, t)| (v.u - t.2, v.v - t.3, v.state))
         .collect()
 }
 
-/// RMS of the error magnitude over vectors with flag < 2.
-pub fn rms(e: &[(f64, f64, u8)]) -> f64 {
+/// RMS of the error magnitude over measured (valid or replaced) vectors.
+pub fn rms(e: &[(f64, f64, State)]) -> f64 {
     let used: Vec<f64> = e
         .iter()
-        .filter(|x| x.2 < 2)
+        .filter(|x| x.2.is_measured())
         .map(|x| x.0 * x.0 + x.1 * x.1)
         .collect();
     (used.iter().sum::<f64>() / used.len().max(1) as f64).sqrt()

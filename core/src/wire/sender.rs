@@ -1,5 +1,5 @@
 //! The sending half of a sidecar: the pair schedule (SPEC section 8) and the
-//! messages that carry a frame — tiles coded by [`crate::compress`], framed
+//! messages that carry a frame — tiles coded by [`crate::wire::codec`], framed
 //! by [`crate::wire`], then a frame end and, now and then, a status. The
 //! simulated firmware on the host and firmware on a real MCU run this same
 //! code, so they put the same bytes on the wire.
@@ -7,8 +7,8 @@
 //! No allocation: the payload, COBS and codec buffers are the caller's
 //! ([`SendBuffers`]); bytes leave through the caller's [`Link`].
 
-use crate::compress::{decode_tile, encode_tile, Lossy};
 use crate::gray::Gray;
+use crate::wire::codec::{decode_tile, encode_tile, Lossy};
 use crate::wire::{
     encode_message, frame_crc, Encoding, FrameEnd, Header, Kind, Status, WireError, MAX_PAYLOAD,
 };
@@ -120,8 +120,8 @@ pub const fn tile_rows(width: u16, height: u16, wide: bool, block: u8) -> u16 {
 pub struct FrameInfo {
     /// Where it sits in the schedule.
     pub slot: Slot,
-    /// 0 adaptive, 1 TFP, 2 TFI.
-    pub method: u8,
+    /// How the frame was made.
+    pub method: crate::method::Method,
     /// Gray level of full scale.
     pub full_scale: u16,
     /// Ticks between the pair's frames.
@@ -130,7 +130,7 @@ pub struct FrameInfo {
 
 /// The caller's buffers: a payload of [`MAX_PAYLOAD`] bytes, a COBS output
 /// of [`crate::wire::MAX_ENCODED`] bytes, and the sparse codec's scratch
-/// ([`crate::compress::sparse_scratch`] samples for one tile; empty when
+/// ([`crate::wire::codec::sparse_scratch`] samples for one tile; empty when
 /// the encoding is never `Sparse`).
 #[derive(Debug)]
 pub struct SendBuffers<'b> {

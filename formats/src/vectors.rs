@@ -3,10 +3,48 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use super::{io_err, FormatError};
+use crate::{io_err, FormatError};
+
+/// What validation made of a vector (the CSV `flag` column in brackets).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum State {
+    /// Passed every test (0).
+    Valid,
+    /// Rejected and replaced from its neighbours (1).
+    Replaced,
+    /// Masked, without signal, or rejected with nothing to replace it (2;
+    /// then u = v = 0).
+    Invalid,
+}
+
+impl State {
+    /// The CSV flag: 0, 1 or 2.
+    pub const fn flag(self) -> u8 {
+        match self {
+            State::Valid => 0,
+            State::Replaced => 1,
+            State::Invalid => 2,
+        }
+    }
+
+    /// The state of a CSV flag, `None` beyond 2.
+    pub const fn from_flag(flag: u8) -> Option<State> {
+        match flag {
+            0 => Some(State::Valid),
+            1 => Some(State::Replaced),
+            2 => Some(State::Invalid),
+            _ => None,
+        }
+    }
+
+    /// A measurement (valid or replaced), not a hole.
+    pub const fn is_measured(self) -> bool {
+        !matches!(self, State::Invalid)
+    }
+}
 
 /// One vector: window centre (px, origin top-left, y down), displacement
-/// (px, u right, v down), flag (0 valid, 1 replaced, 2 masked or invalid).
+/// (px, u right, v down), and its [`State`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Vector {
     /// Column of the centre, px.
@@ -17,16 +55,20 @@ pub struct Vector {
     pub u: f64,
     /// Displacement down, px.
     pub v: f64,
-    /// 0 valid, 1 replaced, 2 masked or invalid (then u = v = 0).
-    pub flag: u8,
+    /// Valid, replaced, or invalid (then u = v = 0).
+    pub state: State,
 }
 
 /// Writes a vector field.
 pub fn write_vectors(path: &Path, vectors: &[Vector]) -> Result<(), FormatError> {
     let mut s = String::from("x,y,u,v,flag\n");
     for v in vectors {
-        let (u, vv) = if v.flag == 2 { (0.0, 0.0) } else { (v.u, v.v) };
-        let _ = writeln!(s, "{},{},{:.6},{:.6},{}", v.x, v.y, u, vv, v.flag);
+        let (u, vv) = if v.state.is_measured() {
+            (v.u, v.v)
+        } else {
+            (0.0, 0.0)
+        };
+        let _ = writeln!(s, "{},{},{:.6},{:.6},{}", v.x, v.y, u, vv, v.state.flag());
     }
     std::fs::write(path, s).map_err(io_err(path))
 }
@@ -57,19 +99,18 @@ pub fn read_vectors(path: &Path) -> Result<Vec<Vector>, FormatError> {
                 .parse::<f64>()
                 .map_err(|_| bad(i + 1, "not a number"))
         };
-        let flag = f[4]
+        let state = f[4]
             .trim()
             .parse::<u8>()
-            .map_err(|_| bad(i + 1, "flag must be 0, 1 or 2"))?;
-        if flag > 2 {
-            return Err(bad(i + 1, "flag must be 0, 1 or 2"));
-        }
+            .ok()
+            .and_then(State::from_flag)
+            .ok_or_else(|| bad(i + 1, "flag must be 0, 1 or 2"))?;
         out.push(Vector {
             x: num(0)?,
             y: num(1)?,
             u: num(2)?,
             v: num(3)?,
-            flag,
+            state,
         });
     }
     Ok(out)

@@ -16,7 +16,7 @@ use std::path::Path;
 
 use ndarray_npy::npy::header::{Header, Layout};
 
-use super::{io_err, FormatError, MAX_FRAME_PIXELS, MAX_NPZ_SAMPLES};
+use crate::{io_err, FormatError, MAX_FRAME_PIXELS, MAX_NPZ_SAMPLES};
 
 /// A spike recording held unpacked in memory.
 #[derive(Debug, Clone)]
@@ -107,7 +107,7 @@ pub fn read_npz_spikes_from<R: Read + Seek>(
         width.next_multiple_of(8)
     };
     let pw = usize::from(packed_width);
-    let pb = super::dat::plane_bytes(packed_width, height)?;
+    let pb = crate::dat::plane_bytes(packed_width, height)?;
     let mut planes = Vec::new();
     let mut plane = vec![0u8; px];
     for k in 0..t {

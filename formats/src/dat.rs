@@ -13,7 +13,7 @@ use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
-use super::{io_err, FormatError};
+use crate::{io_err, FormatError};
 
 /// How to read a `.dat`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -39,7 +39,7 @@ impl Default for DatOptions {
 }
 
 /// Bytes of one plane, or the error for sizes that are not whole bytes or
-/// exceed [`MAX_FRAME_PIXELS`](super::MAX_FRAME_PIXELS).
+/// exceed [`MAX_FRAME_PIXELS`](crate::MAX_FRAME_PIXELS).
 pub fn plane_bytes(width: u16, height: u16) -> Result<usize, FormatError> {
     let px = usize::from(width) * usize::from(height);
     if px == 0 || px % 8 != 0 {
@@ -48,11 +48,11 @@ pub fn plane_bytes(width: u16, height: u16) -> Result<usize, FormatError> {
             height: u32::from(height),
         });
     }
-    if px as u64 > super::MAX_FRAME_PIXELS {
+    if px as u64 > crate::MAX_FRAME_PIXELS {
         return Err(FormatError::TooLarge {
             what: format!("a {width}x{height} plane"),
             got: px as u64,
-            limit: super::MAX_FRAME_PIXELS,
+            limit: crate::MAX_FRAME_PIXELS,
         });
     }
     Ok(px / 8)

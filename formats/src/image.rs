@@ -4,7 +4,7 @@ use std::path::Path;
 
 use image::{DynamicImage, ImageBuffer, Luma};
 
-use super::{FormatError, MAX_FRAME_PIXELS};
+use crate::{FormatError, MAX_FRAME_PIXELS};
 
 /// A gray image, upright, row-major.
 #[derive(Debug, Clone, PartialEq)]
@@ -169,7 +169,7 @@ mod tests {
         // Signature (8), IHDR length (4), "IHDR" (4), width, height, …, CRC.
         bytes[16..20].copy_from_slice(&w.to_be_bytes());
         bytes[20..24].copy_from_slice(&h.to_be_bytes());
-        let crc = spiv_core::wire::CRC.checksum(&bytes[12..29]);
+        let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(&bytes[12..29]);
         bytes[29..33].copy_from_slice(&crc.to_be_bytes());
         bytes
     }

@@ -1,11 +1,27 @@
-//! The camera's files (FORMATS.md): Vidar `.dat` spike streams, `scene.json`,
-//! gray images, vector and profile CSVs, and the real-capture `.npz`.
+//! # spiv-formats — the files of spike-camera PIV
+//!
+//! Read and written by the simulator and the host alike; knows neither
+//! (FORMATS.md):
+//!
+//! | module | owns |
+//! |---|---|
+//! | [`dat`] | Vidar `.dat` spike streams: bit-packed planes, flip, strip-head, streamed reads |
+//! | [`npz`] | real captures as `.npz` (one byte per spike sample), packed plane by plane |
+//! | [`capture`] | the layout half of `scene.json` (size, row order, clock, pair) |
+//! | [`image`] | gray images (PNG, TIFF, BMP) at 8 or 16 bits |
+//! | [`vectors`] | vector fields (`x,y,u,v,flag`, the flag as a [`vectors::State`]) and profiles as CSV |
+//!
+//! Every size that comes from a file is bounded ([`MAX_FRAME_PIXELS`],
+//! [`MAX_NPZ_SAMPLES`]) before anything is allocated for it.
+#![warn(missing_docs)]
 
-pub mod csv;
+pub mod capture;
 pub mod dat;
 pub mod image;
-pub mod meta;
 pub mod npz;
+pub mod vectors;
+
+pub use vectors::{State, Vector};
 
 use std::path::PathBuf;
 
@@ -100,7 +116,8 @@ pub fn reference_data_dir() -> PathBuf {
         .unwrap_or_else(|| PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../data")))
 }
 
-pub(crate) fn io_err(path: &std::path::Path) -> impl FnOnce(std::io::Error) -> FormatError + '_ {
+/// Maps an I/O error on `path` to [`FormatError::Io`].
+pub fn io_err(path: &std::path::Path) -> impl FnOnce(std::io::Error) -> FormatError + '_ {
     move |source| FormatError::Io {
         path: path.to_path_buf(),
         source,

@@ -1,0 +1,186 @@
+//! Owned buffers for the core on a host (`std` feature): the core takes
+//! caller-supplied slices (a sidecar passes static arrays); here they are
+//! `Vec`s, sized by the same functions.
+
+use std::vec;
+use std::vec::Vec;
+
+use crate::gray::Gray;
+use crate::history::History;
+use crate::region::Region;
+use crate::sidecar::{Config, Memory};
+use crate::state::{Buffers, Workspace, WorkspaceSizes};
+use crate::wire::codec::sparse_scratch;
+use crate::wire::sender::{tile_rows, SendBuffers};
+use crate::wire::{Encoding, MAX_ENCODED, MAX_PAYLOAD};
+use crate::Error;
+
+/// Storage of a spike history ring.
+#[derive(Debug, Clone)]
+pub struct HistoryBuf {
+    words: Vec<u64>,
+    width: u16,
+    height: u16,
+    depth: u16,
+}
+
+impl HistoryBuf {
+    /// Room for `depth` planes (1..=256) of a whole `width × height` camera.
+    pub fn new(width: u16, height: u16, depth: u16) -> Result<Self, Error> {
+        let n = History::words_needed(width, height, depth).ok_or(Error::BadDimensions)?;
+        Ok(HistoryBuf {
+            words: vec![0; n],
+            width,
+            height,
+            depth,
+        })
+    }
+
+    /// An empty history over the whole camera.
+    pub fn history(&mut self) -> Result<History<'_>, Error> {
+        History::new(
+            &mut self.words,
+            self.width,
+            self.height,
+            0,
+            self.height,
+            self.depth,
+        )
+    }
+
+    /// The history over the whole camera as it stood before tick `next_tick`.
+    pub fn resume(&mut self, next_tick: u32) -> Result<History<'_>, Error> {
+        Ok(self.history()?.resumed(next_tick))
+    }
+}
+
+/// Owned per-pixel working memory of the adaptive reconstruction.
+#[derive(Debug, Clone)]
+pub struct WorkspaceBuf {
+    sizes: WorkspaceSizes,
+    counts: Vec<u8>,
+    c_t: Vec<u8>,
+    class: Vec<u8>,
+    labels: Vec<u16>,
+    masks: Vec<u64>,
+    tiles: Vec<u8>,
+    parents: Vec<u16>,
+    regions: Vec<Region>,
+}
+
+impl WorkspaceBuf {
+    /// Buffers of the given sizes.
+    pub fn new(sizes: WorkspaceSizes) -> Self {
+        let px = sizes.pixels();
+        WorkspaceBuf {
+            sizes,
+            counts: vec![0; px],
+            c_t: vec![0; px],
+            class: vec![0; px],
+            labels: vec![0; px],
+            masks: vec![0; sizes.mask_words()],
+            tiles: vec![0; sizes.tiles()],
+            parents: vec![0; sizes.parents()],
+            regions: vec![Region::default(); usize::from(sizes.max_regions)],
+        }
+    }
+
+    /// Buffers for a whole `width × height` frame in one strip.
+    pub fn whole(width: u16, height: u16) -> Self {
+        Self::new(WorkspaceSizes::for_strip(width, height))
+    }
+
+    /// The workspace over these buffers.
+    pub fn workspace(&mut self) -> Workspace<'_> {
+        // The buffers were sized from `sizes`, so this cannot fail.
+        Workspace::new(
+            self.sizes,
+            Buffers {
+                counts: &mut self.counts,
+                c_t: &mut self.c_t,
+                class: &mut self.class,
+                labels: &mut self.labels,
+                masks: &mut self.masks,
+                tiles: &mut self.tiles,
+                parents: &mut self.parents,
+                regions: &mut self.regions,
+            },
+        )
+        .expect("buffers sized from their own WorkspaceSizes")
+    }
+}
+
+/// Everything the [`crate::sidecar`] loop borrows, owned: history, adaptive
+/// workspace, one frame of `G`, TFP counts, the sender's buffers and the
+/// window caps.
+#[derive(Debug, Clone)]
+pub struct SidecarBuf<G> {
+    history: HistoryBuf,
+    workspace: WorkspaceBuf,
+    frame: Vec<G>,
+    counts: Vec<u8>,
+    payload: Vec<u8>,
+    wire: Vec<u8>,
+    scratch: Vec<u16>,
+    /// Adaptive window limit per band of [`crate::sidecar::CAP_BAND`]
+    /// upright rows; empty: `n_max` everywhere.
+    pub caps: Vec<u16>,
+}
+
+impl<G: Gray> SidecarBuf<G> {
+    /// Buffers for a `width × height` sensor running `cfg`: a history of
+    /// [`Config::depth`] planes, TFP counts only for TFP, codec scratch only
+    /// for the sparse encoding.
+    pub fn new(width: u16, height: u16, cfg: &Config) -> Result<Self, Error> {
+        let px = usize::from(width) * usize::from(height);
+        let rows = tile_rows(width, height, cfg.params.full_scale > 255, cfg.lossy.block);
+        let scratch = if cfg.encoding == Encoding::Sparse {
+            sparse_scratch(width, rows, cfg.lossy.block)
+        } else {
+            0
+        };
+        Ok(SidecarBuf {
+            history: HistoryBuf::new(width, height, cfg.depth())?,
+            workspace: WorkspaceBuf::whole(width, height),
+            frame: vec![G::from_level(0); px],
+            counts: vec![
+                0;
+                if cfg.method == crate::Method::Tfp {
+                    px
+                } else {
+                    0
+                }
+            ],
+            payload: vec![0; MAX_PAYLOAD],
+            wire: vec![0; MAX_ENCODED],
+            scratch: vec![0; scratch],
+            caps: Vec::new(),
+        })
+    }
+
+    /// The memory for the next call of the loop, the history resumed at
+    /// `next_tick` ([`crate::sidecar::Sidecar::next_tick`]).
+    pub fn memory(&mut self, next_tick: u32) -> Result<Memory<'_, G>, Error> {
+        Ok(Memory {
+            history: self.history.resume(next_tick)?,
+            workspace: self.workspace.workspace(),
+            frame: &mut self.frame,
+            counts: &mut self.counts,
+            send: SendBuffers {
+                payload: &mut self.payload,
+                wire: &mut self.wire,
+                scratch: &mut self.scratch,
+            },
+            caps: &self.caps,
+        })
+    }
+
+    /// The sender's buffers alone (for the final status).
+    pub fn send(&mut self) -> SendBuffers<'_> {
+        SendBuffers {
+            payload: &mut self.payload,
+            wire: &mut self.wire,
+            scratch: &mut self.scratch,
+        }
+    }
+}

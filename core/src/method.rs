@@ -1,0 +1,70 @@
+//! How a frame is made from the spike history: the paper's adaptive
+//! integration or one of its two baselines. The code is what a frame end
+//! carries on the wire ([`crate::wire::FrameEnd::method`]).
+
+/// How a frame is made.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Method {
+    /// The paper's adaptive integration: segmentation, background
+    /// suppression and an SNR-optimal window per particle region, up to
+    /// `Params::n_max` ticks ([`crate::reconstruct_adaptive`]).
+    Adaptive = 0,
+    /// Spike count over a fixed window: gray = FS·c/n
+    /// ([`crate::window::tfp`]).
+    Tfp = 1,
+    /// Inverse inter-spike interval around the tick
+    /// ([`crate::window::tfi`]).
+    Tfi = 2,
+}
+
+impl Method {
+    /// All three, in wire-code order.
+    pub const ALL: [Method; 3] = [Method::Adaptive, Method::Tfp, Method::Tfi];
+
+    /// The wire code (0, 1, 2).
+    pub const fn code(self) -> u8 {
+        self as u8
+    }
+
+    /// The method of a wire code, `None` for an unknown one.
+    pub const fn from_code(code: u8) -> Option<Method> {
+        match code {
+            0 => Some(Method::Adaptive),
+            1 => Some(Method::Tfp),
+            2 => Some(Method::Tfi),
+            _ => None,
+        }
+    }
+
+    /// Its lower-case name (`adaptive`, `tfp`, `tfi`), as the CLI and the
+    /// reports spell it.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Method::Adaptive => "adaptive",
+            Method::Tfp => "tfp",
+            Method::Tfi => "tfi",
+        }
+    }
+
+    /// The method named `name` (see [`Method::name`]).
+    pub fn from_name(name: &str) -> Option<Method> {
+        Method::ALL.into_iter().find(|m| m.name() == name)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn codes_and_names_round_trip() {
+        for m in Method::ALL {
+            assert_eq!(Method::from_code(m.code()), Some(m));
+            assert_eq!(Method::from_name(m.name()), Some(m));
+        }
+        assert_eq!(Method::from_code(3), None);
+        assert_eq!(Method::from_name("TFP"), None);
+        assert_eq!([0, 1, 2], Method::ALL.map(Method::code));
+    }
+}

@@ -1,0 +1,429 @@
+//! The sidecar loop: spike planes in, one by one, into the history ring; at
+//! the scheduled ticks (SPEC section 8: pairs `(k, k + dt)`, one pair every
+//! `every` ticks) a frame through the core — adaptive, TFP or TFI — sent by
+//! the [`Sender`] (tiles coded by [`crate::wire::codec`], framed by
+//! [`crate::wire`]) into the caller's [`Link`]; now and then a status.
+//!
+//! This is the one loop of spiv: the simulated firmware
+//! (`spiv-firmware-sim`) and the Cortex-M4 firmware both call it, so they put
+//! the same bytes on the wire. It holds no buffers: every call borrows the
+//! caller's [`Memory`] (static arrays on a device; the owned
+//! `buffers::SidecarBuf` behind the `std` feature on a host), so the loop
+//! state itself is a few dozen bytes.
+//!
+//! A [`Probe`] sees each stage begin and end and every frame as it was sent:
+//! the M4 firmware brackets its cost markers with it, the simulator keeps
+//! copies of frames; `()` is the probe that does nothing (and costs nothing).
+
+use crate::error::Error;
+use crate::frame::{reconstruct_adaptive, reconstruct_rows};
+use crate::gray::Gray;
+use crate::history::History;
+use crate::method::Method;
+use crate::params::Params;
+use crate::plane::PlaneView;
+use crate::state::Workspace;
+use crate::window::{tfi, tfp};
+use crate::wire::codec::Lossy;
+use crate::wire::sender::{
+    tile_rows, FrameInfo, Link, Schedule, SendBuffers, SendError, Sender, Sent, Slot,
+};
+use crate::wire::{Encoding, WireError, MAX_PAYLOAD};
+
+/// Rows per band of the optional window caps (upright rows, top first).
+pub const CAP_BAND: u16 = 32;
+
+/// What the sidecar does.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Config {
+    /// Core parameters (`n_max` is the adaptive and TFI window limit, ticks).
+    pub params: Params,
+    /// How frames are made.
+    pub method: Method,
+    /// The TFP window, ticks (`1..=255`; TFP only).
+    pub tfp_window: u16,
+    /// When frames are made.
+    pub schedule: Schedule,
+    /// Tile coding wanted (lossless fallbacks apply, see
+    /// [`crate::wire::codec::encode_tile`]).
+    pub encoding: Encoding,
+    /// Lossy settings.
+    pub lossy: Lossy,
+    /// Send a status message every this many pairs (0: only at the end).
+    pub status_every: u32,
+}
+
+impl Config {
+    /// The defaults for a pair `dt` ticks apart whose first frame is at
+    /// `first`: adaptive, lossless Rice, one pair every `4·dt` ticks, until
+    /// the input ends, a status every 16 pairs.
+    pub fn new(first: u32, dt: u32) -> Config {
+        Config {
+            params: Params::default(),
+            method: Method::Adaptive,
+            tfp_window: 8,
+            schedule: Schedule {
+                first,
+                dt,
+                every: dt.saturating_mul(4),
+                pairs: None,
+            },
+            encoding: Encoding::Rice,
+            lossy: Lossy::default(),
+            status_every: 16,
+        }
+    }
+
+    /// The window a frame needs, ticks: `n_max` for adaptive and TFI, the
+    /// TFP window for TFP.
+    pub fn window(&self) -> u16 {
+        match self.method {
+            Method::Tfp => self.tfp_window,
+            Method::Adaptive | Method::Tfi => self.params.n_max,
+        }
+    }
+
+    /// Spike planes the history must hold (at least 2).
+    pub fn depth(&self) -> u16 {
+        self.window().max(self.params.n_max).max(2)
+    }
+
+    /// Ticks a stream needs for `pairs` pairs of this schedule (the last
+    /// frame's window included).
+    pub fn ticks_for(&self, pairs: u32) -> u32 {
+        let window = self.window();
+        let ahead = u32::from(window - window / 2);
+        let s = &self.schedule;
+        s.first
+            .saturating_add(pairs.saturating_sub(1).saturating_mul(s.every))
+            .saturating_add(s.dt)
+            .saturating_add(ahead)
+    }
+}
+
+/// A configuration the sidecar cannot run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ConfigError {
+    /// The frame window is outside `1..=255` ticks.
+    Window(u16),
+    /// `every` below `dt`, or `dt` zero.
+    Schedule {
+        /// Ticks between pairs.
+        every: u32,
+        /// Ticks between the frames of a pair.
+        dt: u32,
+    },
+    /// One row of this many pixels does not fit one payload.
+    RowTooWide(u16),
+}
+
+impl core::fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            ConfigError::Window(w) => write!(f, "window {w} out of range (1..=255)"),
+            ConfigError::Schedule { every, dt } => {
+                write!(f, "pair every {every} ticks must be at least dt = {dt} > 0")
+            }
+            ConfigError::RowTooWide(w) => write!(
+                f,
+                "a row of {w} px does not fit one {MAX_PAYLOAD}-byte payload"
+            ),
+        }
+    }
+}
+
+/// Why the loop stopped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum SidecarError<E> {
+    /// The core refused (a plane of the wrong size, buffers too small, …).
+    Core(Error),
+    /// Coding or framing failed.
+    Wire(WireError),
+    /// The link refused the bytes.
+    Link(E),
+    /// A configuration the sidecar cannot run.
+    Config(ConfigError),
+}
+
+impl<E> From<Error> for SidecarError<E> {
+    fn from(e: Error) -> Self {
+        SidecarError::Core(e)
+    }
+}
+
+impl<E> From<WireError> for SidecarError<E> {
+    fn from(e: WireError) -> Self {
+        SidecarError::Wire(e)
+    }
+}
+
+impl<E> From<SendError<E>> for SidecarError<E> {
+    fn from(e: SendError<E>) -> Self {
+        match e {
+            SendError::Wire(w) => SidecarError::Wire(w),
+            SendError::Link(l) => SidecarError::Link(l),
+        }
+    }
+}
+
+impl<E: core::fmt::Display> core::fmt::Display for SidecarError<E> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            SidecarError::Core(e) => write!(f, "core: {e}"),
+            SidecarError::Wire(e) => write!(f, "wire: {e}"),
+            SidecarError::Link(e) => write!(f, "link: {e}"),
+            SidecarError::Config(e) => write!(f, "configuration: {e}"),
+        }
+    }
+}
+
+/// The memory the loop works in, borrowed for one call.
+#[derive(Debug)]
+pub struct Memory<'a, G: Gray> {
+    /// The spike history over the whole camera, [`Config::depth`] planes
+    /// deep, as it stood after the previous call ([`Sidecar::next_tick`]).
+    pub history: History<'a>,
+    /// Per-pixel state of the adaptive frame (unused by TFP and TFI).
+    pub workspace: Workspace<'a>,
+    /// One frame, `width × height` samples.
+    pub frame: &'a mut [G],
+    /// TFP's window counts, `width × height` (empty unless TFP).
+    pub counts: &'a mut [u8],
+    /// The sender's payload, COBS and codec buffers.
+    pub send: SendBuffers<'a>,
+    /// Adaptive window limit per band of [`CAP_BAND`] upright rows (see
+    /// [`capped_frame`]); empty: `n_max` everywhere.
+    pub caps: &'a [u16],
+}
+
+/// A stage of the loop, for a [`Probe`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Stage {
+    /// One plane into the history.
+    Ingest,
+    /// One frame through the core.
+    Frame,
+    /// One frame coded, framed and handed to the link.
+    Send,
+}
+
+/// Sees the loop work. Every method does nothing by default.
+pub trait Probe<G> {
+    /// A stage begins.
+    #[inline(always)]
+    fn enter(&mut self, _stage: Stage) {}
+    /// A stage ends.
+    #[inline(always)]
+    fn leave(&mut self, _stage: Stage) {}
+    /// Frame `frame_id` of `slot` was sent; `frame` holds exactly what a
+    /// receiver decodes (stored row order).
+    #[inline(always)]
+    fn sent(&mut self, _frame_id: u32, _slot: Slot, _frame: &[G]) {}
+}
+
+/// The probe that sees nothing.
+impl<G> Probe<G> for () {}
+
+/// The loop's state: where the schedule stands and what was sent. No
+/// buffers.
+#[derive(Debug, Clone)]
+pub struct Sidecar {
+    cfg: Config,
+    sender: Sender,
+    next: u64,
+    next_tick: u32,
+}
+
+impl Sidecar {
+    /// The loop for a `width × height` sensor; checks the configuration.
+    pub fn new<E>(width: u16, height: u16, cfg: Config) -> Result<Sidecar, SidecarError<E>> {
+        let window = cfg.window();
+        if !(1..=255).contains(&window) {
+            return Err(SidecarError::Config(ConfigError::Window(window)));
+        }
+        let s = &cfg.schedule;
+        if s.dt == 0 || s.every < s.dt {
+            return Err(SidecarError::Config(ConfigError::Schedule {
+                every: s.every,
+                dt: s.dt,
+            }));
+        }
+        cfg.params.validate(cfg.depth())?;
+        let rows = tile_rows(width, height, cfg.params.full_scale > 255, cfg.lossy.block);
+        if rows == 0 {
+            return Err(SidecarError::Config(ConfigError::RowTooWide(width)));
+        }
+        Ok(Sidecar {
+            cfg,
+            sender: Sender::new(width, height, rows)?,
+            next: 0,
+            next_tick: 0,
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &Config {
+        &self.cfg
+    }
+
+    /// Rows per tile message.
+    pub fn tile_rows(&self) -> u16 {
+        self.sender.tile_rows()
+    }
+
+    /// What was sent so far.
+    pub fn sent(&self) -> Sent {
+        self.sender.sent
+    }
+
+    /// The tick the next plane gets (a caller that rebuilds its
+    /// [`History`] for each call resumes it here).
+    pub fn next_tick(&self) -> u32 {
+        self.next_tick
+    }
+
+    /// True once every scheduled pair was sent.
+    pub fn done(&self) -> bool {
+        self.cfg.schedule.slot(self.next).is_none()
+    }
+
+    /// Ingests the next plane (stored row order, `width·height/8` bytes) and
+    /// sends every frame whose window it completes.
+    pub fn push_plane<G: Gray, L: Link, P: Probe<G>>(
+        &mut self,
+        mem: &mut Memory<'_, G>,
+        plane: &[u8],
+        link: &mut L,
+        probe: &mut P,
+    ) -> Result<(), SidecarError<L::Error>> {
+        probe.enter(Stage::Ingest);
+        let newest = Self::ingest(&mut mem.history, plane)?;
+        probe.leave(Stage::Ingest);
+        self.next_tick = mem.history.next_tick();
+        self.sender.sent.planes = self.sender.sent.planes.wrapping_add(1);
+        let window = self.cfg.window();
+        while let Some(slot) = self.cfg.schedule.slot(self.next) {
+            if !Schedule::ready(slot.tick, window, newest) {
+                break;
+            }
+            self.next += 1;
+            probe.enter(Stage::Frame);
+            self.make_frame(mem, slot.tick)?;
+            probe.leave(Stage::Frame);
+            let frame_id = self.sender.sent.frames;
+            probe.enter(Stage::Send);
+            self.send_frame(mem, slot, link)?;
+            probe.leave(Stage::Send);
+            probe.sent(frame_id, slot, mem.frame);
+            let every = self.cfg.status_every;
+            if slot.member == 1 && every > 0 && (slot.pair + 1) % every == 0 {
+                self.sender.send_status(&mut mem.send, link)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Sends the final status; returns the counts.
+    pub fn finish<L: Link>(
+        &mut self,
+        send: &mut SendBuffers<'_>,
+        link: &mut L,
+    ) -> Result<Sent, SidecarError<L::Error>> {
+        self.sender.send_status(send, link)?;
+        Ok(self.sender.sent)
+    }
+
+    // The three stages stay out of line (one call per plane or frame, a
+    // few instructions) so instruction counters — callgrind on the host,
+    // QEMU's trace on the Cortex-M4 — can attribute cost to each stage.
+
+    #[inline(never)]
+    fn ingest(history: &mut History<'_>, plane: &[u8]) -> Result<u32, Error> {
+        history.push(&PlaneView::new(plane, history.width(), history.height())?)
+    }
+
+    #[inline(never)]
+    fn make_frame<G: Gray>(&self, mem: &mut Memory<'_, G>, k: u32) -> Result<(), Error> {
+        let p = &self.cfg.params;
+        let hist = &mem.history;
+        match self.cfg.method {
+            Method::Tfp => {
+                tfp(
+                    hist,
+                    k,
+                    self.cfg.tfp_window,
+                    p.full_scale,
+                    mem.counts,
+                    mem.frame,
+                )?;
+            }
+            Method::Tfi => tfi(hist, k, p.n_max, p.full_scale, mem.frame)?,
+            Method::Adaptive if mem.caps.is_empty() => {
+                reconstruct_adaptive(hist, k, p, &mut mem.workspace, mem.frame)?;
+            }
+            Method::Adaptive => {
+                capped_frame(hist, k, p, mem.caps, &mut mem.workspace, mem.frame)?;
+            }
+        }
+        Ok(())
+    }
+
+    #[inline(never)]
+    fn send_frame<G: Gray, L: Link>(
+        &mut self,
+        mem: &mut Memory<'_, G>,
+        slot: Slot,
+        link: &mut L,
+    ) -> Result<(), SendError<L::Error>> {
+        let info = FrameInfo {
+            slot,
+            method: self.cfg.method,
+            full_scale: self.cfg.params.full_scale,
+            dt: self.cfg.schedule.dt,
+        };
+        self.sender.send_frame(
+            &mut mem.send,
+            mem.frame,
+            &info,
+            self.cfg.encoding,
+            &self.cfg.lossy,
+            link,
+        )
+    }
+}
+
+/// The adaptive frame at `k` with a window limit per band of [`CAP_BAND`]
+/// upright rows (`caps[0]` the top band; missing entries: `p.n_max`; each
+/// clamped to `1..=p.n_max`): each band is reconstructed once, with its own
+/// limit and a margin of `p.margin` rows ([`reconstruct_rows`]). The one
+/// implementation of the dwell cap, for the sidecar and the host.
+pub fn capped_frame<G: Gray>(
+    hist: &History<'_>,
+    k: u32,
+    p: &Params,
+    caps: &[u16],
+    ws: &mut Workspace<'_>,
+    out: &mut [G],
+) -> Result<(), Error> {
+    p.validate(hist.depth())?;
+    let h = hist.rows();
+    for b in 0..h.div_ceil(CAP_BAND) {
+        let cap = caps.get(usize::from(b)).copied().unwrap_or(p.n_max);
+        let n_max = cap.min(p.n_max).max(1);
+        // A cap below n0 starts the segmentation at the cap itself.
+        let q = Params {
+            n_max,
+            n0: p.n0.min(n_max),
+            ..*p
+        };
+        // Upright band b is stored rows h − 32(b+1) .. h − 32b (bottom-up).
+        let e1 = h - b * CAP_BAND;
+        let e0 = e1.saturating_sub(CAP_BAND);
+        reconstruct_rows(hist, k, &q, ws, (e0, e1), out)?;
+    }
+    Ok(())
+}

@@ -1,0 +1,340 @@
+//! Tile codecs: how a band of rows of an integrated frame becomes a payload
+//! ([`crate::wire::Encoding`]) and back. No allocation, bounded work per
+//! pixel (at most two passes), every decoder input checked.
+//!
+//! | encoding | kind | payload |
+//! |---|---|---|
+//! | `Raw8` | lossless | one byte per sample, row by row |
+//! | `Raw16` | lossless | two bytes per sample, little-endian |
+//! | `Rice` | lossless | bitstream: per sample the zigzag residual of the LOCO-I median predictor, adaptive Rice code |
+//! | `Sparse` | lossy | `block u8, 0u8`, bitstream: background grid (block means of the darker half, Rice-coded deltas), then per row alternating runs: background (decoded as the bilinear upsampling of the grid) and exact samples (Rice-coded left-neighbour residuals) |
+//!
+//! `Sparse` sends a sample exactly when it differs from the upsampled
+//! background by more than its block's tolerance, so every decoded sample is
+//! within `tolerance` gray levels of the original; particles (far above the
+//! flattened background) arrive exact. The block's tolerance is at most its
+//! contrast (brightest sample minus background) over `contrast`: a block of
+//! dim particles a few levels above a suppressed background — what an
+//! adaptive frame shows where short windows leave particles unsegmented —
+//! goes exact, while noise around bright segmented particles is flattened.
+//! This is an encoder decision only; the payload format does not change.
+//!
+//! Bitstreams are MSB first (`bits`); the Rice parameter adapts as in
+//! LOCO-I (`rice`); a quotient of 24 or more is an escape followed by the
+//! value in 18 bits.
+//!
+//! The encoder falls back to a lossless mode when a compressed payload would
+//! not fit the buffer or would be larger than raw.
+//!
+//! | module | owns |
+//! |---|---|
+//! | `bits` | MSB-first bit writer and reader, the Rice code and its escape |
+//! | `rice` | the lossless `Rice` mode, the adaptive parameter, zigzag residuals |
+//! | `sparse` | the lossy `Sparse` mode: background grid and exact runs |
+
+mod bits;
+mod rice;
+mod sparse;
+
+use crate::gray::Gray;
+use crate::wire::{Encoding, WireError};
+
+/// Settings of the lossy [`Encoding::Sparse`] mode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Lossy {
+    /// Background block edge, px, `2..=64`.
+    pub block: u8,
+    /// Largest error of a sample sent as background, gray levels.
+    pub tolerance: u16,
+    /// Contrast rule: in a block whose brightest sample stands `r` levels
+    /// above its background, the tolerance is at most `r / contrast` (0:
+    /// `tolerance` everywhere). Dim blocks — particles a few levels above a
+    /// suppressed background — then go exact, bright ones are flattened.
+    pub contrast: u16,
+}
+
+impl Default for Lossy {
+    fn default() -> Self {
+        Lossy {
+            block: 8,
+            tolerance: 12,
+            contrast: 4,
+        }
+    }
+}
+
+/// Scratch samples the sparse codec needs for a tile: its background grid
+/// and, when encoding, a tolerance per block.
+pub fn sparse_scratch(width: u16, rows: u16, block: u8) -> usize {
+    let b = usize::from(block.max(1));
+    2 * usize::from(width).div_ceil(b) * usize::from(rows).div_ceil(b)
+}
+
+/// Codes the band `samples` (`rows × width`, row by row) as `want` into
+/// `out`; returns the encoding actually used (a lossless fallback when the
+/// wanted one does not fit or is larger than raw, `Raw16` when levels
+/// exceed 255) and the payload bytes. `scratch` holds
+/// [`sparse_scratch`] samples for `Sparse` (otherwise unused).
+pub fn encode_tile<G: Gray>(
+    want: Encoding,
+    samples: &[G],
+    width: u16,
+    rows: u16,
+    lossy: &Lossy,
+    scratch: &mut [u16],
+    out: &mut [u8],
+) -> Result<(Encoding, usize), WireError> {
+    let n = usize::from(width) * usize::from(rows);
+    let samples = samples.get(..n).ok_or(WireError::Payload)?;
+    let wide = samples.iter().any(|s| s.level() > 255);
+    let raw = if wide {
+        Encoding::Raw16
+    } else {
+        Encoding::Raw8
+    };
+    let raw_len = if wide { 2 * n } else { n };
+    let tried = match want {
+        Encoding::Rice => rice::encode(samples, usize::from(width), out),
+        Encoding::Sparse => sparse::encode(samples, width, rows, lossy, scratch, out),
+        _ => Err(WireError::TooLarge),
+    };
+    match tried {
+        Ok(len) if len < raw_len => Ok((want, len)),
+        // Sparse that does not pay: try lossless compression.
+        _ if want == Encoding::Sparse => match rice::encode(samples, usize::from(width), out) {
+            Ok(len) if len < raw_len => Ok((Encoding::Rice, len)),
+            _ => encode_raw(samples, wide, out).map(|l| (raw, l)),
+        },
+        _ => encode_raw(samples, wide, out).map(|l| (raw, l)),
+    }
+}
+
+fn encode_raw<G: Gray>(samples: &[G], wide: bool, out: &mut [u8]) -> Result<usize, WireError> {
+    if wide {
+        let dst = out
+            .get_mut(..2 * samples.len())
+            .ok_or(WireError::TooLarge)?;
+        for (d, s) in dst.chunks_exact_mut(2).zip(samples) {
+            d.copy_from_slice(&s.level().to_le_bytes());
+        }
+        Ok(2 * samples.len())
+    } else {
+        let dst = out.get_mut(..samples.len()).ok_or(WireError::TooLarge)?;
+        for (d, s) in dst.iter_mut().zip(samples) {
+            *d = s.level() as u8;
+        }
+        Ok(samples.len())
+    }
+}
+
+/// Decodes a tile payload into `out` (`rows × width` samples). `scratch`
+/// holds [`sparse_scratch`] samples for `Sparse`. Malformed payloads (too
+/// short, trailing garbage that does not fit, levels above `G::MAX`) are
+/// [`WireError::Payload`]; nothing panics.
+pub fn decode_tile<G: Gray>(
+    enc: Encoding,
+    payload: &[u8],
+    width: u16,
+    rows: u16,
+    scratch: &mut [u16],
+    out: &mut [G],
+) -> Result<(), WireError> {
+    let n = usize::from(width) * usize::from(rows);
+    let out = out.get_mut(..n).ok_or(WireError::TooLarge)?;
+    match enc {
+        Encoding::None => Err(WireError::Payload),
+        Encoding::Raw8 => {
+            if payload.len() != n {
+                return Err(WireError::Payload);
+            }
+            for (o, &b) in out.iter_mut().zip(payload) {
+                *o = level(i32::from(b))?;
+            }
+            Ok(())
+        }
+        Encoding::Raw16 => {
+            if payload.len() != 2 * n {
+                return Err(WireError::Payload);
+            }
+            for (o, b) in out.iter_mut().zip(payload.chunks_exact(2)) {
+                *o = level(i32::from(u16::from_le_bytes([b[0], b[1]])))?;
+            }
+            Ok(())
+        }
+        Encoding::Rice => rice::decode(payload, width, out),
+        Encoding::Sparse => sparse::decode(payload, width, rows, scratch, out),
+    }
+}
+
+/// A decoded value as a sample, or [`WireError::Payload`] beyond `G::MAX`.
+#[inline]
+fn level<G: Gray>(v: i32) -> Result<G, WireError> {
+    if (0..=i32::from(G::MAX)).contains(&v) {
+        Ok(G::from_level(v as u16))
+    } else {
+        Err(WireError::Payload)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scene(w: usize, h: usize) -> [u8; 64 * 24] {
+        let mut s = [0u8; 64 * 24];
+        for y in 0..h {
+            for x in 0..w {
+                let mut v = 30 + ((x * 7 + y * 13) % 5) as i32;
+                for &(px, py) in &[(10i32, 5i32), (40, 12), (55, 20)] {
+                    let d2 = (x as i32 - px).pow(2) + (y as i32 - py).pow(2);
+                    if d2 < 9 {
+                        v += 200 - 20 * d2;
+                    }
+                }
+                s[y * w + x] = v.clamp(0, 255) as u8;
+            }
+        }
+        s
+    }
+
+    #[test]
+    fn lossless_modes_are_exact() {
+        let (w, h) = (64u16, 24u16);
+        let s = scene(64, 24);
+        let mut scratch = [0u16; 64];
+        for want in [Encoding::Raw8, Encoding::Rice] {
+            let mut buf = [0u8; 4096];
+            let (enc, len) = encode_tile(
+                want,
+                &s[..],
+                w,
+                h,
+                &Lossy::default(),
+                &mut scratch,
+                &mut buf,
+            )
+            .unwrap();
+            assert_eq!(enc, want);
+            let mut back = [0u8; 64 * 24];
+            decode_tile(enc, &buf[..len], w, h, &mut scratch, &mut back).unwrap();
+            assert_eq!(back, s);
+        }
+    }
+
+    #[test]
+    fn sparse_is_within_tolerance_and_particles_exact() {
+        let (w, h) = (64u16, 24u16);
+        let s = scene(64, 24);
+        // A fixed tolerance everywhere (the contrast rule has its own test).
+        let lossy = Lossy {
+            contrast: 0,
+            ..Lossy::default()
+        };
+        let mut scratch = [0u16; 64];
+        let mut buf = [0u8; 4096];
+        let (enc, len) = encode_tile(
+            Encoding::Sparse,
+            &s[..],
+            w,
+            h,
+            &lossy,
+            &mut scratch,
+            &mut buf,
+        )
+        .unwrap();
+        assert_eq!(enc, Encoding::Sparse);
+        assert!(len < 64 * 24 / 4, "sparse {len} bytes");
+        let mut back = [0u8; 64 * 24];
+        decode_tile(enc, &buf[..len], w, h, &mut scratch, &mut back).unwrap();
+        for (a, b) in s.iter().zip(back.iter()) {
+            assert!((i32::from(*a) - i32::from(*b)).abs() <= i32::from(lossy.tolerance));
+            if *a > 100 {
+                assert_eq!(a, b);
+            }
+        }
+    }
+
+    /// Dim particles (4 levels over a background of 0–1, as in a
+    /// window-capped band of an adaptive frame) survive the contrast rule and
+    /// are erased by a fixed tolerance.
+    #[test]
+    fn contrast_rule_keeps_dim_particles() {
+        let (w, h) = (64usize, 24usize);
+        let mut s = [0u8; 64 * 24];
+        for (i, v) in s.iter_mut().enumerate() {
+            let (x, y) = (i % w, i / w);
+            *v = u8::from((x * 5 + y * 3) % 7 == 0);
+            if (x % 12 == 5 || x % 12 == 6) && (y % 8 == 3 || y % 8 == 4) {
+                *v = 4;
+            }
+        }
+        let run = |contrast: u16| {
+            let lossy = Lossy {
+                contrast,
+                ..Lossy::default()
+            };
+            let mut scratch = [0u16; 64];
+            let mut buf = [0u8; 4096];
+            let (enc, len) = encode_tile(
+                Encoding::Sparse,
+                &s[..],
+                w as u16,
+                h as u16,
+                &lossy,
+                &mut scratch,
+                &mut buf,
+            )
+            .unwrap();
+            let mut back = [0u8; 64 * 24];
+            decode_tile(
+                enc,
+                &buf[..len],
+                w as u16,
+                h as u16,
+                &mut scratch,
+                &mut back,
+            )
+            .unwrap();
+            back
+        };
+        let kept = run(4);
+        for (a, b) in s.iter().zip(kept.iter()) {
+            // Tolerance 4/4 = 1 in a particle block: noise may go, particles stay.
+            assert!(a.abs_diff(*b) <= 1);
+            if *a == 4 {
+                assert_eq!(*b, 4, "a dim particle sample was lost");
+            }
+        }
+        let flat = run(0);
+        assert!(
+            s.iter().zip(flat.iter()).any(|(a, b)| *a == 4 && *b < 2),
+            "a fixed tolerance of 12 erases 4-level particles"
+        );
+    }
+
+    #[test]
+    fn wide_levels_go_raw16_or_rice() {
+        let s: [u16; 32] = core::array::from_fn(|i| (i as u16) * 2000);
+        let mut buf = [0u8; 256];
+        let (enc, len) = encode_tile(
+            Encoding::Raw8,
+            &s[..],
+            8,
+            4,
+            &Lossy::default(),
+            &mut [],
+            &mut buf,
+        )
+        .unwrap();
+        assert_eq!((enc, len), (Encoding::Raw16, 64));
+        let mut back = [0u16; 32];
+        decode_tile(enc, &buf[..len], 8, 4, &mut [], &mut back).unwrap();
+        assert_eq!(back, s);
+        let mut narrow = [0u8; 32];
+        assert_eq!(
+            decode_tile(enc, &buf[..len], 8, 4, &mut [], &mut narrow),
+            Err(WireError::Payload)
+        );
+    }
+}
