@@ -9,10 +9,11 @@
 use std::path::Path;
 
 use crate::meta::{Glare, SceneInfo, SceneMeta};
-use crate::scene::{vector_grid, Scene, SceneParams, PIXEL_MM, TICK_HZ};
+use crate::scene::{Scene, SceneParams, PIXEL_MM, TICK_HZ};
 use crate::sensor::{FrameCamera, FrameCameraParams, SensorParams, SpikeSensor};
 use spiv_formats::capture::Capture;
 use spiv_formats::dat::{plane_bytes, DatWriter};
+use spiv_formats::grid::Grid;
 use spiv_formats::image::write_levels;
 use spiv_formats::vectors::{write_profile, write_vectors};
 use spiv_formats::FormatError;
@@ -193,7 +194,12 @@ pub fn simulate_to_dir(
     }
     let pair = sim.meta.capture.pair;
     let dt = f64::from(pair[1] - pair[0]);
-    let truth = sim.scene.truth_vectors(&vector_grid(w, h, 32, 16), dt);
+    let truth = sim.scene.truth_vectors(
+        &Grid::new(usize::from(w), usize::from(h), 32, 16)
+            .map(|g| g.centres())
+            .unwrap_or_default(),
+        dt,
+    );
     write_vectors(&dir.join("truth.csv"), &truth)?;
     write_profile(&dir.join("profile.csv"), &sim.scene.profile(dt))?;
     sim.meta.write(&dir.join("scene.json"))?;

@@ -7,6 +7,7 @@
 //! |---|---|
 //! | [`dat`] | Vidar `.dat` spike streams: bit-packed planes, flip, strip-head, streamed reads |
 //! | [`npz`] | real captures as `.npz` (one byte per spike sample), packed plane by plane |
+//! | [`grid`] | the window grid a vector field lives on, and its centres |
 //! | [`capture`] | the layout half of `scene.json` (size, row order, clock, pair) |
 //! | [`image`] | gray images (PNG, TIFF, BMP) at 8 or 16 bits |
 //! | [`vectors`] | vector fields (`x,y,u,v,flag`, the flag as a [`vectors::State`]) and profiles as CSV |
@@ -17,6 +18,7 @@
 
 pub mod capture;
 pub mod dat;
+pub mod grid;
 pub mod image;
 pub mod npz;
 pub mod vectors;

@@ -6,11 +6,12 @@
 //! | [`link`] | the sidecar link in process: the firmware loop's messages through the receiver |
 //! | [`reconstruct`] | frames from spike files (`.dat`, `.npz`) through the core: TFP, TFI, adaptive |
 //! | [`reference`](mod@reference) | the `f64` reference of the core's algorithm, and its tolerance |
-//! | [`piv`] | the PIV engine: filters, deformation, FFT correlation, sub-pixel peaks, validation |
+//! | [`piv`] | the PIV engine, stage by stage: `filter`, `resample`, `deform`, `correlate`, `peak`, `validate` |
 //! | [`dwell`] | the dwell cap: window limits per band from a predicted field, and the banded adaptive frame |
 //! | [`pipeline`] | the main job (`spiv run`): scene → both cameras → sidecar → PIV → metrics |
 //! | [`metrics`] | the paper's row-profile RMAE / RMSE and confidence intervals |
-//! | [`plot`] | profile and vector-field plots |
+//! | [`report`] | what a run tells its user: tables, `summary.json`, plots |
+//! | [`speed`] | speed against error (`spiv bench speed`) |
 //!
 //! The `spiv` binary's subcommands live in `cli`, one file each.
 #![warn(missing_docs)]
@@ -20,7 +21,8 @@ pub mod link;
 pub mod metrics;
 pub mod pipeline;
 pub mod piv;
-pub mod plot;
 pub mod receive;
 pub mod reconstruct;
 pub mod reference;
+pub mod report;
+pub mod speed;

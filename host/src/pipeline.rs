@@ -6,7 +6,7 @@
 
 use serde::Serialize;
 use spiv_core::Params;
-use spiv_firmware_sim::scene::{vector_grid, SceneParams};
+use spiv_firmware_sim::scene::SceneParams;
 use spiv_firmware_sim::simulation::{simulate_planes, Request, Simulated};
 use spiv_formats::vectors::Vector;
 use spiv_formats::FormatError;
@@ -54,14 +54,6 @@ impl Job {
     }
 }
 
-/// The centres of the vectors `s` reports on a `w × h` image (its last
-/// pass's window and step), where the truth is compared.
-pub fn piv_grid(s: &Settings, w: u16, h: u16) -> Vec<(f64, f64)> {
-    let win = s.windows.last().copied().unwrap_or(32);
-    let step = ((win as f64) * (1.0 - s.overlap)).round().max(1.0) as u16;
-    vector_grid(w, h, win as u16, step)
-}
-
 /// Errors of a run.
 #[derive(Debug, thiserror::Error)]
 pub enum JobError {
@@ -85,7 +77,7 @@ pub enum JobError {
 /// The three kinds of frames compared.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
-pub enum Source {
+pub enum FrameKind {
     /// The frame camera.
     Frame,
     /// TFP of the spike stream.
@@ -94,16 +86,16 @@ pub enum Source {
     Adaptive,
 }
 
-impl Source {
+impl FrameKind {
     /// All three, in table order.
-    pub const ALL: [Source; 3] = [Source::Frame, Source::Tfp, Source::Adaptive];
+    pub const ALL: [FrameKind; 3] = [FrameKind::Frame, FrameKind::Tfp, FrameKind::Adaptive];
 
     /// File-name stem.
     pub fn name(self) -> &'static str {
         match self {
-            Source::Frame => "frame",
-            Source::Tfp => "tfp",
-            Source::Adaptive => "adaptive",
+            FrameKind::Frame => "frame",
+            FrameKind::Tfp => "tfp",
+            FrameKind::Adaptive => "adaptive",
         }
     }
 }
@@ -112,7 +104,7 @@ impl Source {
 #[derive(Debug, Clone)]
 pub struct Measured {
     /// Which frames.
-    pub source: Source,
+    pub source: FrameKind,
     /// The pair as gray levels (upright), with the full-scale value.
     pub pair: [Vec<u16>; 2],
     /// Gray level of full scale.
@@ -213,14 +205,14 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
 
     stage("PIV on three pairs");
     let dt = f64::from(sim.meta.capture.pair[1] - sim.meta.capture.pair[0]);
-    let truth = sim.scene.truth_vectors(&piv_grid(&job.piv, w, h), dt);
+    let truth = sim.scene.truth_vectors(&job.piv.centres(w, h), dt);
     let glare_limit = 2.0 * p.glare_sigma;
     let (wu, hu) = (usize::from(w), usize::from(h));
     let cam_max = job.request.camera.max_dn();
-    let pairs: [(Source, [Vec<u16>; 2], u16); 3] = [
-        (Source::Frame, sim.frames.clone(), cam_max),
-        (Source::Tfp, tfp, job.core.full_scale),
-        (Source::Adaptive, adaptive, job.core.full_scale),
+    let pairs: [(FrameKind, [Vec<u16>; 2], u16); 3] = [
+        (FrameKind::Frame, sim.frames.clone(), cam_max),
+        (FrameKind::Tfp, tfp, job.core.full_scale),
+        (FrameKind::Adaptive, adaptive, job.core.full_scale),
     ];
     let mut measured: Vec<Measured> = Vec::new();
     for (source, pair, full_scale) in pairs {

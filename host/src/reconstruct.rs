@@ -5,6 +5,7 @@
 use std::path::Path;
 
 use spiv_core::window::{tfi, tfp};
+pub use spiv_core::Method;
 use spiv_core::{reconstruct_adaptive, FrameStats, Params, PlaneView};
 use spiv_formats::capture::Capture;
 use spiv_formats::dat::{DatOptions, DatReader};
@@ -12,17 +13,6 @@ use spiv_formats::npz::read_npz_spikes;
 use spiv_formats::FormatError;
 
 use spiv_core::buffers::{HistoryBuf, WorkspaceBuf};
-
-/// How a frame is made.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Method {
-    /// Spike count over a window: gray = FS·c/n.
-    Tfp,
-    /// Inverse inter-spike interval around the tick.
-    Tfi,
-    /// The paper's adaptive integration (segmentation, suppression, n* per region).
-    Adaptive,
-}
 
 /// Everything that can go wrong making a frame from a file.
 #[derive(Debug, thiserror::Error)]

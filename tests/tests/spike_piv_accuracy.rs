@@ -10,7 +10,7 @@
 //! the saturated frame camera by at least 1.5×, which is the paper's point.
 
 use spiv_firmware_sim::scene::{SceneKind, SceneParams};
-use spiv_host::pipeline::{run, Job, Source};
+use spiv_host::pipeline::{run, FrameKind, Job};
 
 /// Mean glare and other-row RMAE of (frame camera, TFP, adaptive) over seeds.
 fn measure(kind: SceneKind, seeds: &[u64], dwell_cap: Option<f64>) -> [[f64; 2]; 3] {
@@ -22,7 +22,7 @@ fn measure(kind: SceneKind, seeds: &[u64], dwell_cap: Option<f64>) -> [[f64; 2];
         let o = run(&job, |_| {}).expect("the pipeline runs");
         assert_eq!(
             o.measured.iter().map(|m| m.source).collect::<Vec<_>>(),
-            [Source::Frame, Source::Tfp, Source::Adaptive]
+            [FrameKind::Frame, FrameKind::Tfp, FrameKind::Adaptive]
         );
         // The link is lossless: what PIV saw is what the core made.
         assert_eq!(o.link.lost_frames, 0);

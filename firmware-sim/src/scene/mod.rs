@@ -416,30 +416,6 @@ impl Scene {
     }
 }
 
-/// Window centres of a PIV grid: windows of `win` px every `step` px, the
-/// centre of columns `j0..j0+win−1` at `x = j0 + (win−1)/2` (FORMATS.md).
-pub fn vector_grid(width: u16, height: u16, win: u16, step: u16) -> Vec<(f64, f64)> {
-    let (w, h, win, step) = (
-        usize::from(width),
-        usize::from(height),
-        usize::from(win),
-        usize::from(step.max(1)),
-    );
-    let mut v = Vec::new();
-    if win > w || win > h {
-        return v;
-    }
-    for i0 in (0..=h - win).step_by(step) {
-        for j0 in (0..=w - win).step_by(step) {
-            v.push((
-                j0 as f64 + (win as f64 - 1.0) / 2.0,
-                i0 as f64 + (win as f64 - 1.0) / 2.0,
-            ));
-        }
-    }
-    v
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

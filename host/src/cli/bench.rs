@@ -1,23 +1,16 @@
 //! `spiv bench (paper | blasius | speed | link)`: the paper's comparison over
 //! seeds, the Blasius validation, and speed against error.
 
-use std::path::PathBuf;
-use std::time::Instant;
+use std::path::{Path, PathBuf};
 
 use clap::{Args, Subcommand};
-use ndarray::Array2;
-use plotters::prelude::*;
 use serde_json::json;
-use spiv_firmware_sim::scene::{vector_grid, SceneKind, SceneParams};
-use spiv_firmware_sim::simulation::simulate_planes;
-use spiv_host::metrics::{mean_ci, region_error, rmae_ratio, row_profile, MeanCi};
-use spiv_host::pipeline::{run as run_job, Job, Source};
-use spiv_host::piv::{piv, to_f32, Interp, Settings};
-use spiv_host::reconstruct::{frame_from_planes, Method, Planes};
-use spiv_host::reference::{adaptive_frame, SpikeVolume};
+use spiv_firmware_sim::scene::{SceneKind, SceneParams};
+use spiv_host::metrics::{mean_ci, rmae_ratio, MeanCi};
+use spiv_host::pipeline::{run as run_job, FrameKind, Job};
 
-use super::run::label;
 use super::{bar, CliError};
+use spiv_host::report::table::label;
 
 /// Benchmarks.
 #[derive(Debug, Args)]
@@ -64,11 +57,7 @@ pub fn run(a: &BenchArgs) -> Result<(), CliError> {
             seeds,
             json,
             dwell_cap,
-        } => paper(
-            *seeds,
-            json.as_ref(),
-            super::run::parse_dwell_cap(dwell_cap)?,
-        ),
+        } => paper(*seeds, json.as_ref(), super::parse_dwell_cap(dwell_cap)?),
         Which::Blasius { seeds } => blasius(*seeds),
         Which::Speed { plot } => speed(plot),
         Which::Link(l) => super::bench_link::run(l),
@@ -132,7 +121,7 @@ fn paper(seeds: u64, json_out: Option<&PathBuf>, dwell_cap: Option<f64>) -> Resu
             "frames", "glare RMAE", "glare RMSE px", "other RMAE", "other RMSE px"
         );
         let mut rows = Vec::new();
-        for (k, s) in Source::ALL.iter().enumerate() {
+        for (k, s) in FrameKind::ALL.iter().enumerate() {
             let m: Vec<MeanCi> = acc[k].iter().map(|v| mean_ci(v)).collect();
             println!(
                 "{:<20} | {:>15} {:>15} | {:>15} {:>15}",
@@ -144,7 +133,7 @@ fn paper(seeds: u64, json_out: Option<&PathBuf>, dwell_cap: Option<f64>) -> Resu
             );
             rows.push(json!({"source": s, "glare_rmae": m[0], "glare_rmse": m[1], "rest_rmae": m[2], "rest_rmse": m[3]}));
         }
-        for (k, s) in [Source::Tfp, Source::Adaptive].iter().enumerate() {
+        for (k, s) in [FrameKind::Tfp, FrameKind::Adaptive].iter().enumerate() {
             let (g, r) = (mean_ci(&ratios[k][0]), mean_ci(&ratios[k][1]));
             println!(
                 "{:<20} | {:>15} {:>15} | {:>15}",
@@ -199,7 +188,7 @@ fn blasius(seeds: u64) -> Result<(), CliError> {
         "blasius (400x800 px, U = {:.2} px per pair, δ99 = 730 px), {seeds} seed(s): RMS deviation of the row profile from the Blasius solution, % of U (target ≤ 2 %)",
         u_pair
     );
-    for (k, s) in Source::ALL.iter().enumerate() {
+    for (k, s) in FrameKind::ALL.iter().enumerate() {
         println!(
             "{:<20} {:>16} %   rows without a vector: {}",
             label(*s, 8),
@@ -210,217 +199,17 @@ fn blasius(seeds: u64) -> Result<(), CliError> {
     Ok(())
 }
 
-struct Row {
-    name: String,
-    ms: f64,
-    rmse: f64,
-}
-
-fn speed(plot_path: &PathBuf) -> Result<(), CliError> {
-    let job = Job::new(SceneParams::new(SceneKind::PaperLinear), 1);
-    let p = &job.request.scene;
-    let (w, h) = (p.width, p.height);
-    let (data, sim) = simulate_planes(&job.request)?;
-    let planes = Planes::simulated(w, h, data);
-    let [ka, kb] = sim.meta.capture.pair.map(u64::from);
-    let dt = (kb - ka) as f64;
-    let truth = sim.scene.truth_vectors(&vector_grid(w, h, 32, 16), dt);
-    let (wu, hu) = (usize::from(w), usize::from(h));
-    let to = |d: &[u16]| to_f32(d, wu, hu);
-    // PIV time: the median of 3 runs (the first run of the process also
-    // pays for starting the thread pool and touching fresh memory).
-    let err = |a: &Array2<f32>, b: &Array2<f32>, s: &Settings| -> Result<(f64, f64), CliError> {
-        let mut times = [0.0f64; 3];
-        let mut field = None;
-        for t in times.iter_mut() {
-            let start = Instant::now();
-            field = Some(piv(a, b, None, s)?);
-            *t = start.elapsed().as_secs_f64() * 1e3;
-        }
-        times.sort_by(f64::total_cmp);
-        let ms = times[1];
-        let f = field.ok_or_else(|| CliError::Usage("no PIV run".into()))?;
-        let rows = row_profile(&f.vectors(), &truth, f64::from(h));
-        Ok((ms, region_error(&rows, |_| true).rmse))
-    };
-    let mut rows: Vec<Row> = Vec::new();
-    let base = job.piv.clone();
-    let piv_cfgs = [
-        ("PIV 64,32,32 B-spline", base.clone()),
-        (
-            "PIV 64,32 B-spline",
-            Settings {
-                windows: vec![64, 32],
-                ..base.clone()
-            },
-        ),
-        (
-            "PIV 64,32,32 bilinear",
-            Settings {
-                interp: Interp::Bilinear,
-                ..base.clone()
-            },
-        ),
-    ];
+fn speed(plot_path: &Path) -> Result<(), CliError> {
     let b = bar(14, "configurations");
-    // Frame camera.
-    let (fa, fb) = (to(&sim.frames[0]), to(&sim.frames[1]));
-    for (name, s) in &piv_cfgs {
-        let (ms, e) = err(&fa, &fb, s)?;
-        rows.push(Row {
-            name: format!("frame camera, {name}"),
-            ms,
-            rmse: e,
-        });
-        b.inc(1);
-    }
-    // Core: TFP and adaptive at several window limits.
-    let recon = |m: Method, n: u16| -> Result<(f64, Array2<f32>, Array2<f32>), CliError> {
-        let t = Instant::now();
-        let a = frame_from_planes(&planes, ka, m, n, &job.core)?;
-        let bb = frame_from_planes(&planes, kb, m, n, &job.core)?;
-        Ok((t.elapsed().as_secs_f64() * 1e3, to(&a.data), to(&bb.data)))
-    };
-    for (m, n) in [
-        (Method::Tfp, 8),
-        (Method::Tfp, 16),
-        (Method::Adaptive, 32),
-        (Method::Adaptive, 64),
-        (Method::Adaptive, 128),
-    ] {
-        let (rms, a, bb) = recon(m, n)?;
-        for (name, s) in &piv_cfgs[..1] {
-            let (ms, e) = err(&a, &bb, s)?;
-            rows.push(Row {
-                name: format!("core {m:?} n={n} (fixed point), {name}"),
-                ms: rms + ms,
-                rmse: e,
-            });
-        }
-        b.inc(1);
-    }
-    // Beyond the paper: adaptive windows capped per band by the TFP field.
-    for cap in [6.0, 8.0, 16.0] {
-        let t = Instant::now();
-        let (_, ta, tb) = recon(Method::Tfp, 8)?;
-        let tfp_field = piv(&ta, &tb, None, &piv_cfgs[0].1)?;
-        let caps = spiv_host::dwell::band_caps(&tfp_field.vectors(), hu, dt, cap, &job.core);
-        let a = spiv_host::dwell::adaptive_banded(&planes, ka, &job.core, &caps)?;
-        let bb = spiv_host::dwell::adaptive_banded(&planes, kb, &job.core, &caps)?;
-        let rec_ms = t.elapsed().as_secs_f64() * 1e3;
-        let (ms, e) = err(&to(&a), &to(&bb), &piv_cfgs[0].1)?;
-        rows.push(Row {
-            name: format!("core Adaptive, dwell cap {cap} px, PIV 64,32,32 B-spline"),
-            ms: rec_ms + ms,
-            rmse: e,
-        });
-        b.inc(1);
-    }
-    // The sidecar as `spiv run` drives it: firmware (core frames, dwell caps
-    // from the TFP pair sent through the link), tile coding, the host's
-    // decoder and reassembly; lossless and lossy. Time = firmware + wire +
-    // receiver for both pairs (TFP and adaptive) + PIV on the adaptive pair.
-    for (enc, label) in [
-        (spiv_core::wire::Encoding::Rice, "lossless Rice"),
-        (spiv_core::wire::Encoding::Sparse, "lossy Sparse"),
-    ] {
-        use spiv_firmware_sim::firmware::Config;
-        let t = Instant::now();
-        let mut base = Config::new(ka as u32, (kb - ka) as u32);
-        base.params = job.core;
-        base.schedule.pairs = Some(1);
-        base.encoding = enc;
-        let (caps, _) =
-            spiv_host::link::dwell_caps(&planes.data, w, h, &base, 8, 8.0, &piv_cfgs[0].1)
-                .map_err(|e| CliError::Usage(e.to_string()))?;
-        let ad_t = spiv_host::link::transfer(&planes.data, w, h, base, caps)
-            .map_err(|e| CliError::Usage(e.to_string()))?;
-        let [a, bb] = ad_t
-            .pairs
-            .first()
-            .ok_or_else(|| CliError::Usage("the link delivered no adaptive pair".into()))?;
-        let (a, bb) = (
-            spiv_host::link::upright_f32(a),
-            spiv_host::link::upright_f32(bb),
-        );
-        let rec_ms = t.elapsed().as_secs_f64() * 1e3;
-        let (ms, e) = err(&a, &bb, &piv_cfgs[0].1)?;
-        rows.push(Row {
-            name: format!(
-                "sidecar + wire {label}, {:.0} KB/pair, dwell cap 8 px, PIV 64,32,32",
-                ad_t.bytes as f64 / 1e3
-            ),
-            ms: rec_ms + ms,
-            rmse: e,
-        });
-        b.inc(1);
-    }
-    // The f64 reference of the adaptive frame.
-    let t = Instant::now();
-    let vol = SpikeVolume::from_packed(&planes.data, wu, hu, 0);
-    let ra = adaptive_frame(&vol, ka as u32, &job.core, f64::from(job.core.full_scale));
-    let rb = adaptive_frame(&vol, kb as u32, &job.core, f64::from(job.core.full_scale));
-    let ref_ms = t.elapsed().as_secs_f64() * 1e3;
-    let up = |v: &[f64]| -> Array2<f32> {
-        // The reference works in stored (bottom-up) rows.
-        Array2::from_shape_fn((hu, wu), |(i, j)| v[(hu - 1 - i) * wu + j] as f32)
-    };
-    let (a, bb) = (up(&ra.gray), up(&rb.gray));
-    let (ms, e) = err(&a, &bb, &piv_cfgs[0].1)?;
-    rows.push(Row {
-        name: format!("f64 reference Adaptive n=128, {}", piv_cfgs[0].0),
-        ms: ref_ms + ms,
-        rmse: e,
-    });
+    let rows = spiv_host::speed::speed_against_error(|| b.inc(1))?;
     b.finish_and_clear();
     println!("speed against error, paper-linear seed 1 (400x250): wall time per frame pair (reconstruction of both frames + PIV, the PIV a median of 3 runs) and RMSE of the row profile, px per pair");
     println!("{:<76} {:>8} {:>8}", "configuration", "ms/pair", "RMSE px");
     for r in &rows {
         println!("{:<76} {:>8.1} {:>8.3}", r.name, r.ms, r.rmse);
     }
-    pareto(plot_path, &rows)
-        .map_err(|e| CliError::Usage(format!("{}: {e}", plot_path.display())))?;
+    spiv_host::report::plot::pareto(plot_path, &rows)
+        .map_err(|e| CliError::Usage(e.to_string()))?;
     println!("Pareto plot -> {}", plot_path.display());
     Ok(())
-}
-
-fn pareto(path: &PathBuf, rows: &[Row]) -> Result<(), String> {
-    spiv_host::plot::ensure_font();
-    let root = BitMapBackend::new(path, (760, 520)).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| e.to_string())?;
-    let tmax = rows.iter().map(|r| r.ms).fold(1.0, f64::max) * 1.3;
-    let emax = rows.iter().map(|r| r.rmse).fold(0.1, f64::max) * 1.2;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(
-            "speed against error (paper-linear, 400x250)",
-            ("sans-serif", 18),
-        )
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(55)
-        .build_cartesian_2d((1.0..tmax).log_scale(), 0.0..emax)
-        .map_err(|e| e.to_string())?;
-    chart
-        .configure_mesh()
-        .x_desc("ms per frame pair (log)")
-        .y_desc("RMSE of u(y), px per pair")
-        .draw()
-        .map_err(|e| e.to_string())?;
-    for r in rows {
-        chart
-            .draw_series(std::iter::once(Circle::new(
-                (r.ms.max(1.0), r.rmse),
-                5,
-                RED.filled(),
-            )))
-            .map_err(|e| e.to_string())?;
-        chart
-            .draw_series(std::iter::once(Text::new(
-                r.name.split(',').next().unwrap_or("").to_string(),
-                (r.ms.max(1.0) * 1.05, r.rmse),
-                ("sans-serif", 11),
-            )))
-            .map_err(|e| e.to_string())?;
-    }
-    root.present().map_err(|e| e.to_string())
 }

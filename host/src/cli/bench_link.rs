@@ -18,7 +18,7 @@ use spiv_firmware_sim::scene::{SceneKind, SceneParams};
 use spiv_firmware_sim::simulation::{simulate_planes, Request};
 use spiv_host::link::{dwell_caps, piv_pairs, transfer, LinkError};
 use spiv_host::metrics::{region_error, row_profile};
-use spiv_host::pipeline::{piv_grid, Job};
+use spiv_host::pipeline::Job;
 
 use super::CliError;
 
@@ -90,7 +90,7 @@ pub fn run(a: &LinkArgs) -> Result<(), CliError> {
             "--seeds and --pairs must be at least 1".into(),
         ));
     }
-    let dwell_cap = super::run::parse_dwell_cap(&a.dwell_cap)?;
+    let dwell_cap = super::parse_dwell_cap(&a.dwell_cap)?;
     let scenes = [
         SceneKind::PaperLinear,
         SceneKind::PaperQuadratic,
@@ -120,7 +120,7 @@ pub fn run(a: &LinkArgs) -> Result<(), CliError> {
             let (planes, sim) = simulate_planes(&req)?;
             let truth = sim
                 .scene
-                .truth_vectors(&piv_grid(&job.piv, w, h), f64::from(dt));
+                .truth_vectors(&job.piv.centres(w, h), f64::from(dt));
             let mut caps = Vec::new();
             if let Some(budget) = dwell_cap {
                 // The caps come from a TFP pair sent through the link first,

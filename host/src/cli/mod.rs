@@ -1,4 +1,7 @@
-//! The `spiv` command line: one file per subcommand.
+//! The `spiv` command line: one file per subcommand, each thin argument
+//! parsing over library calls; the option parsers they share live here.
+
+use spiv_firmware_sim::scene::{SceneKind, SceneParams};
 
 pub mod bench;
 pub mod bench_link;
@@ -29,6 +32,38 @@ pub enum CliError {
     /// A bad option value.
     #[error("{0}")]
     Usage(String),
+}
+
+/// Parses `--encoding`.
+pub fn parse_encoding(v: &str) -> Result<spiv_core::wire::Encoding, CliError> {
+    use spiv_core::wire::Encoding;
+    match v {
+        "rice" => Ok(Encoding::Rice),
+        "sparse" => Ok(Encoding::Sparse),
+        "raw" => Ok(Encoding::Raw8),
+        _ => Err(CliError::Usage(format!(
+            "--encoding {v}: expected rice, sparse or raw"
+        ))),
+    }
+}
+
+/// Parses `--dwell-cap`: px, or "off".
+pub fn parse_dwell_cap(v: &str) -> Result<Option<f64>, CliError> {
+    if v == "off" {
+        return Ok(None);
+    }
+    match v.parse::<f64>() {
+        Ok(c) if c.is_finite() && c > 0.0 && c <= 1000.0 => Ok(Some(c)),
+        _ => Err(CliError::Usage(format!(
+            "--dwell-cap {v}: expected px in (0, 1000] or off"
+        ))),
+    }
+}
+
+/// Parses a scene name into its defaults.
+pub fn scene_params(name: &str) -> Result<SceneParams, CliError> {
+    let kind = SceneKind::parse(name).map_err(|e| CliError::Usage(e.to_string()))?;
+    Ok(SceneParams::new(kind))
 }
 
 /// A progress bar for long work: `what`, the bar, position/length, time.

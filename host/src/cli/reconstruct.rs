@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use clap::{Args, ValueEnum};
+use clap::Args;
 use spiv_core::Params;
 use spiv_formats::dat::DatOptions;
 use spiv_formats::image::write_levels;
@@ -11,15 +11,15 @@ use spiv_host::reconstruct::{frame_from_file, FileOptions, Method};
 
 use super::CliError;
 
-/// Reconstruction methods.
-#[derive(Debug, Clone, Copy, ValueEnum)]
-pub enum MethodArg {
-    /// The paper's adaptive integration.
-    Adaptive,
-    /// Spike count over a window.
-    Tfp,
-    /// Inverse inter-spike interval.
-    Tfi,
+/// `--method`: the core's frame methods by name, with their help.
+fn method_parser() -> impl clap::builder::TypedValueParser<Value = Method> {
+    use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
+    PossibleValuesParser::new([
+        PossibleValue::new("adaptive").help("The paper's adaptive integration"),
+        PossibleValue::new("tfp").help("Spike count over a window"),
+        PossibleValue::new("tfi").help("Inverse inter-spike interval"),
+    ])
+    .try_map(|name| Method::from_name(&name).ok_or("unknown method"))
 }
 
 /// Make one frame from a spike file (.dat, or a .npz capture) at any tick.
@@ -37,8 +37,8 @@ pub struct ReconstructArgs {
     #[arg(long)]
     at: u64,
     /// Method.
-    #[arg(long, value_enum, default_value = "adaptive")]
-    method: MethodArg,
+    #[arg(long, default_value = "adaptive", value_parser = method_parser())]
+    method: Method,
     /// TFP window length, or the adaptive/TFI n_max, ticks (default 128 adaptive/TFI, 8 TFP).
     #[arg(long)]
     window: Option<u16>,
@@ -61,11 +61,7 @@ pub struct ReconstructArgs {
 
 /// Runs it.
 pub fn run(a: &ReconstructArgs) -> Result<(), CliError> {
-    let method = match a.method {
-        MethodArg::Adaptive => Method::Adaptive,
-        MethodArg::Tfp => Method::Tfp,
-        MethodArg::Tfi => Method::Tfi,
-    };
+    let method = a.method;
     let window = a
         .window
         .unwrap_or(if method == Method::Tfp { 8 } else { 128 });

@@ -1,4 +1,5 @@
-//! Image pre-filters applied before correlation.
+//! Image pre-filters applied before correlation, and the mask of clipped
+//! (saturated) areas that correlation leaves out.
 
 use ndarray::{Array2, Axis};
 use rayon::prelude::*;
@@ -138,6 +139,82 @@ pub(crate) fn for_column_blocks(img: &mut Array2<f32>, f: impl Fn(&mut [f32], us
         });
 }
 
+/// The clipped areas of `img` (pixels at or above `level`): those that
+/// survive an erosion by `CLIP_CORE` px — so a particle with a clipped core
+/// keeps its pixels — grown back by `grow` px to cover the rim where the
+/// high-pass filter rings at the area's static edge. `None` without a level
+/// or without any area.
+pub fn clipped_areas(img: &Array2<f32>, level: Option<f32>, grow: usize) -> Option<Array2<bool>> {
+    let l = level?;
+    let clipped = img.mapv(|v| v >= l);
+    // An area needs a row with 2·CLIP_CORE + 1 clipped pixels in a row;
+    // clipped particle cores (a few px) have none, and then no area exists.
+    let side = 2 * CLIP_CORE + 1;
+    let has_run = clipped.rows().into_iter().any(|row| {
+        let mut run = 0;
+        row.iter().any(|&c| {
+            run = if c { run + 1 } else { 0 };
+            run >= side
+        })
+    });
+    if !has_run {
+        return None;
+    }
+    let full = (side * side) as u32;
+    let eroded = box_count(&clipped, CLIP_CORE, |c| c == full);
+    Some(box_count(&eroded, CLIP_CORE + grow, |c| c > 0))
+}
+
+/// Radius of the erosion that tells a clipped area from a clipped particle.
+const CLIP_CORE: usize = 3;
+
+/// For every pixel, whether the count of set pixels within `r` (a (2r+1)²
+/// square, clipped at the image edge) passes `test`. Separable: a running
+/// count along each row (rows in parallel), then a running sum of those
+/// counts down the columns with one lane per column (vectorises).
+fn box_count(m: &Array2<bool>, r: usize, test: impl Fn(u32) -> bool + Sync) -> Array2<bool> {
+    let (h, w) = m.dim();
+    let mut rows = Array2::<u32>::zeros((h, w));
+    rows.axis_iter_mut(ndarray::Axis(0))
+        .into_par_iter()
+        .zip(m.axis_iter(ndarray::Axis(0)))
+        .for_each(|(mut o, s)| {
+            let mut acc: u32 = s.iter().take(r.min(w)).map(|&b| u32::from(b)).sum();
+            for j in 0..w {
+                if j + r < w {
+                    acc += u32::from(s[j + r]);
+                }
+                o[j] = acc;
+                if j >= r {
+                    acc -= u32::from(s[j - r]);
+                }
+            }
+        });
+    let mut out = Array2::from_elem((h, w), false);
+    let mut sum = vec![0u32; w];
+    for k in 0..r.min(h) {
+        for (s, &v) in sum.iter_mut().zip(rows.row(k)) {
+            *s += v;
+        }
+    }
+    for i in 0..h {
+        if i + r < h {
+            for (s, &v) in sum.iter_mut().zip(rows.row(i + r)) {
+                *s += v;
+            }
+        }
+        for (o, &s) in out.row_mut(i).iter_mut().zip(&sum) {
+            *o = test(s);
+        }
+        if i >= r {
+            for (s, &v) in sum.iter_mut().zip(rows.row(i - r)) {
+                *s -= v;
+            }
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -173,5 +250,26 @@ mod tests {
         assert_eq!(hp, want);
         let flat = Array2::from_elem((16, 16), 7.0f32);
         assert!(highpass(&flat, 3.0).iter().all(|v| v.abs() < 1e-4));
+    }
+
+    /// The separable running counts against counting every square.
+    #[test]
+    fn box_count_matches_brute_force() {
+        let (h, w) = (23, 37);
+        let m = Array2::from_shape_fn((h, w), |(i, j)| (i * 7 + j * 11 + i * j) % 5 < 2);
+        for r in [0, 1, 2, 5, 30] {
+            let got = box_count(&m, r, |c| c % 3 == 1);
+            for i in 0..h {
+                for j in 0..w {
+                    let (i0, i1) = (i.saturating_sub(r), (i + r + 1).min(h));
+                    let (j0, j1) = (j.saturating_sub(r), (j + r + 1).min(w));
+                    let n = (i0..i1)
+                        .flat_map(|a| (j0..j1).map(move |b| (a, b)))
+                        .filter(|&p| m[p])
+                        .count() as u32;
+                    assert_eq!(got[[i, j]], n % 3 == 1, "r {r} at {i},{j}");
+                }
+            }
+        }
     }
 }

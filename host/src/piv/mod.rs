@@ -10,7 +10,8 @@
 pub mod correlate;
 pub mod deform;
 pub mod filter;
-pub mod grid;
+pub mod peak;
+pub mod resample;
 pub mod validate;
 
 use std::path::Path;
@@ -21,12 +22,12 @@ use spiv_formats::image::read_gray;
 use spiv_formats::vectors::Vector;
 use spiv_formats::FormatError;
 
-pub use deform::Interp;
-pub use grid::Grid;
+pub use resample::Interp;
+pub use spiv_formats::grid::Grid;
 pub use validate::{State, Validation};
 
-pub use correlate::Subpixel;
 use correlate::{correlate, NoPeak, Plan, Scratch};
+pub use peak::Subpixel;
 
 /// Fraction of windows with signal that must pass validation for a pass's
 /// field to deform the next pass.
@@ -113,6 +114,26 @@ impl Settings {
             },
             ..Settings::default()
         }
+    }
+
+    /// Distance between windows of `size` px at this overlap, px (≥ 1).
+    pub fn step(&self, size: usize) -> usize {
+        ((size as f64) * (1.0 - self.overlap)).round().max(1.0) as usize
+    }
+
+    /// The grid the field of a `w × h` pair lives on (its last pass's), or
+    /// `None` when no window fits.
+    pub fn grid(&self, w: usize, h: usize) -> Option<Grid> {
+        let size = self.windows.last().copied().unwrap_or(32);
+        Grid::new(w, h, size, self.step(size))
+    }
+
+    /// The centres of the vectors this reports on a `w × h` pair, where
+    /// the truth is compared (empty when no window fits).
+    pub fn centres(&self, w: u16, h: u16) -> Vec<(f64, f64)> {
+        self.grid(usize::from(w), usize::from(h))
+            .map(|g| g.centres())
+            .unwrap_or_default()
     }
 }
 
@@ -229,82 +250,6 @@ fn check(s: &Settings, (h, w): (usize, usize)) -> Result<(), PivError> {
     Ok(())
 }
 
-/// The clipped areas of `img` (pixels at or above `level`): those that
-/// survive an erosion by `CLIP_CORE` px — so a particle with a clipped core
-/// keeps its pixels — grown back by `grow` px to cover the rim where the
-/// high-pass filter rings at the area's static edge. `None` without a level
-/// or without any area.
-fn clipped_areas(img: &Array2<f32>, level: Option<f32>, grow: usize) -> Option<Array2<bool>> {
-    let l = level?;
-    let clipped = img.mapv(|v| v >= l);
-    // An area needs a row with 2·CLIP_CORE + 1 clipped pixels in a row;
-    // clipped particle cores (a few px) have none, and then no area exists.
-    let side = 2 * CLIP_CORE + 1;
-    let has_run = clipped.rows().into_iter().any(|row| {
-        let mut run = 0;
-        row.iter().any(|&c| {
-            run = if c { run + 1 } else { 0 };
-            run >= side
-        })
-    });
-    if !has_run {
-        return None;
-    }
-    let full = (side * side) as u32;
-    let eroded = box_count(&clipped, CLIP_CORE, |c| c == full);
-    Some(box_count(&eroded, CLIP_CORE + grow, |c| c > 0))
-}
-
-/// Radius of the erosion that tells a clipped area from a clipped particle.
-const CLIP_CORE: usize = 3;
-
-/// For every pixel, whether the count of set pixels within `r` (a (2r+1)²
-/// square, clipped at the image edge) passes `test`. Separable: a running
-/// count along each row (rows in parallel), then a running sum of those
-/// counts down the columns with one lane per column (vectorises).
-fn box_count(m: &Array2<bool>, r: usize, test: impl Fn(u32) -> bool + Sync) -> Array2<bool> {
-    let (h, w) = m.dim();
-    let mut rows = Array2::<u32>::zeros((h, w));
-    rows.axis_iter_mut(ndarray::Axis(0))
-        .into_par_iter()
-        .zip(m.axis_iter(ndarray::Axis(0)))
-        .for_each(|(mut o, s)| {
-            let mut acc: u32 = s.iter().take(r.min(w)).map(|&b| u32::from(b)).sum();
-            for j in 0..w {
-                if j + r < w {
-                    acc += u32::from(s[j + r]);
-                }
-                o[j] = acc;
-                if j >= r {
-                    acc -= u32::from(s[j - r]);
-                }
-            }
-        });
-    let mut out = Array2::from_elem((h, w), false);
-    let mut sum = vec![0u32; w];
-    for k in 0..r.min(h) {
-        for (s, &v) in sum.iter_mut().zip(rows.row(k)) {
-            *s += v;
-        }
-    }
-    for i in 0..h {
-        if i + r < h {
-            for (s, &v) in sum.iter_mut().zip(rows.row(i + r)) {
-                *s += v;
-            }
-        }
-        for (o, &s) in out.row_mut(i).iter_mut().zip(&sum) {
-            *o = test(s);
-        }
-        if i >= r {
-            for (s, &v) in sum.iter_mut().zip(rows.row(i - r)) {
-                *s -= v;
-            }
-        }
-    }
-    out
-}
-
 /// Runs PIV on a pair; the field lives on the last pass's grid.
 pub fn piv(
     a: &Array2<f32>,
@@ -333,7 +278,10 @@ pub fn piv(
     // displacement, so its undeformed outline serves every pass).
     let (la, lb) = (s.clip.level(a), s.clip.level(b));
     let grow = 3 * (s.highpass.max(0.0).round() as usize);
-    let (ca, cb) = rayon::join(|| clipped_areas(a, la, grow), || clipped_areas(b, lb, grow));
+    let (ca, cb) = rayon::join(
+        || filter::clipped_areas(a, la, grow),
+        || filter::clipped_areas(b, lb, grow),
+    );
     let base = (mask.is_some() || ca.is_some() || cb.is_some()).then(|| {
         let mut ex = mask
             .cloned()
@@ -357,12 +305,12 @@ pub fn piv(
     let mut predictor: Option<Field> = None;
     let resamplers = (s.windows.len() > 1).then(|| {
         rayon::join(
-            || deform::Resampler::new(a, s.interp),
-            || deform::Resampler::new(b, s.interp),
+            || resample::Resampler::new(a, s.interp),
+            || resample::Resampler::new(b, s.interp),
         )
     });
     for &size in &s.windows {
-        let step = ((size as f64) * (1.0 - s.overlap)).round().max(1.0) as usize;
+        let step = s.step(size);
         let grid = Grid::new(w, h, size, step).ok_or(PivError::TooSmall(w, h, size))?;
         let (pa, pb, pred, outside) = match &predictor {
             None => (None, None, None, base.clone()),
@@ -546,30 +494,4 @@ fn pass(
 /// An upright `w × h` gray image as PIV input.
 pub fn to_f32(data: &[u16], w: usize, h: usize) -> Array2<f32> {
     Array2::from_shape_fn((h, w), |(i, j)| f32::from(data[i * w + j]))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// The separable running counts against counting every square.
-    #[test]
-    fn box_count_matches_brute_force() {
-        let (h, w) = (23, 37);
-        let m = Array2::from_shape_fn((h, w), |(i, j)| (i * 7 + j * 11 + i * j) % 5 < 2);
-        for r in [0, 1, 2, 5, 30] {
-            let got = box_count(&m, r, |c| c % 3 == 1);
-            for i in 0..h {
-                for j in 0..w {
-                    let (i0, i1) = (i.saturating_sub(r), (i + r + 1).min(h));
-                    let (j0, j1) = (j.saturating_sub(r), (j + r + 1).min(w));
-                    let n = (i0..i1)
-                        .flat_map(|a| (j0..j1).map(move |b| (a, b)))
-                        .filter(|&p| m[p])
-                        .count() as u32;
-                    assert_eq!(got[[i, j]], n % 3 == 1, "r {r} at {i},{j}");
-                }
-            }
-        }
-    }
 }

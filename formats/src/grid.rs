@@ -1,5 +1,8 @@
-//! Interrogation-window grids: windows of `size` px every `step` px from the
-//! top-left corner, as many as fit whole.
+//! The grid a vector field lives on: interrogation windows of `size` px
+//! every `step` px from the top-left corner, as many as fit whole, each
+//! vector at its window's centre (FORMATS.md: the centre of columns
+//! `j0..j0+size−1` is `x = j0 + (size−1)/2`). PIV measures on it, the
+//! simulator's truth and the metrics compare on it.
 
 /// A regular grid of square windows over an image.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -53,6 +56,15 @@ impl Grid {
         locate(y, (self.size as f64 - 1.0) / 2.0, self.step as f64, self.ny)
     }
 
+    /// Every window centre (x, y), px, row by row (the order of a vectors
+    /// CSV).
+    pub fn centres(&self) -> Vec<(f64, f64)> {
+        (0..self.ny)
+            .flat_map(|r| (0..self.nx).map(move |c| (r, c)))
+            .map(|(r, c)| self.centre(r, c))
+            .collect()
+    }
+
     /// Number of windows.
     pub fn len(&self) -> usize {
         self.nx * self.ny
@@ -90,5 +102,10 @@ mod tests {
         assert_eq!(g.locate_x(-1e9), (0, 1, -1.0));
         assert_eq!(g.locate_x(1e9), (22, 23, 2.0));
         assert!(Grid::new(31, 250, 32, 16).is_none());
+        let c = g.centres();
+        assert_eq!(
+            (c.len(), c[1], c[24]),
+            (24 * 14, (31.5, 15.5), (15.5, 31.5))
+        );
     }
 }

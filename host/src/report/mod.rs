@@ -1,0 +1,6 @@
+//! What a run tells its user: the tables it prints ([`table`]), its
+//! `summary.json` ([`summary`]) and its plots ([`plot`]).
+
+pub mod plot;
+pub mod summary;
+pub mod table;
