@@ -45,7 +45,29 @@ pub fn adaptive_banded(
     let mut ws = spiv_core::buffers::WorkspaceBuf::whole(w, h);
     let mut out = vec![0u16; usize::from(w) * usize::from(h)];
     spiv_core::sidecar::capped_frame(&hist, tick, core, caps, &mut ws.workspace(), &mut out)?;
-    Ok(crate::reconstruct::upright(&out, w, planes.flip))
+    Ok(planes.output(&out))
+}
+
+/// [`band_caps`] for the bands [`adaptive_banded`] makes from `planes`:
+/// the core counts bands from the bottom stored row up, which is the top
+/// of the upright image when rows are stored bottom-up (the camera) and
+/// its bottom when they are stored upright (`.npz` captures), so the field
+/// is mirrored for the latter.
+pub fn caps_for(
+    planes: &Planes,
+    field: &[Vector],
+    dt: f64,
+    budget: f64,
+    core: &Params,
+) -> Vec<u16> {
+    let h = usize::from(planes.height);
+    if planes.flip {
+        band_caps(field, h, dt, budget, core)
+    } else {
+        let hf = planes.height as f64 - 1.0;
+        let mirrored: Vec<Vector> = field.iter().map(|v| Vector { y: hf - v.y, ..*v }).collect();
+        band_caps(&mirrored, h, dt, budget, core)
+    }
 }
 
 /// Window limit per band from a field: the budget over the fastest valid

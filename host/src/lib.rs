@@ -8,6 +8,7 @@
 //! | [`reference`](mod@reference) | the `f64` reference of the core's algorithm, and its tolerance |
 //! | [`piv`] | the PIV engine, stage by stage: `filter`, `resample`, `deform`, `correlate`, `peak`, `validate` |
 //! | [`dwell`] | the dwell cap: window limits per band from a predicted field, and the banded adaptive frame |
+//! | [`flow`] | the main job on any spike recording (`spiv flow`): pairs through the core, PIV, the closed-loop dwell cap |
 //! | [`pipeline`] | the main job (`spiv run`): scene → both cameras → sidecar → PIV → metrics |
 //! | [`metrics`] | the paper's row-profile RMAE / RMSE and confidence intervals |
 //! | [`report`] | what a run tells its user: tables, `summary.json`, plots |
@@ -17,6 +18,7 @@
 #![warn(missing_docs)]
 
 pub mod dwell;
+pub mod flow;
 pub mod link;
 pub mod metrics;
 pub mod pipeline;

@@ -31,6 +31,9 @@ enum Command {
     Bench(cli::bench::BenchArgs),
     /// Simulate a scene through the spike sensor and the frame camera.
     Simulate(cli::simulate::SimulateArgs),
+    /// The main job on any spike recording (.dat, .npz): frame pairs through
+    /// the core with closed-loop window caps, PIV on each, vectors and plots.
+    Flow(cli::flow::FlowArgs),
     /// Make one frame from a spike file at any tick (adaptive, TFP or TFI).
     Reconstruct(cli::reconstruct::ReconstructArgs),
     /// PIV on an image pair: multi-pass FFT correlation with deformation.
@@ -46,6 +49,7 @@ fn main() {
         Command::Simulate(a) => cli::simulate::run(a),
         Command::Bench(a) => cli::bench::run(a),
         Command::Reconstruct(a) => cli::reconstruct::run(a),
+        Command::Flow(a) => cli::flow::run(a),
         Command::Piv(a) => cli::piv::run(a),
         Command::Receive(a) => cli::receive::run(a),
     };

@@ -140,21 +140,30 @@ pub fn frame_from_planes(
             )?)
         }
     };
-    let up = upright(&out, w, planes.flip);
-    let cw = planes.crop_width.min(w);
-    let data = if cw == w {
-        up
-    } else {
-        up.chunks_exact(usize::from(w))
-            .flat_map(|r| r[..usize::from(cw)].iter().copied())
-            .collect()
-    };
     Ok(Frame {
-        width: cw,
+        width: planes.crop_width.min(w),
         height: h,
-        data,
+        data: planes.output(&out),
         stats,
     })
+}
+
+impl Planes {
+    /// A frame the core made from these planes (stored row order, `width`
+    /// wide) as the user sees it: upright, padding columns cropped
+    /// (`crop_width` wide).
+    pub fn output(&self, stored: &[u16]) -> Vec<u16> {
+        let w = self.width;
+        let up = upright(stored, w, self.flip);
+        let cw = self.crop_width.min(w);
+        if cw == w {
+            up
+        } else {
+            up.chunks_exact(usize::from(w))
+                .flat_map(|r| r[..usize::from(cw)].iter().copied())
+                .collect()
+        }
+    }
 }
 
 /// Stored row order to upright.

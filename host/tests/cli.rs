@@ -538,3 +538,53 @@ fn receive_counts_crafted_frames_as_corrupt_and_never_allocates_them() {
     let e = fails(&["receive", "--file", p(&file), "--max-frame", "0x8"]);
     assert!(e.contains("frame limit"), "{e}");
 }
+
+#[test]
+fn flow_writes_vectors_per_pair_the_mean_field_and_plots() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let sim = simulate_small(tmp.path());
+    let out = tmp.path().join("flow");
+    let dat = sim.join("spikes.dat");
+    let msg = ok(&["flow", p(&dat), "--out", p(&out)]);
+    assert!(
+        msg.contains("128x96 px") && msg.contains("dwell cap 8 px"),
+        "{msg}"
+    );
+    for f in [
+        "vectors_00000.csv",
+        "mean.csv",
+        "mean_field.png",
+        "pair_vectors.png",
+        "pair_a.png",
+        "pair_b.png",
+        "summary.json",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing: {msg}");
+    }
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(s["method"], "adaptive");
+    assert_eq!(s["pairs"][0]["bootstrapped"], true);
+    // TFP, another schedule.
+    ok(&[
+        "flow",
+        p(&dat),
+        "--out",
+        p(&out),
+        "--method",
+        "tfp",
+        "--every",
+        "20",
+    ]);
+    // Without scene.json the pair separation must be given; bad values fail.
+    let lone = tmp.path().join("lone.dat");
+    std::fs::copy(&dat, &lone).unwrap();
+    let e = fails(&["flow", p(&lone), "--width", "128", "--height", "96"]);
+    assert!(e.contains("--dt"), "{e}");
+    let e = fails(&["flow", p(&dat), "--dt", "100000"]);
+    assert!(e.contains("--dt 100000"), "{e}");
+    let e = fails(&["flow", p(&dat), "--start", "100000", "--out", p(&out)]);
+    assert!(e.contains("no pair fits"), "{e}");
+    let e = fails(&["flow", p(&dat), "--window", "0", "--out", p(&out)]);
+    assert!(e.contains("window 0"), "{e}");
+}

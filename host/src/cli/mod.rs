@@ -5,6 +5,7 @@ use spiv_firmware_sim::scene::{SceneKind, SceneParams};
 
 pub mod bench;
 pub mod bench_link;
+pub mod flow;
 pub mod piv;
 pub mod receive;
 pub mod reconstruct;

@@ -12,7 +12,7 @@ use spiv_host::reconstruct::{frame_from_file, FileOptions, Method};
 use super::CliError;
 
 /// `--method`: the core's frame methods by name, with their help.
-fn method_parser() -> impl clap::builder::TypedValueParser<Value = Method> {
+pub fn method_parser() -> impl clap::builder::TypedValueParser<Value = Method> {
     use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
     PossibleValuesParser::new([
         PossibleValue::new("adaptive").help("The paper's adaptive integration"),

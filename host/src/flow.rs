@@ -1,0 +1,348 @@
+//! `spiv flow`: the main job on any spike recording (a Vidar `.dat` or a
+//! `.npz` capture): frame pairs through the core at a fixed schedule, PIV on
+//! each, and the closed loop that sets the adaptive windows from the flow.
+//!
+//! With a dwell cap (the default, beyond the paper: SPEC 5) the loop is
+//! time-resolved: the field of the previous pair predicts each 32-row
+//! band's fastest particle, and the band's adaptive window is capped so it
+//! blurs by at most the budget. The first pair — and any pair after one
+//! whose PIV found less than half its vectors valid — is bootstrapped from
+//! a TFP pair (window 8). No window needs hand-tuning.
+//!
+//! Memory is bounded by the frames, not the recording: a `.dat` is read
+//! window by window (only the planes a frame needs), a `.npz` capture is
+//! held packed (at most `spiv_formats::MAX_NPZ_SAMPLES` samples).
+
+use std::path::Path;
+
+use spiv_core::{Method, Params};
+use spiv_formats::capture::Capture;
+use spiv_formats::dat::DatReader;
+use spiv_formats::npz::read_npz_spikes;
+use spiv_formats::{FormatError, State, Vector};
+
+use crate::dwell::{adaptive_banded, caps_for};
+use crate::piv::{piv, to_f32, PivError, Settings};
+use crate::reconstruct::{frame_from_planes, FileOptions, Planes, ReconstructError};
+
+/// The TFP window of the bootstrap pair, ticks.
+pub const BOOTSTRAP_WINDOW: u16 = 8;
+
+/// Everything `spiv flow` can refuse.
+#[derive(Debug, thiserror::Error)]
+pub enum FlowError {
+    /// Reading the recording.
+    #[error(transparent)]
+    Format(#[from] FormatError),
+    /// Making a frame.
+    #[error(transparent)]
+    Reconstruct(#[from] ReconstructError),
+    /// PIV.
+    #[error(transparent)]
+    Piv(#[from] PivError),
+    /// A schedule the recording cannot hold, or a bad option.
+    #[error("{0}")]
+    Schedule(String),
+}
+
+/// A spike recording, opened: its size and where its planes come from.
+#[derive(Debug)]
+pub struct Recording {
+    source: Source,
+    /// Width of the planes, px (before cropping padding columns).
+    pub width: u16,
+    /// Height, px.
+    pub height: u16,
+    /// Planes in the recording.
+    pub planes: u64,
+    /// Stored rows are bottom-up.
+    pub flip: bool,
+    /// Width of the output frames, px.
+    pub crop_width: u16,
+    /// The pair separation `scene.json` beside a `.dat` names, ticks.
+    pub meta_dt: Option<u32>,
+}
+
+#[derive(Debug)]
+enum Source {
+    Dat(DatReader<std::io::BufReader<std::fs::File>>),
+    Memory(Vec<u8>),
+}
+
+impl Recording {
+    /// Opens a `.dat` (size from `opts` or the `scene.json` beside it) or a
+    /// `.npz` capture (by extension).
+    pub fn open(path: &Path, opts: &FileOptions) -> Result<Recording, FlowError> {
+        let is_npz = path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("npz"));
+        if is_npz {
+            let s = read_npz_spikes(path)?;
+            return Ok(Recording {
+                width: s.packed_width,
+                height: s.height,
+                planes: s.ticks as u64,
+                flip: false,
+                crop_width: s.width,
+                meta_dt: None,
+                source: Source::Memory(s.planes),
+            });
+        }
+        let meta = Capture::beside(path)?;
+        let (w, h) = match (opts.width, opts.height, &meta) {
+            (Some(w), Some(h), _) => (w, h),
+            (None, None, Some(m)) => (m.width, m.height),
+            _ => return Err(FormatError::NoSize(path.to_path_buf()).into()),
+        };
+        let r = DatReader::open(path, w, h, opts.dat)?;
+        Ok(Recording {
+            width: r.width(),
+            height: r.height(),
+            planes: r.planes(),
+            flip: r.flip(),
+            crop_width: r.width(),
+            meta_dt: meta.map(|m| m.pair[1].saturating_sub(m.pair[0])),
+            source: Source::Dat(r),
+        })
+    }
+
+    /// The planes a window of `window` ticks centred on `k` needs (clipped
+    /// at the recording's ends).
+    pub fn around(&mut self, k: u64, window: u16) -> Result<Planes, FlowError> {
+        let first = k.saturating_sub(u64::from(window / 2));
+        let n = u64::from(window).min(self.planes.saturating_sub(first));
+        let data = match &mut self.source {
+            Source::Dat(r) => r.read_range(first, n)?,
+            Source::Memory(all) => {
+                let pb = usize::from(self.width) * usize::from(self.height) / 8;
+                let a = (first as usize).saturating_mul(pb).min(all.len());
+                let e = a.saturating_add(n as usize * pb).min(all.len());
+                all[a..e].to_vec()
+            }
+        };
+        Ok(Planes {
+            width: self.width,
+            height: self.height,
+            flip: self.flip,
+            crop_width: self.crop_width,
+            first,
+            data,
+        })
+    }
+}
+
+/// What `spiv flow` does.
+#[derive(Debug, Clone)]
+pub struct FlowOptions {
+    /// How frames are made.
+    pub method: Method,
+    /// The TFP window, or the adaptive / TFI window limit n_max, ticks.
+    pub window: u16,
+    /// Adaptive only: blur budget of the closed-loop dwell cap, px; `None`
+    /// runs the paper's algorithm with one n_max everywhere.
+    pub dwell_cap: Option<f64>,
+    /// Ticks between the two frames of a pair.
+    pub dt: u32,
+    /// Ticks between pairs.
+    pub every: u32,
+    /// Tick of the first pair's first frame.
+    pub start: u64,
+    /// No frame at or after this tick.
+    pub end: u64,
+    /// Core parameters (`n_max` is set from `window`).
+    pub core: Params,
+    /// PIV settings.
+    pub piv: Settings,
+}
+
+impl FlowOptions {
+    /// The defaults for `rec` with pairs `dt` ticks apart: the adaptive
+    /// method with the closed-loop dwell cap of 8 px, n_max 128, one pair
+    /// every `4·dt` ticks from the first tick whose window is whole (or, on
+    /// a recording too short for that, the first pair as central as it
+    /// fits), to the end, spike-frame PIV settings.
+    pub fn new(rec: &Recording, dt: u32) -> FlowOptions {
+        let core = Params::default();
+        let last = rec.planes.saturating_sub(1 + u64::from(dt));
+        FlowOptions {
+            method: Method::Adaptive,
+            window: core.n_max,
+            dwell_cap: Some(8.0),
+            dt,
+            every: dt.saturating_mul(4),
+            start: u64::from(core.n_max / 2).min(last / 2),
+            end: rec.planes,
+            core,
+            piv: Settings::for_spike_frames(),
+        }
+    }
+
+    /// The pairs' first ticks.
+    pub fn pair_ticks(&self) -> Vec<u64> {
+        let every = u64::from(self.every.max(1));
+        let mut out = Vec::new();
+        let mut k = self.start;
+        while k + u64::from(self.dt) < self.end {
+            out.push(k);
+            k += every;
+        }
+        out
+    }
+}
+
+/// One pair's result.
+#[derive(Debug, Clone)]
+pub struct PairResult {
+    /// The pair's frame ticks.
+    pub ticks: [u64; 2],
+    /// The field (upright, row-major on the PIV grid).
+    pub vectors: Vec<Vector>,
+    /// Window caps per 32-row band the pair's adaptive frames used (empty:
+    /// none).
+    pub caps: Vec<u16>,
+    /// The caps came from a TFP pair at the same ticks, not from the
+    /// previous pair.
+    pub bootstrapped: bool,
+}
+
+impl PairResult {
+    /// Valid, replaced and invalid vectors.
+    pub fn counts(&self) -> (usize, usize, usize) {
+        let n = |s: State| self.vectors.iter().filter(|v| v.state == s).count();
+        (n(State::Valid), n(State::Replaced), n(State::Invalid))
+    }
+}
+
+/// Everything a run produced.
+#[derive(Debug, Clone)]
+pub struct FlowOutcome {
+    /// Per pair, in time order.
+    pub pairs: Vec<PairResult>,
+    /// The first pair's frames (upright, `width × height`), for plots.
+    pub first_frames: [Vec<u16>; 2],
+    /// Width and height of the frames, px.
+    pub size: (u16, u16),
+    /// Gray level of full scale of those frames.
+    pub full_scale: u16,
+}
+
+impl FlowOutcome {
+    /// The mean field over pairs: per grid node the mean of the measured
+    /// (valid or replaced) vectors, invalid where no pair measured it.
+    pub fn mean_field(&self) -> Vec<Vector> {
+        let Some(first) = self.pairs.first() else {
+            return Vec::new();
+        };
+        first
+            .vectors
+            .iter()
+            .enumerate()
+            .map(|(i, v0)| {
+                let (mut u, mut v, mut n) = (0.0, 0.0, 0usize);
+                for p in &self.pairs {
+                    if let Some(x) = p.vectors.get(i).filter(|x| x.state.is_measured()) {
+                        u += x.u;
+                        v += x.v;
+                        n += 1;
+                    }
+                }
+                let state = if n > 0 { State::Valid } else { State::Invalid };
+                let n = n.max(1) as f64;
+                Vector {
+                    u: u / n,
+                    v: v / n,
+                    state,
+                    ..*v0
+                }
+            })
+            .collect()
+    }
+}
+
+/// Runs the flow job over `rec`; `progress` is told (pairs done, pairs).
+pub fn run_flow(
+    rec: &mut Recording,
+    opts: &FlowOptions,
+    mut progress: impl FnMut(usize, usize),
+) -> Result<FlowOutcome, FlowError> {
+    if !(1..=255).contains(&opts.window) {
+        return Err(FlowError::Schedule(format!(
+            "window {}: expected 1..=255 ticks",
+            opts.window
+        )));
+    }
+    if opts.dt == 0 || opts.every < opts.dt {
+        return Err(FlowError::Schedule(format!(
+            "pairs every {} ticks, {} apart: dt must be at least 1 and every at least dt",
+            opts.every, opts.dt
+        )));
+    }
+    let ticks = opts.pair_ticks();
+    if ticks.is_empty() {
+        return Err(FlowError::Schedule(format!(
+            "no pair fits: {} planes, first frame at {}, frames {} ticks apart (end {})",
+            rec.planes, opts.start, opts.dt, opts.end
+        )));
+    }
+    let core = Params {
+        n_max: opts.window.max(opts.core.n0),
+        ..opts.core
+    };
+    let dt = f64::from(opts.dt);
+    let (w, h) = (rec.crop_width, rec.height);
+    let (wu, hu) = (usize::from(w), usize::from(h));
+    let field = |a: &[u16], b: &[u16]| -> Result<Vec<Vector>, FlowError> {
+        Ok(piv(&to_f32(a, wu, hu), &to_f32(b, wu, hu), None, &opts.piv)?.vectors())
+    };
+    let mut prediction: Option<Vec<Vector>> = None;
+    let mut pairs = Vec::with_capacity(ticks.len());
+    let mut first_frames = None;
+    for (i, &ka) in ticks.iter().enumerate() {
+        let kb = ka + u64::from(opts.dt);
+        let frames =
+            |rec: &mut Recording, method: Method, n: u16| -> Result<[Vec<u16>; 2], FlowError> {
+                let mut out = [Vec::new(), Vec::new()];
+                for (o, k) in out.iter_mut().zip([ka, kb]) {
+                    *o = frame_from_planes(&rec.around(k, n)?, k, method, n, &core)?.data;
+                }
+                Ok(out)
+            };
+        let (pair, caps, bootstrapped) = match (opts.method, opts.dwell_cap) {
+            (Method::Adaptive, Some(budget)) => {
+                let (pred, boot) = match prediction.take() {
+                    Some(p) => (p, false),
+                    None => {
+                        let [a, b] = frames(rec, Method::Tfp, BOOTSTRAP_WINDOW)?;
+                        (field(&a, &b)?, true)
+                    }
+                };
+                let pa = rec.around(ka, core.n_max)?;
+                let caps = caps_for(&pa, &pred, dt, budget, &core);
+                let a = adaptive_banded(&pa, ka, &core, &caps)?;
+                let b = adaptive_banded(&rec.around(kb, core.n_max)?, kb, &core, &caps)?;
+                ([a, b], caps, boot)
+            }
+            (m, _) => (frames(rec, m, opts.window)?, Vec::new(), false),
+        };
+        let vectors = field(&pair[0], &pair[1])?;
+        let valid = vectors.iter().filter(|v| v.state == State::Valid).count();
+        // A pair that mostly failed predicts nothing: bootstrap again.
+        prediction = (2 * valid >= vectors.len()).then(|| vectors.clone());
+        if first_frames.is_none() {
+            first_frames = Some(pair);
+        }
+        pairs.push(PairResult {
+            ticks: [ka, kb],
+            vectors,
+            caps,
+            bootstrapped,
+        });
+        progress(i + 1, ticks.len());
+    }
+    Ok(FlowOutcome {
+        pairs,
+        first_frames: first_frames.unwrap_or_default(),
+        size: (w, h),
+        full_scale: core.full_scale,
+    })
+}
