@@ -10,6 +10,7 @@
 //! | [`history`] | the ingest: a ring of the last `depth` planes of a band of rows |
 //! | [`window`] | centred windows, bit-parallel window counts, TFP and TFI |
 //! | [`method`] | how a frame is made: adaptive, TFP, TFI, and its wire code |
+//! | [`motion`] | motion compensation: counting along a predicted path, refining the prediction by contrast maximisation |
 //! | [`particle`] | the particle test against the local background, exact, with per-frame tables |
 //! | [`segment`] | saturation time `t_bgmax` and particle/background segmentation |
 //! | [`label`] | 8-connected region labelling with a bounded region table |
@@ -47,6 +48,7 @@ pub mod history;
 pub mod integrate;
 pub mod label;
 pub mod method;
+pub mod motion;
 pub mod params;
 pub mod particle;
 pub mod plane;

@@ -14,6 +14,8 @@
 //! unrounded value (the core rounds exact rationals once, so the difference
 //! is at most ½ level plus `f64` rounding).
 
+pub mod motion;
+
 use spiv_core::Params;
 
 /// A spike recording unpacked: `data[(t·rows + r)·width + c]` is 0 or 1,

@@ -1,0 +1,207 @@
+//! Motion compensation: shifted words and compensated counts against
+//! counting every spike by hand, and the contrast-maximisation refinement
+//! against particles whose velocity is known.
+
+use proptest::prelude::*;
+use spiv_core::motion::{add_compensated, candidate, refine, shift, shifted_word, Motion, Refine};
+use spiv_core::window::{Span, Window};
+use spiv_core::{History, PlaneView};
+
+/// A history over `planes` (stored row order, `w × h`), depth 255.
+fn history<'a>(words: &'a mut Vec<u64>, planes: &[Vec<u8>], w: u16, h: u16) -> History<'a> {
+    *words = vec![0; History::words_needed(w, h, 255).unwrap()];
+    let mut hist = History::new(words, w, h, 0, h, 255).unwrap();
+    for p in planes {
+        hist.push(&PlaneView::new(p, w, h).unwrap()).unwrap();
+    }
+    hist
+}
+
+fn spike(p: &[u8], w: usize, h: usize, r: i64, c: i64) -> bool {
+    r >= 0 && c >= 0 && (r as usize) < h && (c as usize) < w && {
+        let i = r as usize * w + c as usize;
+        p[i / 8] >> (i % 8) & 1 == 1
+    }
+}
+
+fn proptest_cases() -> u32 {
+    std::env::var("PROPTEST_CASES")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(64)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(proptest_cases()))]
+
+    /// Every compensated count equals the spikes found by hand at
+    /// (r + round(vy·dt), c + round(vx·dt)) over the window's ticks.
+    #[test]
+    fn compensated_counts_equal_counting_by_hand(
+        seed in any::<u64>(),
+        wsel in 0usize..3,
+        vx in -400i16..400,
+        vy in -300i16..300,
+        kc in 5u32..35,
+        n in 1u16..40,
+    ) {
+        let (w, h) = ([8u16, 72, 130][wsel], 12u16);
+        let (wu, hu) = (usize::from(w), usize::from(h));
+        let mut s = seed | 1;
+        let planes: Vec<Vec<u8>> = (0..40)
+            .map(|_| {
+                (0..wu * hu / 8)
+                    .map(|_| {
+                        s ^= s << 13;
+                        s ^= s >> 7;
+                        s ^= s << 17;
+                        (s & (s >> 8) & 0xff) as u8
+                    })
+                    .collect()
+            })
+            .collect();
+        let mut words = Vec::new();
+        let hist = history(&mut words, &planes, w, h);
+        let win = Window::in_history(&hist, kc, n);
+        let span = Span::new(&hist, win);
+        let vxs: Vec<i16> = (0..h).map(|r| vx.wrapping_add(i16::try_from(r).unwrap() * 7)).collect();
+        let vys = vec![vy; hu];
+        let m = Motion { vx: &vxs, vy: &vys };
+        let mut counts = vec![0u8; wu * hu];
+        add_compensated(&span, kc, w, h, (0, h), &m, &mut counts);
+        for r in 0..hu {
+            for c in 0..wu {
+                let mut want = 0u8;
+                for t in win.start..win.end() {
+                    let dt = i64::from(t) - i64::from(kc);
+                    let sx = (i64::from(vxs[r]) * dt + 128).div_euclid(256);
+                    let sy = (i64::from(vy) * dt + 128).div_euclid(256);
+                    want += u8::from(spike(&planes[t as usize], wu, hu, r as i64 + sy, c as i64 + sx));
+                }
+                prop_assert_eq!(counts[r * wu + c], want, "r {} c {}", r, c);
+            }
+        }
+        // The word view agrees bit by bit.
+        let wpr = usize::from(w).div_ceil(64);
+        let p = hist.plane(kc);
+        for r in 0..h {
+            for j in 0..wpr {
+                let word = shifted_word(p, wpr, h, r, j, i32::from(vx / 16), i32::from(vy / 64));
+                for b in 0..64 {
+                    let c = 64 * j + b;
+                    if c < wu {
+                        let want = spike(&planes[kc as usize], wu, hu, i64::from(r) + i64::from(vy / 64), c as i64 + i64::from(vx / 16));
+                        prop_assert_eq!(word >> b & 1 == 1, want);
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn shifts_round_halves_up() {
+    assert_eq!(shift(128, 1), 1); // 0.5 → 1
+    assert_eq!(shift(-128, 1), 0); // −0.5 → 0
+    assert_eq!(shift(256, -3), -3);
+    assert_eq!(shift(100, 10), 4); // 3.906
+    assert_eq!(shift(i16::MAX, 255), (32767 * 255 + 128) / 256);
+}
+
+/// Dots moving right at `v(row)` px/tick on a faint random background,
+/// `w × h`, `ticks` planes; a dot fires every tick.
+fn moving_dots(w: usize, h: usize, ticks: usize, v: impl Fn(usize) -> f64) -> Vec<Vec<u8>> {
+    let mut s = 99u64;
+    (0..ticks)
+        .map(|t| {
+            let mut p = vec![0u8; w * h / 8];
+            let mut set = |r: usize, c: usize| p[(r * w + c) / 8] |= 1 << ((r * w + c) % 8);
+            for r in 0..h {
+                for c in 0..w {
+                    s = s
+                        .wrapping_mul(6364136223846793005)
+                        .wrapping_add(1442695040888963407);
+                    if (s >> 58) == 0 {
+                        set(r, c);
+                    }
+                }
+            }
+            for y in (3..h).step_by(6) {
+                for x0 in (5..w).step_by(23) {
+                    let x = (x0 as f64 + v(y) * t as f64).round() as usize % w;
+                    set(y, x);
+                }
+            }
+            p
+        })
+        .collect()
+}
+
+#[test]
+fn refine_finds_the_velocity_of_moving_particles() {
+    let (w, h) = (256u16, 48u16);
+    // 0.5 px/tick in the top band, 1.0 in the middle, 0.75 in the bottom.
+    let truth = |r: usize| [0.5, 1.0, 0.75][r / 16];
+    let planes = moving_dots(256, 48, 100, truth);
+    let mut words = Vec::new();
+    let hist = history(&mut words, &planes, w, h);
+    // A prediction 20 % low everywhere.
+    let pred: Vec<i16> = (0..48).map(|r| (truth(r) * 0.8 * 256.0) as i16).collect();
+    let zero = vec![0i16; 48];
+    let m = Motion {
+        vx: &pred,
+        vy: &zero,
+    };
+    let cfg = Refine::default();
+    let mut scratch = vec![0u8; usize::from(cfg.band) * 256];
+    let (mut vx, mut vy) = (vec![0i16; 48], vec![0i16; 48]);
+    refine(&hist, 50, &m, &cfg, &mut scratch, &mut vx, &mut vy).unwrap();
+    for (b, r) in [(0, 7), (1, 24), (2, 40)] {
+        // Rows at or next to the band's centre (rows 7.5, 23.5, 39.5).
+        let got = f64::from(vx[r]) / 256.0;
+        let want = truth(r);
+        assert!(
+            (got - want).abs() <= 0.02 * want + 0.01,
+            "band {b}: {got} against {want}"
+        );
+        assert!(vy[r].abs() <= 6, "band {b}: vy {}", vy[r]);
+    }
+    // Between band centres the velocity is interpolated, beyond them constant.
+    assert_eq!(vx[0], vx[7]);
+    assert!(vx[15] > vx[7] && vx[15] < vx[24], "{vx:?}");
+    assert_eq!(vx[47], vx[40]);
+}
+
+#[test]
+fn refine_keeps_the_prediction_when_nothing_is_sharper_and_refuses_bad_input() {
+    let (w, h) = (64u16, 16u16);
+    let planes = vec![vec![0u8; 64 * 16 / 8]; 40];
+    let mut words = Vec::new();
+    let hist = history(&mut words, &planes, w, h);
+    let pred = vec![100i16; 16];
+    let m = Motion {
+        vx: &pred,
+        vy: &pred,
+    };
+    let cfg = Refine::default();
+    let mut scratch = vec![0u8; 16 * 64];
+    let (mut vx, mut vy) = (vec![0i16; 16], vec![0i16; 16]);
+    refine(&hist, 20, &m, &cfg, &mut scratch, &mut vx, &mut vy).unwrap();
+    assert!(vx.iter().chain(&vy).all(|&v| v == 100));
+    let bad = Refine { band: 0, ..cfg };
+    assert!(refine(&hist, 20, &m, &bad, &mut scratch, &mut vx, &mut vy).is_err());
+    let bad = Refine { window: 0, ..cfg };
+    assert!(refine(&hist, 20, &m, &bad, &mut scratch, &mut vx, &mut vy).is_err());
+    assert!(refine(&hist, 99, &m, &cfg, &mut scratch, &mut vx, &mut vy).is_err());
+    assert!(refine(&hist, 20, &m, &cfg, &mut scratch[..10], &mut vx, &mut vy).is_err());
+    assert!(refine(&hist, 20, &m, &cfg, &mut scratch, &mut vx[..3], &mut vy).is_err());
+    // Candidates: the prediction first, 1 + 2·rel + 4·abs in all, clamped.
+    let n = (0..)
+        .take_while(|&i| candidate(&cfg, 100, 0, i).is_some())
+        .count();
+    assert_eq!(n, 1 + 40 + 20);
+    assert_eq!(candidate(&cfg, 100, -7, 0), Some((100, -7)));
+    assert_eq!(candidate(&cfg, 100, 0, 1), Some((102, 0)));
+    assert_eq!(candidate(&cfg, 100, 0, 2), Some((98, 0)));
+    assert_eq!(candidate(&cfg, i16::MAX, 0, 41), Some((i16::MAX, 0)));
+}

@@ -1,0 +1,123 @@
+//! The `f64` reference of the core's motion compensation
+//! (`spiv_core::motion`), written from its definition: a pixel's
+//! compensated count is the number of ticks of the window with a spike at
+//! the place the predicted motion puts it, `round(v·Δt)` px away (halves
+//! up); refinement tries the documented candidates in their documented
+//! order and keeps the first with the largest sum of squared counts.
+//!
+//! **Tolerance**: none. Counts, energies and velocities are integers, and
+//! every `f64` here is exact or rounded away from any integer it is
+//! floored to, so `host/tests/reference_parity.rs` holds the core's refined
+//! velocities identical to these for every row.
+
+use super::SpikeVolume;
+
+/// `round(v/256 · dt)`, halves up.
+fn shift(v: i16, dt: i64) -> i64 {
+    (f64::from(v) / 256.0 * dt as f64 + 0.5).floor() as i64
+}
+
+/// Compensated count of pixel (r, c) over the window of `n` ticks centred
+/// on `kc`, for a velocity `(vx, vy)` (1/256 px per tick).
+pub fn compensated_count(
+    vol: &SpikeVolume,
+    kc: u32,
+    n: u16,
+    (r, c): (usize, usize),
+    (vx, vy): (i16, i16),
+) -> u32 {
+    let (start, len) = vol.window(kc, n);
+    (start..start + i64::from(len))
+        .filter(|&t| {
+            let dt = t - i64::from(kc);
+            let (rs, cs) = (r as i64 + shift(vy, dt), c as i64 + shift(vx, dt));
+            rs >= 0
+                && cs >= 0
+                && (rs as usize) < vol.rows
+                && (cs as usize) < vol.width
+                && vol.spike(t, rs as usize, cs as usize) == 1
+        })
+        .count() as u32
+}
+
+/// The candidates around `(vx, vy)`: the prediction; scaled by
+/// 1 ± 2 %·k (k = 1..=rel, + before −); offset by ±3k/256 px/tick in x,
+/// then in y (k = 1..=abs); each component clamped to `i16`.
+pub fn candidates(vx: i16, vy: i16, rel: u8, abs: u8) -> Vec<(i16, i16)> {
+    let clamp = |v: f64| v.clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16;
+    let mut out = vec![(vx, vy)];
+    for k in 1..=i32::from(rel) {
+        for sign in [1, -1] {
+            let s = |v: i16| clamp((f64::from(v) * f64::from(100 + 2 * sign * k) / 100.0).floor());
+            out.push((s(vx), s(vy)));
+        }
+    }
+    for k in 1..=i32::from(abs) {
+        for sign in [1, -1] {
+            out.push((clamp(f64::from(vx) + f64::from(3 * sign * k)), vy));
+        }
+    }
+    for k in 1..=i32::from(abs) {
+        for sign in [1, -1] {
+            out.push((vx, clamp(f64::from(vy) + f64::from(3 * sign * k))));
+        }
+    }
+    out
+}
+
+/// Refined velocities per row: for each band of `band` rows, the first
+/// candidate around the middle row's prediction with the largest sum of
+/// squared compensated counts over `window` ticks; rows between band
+/// centres linear (floored), constant beyond the outer centres.
+pub fn refine(
+    vol: &SpikeVolume,
+    kc: u32,
+    pred: (&[i16], &[i16]),
+    band: usize,
+    window: u16,
+    (rel, abs): (u8, u8),
+) -> (Vec<i16>, Vec<i16>) {
+    let rows = vol.rows;
+    let at = |v: &[i16], r: usize| v.get(r).copied().unwrap_or(0);
+    let mut winners = Vec::new();
+    for r0 in (0..rows).step_by(band) {
+        let r1 = (r0 + band).min(rows);
+        let mid = r0 + (r1 - r0) / 2;
+        let mut best: Option<(f64, (i16, i16))> = None;
+        for cand in candidates(at(pred.0, mid), at(pred.1, mid), rel, abs) {
+            let mut e = 0.0;
+            for r in r0..r1 {
+                for c in 0..vol.width {
+                    let n = f64::from(compensated_count(vol, kc, window, (r, c), cand));
+                    e += n * n;
+                }
+            }
+            if best.is_none_or(|(be, _)| e > be) {
+                best = Some((e, cand));
+            }
+        }
+        winners.push(best.map_or((0, 0), |(_, v)| v));
+    }
+    let centre = |b: usize| (b * band) as f64 + (band as f64 - 1.0) / 2.0;
+    let last = winners.len() - 1;
+    let mut vx = Vec::with_capacity(rows);
+    let mut vy = Vec::with_capacity(rows);
+    for r in 0..rows {
+        let y = r as f64;
+        let b = (((y - centre(0)) / band as f64).floor().max(0.0) as usize).min(last);
+        let b1 = (b + 1).min(last);
+        let lerp = |a: i16, z: i16| -> i16 {
+            if b1 == b || y <= centre(b) {
+                a
+            } else if y >= centre(b1) {
+                z
+            } else {
+                let d = (f64::from(z) - f64::from(a)) * (y - centre(b)) / band as f64;
+                (f64::from(a) + d.floor()) as i16
+            }
+        };
+        vx.push(lerp(winners[b].0, winners[b1].0));
+        vy.push(lerp(winners[b].1, winners[b1].1));
+    }
+    (vx, vy)
+}
