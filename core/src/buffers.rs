@@ -66,6 +66,7 @@ pub struct WorkspaceBuf {
     tiles: Vec<u8>,
     parents: Vec<u16>,
     regions: Vec<Region>,
+    mc: Vec<u8>,
 }
 
 impl WorkspaceBuf {
@@ -82,6 +83,7 @@ impl WorkspaceBuf {
             tiles: vec![0; sizes.tiles()],
             parents: vec![0; sizes.parents()],
             regions: vec![Region::default(); usize::from(sizes.max_regions)],
+            mc: vec![0; px],
         }
     }
 
@@ -90,9 +92,11 @@ impl WorkspaceBuf {
         Self::new(WorkspaceSizes::for_strip(width, height))
     }
 
-    /// The workspace over these buffers.
+    /// The workspace over these buffers (with the motion-compensated
+    /// counts).
     pub fn workspace(&mut self) -> Workspace<'_> {
         // The buffers were sized from `sizes`, so this cannot fail.
+        let mc = &mut self.mc;
         Workspace::new(
             self.sizes,
             Buffers {
@@ -106,6 +110,7 @@ impl WorkspaceBuf {
                 regions: &mut self.regions,
             },
         )
+        .and_then(|ws| ws.with_motion_counts(mc))
         .expect("buffers sized from their own WorkspaceSizes")
     }
 }

@@ -20,6 +20,7 @@ use crate::gray::Gray;
 use crate::history::History;
 use crate::integrate::{adapt_region, region_gray};
 use crate::label::{label, LabelStats};
+use crate::motion::Motion;
 use crate::params::{Params, MAX_LEVELS};
 use crate::particle::Thresholds;
 use crate::segment::{decode, pixel_saturation, segment, Class, SegmentStats};
@@ -75,6 +76,41 @@ pub fn reconstruct_rows<G: Gray>(
     rows: (u16, u16),
     out: &mut [G],
 ) -> Result<FrameStats, Error> {
+    rows_with(hist, k, p, ws, rows, None, out)
+}
+
+/// Rows `rows.0..rows.1` of the motion-compensated adaptive frame at `k`
+/// (beyond the paper; issue 14): as [`reconstruct_rows`], but particles are
+/// segmented, their windows n* chosen and their gray levels counted on
+/// counts compensated for `motion` (`crate::motion`: each plane shifted by
+/// the row's velocity times its distance from `k`), so a particle moving as
+/// predicted piles its spikes up where it is at `k` and long windows do not
+/// blur it. Static light keeps its meaning: saturation times and background
+/// suppression use the plain counts, so a background renders exactly as
+/// without motion. The workspace needs its motion counts
+/// ([`Workspace::with_motion_counts`]).
+pub fn reconstruct_compensated<G: Gray>(
+    hist: &History<'_>,
+    k: u32,
+    p: &Params,
+    ws: &mut Workspace<'_>,
+    rows: (u16, u16),
+    motion: &Motion<'_>,
+    out: &mut [G],
+) -> Result<FrameStats, Error> {
+    check_len(ws.mc.len(), ws.sizes.pixels())?;
+    rows_with(hist, k, p, ws, rows, Some(*motion), out)
+}
+
+fn rows_with<G: Gray>(
+    hist: &History<'_>,
+    k: u32,
+    p: &Params,
+    ws: &mut Workspace<'_>,
+    rows: (u16, u16),
+    motion: Option<Motion<'_>>,
+    out: &mut [G],
+) -> Result<FrameStats, Error> {
     p.validate(hist.depth())?;
     if !hist.holds(k) {
         return Err(Error::TickUnavailable);
@@ -117,6 +153,7 @@ pub fn reconstruct_rows<G: Gray>(
         levels: &levels,
         lens: &lens,
         fs,
+        motion,
     };
     let mut stats = FrameStats {
         tick: k,

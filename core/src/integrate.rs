@@ -14,10 +14,17 @@
 
 use core::cmp::Ordering;
 
+use crate::motion::{shift, shifted_word};
 use crate::params::Params;
 use crate::region::Region;
 use crate::state::Workspace;
 use crate::window::Window;
+
+/// Words per row of the history's planes.
+#[inline]
+fn wpr_of(hist: &crate::history::History<'_>) -> usize {
+    hist.words_per_row()
+}
 
 /// The two integers that fix a region's SNR at one window, up to a positive
 /// factor shared by all windows of that region:
@@ -104,8 +111,39 @@ pub(crate) fn adapt_region(
     idx: usize,
 ) -> Region {
     let crate::context::Ctx {
-        hist, span, k, p, ..
+        hist,
+        span,
+        k,
+        p,
+        motion,
+        ..
     } = *ctx;
+    let band_rows = hist.rows();
+    // Word j of strip row r at tick t: plain, or moved by the row's
+    // predicted motion (then the region's spikes are counted where the
+    // particle is at k).
+    let word = |plane: &[u64], t: u32, r: usize, j: usize| -> u64 {
+        let br = s0 + r as u16;
+        match &motion {
+            None => plane
+                .get(usize::from(s0) * wpr_of(hist) + r * wpr_of(hist) + j)
+                .copied()
+                .unwrap_or(0),
+            Some(m) => {
+                let (vx, vy) = m.at(br);
+                let dt = (i64::from(t) - i64::from(k)) as i32;
+                shifted_word(
+                    plane,
+                    wpr_of(hist),
+                    band_rows,
+                    br,
+                    j,
+                    shift(vx, dt),
+                    shift(vy, dt),
+                )
+            }
+        }
+    };
     let mut reg = ws.regions[idx];
     let id = idx as u16 + 1;
     let width = usize::from(ws.sizes.width);
@@ -161,12 +199,12 @@ pub(crate) fn adapt_region(
     // Per-tick spike sums of region and ring over the n_max span.
     let mut ps = [0u32; 256];
     let mut pb = [0u32; 256];
-    let band_off = usize::from(s0) * wpr;
     for (i, plane) in span.planes().iter().enumerate() {
+        let t = span.start + i as u32;
         let (mut hs, mut hb) = (0u32, 0u32);
         for r in b.r0..b.r1 {
             for j in b.j0..=b.j1 {
-                let w = plane.get(band_off + r * wpr + j).copied().unwrap_or(0);
+                let w = word(plane, t, r, j);
                 hb += (w & ring[r * wpr + j]).count_ones();
                 if (rr0..rr1).contains(&r) {
                     hs += (w & regm[r * wpr + j]).count_ones();
@@ -224,11 +262,11 @@ pub(crate) fn adapt_region(
             }
         }
     }
-    for plane in span.range(win.start, win.end()) {
+    for (i, plane) in span.range(win.start, win.end()).iter().enumerate() {
+        let t = win.start.max(span.start) + i as u32;
         for r in rr0..rr1 {
             for j in b.j0..=b.j1 {
-                let mut w =
-                    plane.get(band_off + r * wpr + j).copied().unwrap_or(0) & regm[r * wpr + j];
+                let mut w = word(plane, t, r, j) & regm[r * wpr + j];
                 while w != 0 {
                     let c = j * 64 + w.trailing_zeros() as usize;
                     if let Some(x) = ws.counts.get_mut(r * width + c) {

@@ -62,7 +62,7 @@ pub mod window;
 pub mod wire;
 
 pub use error::Error;
-pub use frame::{reconstruct_adaptive, reconstruct_rows, FrameStats};
+pub use frame::{reconstruct_adaptive, reconstruct_compensated, reconstruct_rows, FrameStats};
 pub use gray::Gray;
 pub use history::History;
 pub use method::Method;

@@ -108,11 +108,15 @@ pub fn shifted_word(
 }
 
 /// Adds the motion-compensated counts of band rows `rows.0..rows.1` over
-/// the planes of `span` (the frame centred on `kc`) to `counts` (row-major,
-/// `width` per row, first row = `rows.0`), with `motion`'s velocity of each
-/// row. The caller keeps every count ≤ 255 (at most 255 ticks).
+/// `planes` (consecutive ticks from `start`, each the band's
+/// `band_rows × words` words) for a frame centred on `kc` to `counts`
+/// (row-major, `width` per row, first row = `rows.0`), with `motion`'s
+/// velocity of each row. The caller keeps every count ≤ 255 (at most 255
+/// ticks in all); bytes wrap otherwise.
+#[allow(clippy::too_many_arguments)]
 pub fn add_compensated(
-    span: &Span<'_>,
+    planes: &[&[u64]],
+    start: u32,
     kc: u32,
     width: u16,
     band_rows: u16,
@@ -122,7 +126,7 @@ pub fn add_compensated(
 ) {
     let w = usize::from(width);
     for (r, crow) in (rows.0..rows.1).zip(counts.chunks_exact_mut(w)) {
-        add_row(span, kc, width, band_rows, r, motion.at(r), crow);
+        add_row(planes, start, kc, width, band_rows, r, motion.at(r), crow);
     }
 }
 
@@ -238,7 +242,7 @@ pub fn refine(
             counts.fill(0);
             for (i, r) in (r0..r1).enumerate() {
                 let row = &mut counts[i * w..(i + 1) * w];
-                add_row(&span, kc, width, rows, r, (cx, cy), row);
+                add_row(span.planes(), span.start, kc, width, rows, r, (cx, cy), row);
             }
             let e: u64 = counts.iter().map(|&c| u64::from(c) * u64::from(c)).sum();
             if best.is_none_or(|(be, _, _)| e > be) {
@@ -274,9 +278,14 @@ pub fn refine(
     Ok(())
 }
 
-/// Adds the counts of band row `r` compensated for `(vx, vy)` to `row`.
+/// Adds the counts of band row `r` compensated for `(vx, vy)` to `row`:
+/// the shifted words of 15 ticks at a time summed into 4-bit vertical
+/// counters, then spread into the byte counters (as
+/// `window::add_plane_counts` does for unshifted words).
+#[allow(clippy::too_many_arguments)]
 fn add_row(
-    span: &Span<'_>,
+    planes: &[&[u64]],
+    start: u32,
     kc: u32,
     width: u16,
     band_rows: u16,
@@ -285,17 +294,37 @@ fn add_row(
     row: &mut [u8],
 ) {
     let wpr = crate::plane::words_per_row(width);
-    for (i, plane) in span.planes().iter().enumerate() {
-        let dt = (i64::from(span.start) + i as i64 - i64::from(kc)) as i32;
-        let (sx, sy) = (shift(vx, dt), shift(vy, dt));
-        for (j, cw) in row.chunks_mut(64).enumerate() {
-            let mut x = shifted_word(plane, wpr, band_rows, r, j, sx, sy);
-            while x != 0 {
-                let b = x.trailing_zeros() as usize;
-                if let Some(c) = cw.get_mut(b) {
-                    *c = c.saturating_add(1);
-                }
-                x &= x - 1;
+    let mut sh = [(0i32, 0i32); 256];
+    for (i, s) in sh.iter_mut().enumerate().take(planes.len()) {
+        let dt = (i64::from(start) + i as i64 - i64::from(kc)) as i32;
+        *s = (shift(vx, dt), shift(vy, dt));
+    }
+    for (j, cw) in row.chunks_mut(64).enumerate() {
+        let mut acc = [0u64; 8];
+        for (chunk, shifts) in planes.chunks(15).zip(sh.chunks(15)) {
+            let (mut s0, mut s1, mut s2, mut s3) = (0u64, 0u64, 0u64, 0u64);
+            for (p, &(sx, sy)) in chunk.iter().zip(shifts) {
+                let x = shifted_word(p, wpr, band_rows, r, j, sx, sy);
+                let c0 = s0 & x;
+                s0 ^= x;
+                let c1 = s1 & c0;
+                s1 ^= c0;
+                let c2 = s2 & c1;
+                s2 ^= c1;
+                s3 ^= c2;
+            }
+            if s0 | s1 | s2 | s3 == 0 {
+                continue;
+            }
+            for (g, a) in acc.iter_mut().enumerate() {
+                let b = |s: u64| crate::window::spread((s >> (8 * g)) as u8);
+                *a = a.wrapping_add(b(s0) + (b(s1) << 1) + (b(s2) << 2) + (b(s3) << 3));
+            }
+        }
+        for (g, c8) in cw.chunks_mut(8).enumerate() {
+            let lanes = acc.get(g).copied().unwrap_or(0).to_le_bytes();
+            for (c, l) in c8.iter_mut().zip(lanes) {
+                *c = c.wrapping_add(l);
             }
         }
     }

@@ -15,6 +15,7 @@
 //! Memory: the workspace's per-pixel bytes; one 512-byte histogram on the stack.
 
 use crate::history::History;
+use crate::motion::add_compensated;
 use crate::params::Params;
 use crate::state::Workspace;
 use crate::window::{add_counts, add_plane_counts, Window};
@@ -143,9 +144,17 @@ impl Tiles {
 }
 
 /// Lower median of the non-particle counts of each tile (of all counts where
-/// a tile has only particle pixels).
-pub(crate) fn tile_medians(ws: &mut Workspace<'_>, s0: u16, s1: u16, tiles: &Tiles) {
+/// a tile has only particle pixels): of the motion-compensated counts when
+/// `compensated`, else of the plain ones.
+pub(crate) fn tile_medians(
+    ws: &mut Workspace<'_>,
+    s0: u16,
+    s1: u16,
+    tiles: &Tiles,
+    compensated: bool,
+) {
     let width = usize::from(ws.sizes.width);
+    let counts: &[u8] = if compensated { ws.mc } else { ws.counts };
     for ty in tiles.y0..=tiles.y1 {
         let r_lo = (ty * 16).max(usize::from(s0));
         let r_hi = (ty * 16 + 16).min(usize::from(s1));
@@ -157,7 +166,7 @@ pub(crate) fn tile_medians(ws: &mut Workspace<'_>, s0: u16, s1: u16, tiles: &Til
             for r in r_lo..r_hi {
                 let base = (r - usize::from(s0)) * width;
                 let row = base + c_lo..base + c_hi;
-                for (&c, &cl) in ws.counts[row.clone()].iter().zip(&ws.class[row]) {
+                for (&c, &cl) in counts[row.clone()].iter().zip(&ws.class[row]) {
                     if decode(cl).0 != Class::Particle {
                         hist[usize::from(c)] += 1;
                         n += 1;
@@ -168,7 +177,7 @@ pub(crate) fn tile_medians(ws: &mut Workspace<'_>, s0: u16, s1: u16, tiles: &Til
                 // A tile of particle pixels only: the median of all its counts.
                 for r in r_lo..r_hi {
                     let base = (r - usize::from(s0)) * width;
-                    for &c in &ws.counts[base + c_lo..base + c_hi] {
+                    for &c in &counts[base + c_lo..base + c_hi] {
                         hist[usize::from(c)] += 1;
                         n += 1;
                     }
@@ -206,7 +215,10 @@ pub(crate) fn tile_pos(i: usize, lo: usize, hi: usize) -> (usize, usize, u32) {
 
 /// Runs the segmentation over strip rows `s0..s1` (band rows) for a frame at
 /// tick `k`. Leaves every pixel's class and `c_t` (count at its deciding
-/// window); `span` holds the planes of the n_max window.
+/// window); `span` holds the planes of the n_max window. With a predicted
+/// motion the particle test (and the tile backgrounds it compares with)
+/// runs on motion-compensated counts, kept in `ws.mc`, and saturation on
+/// the plain counts; a particle's `c_t` is then its compensated count.
 pub(crate) fn segment(
     ctx: &crate::context::Ctx<'_, '_>,
     ws: &mut Workspace<'_>,
@@ -219,10 +231,12 @@ pub(crate) fn segment(
         k,
         p,
         th,
+        motion,
         ..
     } = *ctx;
     let width = usize::from(ws.sizes.width);
     let px = width * usize::from(s1 - s0);
+    let mc = motion.is_some() && ws.mc.len() >= px;
     let (levels, nlev) = p.levels();
     let tiles = Tiles::for_strip(ws.sizes.width, s0, s1);
     let mut stats = SegmentStats::default();
@@ -230,35 +244,37 @@ pub(crate) fn segment(
     ws.counts[..px].fill(0);
     ws.class[..px].fill(active);
     ws.c_t[..px].fill(0);
+    if mc {
+        ws.mc[..px].fill(0);
+    }
     let mut prev: Option<Window> = None;
     for (j, &n) in levels.iter().enumerate().take(nlev) {
         let win = Window::in_history(hist, k, n);
         // Windows are nested: add only the ticks the previous one lacked.
         let rows = (s0, s1);
-        match prev {
-            None => add_plane_counts(
-                span.range(win.start, win.end()),
-                hist.width(),
-                rows,
-                &mut ws.counts[..px],
-            ),
-            Some(pw) => {
-                add_plane_counts(
-                    span.range(win.start, pw.start),
+        let added = match prev {
+            None => [(win.start, win.end()), (win.end(), win.end())],
+            Some(pw) => [(win.start, pw.start), (pw.end(), win.end())],
+        };
+        for (a, e) in added {
+            add_plane_counts(span.range(a, e), hist.width(), rows, &mut ws.counts[..px]);
+            if let (true, Some(m)) = (mc, &motion) {
+                let planes = span.range(a, e);
+                let start = a.max(span.start);
+                add_compensated(
+                    planes,
+                    start,
+                    k,
                     hist.width(),
+                    hist.rows(),
                     rows,
-                    &mut ws.counts[..px],
-                );
-                add_plane_counts(
-                    span.range(pw.end(), win.end()),
-                    hist.width(),
-                    rows,
-                    &mut ws.counts[..px],
+                    m,
+                    &mut ws.mc[..px],
                 );
             }
         }
         prev = Some(win);
-        tile_medians(ws, s0, s1, &tiles);
+        tile_medians(ws, s0, s1, &tiles, mc);
         // c ≥ sat_c ⟺ c·n ≥ N_fs·len (the rate reaches N_fs/n).
         let sat_c = if win.len == 0 {
             u32::MAX
@@ -276,6 +292,11 @@ pub(crate) fn segment(
             let m = |t: usize| u32::from(ws.tiles.get(t).copied().unwrap_or(0));
             let base = usize::from(r - s0) * width;
             let counts = &ws.counts[base..base + width];
+            let tested: &[u8] = if mc {
+                &ws.mc[base..base + width]
+            } else {
+                counts
+            };
             let class = &mut ws.class[base..base + width];
             let c_t = &mut ws.c_t[base..base + width];
             // Runs of pixels between the same two tile centres: x in [0, 8),
@@ -293,9 +314,9 @@ pub(crate) fn segment(
                     if class[i] == active {
                         let c = counts[i];
                         let b_q10 = b as u32;
-                        if th.is_particle(c, b_q10, p) {
+                        if th.is_particle(tested[i], b_q10, p) {
                             class[i] = decided_particle;
-                            c_t[i] = c;
+                            c_t[i] = tested[i];
                             stats.particle_pixels += 1;
                         } else if u32::from(c) >= sat_c {
                             class[i] = decided_bg;

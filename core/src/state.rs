@@ -109,6 +109,9 @@ pub struct Workspace<'a> {
     pub(crate) tiles: &'a mut [u8],
     pub(crate) parents: &'a mut [u16],
     pub(crate) regions: &'a mut [Region],
+    /// Motion-compensated counts (one byte per pixel; empty unless
+    /// [`Workspace::with_motion_counts`] gave them).
+    pub(crate) mc: &'a mut [u8],
 }
 
 /// The buffers of a [`Workspace`], each at least as long as [`WorkspaceSizes`] says.
@@ -157,7 +160,17 @@ impl<'a> Workspace<'a> {
             tiles: b.tiles,
             parents: b.parents,
             regions: b.regions,
+            mc: &mut [],
         })
+    }
+
+    /// Adds the one extra byte per pixel that motion-compensated frames
+    /// need (`crate::frame::reconstruct_compensated`): their particle test
+    /// runs on compensated counts while saturation keeps the plain ones.
+    pub fn with_motion_counts(mut self, mc: &'a mut [u8]) -> Result<Self, Error> {
+        check_len(mc.len(), self.sizes.pixels())?;
+        self.mc = mc;
+        Ok(self)
     }
 
     /// The sizes it was built for.

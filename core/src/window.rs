@@ -76,6 +76,12 @@ const SPREAD: [u64; 256] = {
     t
 };
 
+/// Byte `i` of the result is bit `i` of `b` (the spread table).
+#[inline]
+pub(crate) fn spread(b: u8) -> u64 {
+    SPREAD[usize::from(b)]
+}
+
 /// The planes of a window, gathered once: slice `i` is the band at tick
 /// `start + i` (an empty slice for a tick not held). At most 256 planes.
 #[derive(Debug)]

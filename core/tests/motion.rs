@@ -68,7 +68,7 @@ proptest! {
         let vys = vec![vy; hu];
         let m = Motion { vx: &vxs, vy: &vys };
         let mut counts = vec![0u8; wu * hu];
-        add_compensated(&span, kc, w, h, (0, h), &m, &mut counts);
+        add_compensated(span.planes(), span.start, kc, w, h, (0, h), &m, &mut counts);
         for r in 0..hu {
             for c in 0..wu {
                 let mut want = 0u8;

@@ -11,7 +11,8 @@ use spiv_core::region::Region;
 use spiv_core::segment::{decode, Class};
 use spiv_core::state::Buffers;
 use spiv_core::{
-    reconstruct_adaptive, Gray, History, Params, PlaneView, Workspace, WorkspaceSizes,
+    reconstruct_adaptive, reconstruct_compensated, Gray, History, Params, PlaneView, Workspace,
+    WorkspaceSizes,
 };
 use spiv_firmware_sim::scene::{Scene, SceneKind, SceneParams};
 use spiv_firmware_sim::sensor::{simulate, SensorParams};
@@ -33,6 +34,21 @@ fn run_core<G: Gray>(
     k: u32,
     p: &Params,
     strip_rows: u16,
+) -> CoreFrame<G> {
+    run_core_with(packed, w, h, k, p, strip_rows, None)
+}
+
+/// Velocities per band row (x, y), 1/256 px per tick.
+type Velocities<'a> = Option<(&'a [i16], &'a [i16])>;
+
+fn run_core_with<G: Gray>(
+    packed: &[u8],
+    w: u16,
+    h: u16,
+    k: u32,
+    p: &Params,
+    strip_rows: u16,
+    motion: Velocities<'_>,
 ) -> CoreFrame<G> {
     let plane = usize::from(w) * usize::from(h) / 8;
     // A ring at least n_max deep; a shorter recording clips the windows.
@@ -68,7 +84,26 @@ fn run_core<G: Gray>(
     )
     .unwrap();
     let mut out = vec![G::default(); usize::from(w) * usize::from(h)];
-    let stats = reconstruct_adaptive(&hist, k, p, &mut ws, &mut out).unwrap();
+    let mut mc = vec![0u8; px];
+    let stats = match motion {
+        None => reconstruct_adaptive(&hist, k, p, &mut ws, &mut out).unwrap(),
+        Some((vx, vy)) => {
+            let mut ws = ws.with_motion_counts(&mut mc).unwrap();
+            let m = spiv_core::motion::Motion { vx, vy };
+            let s = reconstruct_compensated(&hist, k, p, &mut ws, (0, h), &m, &mut out).unwrap();
+            let n = if s.strips == 1 {
+                s.labels.regions as usize
+            } else {
+                0
+            };
+            return CoreFrame {
+                class: ws.class().to_vec(),
+                labels: ws.labels().to_vec(),
+                regions: ws.regions(n).to_vec(),
+                out,
+            };
+        }
+    };
     let n = if stats.strips == 1 {
         stats.labels.regions as usize
     } else {
@@ -96,10 +131,26 @@ fn scene_stream(kind: SceneKind, seed: u64, w: u16, h: u16, ticks: u32) -> Vec<u
 }
 
 fn compare<G: Gray>(packed: &[u8], w: u16, h: u16, k: u32, p: &Params) -> (usize, f64) {
-    let core = run_core::<G>(packed, w, h, k, p, h);
+    compare_with::<G>(packed, w, h, k, p, None)
+}
+
+fn compare_with<G: Gray>(
+    packed: &[u8],
+    w: u16,
+    h: u16,
+    k: u32,
+    p: &Params,
+    motion: Velocities<'_>,
+) -> (usize, f64) {
+    let core = run_core_with::<G>(packed, w, h, k, p, h, motion);
     let vol = SpikeVolume::from_packed(packed, usize::from(w), usize::from(h), 0);
     let fs = f64::from(p.full_scale.min(G::MAX));
-    let reference = adaptive_frame(&vol, k, p, fs);
+    let reference = match motion {
+        None => adaptive_frame(&vol, k, p, fs),
+        Some(v) => {
+            spiv_host::reference::adaptive_rows_compensated(&vol, k, p, fs, (0, usize::from(h)), v)
+        }
+    };
     let px = usize::from(w) * usize::from(h);
     for i in 0..px {
         let (cls, lev) = decode(core.class[i]);
@@ -380,5 +431,78 @@ fn refined_motion_matches_reference_and_moves_toward_the_truth() {
         "refined {:.0} against predicted {:.0} (sum of |error|, 1/256 px/tick)",
         err(&vx),
         err(&pred)
+    );
+}
+
+/// The motion-compensated frame against the reference with the same
+/// motion: classes, labels and n* identical, gray within 1 level; with the
+/// true velocities of a paper scene (so particles are compact) and with a
+/// velocity 30 % off (so they are not), 8- and 16-bit.
+#[test]
+fn motion_compensated_frames_match_reference() {
+    let (w, h, ticks, k) = (160u16, 96u16, 170u32, 85u32);
+    let params = SceneParams {
+        width: w,
+        height: h,
+        ..SceneParams::new(SceneKind::PaperLinear)
+    };
+    let scene = Scene::new(params, 4, ticks);
+    let packed = simulate(&scene, SensorParams::default(), 4, 0, ticks);
+    let truth: Vec<i16> = (0..usize::from(h))
+        .map(|r| {
+            let y = f64::from(h) - 1.0 - r as f64;
+            (scene.truth(&[(f64::from(w) / 2.0, y)], 1.0)[0].2 * 256.0).round() as i16
+        })
+        .collect();
+    let off: Vec<i16> = truth.iter().map(|&v| (f64::from(v) * 1.3) as i16).collect();
+    let vy: Vec<i16> = (0..h).map(|r| (r % 3) as i16 - 1).collect();
+    let p = Params::default();
+    for vx in [&truth, &off] {
+        let (regions, worst) = compare_with::<u8>(&packed, w, h, k, &p, Some((vx, &vy)));
+        assert!(regions > 5, "{regions} regions");
+        assert!(worst <= 1.0, "{worst}");
+        let (_, worst) = compare_with::<u16>(
+            &packed,
+            w,
+            h,
+            k,
+            &Params {
+                full_scale: 1023,
+                ..p
+            },
+            Some((vx, &vy)),
+        );
+        assert!(worst <= 1.0, "{worst}");
+    }
+}
+
+/// Static light keeps its meaning: every background pixel of the
+/// compensated frame renders exactly as in the plain frame (saturation and
+/// suppression use the plain counts), and with zero motion the whole frame
+/// is the plain one.
+#[test]
+fn background_renders_the_same_with_and_without_motion() {
+    let (w, h, ticks, k) = (128u16, 80u16, 170u32, 85u32);
+    let packed = scene_stream(SceneKind::PaperQuadratic, 3, w, h, ticks);
+    let p = Params::default();
+    let plain = run_core::<u8>(&packed, w, h, k, &p, h);
+    let zero = vec![0i16; usize::from(h)];
+    let still = run_core_with::<u8>(&packed, w, h, k, &p, h, Some((&zero, &zero)));
+    assert_eq!(plain.out, still.out);
+    assert_eq!(plain.class, still.class);
+    let fast = vec![300i16; usize::from(h)];
+    let moved = run_core_with::<u8>(&packed, w, h, k, &p, h, Some((&fast, &zero)));
+    let mut bg = 0;
+    for i in 0..plain.out.len() {
+        let (a, _) = decode(plain.class[i]);
+        let (b, _) = decode(moved.class[i]);
+        if a == Class::Background && b == Class::Background {
+            assert_eq!(plain.out[i], moved.out[i], "background pixel {i}");
+            bg += 1;
+        }
+    }
+    assert!(
+        bg > usize::from(w) * usize::from(h) / 3,
+        "{bg} background pixels"
     );
 }

@@ -159,12 +159,64 @@ pub fn adaptive_rows(
         ticks: vol.ticks,
         data,
     };
-    strip_frame(&strip, s0, k, p, fs)
+    strip_frame(&strip, s0, k, p, fs, None)
 }
 
+/// [`adaptive_rows`] motion-compensated (`spiv_core::reconstruct_compensated`):
+/// particles are segmented and integrated on counts compensated for the
+/// velocity of each band row (`vx`, `vy`, 1/256 px per tick; see
+/// [`motion::compensated_count`], over the whole band), saturation and
+/// background on plain counts.
+pub fn adaptive_rows_compensated(
+    vol: &SpikeVolume,
+    k: u32,
+    p: &Params,
+    fs: f64,
+    (s0, s1): (usize, usize),
+    (vx, vy): (&[i16], &[i16]),
+) -> RefFrame {
+    let s1 = s1.min(vol.rows);
+    let s0 = s0.min(s1);
+    let w = vol.width;
+    let plane = vol.rows * w;
+    let mut data = Vec::with_capacity(vol.ticks * (s1 - s0) * w);
+    for t in 0..vol.ticks {
+        data.extend_from_slice(&vol.data[t * plane + s0 * w..t * plane + s1 * w]);
+    }
+    let strip = SpikeVolume {
+        width: w,
+        rows: s1 - s0,
+        first: vol.first,
+        ticks: vol.ticks,
+        data,
+    };
+    strip_frame(&strip, s0, k, p, fs, Some((vol, vx, vy)))
+}
+
+/// The band and its rows' velocities, for a motion-compensated strip.
+type Compensation<'a> = Option<(&'a SpikeVolume, &'a [i16], &'a [i16])>;
+
 /// The algorithm on one strip whose first row is row `row0` of the band.
-fn strip_frame(vol: &SpikeVolume, row0: usize, k: u32, p: &Params, fs: f64) -> RefFrame {
+fn strip_frame(
+    vol: &SpikeVolume,
+    row0: usize,
+    k: u32,
+    p: &Params,
+    fs: f64,
+    comp: Compensation<'_>,
+) -> RefFrame {
     let (w, h) = (vol.width, vol.rows);
+    // The count a particle is judged and integrated by: plain, or
+    // compensated for its row's motion over the whole band.
+    let pcount = |n: u16, r: usize, c: usize| -> u32 {
+        match comp {
+            None => vol.count(k, n, r, c),
+            Some((band, vx, vy)) => {
+                let v = |a: &[i16]| a.get(row0 + r).copied().unwrap_or(0);
+                motion::compensated_count(band, k, n, (row0 + r, c), (v(vx), v(vy)))
+            }
+        }
+    };
     let (k_sig, beta, sigma, g) = params_f64(p);
     let levels = levels(p);
     // Classes, and for each decided pixel the count and window that decided it.
@@ -176,6 +228,10 @@ fn strip_frame(vol: &SpikeVolume, row0: usize, k: u32, p: &Params, fs: f64) -> R
     for (j, &n) in levels.iter().enumerate() {
         let (_, len) = vol.window(k, n);
         let counts: Vec<u32> = (0..w * h).map(|i| vol.count(k, n, i / w, i % w)).collect();
+        let tested: Vec<u32> = match comp {
+            None => counts.clone(),
+            Some(_) => (0..w * h).map(|i| pcount(n, i / w, i % w)).collect(),
+        };
         // Lower median of the non-particle counts of each 16×16 tile (its
         // rows inside the strip).
         let mut med = vec![0.0f64; tx * ty];
@@ -190,9 +246,9 @@ fn strip_frame(vol: &SpikeVolume, row0: usize, k: u32, p: &Params, fs: f64) -> R
                 let mut bg = Vec::new();
                 for r in lo..hi {
                     for c in 16 * b..(16 * b + 16).min(w) {
-                        all.push(counts[r * w + c]);
+                        all.push(tested[r * w + c]);
                         if !matches!(class[r * w + c], Some(RefClass::Particle(_))) {
-                            bg.push(counts[r * w + c]);
+                            bg.push(tested[r * w + c]);
                         }
                     }
                 }
@@ -224,15 +280,18 @@ fn strip_frame(vol: &SpikeVolume, row0: usize, k: u32, p: &Params, fs: f64) -> R
                 let bgd = (1.0 - fy) * ((1.0 - fx) * m(a0, b0) + fx * m(a0, b1))
                     + fy * ((1.0 - fx) * m(a1, b0) + fx * m(a1, b1));
                 let cnt = f64::from(counts[i]);
-                let particle = cnt > bgd
-                    && (cnt - bgd).powi(2) > k_sig * k_sig * count_variance(bgd, sigma, g);
+                let tc = f64::from(tested[i]);
+                let particle =
+                    tc > bgd && (tc - bgd).powi(2) > k_sig * k_sig * count_variance(bgd, sigma, g);
                 let saturated = len > 0 && cnt / f64::from(len) >= f64::from(p.n_fs) / f64::from(n);
                 if particle {
                     class[i] = Some(RefClass::Particle(j as u8));
                 } else if saturated || last {
                     class[i] = Some(RefClass::Background(j as u8));
                 }
-                if class[i].is_some() {
+                if particle {
+                    decided[i] = (tested[i], n, len);
+                } else if class[i].is_some() {
                     decided[i] = (counts[i], n, len);
                 }
             }
@@ -341,7 +400,7 @@ fn strip_frame(vol: &SpikeVolume, row0: usize, k: u32, p: &Params, fs: f64) -> R
             if set.is_empty() {
                 return 0.0;
             }
-            let s: u32 = set.iter().map(|&i| vol.count(k, n, i / w, i % w)).sum();
+            let s: u32 = set.iter().map(|&i| pcount(n, i / w, i % w)).sum();
             f64::from(s) / set.len() as f64
         };
         let snr = |n: u16| {
@@ -371,12 +430,12 @@ fn strip_frame(vol: &SpikeVolume, row0: usize, k: u32, p: &Params, fs: f64) -> R
         let b = mean(&ring, n);
         let cmax = pix
             .iter()
-            .map(|&i| vol.count(k, n, i / w, i % w))
+            .map(|&i| pcount(n, i / w, i % w))
             .max()
             .unwrap_or(0);
         let lo_gray = fs / beta;
         for &i in pix {
-            let c = f64::from(vol.count(k, n, i / w, i % w));
+            let c = f64::from(pcount(n, i / w, i % w));
             let den = f64::from(cmax) - b;
             gray[i] = if den <= 0.0 {
                 lo_gray.min(fs)
