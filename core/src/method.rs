@@ -16,11 +16,15 @@ pub enum Method {
     /// Inverse inter-spike interval around the tick
     /// ([`crate::window::tfi`]).
     Tfi = 2,
+    /// Adaptive integration on motion-compensated counts (beyond the
+    /// paper): each particle counted along its predicted path
+    /// ([`crate::reconstruct_compensated`]); needs a predicted motion.
+    Mc = 3,
 }
 
 impl Method {
     /// All three, in wire-code order.
-    pub const ALL: [Method; 3] = [Method::Adaptive, Method::Tfp, Method::Tfi];
+    pub const ALL: [Method; 4] = [Method::Adaptive, Method::Tfp, Method::Tfi, Method::Mc];
 
     /// The wire code (0, 1, 2).
     pub const fn code(self) -> u8 {
@@ -33,17 +37,19 @@ impl Method {
             0 => Some(Method::Adaptive),
             1 => Some(Method::Tfp),
             2 => Some(Method::Tfi),
+            3 => Some(Method::Mc),
             _ => None,
         }
     }
 
-    /// Its lower-case name (`adaptive`, `tfp`, `tfi`), as the CLI and the
+    /// Its lower-case name (`adaptive`, `tfp`, `tfi`, `mc`), as the CLI and the
     /// reports spell it.
     pub const fn name(self) -> &'static str {
         match self {
             Method::Adaptive => "adaptive",
             Method::Tfp => "tfp",
             Method::Tfi => "tfi",
+            Method::Mc => "mc",
         }
     }
 
@@ -63,8 +69,8 @@ mod tests {
             assert_eq!(Method::from_code(m.code()), Some(m));
             assert_eq!(Method::from_name(m.name()), Some(m));
         }
-        assert_eq!(Method::from_code(3), None);
+        assert_eq!(Method::from_code(4), None);
         assert_eq!(Method::from_name("TFP"), None);
-        assert_eq!([0, 1, 2], Method::ALL.map(Method::code));
+        assert_eq!([0, 1, 2, 3], Method::ALL.map(Method::code));
     }
 }

@@ -17,7 +17,8 @@
 //! ±[`RELATIVE_STEP`]·k and offset by ±[`ABSOLUTE_STEP`]·k in x and in y)
 //! and keeps the one whose compensated counts are sharpest (largest sum of
 //! squared counts; a blurred particle spreads the same spikes over more
-//! pixels, which lowers it). With a PIV prediction a few per cent off, the
+//! pixels, which lowers it) — if it beats the prediction by more than
+//! [`Refine::min_gain`]. With a PIV prediction a few per cent off, the
 //! refined velocity is within about 1–4 % on the paper's scenes
 //! (`host/examples/mc_probe.rs`).
 //!
@@ -143,16 +144,22 @@ pub struct Refine {
     /// Offset candidates `v + k·3/256 px/tick`, in x and in y, for `k` in
     /// `−abs..=abs`.
     pub abs: u8,
+    /// A candidate replaces the prediction only when its sum of squares
+    /// beats the prediction's by more than this, in 1/1000 (where noise
+    /// swamps the particles, as in glare, the contrast is flat and the
+    /// prediction is kept).
+    pub min_gain: u16,
 }
 
 impl Default for Refine {
-    /// 16-row bands, 64 ticks, ±40 % and ±0.06 px/tick.
+    /// 16-row bands, 64 ticks, ±40 % and ±0.06 px/tick, a 2 % gain.
     fn default() -> Self {
         Refine {
             band: 16,
             window: 64,
             rel: 20,
             abs: 5,
+            min_gain: 20,
         }
     }
 }
@@ -236,6 +243,7 @@ pub fn refine(
         let (px, py) = motion.at(r0 + (r1 - r0) / 2);
         let counts = &mut scratch[..usize::from(r1 - r0) * w];
         let mut best: Option<(u64, i16, i16)> = None;
+        let mut first = 0u64;
         let mut n = 0;
         while let Some((cx, cy)) = candidate(cfg, px, py, n) {
             n += 1;
@@ -245,11 +253,19 @@ pub fn refine(
                 add_row(span.planes(), span.start, kc, width, rows, r, (cx, cy), row);
             }
             let e: u64 = counts.iter().map(|&c| u64::from(c) * u64::from(c)).sum();
+            if n == 1 {
+                first = e;
+            }
             if best.is_none_or(|(be, _, _)| e > be) {
                 best = Some((e, cx, cy));
             }
         }
-        *slot = best.map_or((px, py), |(_, x, y)| (x, y));
+        // The prediction (candidate 0) stays unless beaten by min_gain.
+        let gain = u128::from(first) * (1000 + u128::from(cfg.min_gain));
+        *slot = match best {
+            Some((e, x, y)) if u128::from(e) * 1000 > gain => (x, y),
+            _ => (px, py),
+        };
     }
     // Band centres at rows b·band + (band − 1)/2 (in half rows: c2(b));
     // linear between them, constant beyond.

@@ -80,7 +80,7 @@ impl Config {
     pub fn window(&self) -> u16 {
         match self.method {
             Method::Tfp => self.tfp_window,
-            Method::Adaptive | Method::Tfi => self.params.n_max,
+            Method::Adaptive | Method::Tfi | Method::Mc => self.params.n_max,
         }
     }
 
@@ -117,6 +117,9 @@ pub enum ConfigError {
     },
     /// One row of this many pixels does not fit one payload.
     RowTooWide(u16),
+    /// A method the sidecar cannot run yet: motion-compensated frames need
+    /// the host's prediction, which the wire does not carry down yet.
+    Unsupported(Method),
 }
 
 impl core::fmt::Display for ConfigError {
@@ -126,6 +129,11 @@ impl core::fmt::Display for ConfigError {
             ConfigError::Schedule { every, dt } => {
                 write!(f, "pair every {every} ticks must be at least dt = {dt} > 0")
             }
+            ConfigError::Unsupported(m) => write!(
+                f,
+                "method {} is not run on the sidecar yet (no prediction downlink)",
+                m.name()
+            ),
             ConfigError::RowTooWide(w) => write!(
                 f,
                 "a row of {w} px does not fit one {MAX_PAYLOAD}-byte payload"
@@ -241,6 +249,9 @@ pub struct Sidecar {
 impl Sidecar {
     /// The loop for a `width × height` sensor; checks the configuration.
     pub fn new<E>(width: u16, height: u16, cfg: Config) -> Result<Sidecar, SidecarError<E>> {
+        if cfg.method == Method::Mc {
+            return Err(SidecarError::Config(ConfigError::Unsupported(cfg.method)));
+        }
         let window = cfg.window();
         if !(1..=255).contains(&window) {
             return Err(SidecarError::Config(ConfigError::Window(window)));
@@ -362,6 +373,8 @@ impl Sidecar {
                 )?;
             }
             Method::Tfi => tfi(hist, k, p.n_max, p.full_scale, mem.frame)?,
+            // Refused by `Sidecar::new`.
+            Method::Mc => return Err(Error::BadParam(crate::error::ParamError::Window)),
             Method::Adaptive if mem.caps.is_empty() => {
                 reconstruct_adaptive(hist, k, p, &mut mem.workspace, mem.frame)?;
             }

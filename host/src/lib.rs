@@ -9,6 +9,7 @@
 //! | [`piv`] | the PIV engine, stage by stage: `filter`, `resample`, `deform`, `correlate`, `peak`, `validate` |
 //! | [`dwell`] | the dwell cap: window limits per band from a predicted field, and the banded adaptive frame |
 //! | [`flow`] | the main job on any spike recording (`spiv flow`): pairs through the core, PIV, the closed-loop dwell cap |
+//! | [`predict`] | the prediction of motion-compensated frames: a field as row velocities, refined in the core, and the compensated frame |
 //! | [`pipeline`] | the main job (`spiv run`): scene → both cameras → sidecar → PIV → metrics |
 //! | [`metrics`] | the paper's row-profile RMAE / RMSE and confidence intervals |
 //! | [`report`] | what a run tells its user: tables, `summary.json`, plots |
@@ -23,6 +24,7 @@ pub mod link;
 pub mod metrics;
 pub mod pipeline;
 pub mod piv;
+pub mod predict;
 pub mod receive;
 pub mod reconstruct;
 pub mod reference;

@@ -31,8 +31,8 @@ enum Command {
     Bench(cli::bench::BenchArgs),
     /// Simulate a scene through the spike sensor and the frame camera.
     Simulate(cli::simulate::SimulateArgs),
-    /// The main job on any spike recording (.dat, .npz): frame pairs through
-    /// the core with closed-loop window caps, PIV on each, vectors and plots.
+    /// The main job on any spike recording (.dat, .npz): motion-compensated
+    /// frame pairs through the core, PIV on each, vectors and plots.
     Flow(cli::flow::FlowArgs),
     /// Make one frame from a spike file at any tick (adaptive, TFP or TFI).
     Reconstruct(cli::reconstruct::ReconstructArgs),

@@ -34,6 +34,12 @@ pub enum ReconstructError {
     /// A window the core cannot hold.
     #[error("window {0} out of range (1..=255)")]
     Window(u32),
+    /// Motion-compensated frames need a predicted motion, which one frame
+    /// alone does not have.
+    #[error(
+        "method mc needs a predicted motion: it runs in `spiv flow`, whose closed loop predicts it"
+    )]
+    NeedsMotion,
 }
 
 /// A reconstructed frame, upright (row 0 at the top).
@@ -116,6 +122,7 @@ pub fn frame_from_planes(
     let mut out = vec![0u16; px];
     let fs = p.full_scale;
     let stats = match method {
+        Method::Mc => return Err(ReconstructError::NeedsMotion),
         Method::Tfp => {
             let mut counts = vec![0u8; px];
             tfp(&hist, k, window, fs, &mut counts, &mut out)?;

@@ -547,7 +547,7 @@ fn flow_writes_vectors_per_pair_the_mean_field_and_plots() {
     let dat = sim.join("spikes.dat");
     let msg = ok(&["flow", p(&dat), "--out", p(&out)]);
     assert!(
-        msg.contains("128x96 px") && msg.contains("dwell cap 8 px"),
+        msg.contains("128x96 px") && msg.contains("(mc 128)"),
         "{msg}"
     );
     for f in [
@@ -563,8 +563,10 @@ fn flow_writes_vectors_per_pair_the_mean_field_and_plots() {
     }
     let s: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
-    assert_eq!(s["method"], "adaptive");
+    assert_eq!(s["method"], "mc");
     assert_eq!(s["pairs"][0]["bootstrapped"], true);
+    let msg = ok(&["flow", p(&dat), "--out", p(&out), "--method", "adaptive"]);
+    assert!(msg.contains("dwell cap 8 px"), "{msg}");
     // TFP, another schedule.
     ok(&[
         "flow",

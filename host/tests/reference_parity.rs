@@ -410,7 +410,7 @@ fn refined_motion_matches_reference_and_moves_toward_the_truth() {
         (&pred, &zero),
         usize::from(cfg.band),
         cfg.window,
-        (cfg.rel, cfg.abs),
+        (cfg.rel, cfg.abs, cfg.min_gain),
     );
     assert_eq!((&vx, &vy), (&rx, &ry));
     let err = |v: &[i16]| -> f64 {

@@ -15,8 +15,9 @@ use spiv_host::report::plot;
 use super::reconstruct::method_parser;
 use super::{bar, parse_dwell_cap, CliError};
 
-/// Frame pairs through the core at a fixed schedule, PIV on each, the
-/// closed-loop dwell cap; one vectors CSV per pair, the mean field, plots.
+/// Frame pairs through the core at a fixed schedule, PIV on each, the flow
+/// predicted (motion-compensated frames by default); one vectors CSV per
+/// pair, the mean field, plots.
 #[derive(Debug, Args)]
 pub struct FlowArgs {
     /// The spike recording: a Vidar .dat or a .npz capture.
@@ -41,7 +42,7 @@ pub struct FlowArgs {
     #[arg(long)]
     end: Option<u64>,
     /// Frame method.
-    #[arg(long, default_value = "adaptive", value_parser = method_parser())]
+    #[arg(long, default_value = "mc", value_parser = method_parser())]
     method: spiv_core::Method,
     /// TFP window, or the adaptive/TFI n_max, ticks (default 128, TFP 8).
     #[arg(long)]
@@ -155,6 +156,7 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
             all += v + r + i;
             json!({
                 "ticks": p.ticks,
+                "method": p.method.name(),
                 "valid": v, "replaced": r, "invalid": i,
                 "bootstrapped": p.bootstrapped,
                 "caps": p.caps,

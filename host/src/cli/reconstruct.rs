@@ -18,6 +18,9 @@ pub fn method_parser() -> impl clap::builder::TypedValueParser<Value = Method> {
         PossibleValue::new("adaptive").help("The paper's adaptive integration"),
         PossibleValue::new("tfp").help("Spike count over a window"),
         PossibleValue::new("tfi").help("Inverse inter-spike interval"),
+        PossibleValue::new("mc").help(
+            "Adaptive on motion-compensated counts (spiv flow: needs the closed loop's prediction)",
+        ),
     ])
     .try_map(|name| Method::from_name(&name).ok_or("unknown method"))
 }

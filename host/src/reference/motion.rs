@@ -67,15 +67,17 @@ pub fn candidates(vx: i16, vy: i16, rel: u8, abs: u8) -> Vec<(i16, i16)> {
 
 /// Refined velocities per row: for each band of `band` rows, the first
 /// candidate around the middle row's prediction with the largest sum of
-/// squared compensated counts over `window` ticks; rows between band
-/// centres linear (floored), constant beyond the outer centres.
+/// squared compensated counts over `window` ticks, if that sum exceeds the
+/// prediction's by more than `min_gain`/1000 (else the prediction); rows
+/// between band centres linear (floored), constant beyond the outer
+/// centres.
 pub fn refine(
     vol: &SpikeVolume,
     kc: u32,
     pred: (&[i16], &[i16]),
     band: usize,
     window: u16,
-    (rel, abs): (u8, u8),
+    (rel, abs, min_gain): (u8, u8, u16),
 ) -> (Vec<i16>, Vec<i16>) {
     let rows = vol.rows;
     let at = |v: &[i16], r: usize| v.get(r).copied().unwrap_or(0);
@@ -84,7 +86,12 @@ pub fn refine(
         let r1 = (r0 + band).min(rows);
         let mid = r0 + (r1 - r0) / 2;
         let mut best: Option<(f64, (i16, i16))> = None;
-        for cand in candidates(at(pred.0, mid), at(pred.1, mid), rel, abs) {
+        let mut pred_e = 0.0;
+        let prediction = (at(pred.0, mid), at(pred.1, mid));
+        for (i, cand) in candidates(prediction.0, prediction.1, rel, abs)
+            .into_iter()
+            .enumerate()
+        {
             let mut e = 0.0;
             for r in r0..r1 {
                 for c in 0..vol.width {
@@ -92,11 +99,17 @@ pub fn refine(
                     e += n * n;
                 }
             }
+            if i == 0 {
+                pred_e = e;
+            }
             if best.is_none_or(|(be, _)| e > be) {
                 best = Some((e, cand));
             }
         }
-        winners.push(best.map_or((0, 0), |(_, v)| v));
+        winners.push(match best {
+            Some((e, v)) if e * 1000.0 > pred_e * (1000.0 + f64::from(min_gain)) => v,
+            _ => prediction,
+        });
     }
     let centre = |b: usize| (b * band) as f64 + (band as f64 - 1.0) / 2.0;
     let last = winners.len() - 1;

@@ -1,0 +1,171 @@
+//! The prediction that motion-compensated frames need (beyond the paper;
+//! issue 14): a PIV field becomes a velocity per stored row, the core
+//! refines it from the spikes by contrast maximisation
+//! (`spiv_core::motion::refine`), and the core counts each particle along
+//! its path (`spiv_core::reconstruct_compensated`).
+
+use spiv_core::buffers::{HistoryBuf, WorkspaceBuf};
+use spiv_core::motion::{refine, Motion, Refine};
+use spiv_core::{reconstruct_compensated, Params, PlaneView, WorkspaceSizes};
+use spiv_formats::Vector;
+
+use crate::reconstruct::{Planes, ReconstructError};
+
+/// Velocities per stored row, 1/256 px per tick: `(vx, vy)`.
+pub type RowVelocities = (Vec<i16>, Vec<i16>);
+
+/// The velocity of every stored row of an `h`-row frame from an upright
+/// `field` measured over `dt` ticks: the mean of each grid row's measured
+/// vectors, linear between grid rows and constant beyond the outer ones;
+/// rows stored bottom-up when `flip` (then y velocities change sign).
+/// All zero when no vector was measured.
+pub fn row_velocities(field: &[Vector], h: u16, flip: bool, dt: f64) -> RowVelocities {
+    let mut rows: Vec<(f64, f64, f64, usize)> = Vec::new(); // y, Σu, Σv, n
+    for v in field.iter().filter(|v| v.state.is_measured()) {
+        match rows.iter_mut().find(|r| (r.0 - v.y).abs() < 1e-9) {
+            Some(r) => {
+                r.1 += v.u;
+                r.2 += v.v;
+                r.3 += 1;
+            }
+            None => rows.push((v.y, v.u, v.v, 1)),
+        }
+    }
+    rows.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let means: Vec<(f64, f64, f64)> = rows
+        .iter()
+        .map(|r| (r.0, r.1 / r.3 as f64, r.2 / r.3 as f64))
+        .collect();
+    let at = |y: f64| -> (f64, f64) {
+        let (Some(first), Some(last)) = (means.first(), means.last()) else {
+            return (0.0, 0.0);
+        };
+        if y <= first.0 {
+            return (first.1, first.2);
+        }
+        if y >= last.0 {
+            return (last.1, last.2);
+        }
+        let k = means.partition_point(|m| m.0 < y).max(1);
+        let (a, b) = (means[k - 1], means[k]);
+        let t = (y - a.0) / (b.0 - a.0);
+        (a.1 + t * (b.1 - a.1), a.2 + t * (b.2 - a.2))
+    };
+    let q8 = |px_per_pair: f64| -> i16 {
+        let v = px_per_pair / dt.max(1e-9) * 256.0;
+        if v.is_finite() {
+            v.round().clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16
+        } else {
+            0
+        }
+    };
+    let n = usize::from(h);
+    let (mut vx, mut vy) = (vec![0i16; n], vec![0i16; n]);
+    for r in 0..n {
+        let y = if flip { (n - 1 - r) as f64 } else { r as f64 };
+        let (u, v) = at(y);
+        vx[r] = q8(u);
+        vy[r] = q8(if flip { -v } else { v });
+    }
+    (vx, vy)
+}
+
+/// The motion-compensated adaptive frame at `k` (upright, cropped) from
+/// `planes`, with the prediction `pred` refined first when `refine_cfg` is
+/// given (per band of rows, from the spikes around `k`). Returns the frame
+/// and the velocities it used.
+pub fn compensated_frame(
+    planes: &Planes,
+    k: u64,
+    core: &Params,
+    pred: &RowVelocities,
+    refine_cfg: Option<Refine>,
+) -> Result<(Vec<u16>, RowVelocities), ReconstructError> {
+    let (w, h) = (planes.width, planes.height);
+    let pb = usize::from(w) * usize::from(h) / 8;
+    let n = planes.data.len() / pb.max(1);
+    // At least the window limit, at most the 256 planes the core holds.
+    let depth = n.max(usize::from(core.n_max.max(2))).min(256) as u16;
+    let mut hb = HistoryBuf::new(w, h, depth)?;
+    let mut hist = hb.history()?;
+    let skip = n.saturating_sub(usize::from(depth));
+    for chunk in planes.data.chunks_exact(pb).skip(skip) {
+        hist.push(&PlaneView::new(chunk, w, h)?)?;
+    }
+    let tick = k
+        .checked_sub(planes.first + skip as u64)
+        .and_then(|t| u32::try_from(t).ok())
+        .ok_or(ReconstructError::TickOutside {
+            tick: k,
+            planes: planes.first + n as u64,
+        })?;
+    let mut used = pred.clone();
+    if let Some(cfg) = refine_cfg {
+        let m = Motion {
+            vx: &pred.0,
+            vy: &pred.1,
+        };
+        let mut scratch = vec![0u8; usize::from(cfg.band) * usize::from(w)];
+        refine(
+            &hist,
+            tick,
+            &m,
+            &cfg,
+            &mut scratch,
+            &mut used.0,
+            &mut used.1,
+        )?;
+    }
+    // Compensated counts make every moving particle detectable, so a frame
+    // holds several times the regions of a plain one: tables for one region
+    // per 16 px (the core's default is one per 64, sized for an MCU).
+    let mut sizes = WorkspaceSizes::for_strip(w, h);
+    sizes.max_regions = (sizes.pixels() / 16).clamp(16, 65535) as u16;
+    sizes.max_provisional = 32766;
+    let mut ws = WorkspaceBuf::new(sizes);
+    let mut out = vec![0u16; usize::from(w) * usize::from(h)];
+    let m = Motion {
+        vx: &used.0,
+        vy: &used.1,
+    };
+    reconstruct_compensated(&hist, tick, core, &mut ws.workspace(), (0, h), &m, &mut out)?;
+    Ok((planes.output(&out), used))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use spiv_formats::State;
+
+    fn v(y: f64, u: f64, vv: f64, state: State) -> Vector {
+        Vector {
+            x: 0.0,
+            y,
+            u,
+            v: vv,
+            state,
+        }
+    }
+
+    #[test]
+    fn row_velocities_interpolate_flip_and_skip_holes() {
+        let field = [
+            v(10.0, 2.0, 1.0, State::Valid),
+            v(10.0, 4.0, 1.0, State::Replaced),
+            v(20.0, 6.0, 1.0, State::Valid),
+            v(20.0, 99.0, 9.0, State::Invalid),
+        ];
+        // Upright storage: row 10 → mean u 3 px/pair over 10 ticks = 0.3 px/tick.
+        let (vx, vy) = row_velocities(&field, 30, false, 10.0);
+        assert_eq!(vx[10], (0.3f64 * 256.0).round() as i16);
+        assert_eq!(vx[15], (0.45f64 * 256.0).round() as i16);
+        assert_eq!((vx[0], vx[29]), (vx[10], vx[20]));
+        assert_eq!(vy[12], (0.1f64 * 256.0).round() as i16);
+        // Bottom-up storage: stored row 29 − y, y velocities negated.
+        let (fx, fy) = row_velocities(&field, 30, true, 10.0);
+        assert_eq!((fx[19], fy[19]), (vx[10], -vy[10]));
+        // Nothing measured: no motion.
+        let (zx, zy) = row_velocities(&field[3..], 30, true, 10.0);
+        assert!(zx.iter().chain(&zy).all(|&x| x == 0));
+    }
+}
