@@ -201,6 +201,6 @@ fn an_unknown_method_code_is_a_malformed_frame_end() {
     };
     let mut b = end.to_bytes();
     assert_eq!(FrameEnd::parse(&b), Ok(end));
-    b[5] = 3;
+    b[5] = 4;
     assert_eq!(FrameEnd::parse(&b), Err(WireError::Payload));
 }

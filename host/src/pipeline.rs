@@ -14,7 +14,9 @@ use spiv_formats::FormatError;
 use crate::link::{dwell_caps, transfer, Transfer};
 use crate::metrics::{region_error, row_profile, ProfileRow, RegionError};
 use crate::piv::{piv, to_f32, PivError, Settings};
-use crate::reconstruct::ReconstructError;
+use crate::predict::{compensated_frame, row_velocities};
+use crate::reconstruct::{Planes, ReconstructError};
+use spiv_core::motion::Refine;
 use spiv_core::Method;
 use spiv_firmware_sim::firmware::Config;
 
@@ -74,7 +76,7 @@ pub enum JobError {
     NoPair(&'static str),
 }
 
-/// The three kinds of frames compared.
+/// The kinds of frames compared.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum FrameKind {
@@ -84,11 +86,21 @@ pub enum FrameKind {
     Tfp,
     /// The adaptive reconstruction.
     Adaptive,
+    /// The adaptive reconstruction on motion-compensated counts (beyond the
+    /// paper; issue 14), predicted from the TFP pair's PIV and refined from
+    /// the spikes (`crate::predict`). Made in the host process: the sidecar
+    /// has no prediction downlink yet.
+    Mc,
 }
 
 impl FrameKind {
-    /// All three, in table order.
-    pub const ALL: [FrameKind; 3] = [FrameKind::Frame, FrameKind::Tfp, FrameKind::Adaptive];
+    /// All of them, in table order.
+    pub const ALL: [FrameKind; 4] = [
+        FrameKind::Frame,
+        FrameKind::Tfp,
+        FrameKind::Adaptive,
+        FrameKind::Mc,
+    ];
 
     /// File-name stem.
     pub fn name(self) -> &'static str {
@@ -96,6 +108,7 @@ impl FrameKind {
             FrameKind::Frame => "frame",
             FrameKind::Tfp => "tfp",
             FrameKind::Adaptive => "adaptive",
+            FrameKind::Mc => "mc",
         }
     }
 }
@@ -201,18 +214,48 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
     };
     let tfp = up(&tfp_t, "TFP")?;
     let adaptive = up(&ad_t, "adaptive")?;
+    // Motion-compensated: the TFP pair's PIV predicts each row's velocity
+    // (as `spiv flow` does); without a usable field, the adaptive pair.
+    let (wu, hu) = (usize::from(w), usize::from(h));
+    let dt_ticks = f64::from(kb - ka);
+    let pred = piv(
+        &to_f32(&tfp[0], wu, hu),
+        &to_f32(&tfp[1], wu, hu),
+        None,
+        &job.piv,
+    )?
+    .vectors();
+    let measured = pred.iter().filter(|v| v.state.is_measured()).count();
+    let mc = if 2 * measured >= pred.len() {
+        let planes = Planes::simulated(w, h, data);
+        let vel = row_velocities(&pred, h, planes.flip, dt_ticks);
+        let mut out = [Vec::new(), Vec::new()];
+        for (o, k) in out.iter_mut().zip([ka, kb]) {
+            *o = compensated_frame(
+                &planes,
+                u64::from(k),
+                &job.core,
+                &vel,
+                Some(Refine::default()),
+            )?
+            .0;
+        }
+        out
+    } else {
+        adaptive.clone()
+    };
     let t_rec = t0.elapsed().as_secs_f64() * 1e3 - t_sim;
 
     stage("PIV on three pairs");
     let dt = f64::from(sim.meta.capture.pair[1] - sim.meta.capture.pair[0]);
     let truth = sim.scene.truth_vectors(&job.piv.centres(w, h), dt);
     let glare_limit = 2.0 * p.glare_sigma;
-    let (wu, hu) = (usize::from(w), usize::from(h));
     let cam_max = job.request.camera.max_dn();
-    let pairs: [(FrameKind, [Vec<u16>; 2], u16); 3] = [
+    let pairs: [(FrameKind, [Vec<u16>; 2], u16); 4] = [
         (FrameKind::Frame, sim.frames.clone(), cam_max),
         (FrameKind::Tfp, tfp, job.core.full_scale),
         (FrameKind::Adaptive, adaptive, job.core.full_scale),
+        (FrameKind::Mc, mc, job.core.full_scale),
     ];
     let mut measured: Vec<Measured> = Vec::new();
     for (source, pair, full_scale) in pairs {

@@ -31,7 +31,7 @@ pub struct SpeedRow {
 /// Speed against error on paper-linear seed 1 (400×250): the frame camera
 /// and the core's frames (TFP, adaptive at several window limits, dwell
 /// caps, through the sidecar and the wire, the f64 reference), each with
-/// PIV; `progress` is called after each of the 14 groups.
+/// PIV; `progress` is called after each of the 15 groups.
 pub fn speed_against_error(mut progress: impl FnMut()) -> Result<Vec<SpeedRow>, JobError> {
     let job = Job::new(SceneParams::new(SceneKind::PaperLinear), 1);
     let p = &job.request.scene;
@@ -157,6 +157,27 @@ pub fn speed_against_error(mut progress: impl FnMut()) -> Result<Vec<SpeedRow>, 
                 "sidecar + wire {label}, {:.0} KB/pair, dwell cap 8 px, PIV 64,32,32",
                 ad_t.bytes as f64 / 1e3
             ),
+            ms: rec_ms + ms,
+            rmse: e,
+        });
+        progress();
+    }
+    // Motion-compensated (issue 14): the TFP pair's PIV predicts each row's
+    // velocity, the core refines it and counts along the path. Time = the
+    // TFP pair and its PIV + both compensated frames + PIV.
+    {
+        let t = Instant::now();
+        let (_, ta, tb) = recon(Method::Tfp, 8)?;
+        let tfp_field = piv(&ta, &tb, None, &piv_cfgs[0].1)?;
+        let vel = crate::predict::row_velocities(&tfp_field.vectors(), h, planes.flip, dt);
+        let refine = Some(spiv_core::motion::Refine::default());
+        let a = crate::predict::compensated_frame(&planes, ka, &job.core, &vel, refine)?.0;
+        let bb = crate::predict::compensated_frame(&planes, kb, &job.core, &vel, refine)?.0;
+        let rec_ms = t.elapsed().as_secs_f64() * 1e3;
+        let (ms, e) = err(&to(&a), &to(&bb), &piv_cfgs[0].1)?;
+        rows.push(SpeedRow {
+            name: "core motion-compensated n=128, TFP prediction refined, PIV 64,32,32 B-spline"
+                .into(),
             ms: rec_ms + ms,
             rmse: e,
         });

@@ -470,6 +470,9 @@ fn run_writes_the_table_images_vectors_plots_and_summary() {
         "vectors_frame.csv",
         "vectors_tfp.csv",
         "vectors_adaptive.csv",
+        "mc_a.png",
+        "mc_b.png",
+        "vectors_mc.csv",
         "profile.png",
         "vectors.png",
         "summary.json",
@@ -482,7 +485,7 @@ fn run_writes_the_table_images_vectors_plots_and_summary() {
             .expect("parse");
     assert_eq!(s["scene"], "paper-linear");
     let results = s["results"].as_array().expect("results");
-    assert_eq!(results.len(), 3);
+    assert_eq!(results.len(), 4);
     let rmae = |i: usize, region: &str| results[i][region]["rmae"].as_f64().expect("number");
     // Against the simulator's truth (seed 1; today frame camera 0.543 /
     // 0.003, adaptive 0.130 / 0.027): the spike camera sees the flow in
@@ -495,6 +498,11 @@ fn run_writes_the_table_images_vectors_plots_and_summary() {
     assert!(rmae(2, "rest") < 0.05, "adaptive rest {}", rmae(2, "rest"));
     assert!(rmae(0, "glare") > 2.0 * rmae(2, "glare"));
     assert!(rmae(0, "rest") < 0.01);
+    // Motion-compensated (seed 1: 0.157 / 0.009): the other rows within
+    // about 3x the frame camera, a third of the adaptive frames' error.
+    assert!(rmae(3, "rest") < 0.02, "mc rest {}", rmae(3, "rest"));
+    assert!(rmae(3, "rest") < 0.5 * rmae(2, "rest"));
+    assert!(table.contains("spike, motion-comp."), "{table}");
     // The table is the one in summary.json: the frame camera's error in the
     // glare rows is printed as it is stored.
     let fg = results[0]["glare"]["rmae"].as_f64().expect("number");

@@ -12,9 +12,10 @@
 use spiv_firmware_sim::scene::{SceneKind, SceneParams};
 use spiv_host::pipeline::{run, FrameKind, Job};
 
-/// Mean glare and other-row RMAE of (frame camera, TFP, adaptive) over seeds.
-fn measure(kind: SceneKind, seeds: &[u64], dwell_cap: Option<f64>) -> [[f64; 2]; 3] {
-    let mut sum = [[0.0; 2]; 3];
+/// Mean glare and other-row RMAE of (frame camera, TFP, adaptive,
+/// motion-compensated) over seeds.
+fn measure(kind: SceneKind, seeds: &[u64], dwell_cap: Option<f64>) -> [[f64; 2]; 4] {
+    let mut sum = [[0.0; 2]; 4];
     for &seed in seeds {
         let mut job = Job::new(SceneParams::new(kind), seed);
         // `spiv run`'s default is `--dwell-cap 8`.
@@ -22,7 +23,7 @@ fn measure(kind: SceneKind, seeds: &[u64], dwell_cap: Option<f64>) -> [[f64; 2];
         let o = run(&job, |_| {}).expect("the pipeline runs");
         assert_eq!(
             o.measured.iter().map(|m| m.source).collect::<Vec<_>>(),
-            [FrameKind::Frame, FrameKind::Tfp, FrameKind::Adaptive]
+            FrameKind::ALL
         );
         // The link is lossless: what PIV saw is what the core made.
         assert_eq!(o.link.lost_frames, 0);
@@ -36,9 +37,25 @@ fn measure(kind: SceneKind, seeds: &[u64], dwell_cap: Option<f64>) -> [[f64; 2];
     sum
 }
 
-/// Asserts the adaptive frames' bounds and the glare advantage.
-fn check(kind: SceneKind, glare_max: f64, rest_max: f64) {
-    let [frame, _tfp, adaptive] = measure(kind, &[1, 2], Some(8.0));
+/// Asserts the adaptive frames' bounds and the glare advantage, and that
+/// motion compensation measures the other rows within `mc_rest_max` and
+/// better than half the adaptive frames' error there (switched off, the
+/// compensated row is the adaptive one and fails).
+fn check(kind: SceneKind, glare_max: f64, rest_max: f64, mc_rest_max: f64) {
+    let [frame, _tfp, adaptive, mc] = measure(kind, &[1, 2], Some(8.0));
+    eprintln!("{kind:?}: frame {frame:.3?} adaptive {adaptive:.3?} mc {mc:.3?}");
+    assert!(
+        mc[1] <= mc_rest_max && mc[1] < 0.5 * adaptive[1],
+        "{kind:?}: motion-compensated other-row RMAE {:.3} (bound {mc_rest_max}, adaptive {:.3})",
+        mc[1],
+        adaptive[1]
+    );
+    assert!(
+        mc[0] < frame[0],
+        "{kind:?}: mc glare {:.3} against the frame camera's {:.3}",
+        mc[0],
+        frame[0]
+    );
     assert!(
         adaptive[0] <= glare_max,
         "{kind:?}: adaptive glare RMAE {:.3} > {glare_max}",
@@ -62,19 +79,22 @@ fn check(kind: SceneKind, glare_max: f64, rest_max: f64) {
 #[test]
 fn paper_linear_spike_frames_measure_the_flow() {
     // Today: glare 0.130 / 0.173, other rows 0.027 / 0.036 (seeds 1, 2).
-    check(SceneKind::PaperLinear, 0.23, 0.05);
+    // Motion-compensated other rows: 0.009 / 0.009 (frame camera 0.003).
+    check(SceneKind::PaperLinear, 0.23, 0.05, 0.02);
 }
 
 #[test]
 fn paper_quadratic_spike_frames_measure_the_flow() {
     // Today: glare 0.211 / 0.259, other rows 0.083 / 0.046.
-    check(SceneKind::PaperQuadratic, 0.35, 0.10);
+    // Motion-compensated other rows: about 0.013.
+    check(SceneKind::PaperQuadratic, 0.35, 0.10, 0.03);
 }
 
 #[test]
 fn paper_log_spike_frames_measure_the_flow() {
     // Today: glare 0.191 / 0.350, other rows 0.009 / 0.026.
-    check(SceneKind::PaperLog, 0.40, 0.03);
+    // Motion-compensated other rows: about 0.005.
+    check(SceneKind::PaperLog, 0.40, 0.03, 0.012);
 }
 
 #[test]
@@ -82,7 +102,7 @@ fn the_bounds_catch_streaked_adaptive_frames() {
     // The paper's one window limit everywhere (no dwell cap): fast
     // particles streak and PIV loses the fast rows. The same bounds as
     // above must reject these frames, or they would not guard anything.
-    let [_, _, adaptive] = measure(SceneKind::PaperLinear, &[1], None);
+    let [_, _, adaptive, _] = measure(SceneKind::PaperLinear, &[1], None);
     assert!(
         adaptive[0] > 0.23 || adaptive[1] > 0.05,
         "streaked frames passed the bounds: {adaptive:?}"

@@ -87,8 +87,8 @@ fn paper(seeds: u64, json_out: Option<&PathBuf>, dwell_cap: Option<f64>) -> Resu
     let mut tables = Vec::new();
     for (kind, paper_rmae, paper_ratio) in scenes {
         // [source][glare rmae, glare rmse, rest rmae, rest rmse]
-        let mut acc = vec![[Vec::new(), Vec::new(), Vec::new(), Vec::new()]; 3];
-        let mut ratios = vec![[Vec::new(), Vec::new()]; 2];
+        let mut acc = vec![[Vec::new(), Vec::new(), Vec::new(), Vec::new()]; FrameKind::ALL.len()];
+        let mut ratios = vec![[Vec::new(), Vec::new()]; FrameKind::ALL.len() - 1];
         for seed in 1..=seeds {
             let mut job = Job::new(SceneParams::new(kind), seed);
             job.dwell_cap = dwell_cap;
@@ -133,7 +133,7 @@ fn paper(seeds: u64, json_out: Option<&PathBuf>, dwell_cap: Option<f64>) -> Resu
             );
             rows.push(json!({"source": s, "glare_rmae": m[0], "glare_rmse": m[1], "rest_rmae": m[2], "rest_rmse": m[3]}));
         }
-        for (k, s) in [FrameKind::Tfp, FrameKind::Adaptive].iter().enumerate() {
+        for (k, s) in FrameKind::ALL[1..].iter().enumerate() {
             let (g, r) = (mean_ci(&ratios[k][0]), mean_ci(&ratios[k][1]));
             println!(
                 "{:<20} | {:>15} {:>15} | {:>15}",
@@ -162,8 +162,8 @@ fn blasius(seeds: u64) -> Result<(), CliError> {
         return Err(CliError::Usage("--seeds must be in 1..=100".into()));
     }
     let b = bar(seeds, "runs");
-    let mut dev = vec![Vec::new(); 3];
-    let mut lost = [0usize; 3];
+    let mut dev = vec![Vec::new(); FrameKind::ALL.len()];
+    let mut lost = [0usize; FrameKind::ALL.len()];
     let mut u_pair = 0.0;
     for seed in 1..=seeds {
         let mut job = Job::new(SceneParams::new(SceneKind::Blasius), seed);
@@ -200,7 +200,7 @@ fn blasius(seeds: u64) -> Result<(), CliError> {
 }
 
 fn speed(plot_path: &Path) -> Result<(), CliError> {
-    let b = bar(14, "configurations");
+    let b = bar(15, "configurations");
     let rows = spiv_host::speed::speed_against_error(|| b.inc(1))?;
     b.finish_and_clear();
     println!("speed against error, paper-linear seed 1 (400x250): wall time per frame pair (reconstruction of both frames + PIV, the PIV a median of 3 runs) and RMSE of the row profile, px per pair");

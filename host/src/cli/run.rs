@@ -81,6 +81,7 @@ pub fn run(a: &RunArgs) -> Result<(), CliError> {
         RGBColor(31, 119, 180),
         RGBColor(255, 127, 14),
         RGBColor(214, 39, 40),
+        RGBColor(44, 160, 44),
     ];
     let names: Vec<String> = o
         .measured
@@ -107,7 +108,8 @@ pub fn run(a: &RunArgs) -> Result<(), CliError> {
         o.glare_limit,
     )
     .map_err(|e| CliError::Usage(e.to_string()))?;
-    let ad = &o.measured[2];
+    // The spike camera's headline: the motion-compensated pair.
+    let ad = &o.measured[3];
     plot::vectors(
         &a.out.join("vectors.png"),
         &ad.pair[0],

@@ -33,6 +33,10 @@ pub fn run_summary(o: &Outcome, job: &Job) -> serde_json::Value {
             "glare": rmae_ratio(o.measured[0].glare.rmae, o.measured[2].glare.rmae),
             "rest": rmae_ratio(o.measured[0].rest.rmae, o.measured[2].rest.rmae),
         },
+        "frame_over_mc_rmae": {
+            "glare": rmae_ratio(o.measured[0].glare.rmae, o.measured[3].glare.rmae),
+            "rest": rmae_ratio(o.measured[0].rest.rmae, o.measured[3].rest.rmae),
+        },
         "stage_ms": { "simulate": o.stage_ms[0], "sidecar": o.stage_ms[1], "piv": o.stage_ms[2] },
         "wire": {
             "encoding": format!("{:?}", job.encoding),

@@ -14,6 +14,7 @@ pub fn label(s: FrameKind, tfp: u16) -> String {
         FrameKind::Frame => "frame camera".into(),
         FrameKind::Tfp => format!("spike, TFP n={tfp}"),
         FrameKind::Adaptive => "spike, adaptive".into(),
+        FrameKind::Mc => "spike, motion-comp.".into(),
     }
 }
 
