@@ -130,6 +130,9 @@ pub struct SidecarBuf<G> {
     /// Adaptive window limit per band of [`crate::sidecar::CAP_BAND`]
     /// upright rows; empty: `n_max` everywhere.
     pub caps: Vec<u16>,
+    /// `Mc` frames: the predicted x and y velocity of each stored row,
+    /// 1/256 px per tick; empty: none.
+    pub motion: (Vec<i16>, Vec<i16>),
 }
 
 impl<G: Gray> SidecarBuf<G> {
@@ -160,6 +163,7 @@ impl<G: Gray> SidecarBuf<G> {
             wire: vec![0; MAX_ENCODED],
             scratch: vec![0; scratch],
             caps: Vec::new(),
+            motion: (Vec::new(), Vec::new()),
         })
     }
 
@@ -177,6 +181,10 @@ impl<G: Gray> SidecarBuf<G> {
                 scratch: &mut self.scratch,
             },
             caps: &self.caps,
+            motion: crate::motion::Motion {
+                vx: &self.motion.0,
+                vy: &self.motion.1,
+            },
         })
     }
 

@@ -16,10 +16,11 @@
 //! copies of frames; `()` is the probe that does nothing (and costs nothing).
 
 use crate::error::Error;
-use crate::frame::{reconstruct_adaptive, reconstruct_rows};
+use crate::frame::{reconstruct_adaptive, reconstruct_compensated, reconstruct_rows};
 use crate::gray::Gray;
 use crate::history::History;
 use crate::method::Method;
+use crate::motion::Motion;
 use crate::params::Params;
 use crate::plane::PlaneView;
 use crate::state::Workspace;
@@ -117,9 +118,6 @@ pub enum ConfigError {
     },
     /// One row of this many pixels does not fit one payload.
     RowTooWide(u16),
-    /// A method the sidecar cannot run yet: motion-compensated frames need
-    /// the host's prediction, which the wire does not carry down yet.
-    Unsupported(Method),
 }
 
 impl core::fmt::Display for ConfigError {
@@ -129,11 +127,6 @@ impl core::fmt::Display for ConfigError {
             ConfigError::Schedule { every, dt } => {
                 write!(f, "pair every {every} ticks must be at least dt = {dt} > 0")
             }
-            ConfigError::Unsupported(m) => write!(
-                f,
-                "method {} is not run on the sidecar yet (no prediction downlink)",
-                m.name()
-            ),
             ConfigError::RowTooWide(w) => write!(
                 f,
                 "a row of {w} px does not fit one {MAX_PAYLOAD}-byte payload"
@@ -205,6 +198,11 @@ pub struct Memory<'a, G: Gray> {
     /// Adaptive window limit per band of [`CAP_BAND`] upright rows (see
     /// [`capped_frame`]); empty: `n_max` everywhere.
     pub caps: &'a [u16],
+    /// [`Method::Mc`]: the predicted velocity of each band row (stored
+    /// order), 1/256 px per tick (`crate::motion`); the workspace needs its
+    /// motion counts. Empty slices: no prediction, and an `Mc` frame is
+    /// refused.
+    pub motion: Motion<'a>,
 }
 
 /// A stage of the loop, for a [`Probe`].
@@ -249,9 +247,6 @@ pub struct Sidecar {
 impl Sidecar {
     /// The loop for a `width × height` sensor; checks the configuration.
     pub fn new<E>(width: u16, height: u16, cfg: Config) -> Result<Sidecar, SidecarError<E>> {
-        if cfg.method == Method::Mc {
-            return Err(SidecarError::Config(ConfigError::Unsupported(cfg.method)));
-        }
         let window = cfg.window();
         if !(1..=255).contains(&window) {
             return Err(SidecarError::Config(ConfigError::Window(window)));
@@ -373,8 +368,25 @@ impl Sidecar {
                 )?;
             }
             Method::Tfi => tfi(hist, k, p.n_max, p.full_scale, mem.frame)?,
-            // Refused by `Sidecar::new`.
-            Method::Mc => return Err(Error::BadParam(crate::error::ParamError::Window)),
+            Method::Mc => {
+                let rows = usize::from(hist.rows());
+                if mem.motion.vx.len() < rows || mem.motion.vy.len() < rows {
+                    return Err(Error::BufferTooSmall {
+                        needed: rows,
+                        got: mem.motion.vx.len().min(mem.motion.vy.len()),
+                    });
+                }
+                let m = mem.motion;
+                reconstruct_compensated(
+                    hist,
+                    k,
+                    p,
+                    &mut mem.workspace,
+                    (0, hist.rows()),
+                    &m,
+                    mem.frame,
+                )?;
+            }
             Method::Adaptive if mem.caps.is_empty() => {
                 reconstruct_adaptive(hist, k, p, &mut mem.workspace, mem.frame)?;
             }

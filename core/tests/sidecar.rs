@@ -65,8 +65,17 @@ impl Probe<u16> for Kept {
 
 /// Runs the loop over `planes` with `cfg`; returns the frames as sent and
 /// the wire bytes.
+/// The velocity the sidecar is given for `Mc` frames: 0.3 px/tick to the
+/// right in the top half, 0.1 in the bottom (1/256 px per tick).
+fn mc_velocity() -> Vec<i16> {
+    (0..H).map(|r| if r < H / 2 { 77 } else { 26 }).collect()
+}
+
 fn run(cfg: Config, planes: &[Vec<u8>]) -> (Vec<(Slot, Vec<u16>)>, Vec<u8>) {
     let mut buf = SidecarBuf::<u16>::new(W, H, &cfg).unwrap();
+    if cfg.method == Method::Mc {
+        buf.motion = (mc_velocity(), vec![0; usize::from(H)]);
+    }
     let mut mem = buf.memory(0).unwrap();
     let mut sc = Sidecar::new::<()>(W, H, cfg).unwrap();
     let (mut link, mut kept) = (Bytes(Vec::new()), Kept::default());
@@ -103,7 +112,23 @@ fn direct(method: Method, cfg: &Config, planes: &[Vec<u8>], k: u32) -> Vec<u16> 
             .unwrap();
         }
         Method::Tfi => tfi(&hist, k, p.n_max, p.full_scale, &mut out).unwrap(),
-        Method::Mc => unreachable!("the sidecar refuses mc"),
+        Method::Mc => {
+            let mut ws = WorkspaceBuf::whole(W, H);
+            let v = mc_velocity();
+            let m = spiv_core::motion::Motion { vx: &v, vy: &v[..] };
+            let zero = vec![0i16; usize::from(H)];
+            let m = spiv_core::motion::Motion { vy: &zero, ..m };
+            spiv_core::reconstruct_compensated(
+                &hist,
+                k,
+                p,
+                &mut ws.workspace(),
+                (0, H),
+                &m,
+                &mut out,
+            )
+            .unwrap();
+        }
         Method::Adaptive => {
             let mut ws = WorkspaceBuf::whole(W, H);
             reconstruct_adaptive(&hist, k, p, &mut ws.workspace(), &mut out).unwrap();
@@ -115,7 +140,7 @@ fn direct(method: Method, cfg: &Config, planes: &[Vec<u8>], k: u32) -> Vec<u16> 
 #[test]
 fn every_method_sends_the_cores_frames_at_the_scheduled_ticks() {
     let planes = planes(200);
-    for method in [Method::Adaptive, Method::Tfp, Method::Tfi] {
+    for method in Method::ALL {
         let mut cfg = Config::new(40, 9);
         cfg.method = method;
         cfg.params.n_max = 48;
@@ -157,12 +182,6 @@ fn bad_configurations_and_planes_are_refused() {
         SidecarError::Config(ConfigError::Window(0))
     );
     let mut cfg = Config::new(10, 5);
-    cfg.method = Method::Mc;
-    assert_eq!(
-        Sidecar::new::<()>(W, H, cfg).unwrap_err(),
-        SidecarError::Config(ConfigError::Unsupported(Method::Mc))
-    );
-    let mut cfg = Config::new(10, 5);
     cfg.schedule.every = 4;
     assert!(matches!(
         Sidecar::new::<()>(W, H, cfg),
@@ -185,6 +204,24 @@ fn bad_configurations_and_planes_are_refused() {
         Err(SidecarError::Core(spiv_core::Error::PlaneSize { .. }))
     ));
     assert_eq!(sc.sent().planes, 0, "a refused plane is not counted");
+    // An Mc frame without a predicted motion is refused when it is due.
+    let mut cfg = Config::new(4, 2);
+    cfg.method = Method::Mc;
+    cfg.params.n_max = 8;
+    let mut buf = SidecarBuf::<u16>::new(W, H, &cfg).unwrap();
+    let mut mem = buf.memory(0).unwrap();
+    let mut sc = Sidecar::new::<()>(W, H, cfg).unwrap();
+    let refused = planes(10).iter().find_map(|p| {
+        sc.push_plane(&mut mem, p, &mut Bytes(Vec::new()), &mut ())
+            .err()
+    });
+    assert!(
+        matches!(
+            refused,
+            Some(SidecarError::Core(spiv_core::Error::BufferTooSmall { .. }))
+        ),
+        "{refused:?}"
+    );
 }
 
 #[test]

@@ -75,7 +75,7 @@ struct Args {
     /// sample above background) over this, so dim particles stay exact; 0: off.
     #[arg(long, default_value_t = 4)]
     contrast: u16,
-    /// Frame method: adaptive, tfp or tfi.
+    /// Frame method: adaptive, tfp or tfi (mc needs a prediction downlink).
     #[arg(long, default_value = "adaptive")]
     method: String,
     /// Adaptive/TFI window limit n_max, or the TFP window, ticks.
@@ -147,6 +147,11 @@ fn config(a: &Args, dt: u32) -> Result<Config, Error> {
             a.method
         ))
     })?;
+    if cfg.method == Method::Mc {
+        return Err(Error::Usage(
+            "--method mc: the sidecar needs the host's predicted motion, and the wire has no downlink for it yet (spiv flow and spiv run make mc frames in the host)".into(),
+        ));
+    }
     match (cfg.method, a.window) {
         (Method::Tfp, Some(n)) => cfg.tfp_window = n,
         (_, Some(n)) => cfg.params.n_max = n,

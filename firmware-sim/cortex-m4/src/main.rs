@@ -254,6 +254,7 @@ fn run() -> Result<(), Failure> {
             scratch: &mut [],
         },
         caps: &[],
+        motion: spiv_core::motion::Motion { vx: &[], vy: &[] },
     };
     let mut link = CrcLink {
         digest: CRC32.digest(),
