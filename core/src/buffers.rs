@@ -133,6 +133,8 @@ pub struct SidecarBuf<G> {
     /// `Mc` frames: the predicted x and y velocity of each stored row,
     /// 1/256 px per tick; empty: none.
     pub motion: (Vec<i16>, Vec<i16>),
+    refined: (Vec<i16>, Vec<i16>),
+    refine_scratch: Vec<u8>,
 }
 
 impl<G: Gray> SidecarBuf<G> {
@@ -147,9 +149,23 @@ impl<G: Gray> SidecarBuf<G> {
         } else {
             0
         };
+        let workspace = if cfg.method == crate::Method::Mc {
+            // Compensated counts make every moving particle detectable:
+            // tables for one region per 16 px (the default is one per 64).
+            let mut sizes = WorkspaceSizes::for_strip(width, height);
+            sizes.max_regions = (sizes.pixels() / 16).clamp(16, 65535) as u16;
+            sizes.max_provisional = 32766;
+            WorkspaceBuf::new(sizes)
+        } else {
+            WorkspaceBuf::whole(width, height)
+        };
+        let (rows, band) = match cfg.refine {
+            Some(r) => (usize::from(height), usize::from(r.band)),
+            None => (0, 0),
+        };
         Ok(SidecarBuf {
             history: HistoryBuf::new(width, height, cfg.depth())?,
-            workspace: WorkspaceBuf::whole(width, height),
+            workspace,
             frame: vec![G::from_level(0); px],
             counts: vec![
                 0;
@@ -164,6 +180,8 @@ impl<G: Gray> SidecarBuf<G> {
             scratch: vec![0; scratch],
             caps: Vec::new(),
             motion: (Vec::new(), Vec::new()),
+            refined: (vec![0; rows], vec![0; rows]),
+            refine_scratch: vec![0; band * usize::from(width)],
         })
     }
 
@@ -184,6 +202,11 @@ impl<G: Gray> SidecarBuf<G> {
             motion: crate::motion::Motion {
                 vx: &self.motion.0,
                 vy: &self.motion.1,
+            },
+            refine: crate::sidecar::RefineBuffers {
+                vx: &mut self.refined.0,
+                vy: &mut self.refined.1,
+                scratch: &mut self.refine_scratch,
             },
         })
     }

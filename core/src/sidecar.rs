@@ -20,7 +20,7 @@ use crate::frame::{reconstruct_adaptive, reconstruct_compensated, reconstruct_ro
 use crate::gray::Gray;
 use crate::history::History;
 use crate::method::Method;
-use crate::motion::Motion;
+use crate::motion::{refine, Motion, Refine};
 use crate::params::Params;
 use crate::plane::PlaneView;
 use crate::state::Workspace;
@@ -53,6 +53,9 @@ pub struct Config {
     pub lossy: Lossy,
     /// Send a status message every this many pairs (0: only at the end).
     pub status_every: u32,
+    /// [`Method::Mc`]: refine the predicted motion from the spikes before
+    /// each frame (contrast maximisation, `crate::motion::refine`).
+    pub refine: Option<Refine>,
 }
 
 impl Config {
@@ -73,6 +76,7 @@ impl Config {
             encoding: Encoding::Rice,
             lossy: Lossy::default(),
             status_every: 16,
+            refine: None,
         }
     }
 
@@ -203,6 +207,31 @@ pub struct Memory<'a, G: Gray> {
     /// motion counts. Empty slices: no prediction, and an `Mc` frame is
     /// refused.
     pub motion: Motion<'a>,
+    /// With [`Config::refine`]: where the refined velocities go (one per
+    /// band row each) and the refinement's scratch (`band × width` bytes).
+    pub refine: RefineBuffers<'a>,
+}
+
+/// The refinement's buffers (empty when [`Config::refine`] is `None`).
+#[derive(Debug)]
+pub struct RefineBuffers<'a> {
+    /// Refined x velocities, one per band row.
+    pub vx: &'a mut [i16],
+    /// Refined y velocities, one per band row.
+    pub vy: &'a mut [i16],
+    /// Scratch counts, `band × width` bytes.
+    pub scratch: &'a mut [u8],
+}
+
+impl RefineBuffers<'_> {
+    /// No refinement.
+    pub fn none() -> Self {
+        RefineBuffers {
+            vx: &mut [],
+            vy: &mut [],
+            scratch: &mut [],
+        }
+    }
 }
 
 /// A stage of the loop, for a [`Probe`].
@@ -376,7 +405,14 @@ impl Sidecar {
                         got: mem.motion.vx.len().min(mem.motion.vy.len()),
                     });
                 }
-                let m = mem.motion;
+                let m = match &self.cfg.refine {
+                    None => mem.motion,
+                    Some(cfg) => {
+                        let r = &mut mem.refine;
+                        refine(hist, k, &mem.motion, cfg, r.scratch, r.vx, r.vy)?;
+                        Motion { vx: r.vx, vy: r.vy }
+                    }
+                };
                 reconstruct_compensated(
                     hist,
                     k,

@@ -151,6 +151,12 @@ impl<L: Link> Firmware<L> {
         self.buf.caps = caps;
     }
 
+    /// Sets the predicted velocity of each stored row (1/256 px per tick)
+    /// for `Mc` frames — what the host would send down the control link.
+    pub fn set_motion(&mut self, vx: Vec<i16>, vy: Vec<i16>) {
+        self.buf.motion = (vx, vy);
+    }
+
     /// Rows per tile message.
     pub fn tile_rows(&self) -> u16 {
         self.sidecar.tile_rows()
@@ -402,20 +408,30 @@ pub fn run_on_dat<L: Link>(
     Ok(fw)
 }
 
+/// What the host tells the sidecar — what the control link will carry
+/// (issue 14): window caps per band and the predicted motion per row.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Control {
+    /// Adaptive window limit per band (see [`Firmware::set_caps`]).
+    pub caps: Vec<u16>,
+    /// `Mc` frames: x and y velocity of each stored row, 1/256 px per tick.
+    pub motion: (Vec<i16>, Vec<i16>),
+}
+
 /// Runs the firmware on planes held in memory (back to back, stored row
-/// order), from the first, with window `caps` per band (see
-/// [`Firmware::set_caps`]; empty: none).
+/// order), from the first, told `control`.
 pub fn run_on_planes<L: Link>(
     planes: &[u8],
     width: u16,
     height: u16,
     cfg: Config,
-    caps: Vec<u16>,
+    control: Control,
     link: L,
     keep: bool,
 ) -> Result<Firmware<L>, FirmwareError> {
     let mut fw = Firmware::new(width, height, cfg, link)?;
-    fw.set_caps(caps);
+    fw.set_caps(control.caps);
+    fw.set_motion(control.motion.0, control.motion.1);
     if keep {
         fw.keep = Some(Vec::new());
     }

@@ -6,7 +6,7 @@
 use ndarray::Array2;
 use spiv_core::wire::Encoding;
 use spiv_core::Method;
-use spiv_firmware_sim::firmware::{run_on_planes, Config, FirmwareError, SentFrame};
+use spiv_firmware_sim::firmware::{run_on_planes, Config, Control, FirmwareError, SentFrame};
 use spiv_formats::vectors::Vector;
 
 use crate::piv::{piv, PivError, Settings};
@@ -74,7 +74,23 @@ pub fn transfer(
     cfg: Config,
     caps: Vec<u16>,
 ) -> Result<Transfer, LinkError> {
-    let mut fw = run_on_planes(planes, width, height, cfg, caps, Vec::new(), true)?;
+    let control = Control {
+        caps,
+        ..Control::default()
+    };
+    transfer_with(planes, width, height, cfg, control)
+}
+
+/// [`transfer`] with everything the host tells the sidecar (caps and the
+/// predicted motion of `Mc` frames), as the control link will carry it.
+pub fn transfer_with(
+    planes: &[u8],
+    width: u16,
+    height: u16,
+    cfg: Config,
+    control: Control,
+) -> Result<Transfer, LinkError> {
+    let mut fw = run_on_planes(planes, width, height, cfg, control, Vec::new(), true)?;
     let counters = fw.counters();
     let sent = fw.keep.take().unwrap_or_default();
     let bytes = fw.into_link();

@@ -11,14 +11,14 @@ use spiv_firmware_sim::simulation::{simulate_planes, Request, Simulated};
 use spiv_formats::vectors::Vector;
 use spiv_formats::FormatError;
 
-use crate::link::{dwell_caps, transfer, Transfer};
+use crate::link::{dwell_caps, transfer, transfer_with, Transfer};
 use crate::metrics::{region_error, row_profile, ProfileRow, RegionError};
 use crate::piv::{piv, to_f32, PivError, Settings};
-use crate::predict::{compensated_frame, row_velocities};
-use crate::reconstruct::{Planes, ReconstructError};
+use crate::predict::row_velocities;
+use crate::reconstruct::ReconstructError;
 use spiv_core::motion::Refine;
 use spiv_core::Method;
-use spiv_firmware_sim::firmware::Config;
+use spiv_firmware_sim::firmware::{Config, Control};
 
 /// What one run does.
 #[derive(Debug, Clone)]
@@ -87,9 +87,10 @@ pub enum FrameKind {
     /// The adaptive reconstruction.
     Adaptive,
     /// The adaptive reconstruction on motion-compensated counts (beyond the
-    /// paper; issue 14), predicted from the TFP pair's PIV and refined from
-    /// the spikes (`crate::predict`). Made in the host process: the sidecar
-    /// has no prediction downlink yet.
+    /// paper; issue 14): the TFP pair's PIV predicts each row's velocity,
+    /// the sidecar refines it from the spikes and sends the pair through
+    /// the wire (in process: the prediction is handed to the firmware as the
+    /// control link will carry it).
     Mc,
 }
 
@@ -158,6 +159,9 @@ pub struct LinkSummary {
     pub adaptive_bytes: u64,
     /// Bytes of the TFP pair on the wire.
     pub tfp_bytes: u64,
+    /// Bytes of the motion-compensated pair on the wire (0 when it fell
+    /// back to the adaptive pair).
+    pub mc_bytes: u64,
     /// Raw spike bytes over the ticks of one pair period (4·dt).
     pub raw_bytes_per_period: u64,
     /// Frames lost or corrupted on the way (0 in process).
@@ -204,6 +208,7 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
     let link = LinkSummary {
         adaptive_bytes: ad_t.bytes,
         tfp_bytes: tfp_t.bytes,
+        mc_bytes: 0,
         raw_bytes_per_period: u64::from(base.schedule.every) * u64::from(w) * u64::from(h) / 8,
         lost_frames: ad_t.report.lost_frames + tfp_t.report.lost_frames,
         bit_exact: exact(&ad_t) && exact(&tfp_t),
@@ -215,7 +220,9 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
     let tfp = up(&tfp_t, "TFP")?;
     let adaptive = up(&ad_t, "adaptive")?;
     // Motion-compensated: the TFP pair's PIV predicts each row's velocity
-    // (as `spiv flow` does); without a usable field, the adaptive pair.
+    // (as `spiv flow` does), handed to the sidecar as the control link will
+    // carry it; the sidecar refines it from the spikes and sends the pair.
+    // Without a usable field, the adaptive pair.
     let (wu, hu) = (usize::from(w), usize::from(h));
     let dt_ticks = f64::from(kb - ka);
     let pred = piv(
@@ -226,23 +233,26 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
     )?
     .vectors();
     let measured = pred.iter().filter(|v| v.state.is_measured()).count();
-    let mc = if 2 * measured >= pred.len() {
-        let planes = Planes::simulated(w, h, data);
-        let vel = row_velocities(&pred, h, planes.flip, dt_ticks);
-        let mut out = [Vec::new(), Vec::new()];
-        for (o, k) in out.iter_mut().zip([ka, kb]) {
-            *o = compensated_frame(
-                &planes,
-                u64::from(k),
-                &job.core,
-                &vel,
-                Some(Refine::default()),
-            )?
-            .0;
-        }
-        out
+    let (mc, mc_t) = if 2 * measured >= pred.len() {
+        let cfg = Config {
+            method: Method::Mc,
+            refine: Some(Refine::default()),
+            ..base
+        };
+        let control = Control {
+            caps: Vec::new(),
+            motion: row_velocities(&pred, h, true, dt_ticks),
+        };
+        let t = transfer_with(&data, w, h, cfg, control)?;
+        (up(&t, "motion-compensated")?, Some(t))
     } else {
-        adaptive.clone()
+        (adaptive.clone(), None)
+    };
+    let link = LinkSummary {
+        lost_frames: link.lost_frames + mc_t.as_ref().map_or(0, |t| t.report.lost_frames),
+        bit_exact: link.bit_exact && mc_t.as_ref().is_none_or(exact),
+        mc_bytes: mc_t.as_ref().map_or(0, |t| t.bytes),
+        ..link
     };
     let t_rec = t0.elapsed().as_secs_f64() * 1e3 - t_sim;
 

@@ -255,6 +255,7 @@ fn run() -> Result<(), Failure> {
         },
         caps: &[],
         motion: spiv_core::motion::Motion { vx: &[], vy: &[] },
+        refine: spiv_core::sidecar::RefineBuffers::none(),
     };
     let mut link = CrcLink {
         digest: CRC32.digest(),

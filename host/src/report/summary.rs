@@ -41,6 +41,7 @@ pub fn run_summary(o: &Outcome, job: &Job) -> serde_json::Value {
         "wire": {
             "encoding": format!("{:?}", job.encoding),
             "adaptive_pair_bytes": o.link.adaptive_bytes,
+            "mc_pair_bytes": o.link.mc_bytes,
             "tfp_pair_bytes": o.link.tfp_bytes,
             "raw_spike_bytes_per_pair_period": o.link.raw_bytes_per_period,
             "reduction_adaptive": o.link.raw_bytes_per_period as f64 / o.link.adaptive_bytes.max(1) as f64,
