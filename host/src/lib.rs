@@ -13,11 +13,12 @@
 //! | [`pipeline`] | the main job (`spiv run`): scene → both cameras → sidecar → PIV → metrics |
 //! | [`metrics`] | the paper's row-profile RMAE / RMSE and confidence intervals |
 //! | [`report`] | what a run tells its user: tables, `summary.json`, plots |
-//! | [`speed`] | speed against error (`spiv bench speed`) |
+//! | [`bench`] | the benchmarks' experiments: speed against error, the sidecar link |
 //!
 //! The `spiv` binary's subcommands live in `cli`, one file each.
 #![warn(missing_docs)]
 
+pub mod bench;
 pub mod dwell;
 pub mod flow;
 pub mod link;
@@ -29,4 +30,3 @@ pub mod receive;
 pub mod reconstruct;
 pub mod reference;
 pub mod report;
-pub mod speed;

@@ -8,8 +8,8 @@ use std::sync::Once;
 use plotters::prelude::*;
 use plotters::style::{register_font, FontStyle};
 
+use crate::bench::speed::SpeedRow;
 use crate::metrics::ProfileRow;
-use crate::speed::SpeedRow;
 use spiv_formats::{State, Vector};
 
 /// A plotting failure, as text (plotters' errors are generic over backends).

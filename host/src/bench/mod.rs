@@ -1,0 +1,5 @@
+//! The benchmarks' experiments (`spiv bench speed`, `spiv bench link`):
+//! each returns its rows; the CLI prints them.
+
+pub mod link;
+pub mod speed;
