@@ -93,9 +93,9 @@ impl WorkspaceBuf {
     }
 
     /// The workspace over these buffers (with the motion-compensated
-    /// counts).
-    pub fn workspace(&mut self) -> Workspace<'_> {
-        // The buffers were sized from `sizes`, so this cannot fail.
+    /// counts). The buffers were sized from their own sizes, so the core's
+    /// checks pass; they are still checked, never assumed.
+    pub fn workspace(&mut self) -> Result<Workspace<'_>, Error> {
         let mc = &mut self.mc;
         Workspace::new(
             self.sizes,
@@ -111,7 +111,6 @@ impl WorkspaceBuf {
             },
         )
         .and_then(|ws| ws.with_motion_counts(mc))
-        .expect("buffers sized from their own WorkspaceSizes")
     }
 }
 
@@ -150,12 +149,7 @@ impl<G: Gray> SidecarBuf<G> {
             0
         };
         let workspace = if cfg.method == crate::Method::Mc {
-            // Compensated counts make every moving particle detectable:
-            // tables for one region per 16 px (the default is one per 64).
-            let mut sizes = WorkspaceSizes::for_strip(width, height);
-            sizes.max_regions = (sizes.pixels() / 16).clamp(16, 65535) as u16;
-            sizes.max_provisional = 32766;
-            WorkspaceBuf::new(sizes)
+            WorkspaceBuf::new(WorkspaceSizes::for_motion(width, height))
         } else {
             WorkspaceBuf::whole(width, height)
         };
@@ -190,7 +184,7 @@ impl<G: Gray> SidecarBuf<G> {
     pub fn memory(&mut self, next_tick: u32) -> Result<Memory<'_, G>, Error> {
         Ok(Memory {
             history: self.history.resume(next_tick)?,
-            workspace: self.workspace.workspace(),
+            workspace: self.workspace.workspace()?,
             frame: &mut self.frame,
             counts: &mut self.counts,
             send: SendBuffers {

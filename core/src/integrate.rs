@@ -20,12 +20,6 @@ use crate::region::Region;
 use crate::state::Workspace;
 use crate::window::Window;
 
-/// Words per row of the history's planes.
-#[inline]
-fn wpr_of(hist: &crate::history::History<'_>) -> usize {
-    hist.words_per_row()
-}
-
 /// The two integers that fix a region's SNR at one window, up to a positive
 /// factor shared by all windows of that region:
 /// `SNR ∝ d / sqrt(v)`, `d = S_sum·N_r − B_sum·N_p`,
@@ -110,40 +104,36 @@ pub(crate) fn adapt_region(
     strip_rows: u16,
     idx: usize,
 ) -> Region {
-    let crate::context::Ctx {
-        hist,
-        span,
-        k,
-        p,
-        motion,
-        ..
-    } = *ctx;
-    let band_rows = hist.rows();
+    let (hist, k) = (ctx.hist, ctx.k);
+    let wpr = hist.words_per_row();
+    let base = usize::from(s0) * wpr;
     // Word j of strip row r at tick t: plain, or moved by the row's
     // predicted motion (then the region's spikes are counted where the
-    // particle is at k).
-    let word = |plane: &[u64], t: u32, r: usize, j: usize| -> u64 {
-        let br = s0 + r as u16;
-        match &motion {
-            None => plane
-                .get(usize::from(s0) * wpr_of(hist) + r * wpr_of(hist) + j)
-                .copied()
-                .unwrap_or(0),
-            Some(m) => {
-                let (vx, vy) = m.at(br);
-                let dt = (i64::from(t) - i64::from(k)) as i32;
-                shifted_word(
-                    plane,
-                    wpr_of(hist),
-                    band_rows,
-                    br,
-                    j,
-                    shift(vx, dt),
-                    shift(vy, dt),
-                )
-            }
-        }
-    };
+    // particle is at k). Chosen once, so the plain path has no branch.
+    match ctx.motion {
+        None => adapt_with(ctx, ws, strip_rows, idx, |plane, _t, r, j| {
+            plane.get(base + r * wpr + j).copied().unwrap_or(0)
+        }),
+        Some(m) => adapt_with(ctx, ws, strip_rows, idx, |plane, t, r, j| {
+            let br = s0 + r as u16;
+            let (vx, vy) = m.at(br);
+            let dt = (i64::from(t) - i64::from(k)) as i32;
+            shifted_word(plane, wpr, hist.rows(), br, j, shift(vx, dt), shift(vy, dt))
+        }),
+    }
+}
+
+/// [`adapt_region`] with `word(plane, tick, strip row, word index)`.
+fn adapt_with(
+    ctx: &crate::context::Ctx<'_, '_>,
+    ws: &mut Workspace<'_>,
+    strip_rows: u16,
+    idx: usize,
+    word: impl Fn(&[u64], u32, usize, usize) -> u64,
+) -> Region {
+    let crate::context::Ctx {
+        hist, span, k, p, ..
+    } = *ctx;
     let mut reg = ws.regions[idx];
     let id = idx as u16 + 1;
     let width = usize::from(ws.sizes.width);

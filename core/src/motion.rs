@@ -271,7 +271,7 @@ pub fn refine(
     // linear between them, constant beyond.
     let band2 = 2 * i64::from(cfg.band);
     let c2 = |b: u16| i64::from(b) * band2 + i64::from(cfg.band) - 1;
-    let last = bands - 1;
+    let last = bands.saturating_sub(1);
     for r in 0..rows {
         let y2 = 2 * i64::from(r);
         let b = ((y2 - c2(0)).max(0) / band2).min(i64::from(last)) as u16;
@@ -294,10 +294,8 @@ pub fn refine(
     Ok(())
 }
 
-/// Adds the counts of band row `r` compensated for `(vx, vy)` to `row`:
-/// the shifted words of 15 ticks at a time summed into 4-bit vertical
-/// counters, then spread into the byte counters (as
-/// `window::add_plane_counts` does for unshifted words).
+/// Adds the counts of band row `r` compensated for `(vx, vy)` to `row`,
+/// bit-sliced as the plain counts are (`window::add_words`).
 #[allow(clippy::too_many_arguments)]
 fn add_row(
     planes: &[&[u64]],
@@ -310,38 +308,18 @@ fn add_row(
     row: &mut [u8],
 ) {
     let wpr = crate::plane::words_per_row(width);
-    let mut sh = [(0i32, 0i32); 256];
-    for (i, s) in sh.iter_mut().enumerate().take(planes.len()) {
-        let dt = (i64::from(start) + i as i64 - i64::from(kc)) as i32;
-        *s = (shift(vx, dt), shift(vy, dt));
+    // Each tick's plane with its shift.
+    let mut items: [(&[u64], i32, i32); 256] = [(&[], 0, 0); 256];
+    let n = planes.len().min(items.len());
+    for ((it, p), i) in items.iter_mut().zip(planes).zip(0i64..) {
+        let dt = (i64::from(start) + i - i64::from(kc)) as i32;
+        *it = (p, shift(vx, dt), shift(vy, dt));
     }
     for (j, cw) in row.chunks_mut(64).enumerate() {
-        let mut acc = [0u64; 8];
-        for (chunk, shifts) in planes.chunks(15).zip(sh.chunks(15)) {
-            let (mut s0, mut s1, mut s2, mut s3) = (0u64, 0u64, 0u64, 0u64);
-            for (p, &(sx, sy)) in chunk.iter().zip(shifts) {
-                let x = shifted_word(p, wpr, band_rows, r, j, sx, sy);
-                let c0 = s0 & x;
-                s0 ^= x;
-                let c1 = s1 & c0;
-                s1 ^= c0;
-                let c2 = s2 & c1;
-                s2 ^= c1;
-                s3 ^= c2;
-            }
-            if s0 | s1 | s2 | s3 == 0 {
-                continue;
-            }
-            for (g, a) in acc.iter_mut().enumerate() {
-                let b = |s: u64| crate::window::spread((s >> (8 * g)) as u8);
-                *a = a.wrapping_add(b(s0) + (b(s1) << 1) + (b(s2) << 2) + (b(s3) << 3));
-            }
-        }
-        for (g, c8) in cw.chunks_mut(8).enumerate() {
-            let lanes = acc.get(g).copied().unwrap_or(0).to_le_bytes();
-            for (c, l) in c8.iter_mut().zip(lanes) {
-                *c = c.wrapping_add(l);
-            }
-        }
+        crate::window::add_words(
+            &items[..n],
+            |(p, sx, sy)| shifted_word(p, wpr, band_rows, r, j, sx, sy),
+            cw,
+        );
     }
 }

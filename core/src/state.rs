@@ -62,6 +62,28 @@ impl WorkspaceSizes {
             max_provisional: clamp(px / 8, 64, 32766) as u16,
         }
     }
+
+    /// Sizes for a motion-compensated strip (`crate::reconstruct_compensated`):
+    /// compensated counts make every moving particle detectable, so a frame
+    /// holds several times the regions of a plain one — one region per 16
+    /// px (the plain default is one per 64, sized for an MCU) and the
+    /// largest union-find table.
+    pub const fn for_motion(width: u16, rows: u16) -> Self {
+        let plain = Self::for_strip(width, rows);
+        let per16 = plain.pixels() / 16;
+        WorkspaceSizes {
+            max_regions: if per16 < 16 {
+                16
+            } else if per16 > 65535 {
+                65535
+            } else {
+                per16 as u16
+            },
+            max_provisional: 32766,
+            ..plain
+        }
+    }
+
     /// Pixels of the strip.
     pub const fn pixels(&self) -> usize {
         self.width as usize * self.rows as usize

@@ -76,12 +76,6 @@ const SPREAD: [u64; 256] = {
     t
 };
 
-/// Byte `i` of the result is bit `i` of `b` (the spread table).
-#[inline]
-pub(crate) fn spread(b: u8) -> u64 {
-    SPREAD[usize::from(b)]
-}
-
 /// The planes of a window, gathered once: slice `i` is the band at tick
 /// `start + i` (an empty slice for a tick not held). At most 256 planes.
 #[derive(Debug)]
@@ -142,10 +136,7 @@ pub fn add_counts(hist: &History<'_>, rows: (u16, u16), ticks: (u32, u32), count
 
 /// [`add_counts`] over planes already gathered (each `band rows × words`).
 ///
-/// Bit-sliced: 15 planes at a time are summed into 4-bit vertical counters
-/// (four words hold 64 pixels' counts; 7 logic ops per plane per 64 px), then
-/// flushed into the byte counters through the `SPREAD` table. Hand-written
-/// because this is the hot loop of every frame.
+/// Bit-sliced ([`add_words`]).
 pub fn add_plane_counts(planes: &[&[u64]], width: u16, rows: (u16, u16), counts: &mut [u8]) {
     let width = usize::from(width);
     let wpr = crate::plane::words_per_row(width as u16);
@@ -156,34 +147,44 @@ pub fn add_plane_counts(planes: &[&[u64]], width: u16, rows: (u16, u16), counts:
         let row_off = usize::from(r) * wpr;
         for (j, cw) in crow.chunks_mut(64).enumerate() {
             let idx = row_off + j;
-            let mut acc = [0u64; 8];
-            for chunk in planes.chunks(15) {
-                let (mut s0, mut s1, mut s2, mut s3) = (0u64, 0u64, 0u64, 0u64);
-                for p in chunk {
-                    let x = p.get(idx).copied().unwrap_or(0);
-                    let c0 = s0 & x;
-                    s0 ^= x;
-                    let c1 = s1 & c0;
-                    s1 ^= c0;
-                    let c2 = s2 & c1;
-                    s2 ^= c1;
-                    s3 ^= c2;
-                }
-                if s0 | s1 | s2 | s3 == 0 {
-                    continue;
-                }
-                for (g, a) in acc.iter_mut().enumerate() {
-                    let sh = 8 * g;
-                    let b = |s: u64| SPREAD[((s >> sh) & 0xff) as usize];
-                    *a = a.wrapping_add(b(s0) + (b(s1) << 1) + (b(s2) << 2) + (b(s3) << 3));
-                }
-            }
-            for (g, c8) in cw.chunks_mut(8).enumerate() {
-                let lanes = acc.get(g).copied().unwrap_or(0).to_le_bytes();
-                for (c, l) in c8.iter_mut().zip(lanes) {
-                    *c = c.wrapping_add(l);
-                }
-            }
+            add_words(planes, |p| p.get(idx).copied().unwrap_or(0), cw);
+        }
+    }
+}
+
+/// Adds the words of spikes `word(item)` of every item (bit `b` of a word
+/// the pixel `b`) to the byte counters `out` (at most 64 pixels). Bit-sliced: 15 words at a time are
+/// summed into 4-bit vertical counters (7 logic ops per word), then flushed
+/// into the byte counters through the `SPREAD` table. Hand-written because
+/// this is the hot loop of every frame, plain or motion-compensated.
+#[inline(always)]
+pub(crate) fn add_words<T: Copy>(items: &[T], word: impl Fn(T) -> u64, out: &mut [u8]) {
+    let mut acc = [0u64; 8];
+    for chunk in items.chunks(15) {
+        let (mut s0, mut s1, mut s2, mut s3) = (0u64, 0u64, 0u64, 0u64);
+        for &item in chunk {
+            let x = word(item);
+            let c0 = s0 & x;
+            s0 ^= x;
+            let c1 = s1 & c0;
+            s1 ^= c0;
+            let c2 = s2 & c1;
+            s2 ^= c1;
+            s3 ^= c2;
+        }
+        if s0 | s1 | s2 | s3 == 0 {
+            continue;
+        }
+        for (g, a) in acc.iter_mut().enumerate() {
+            let sh = 8 * g;
+            let b = |s: u64| SPREAD[((s >> sh) & 0xff) as usize];
+            *a = a.wrapping_add(b(s0) + (b(s1) << 1) + (b(s2) << 2) + (b(s3) << 3));
+        }
+    }
+    for (g, c8) in out.chunks_mut(8).enumerate() {
+        let lanes = acc.get(g).copied().unwrap_or(0).to_le_bytes();
+        for (c, l) in c8.iter_mut().zip(lanes) {
+            *c = c.wrapping_add(l);
         }
     }
 }

@@ -113,11 +113,7 @@ fn direct(method: Method, cfg: &Config, planes: &[Vec<u8>], k: u32) -> Vec<u16> 
         }
         Method::Tfi => tfi(&hist, k, p.n_max, p.full_scale, &mut out).unwrap(),
         Method::Mc => {
-            // The sidecar's buffers for mc: one region per 16 px.
-            let mut sizes = spiv_core::WorkspaceSizes::for_strip(W, H);
-            sizes.max_regions = (sizes.pixels() / 16) as u16;
-            sizes.max_provisional = 32766;
-            let mut ws = WorkspaceBuf::new(sizes);
+            let mut ws = WorkspaceBuf::new(spiv_core::WorkspaceSizes::for_motion(W, H));
             let v = mc_velocity();
             let m = spiv_core::motion::Motion { vx: &v, vy: &v[..] };
             let zero = vec![0i16; usize::from(H)];
@@ -126,7 +122,7 @@ fn direct(method: Method, cfg: &Config, planes: &[Vec<u8>], k: u32) -> Vec<u16> 
                 &hist,
                 k,
                 p,
-                &mut ws.workspace(),
+                &mut ws.workspace().unwrap(),
                 (0, H),
                 &m,
                 &mut out,
@@ -135,7 +131,7 @@ fn direct(method: Method, cfg: &Config, planes: &[Vec<u8>], k: u32) -> Vec<u16> 
         }
         Method::Adaptive => {
             let mut ws = WorkspaceBuf::whole(W, H);
-            reconstruct_adaptive(&hist, k, p, &mut ws.workspace(), &mut out).unwrap();
+            reconstruct_adaptive(&hist, k, p, &mut ws.workspace().unwrap(), &mut out).unwrap();
         }
     }
     out

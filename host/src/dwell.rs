@@ -23,28 +23,12 @@ pub fn adaptive_banded(
     caps: &[u16],
 ) -> Result<Vec<u16>, ReconstructError> {
     let (w, h) = (planes.width, planes.height);
-    let pb = usize::from(w) * usize::from(h) / 8;
-    let n = planes.data.len() / pb.max(1);
-    // At least the window limit, at most the 256 planes the core holds
-    // (`max` then `min`: the bounds may cross; the core refuses n_max > 255).
-    let depth = n.max(usize::from(core.n_max.max(2))).min(256) as u16;
-    let mut hb = spiv_core::buffers::HistoryBuf::new(w, h, depth)?;
-    let mut hist = hb.history()?;
-    let skip = n.saturating_sub(usize::from(depth));
-    for chunk in planes.data.chunks_exact(pb).skip(skip) {
-        let view = spiv_core::PlaneView::new(chunk, w, h)?;
-        hist.push(&view)?;
-    }
-    let tick = k
-        .checked_sub(planes.first + skip as u64)
-        .and_then(|t| u32::try_from(t).ok())
-        .ok_or(ReconstructError::TickOutside {
-            tick: k,
-            planes: planes.first + n as u64,
-        })?;
+    let mut ring = planes.ring(k, core.n_max)?;
+    let tick = ring.tick;
+    let hist = ring.history()?;
     let mut ws = spiv_core::buffers::WorkspaceBuf::whole(w, h);
     let mut out = vec![0u16; usize::from(w) * usize::from(h)];
-    spiv_core::sidecar::capped_frame(&hist, tick, core, caps, &mut ws.workspace(), &mut out)?;
+    spiv_core::sidecar::capped_frame(&hist, tick, core, caps, &mut ws.workspace()?, &mut out)?;
     Ok(planes.output(&out))
 }
 

@@ -4,9 +4,9 @@
 //! (`spiv_core::motion::refine`), and the core counts each particle along
 //! its path (`spiv_core::reconstruct_compensated`).
 
-use spiv_core::buffers::{HistoryBuf, WorkspaceBuf};
+use spiv_core::buffers::WorkspaceBuf;
 use spiv_core::motion::{refine, Motion, Refine};
-use spiv_core::{reconstruct_compensated, Params, PlaneView, WorkspaceSizes};
+use spiv_core::{reconstruct_compensated, Params, WorkspaceSizes};
 use spiv_formats::Vector;
 
 use crate::reconstruct::{Planes, ReconstructError};
@@ -82,23 +82,9 @@ pub fn compensated_frame(
     refine_cfg: Option<Refine>,
 ) -> Result<(Vec<u16>, RowVelocities), ReconstructError> {
     let (w, h) = (planes.width, planes.height);
-    let pb = usize::from(w) * usize::from(h) / 8;
-    let n = planes.data.len() / pb.max(1);
-    // At least the window limit, at most the 256 planes the core holds.
-    let depth = n.max(usize::from(core.n_max.max(2))).min(256) as u16;
-    let mut hb = HistoryBuf::new(w, h, depth)?;
-    let mut hist = hb.history()?;
-    let skip = n.saturating_sub(usize::from(depth));
-    for chunk in planes.data.chunks_exact(pb).skip(skip) {
-        hist.push(&PlaneView::new(chunk, w, h)?)?;
-    }
-    let tick = k
-        .checked_sub(planes.first + skip as u64)
-        .and_then(|t| u32::try_from(t).ok())
-        .ok_or(ReconstructError::TickOutside {
-            tick: k,
-            planes: planes.first + n as u64,
-        })?;
+    let mut ring = planes.ring(k, core.n_max)?;
+    let tick = ring.tick;
+    let hist = ring.history()?;
     let mut used = pred.clone();
     if let Some(cfg) = refine_cfg {
         let m = Motion {
@@ -116,19 +102,21 @@ pub fn compensated_frame(
             &mut used.1,
         )?;
     }
-    // Compensated counts make every moving particle detectable, so a frame
-    // holds several times the regions of a plain one: tables for one region
-    // per 16 px (the core's default is one per 64, sized for an MCU).
-    let mut sizes = WorkspaceSizes::for_strip(w, h);
-    sizes.max_regions = (sizes.pixels() / 16).clamp(16, 65535) as u16;
-    sizes.max_provisional = 32766;
-    let mut ws = WorkspaceBuf::new(sizes);
+    let mut ws = WorkspaceBuf::new(WorkspaceSizes::for_motion(w, h));
     let mut out = vec![0u16; usize::from(w) * usize::from(h)];
     let m = Motion {
         vx: &used.0,
         vy: &used.1,
     };
-    reconstruct_compensated(&hist, tick, core, &mut ws.workspace(), (0, h), &m, &mut out)?;
+    reconstruct_compensated(
+        &hist,
+        tick,
+        core,
+        &mut ws.workspace()?,
+        (0, h),
+        &m,
+        &mut out,
+    )?;
     Ok((planes.output(&out), used))
 }
 

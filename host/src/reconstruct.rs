@@ -6,7 +6,7 @@ use std::path::Path;
 
 use spiv_core::window::{tfi, tfp};
 pub use spiv_core::Method;
-use spiv_core::{reconstruct_adaptive, FrameStats, Params, PlaneView};
+use spiv_core::{reconstruct_adaptive, FrameStats, History, Params, PlaneView};
 use spiv_formats::capture::Capture;
 use spiv_formats::dat::{DatOptions, DatReader};
 use spiv_formats::npz::read_npz_spikes;
@@ -104,20 +104,9 @@ pub fn frame_from_planes(
             planes: planes.first + n,
         });
     }
-    // At least the window, at most the 256 planes the core holds (the
-    // bounds cross for window > 256, which the core then refuses).
-    let depth = n.max(u64::from(window.max(2))).min(256) as u16;
-    let mut hb = HistoryBuf::new(w, h, depth)?;
-    let mut hist = hb.history()?;
-    // History ticks count from 0 at the first plane pushed; push the last `depth`.
-    let skip = n.saturating_sub(u64::from(depth));
-    for chunk in planes.data.chunks_exact(pb).skip(skip as usize) {
-        hist.push(&PlaneView::new(chunk, w, h)?)?;
-    }
-    let k = u32::try_from(at - planes.first - skip).map_err(|_| ReconstructError::TickOutside {
-        tick: at,
-        planes: n,
-    })?;
+    let mut ring = planes.ring(at, window)?;
+    let k = ring.tick;
+    let hist = ring.history()?;
     let px = usize::from(w) * usize::from(h);
     let mut out = vec![0u16; px];
     let fs = p.full_scale;
@@ -142,7 +131,7 @@ pub fn frame_from_planes(
                 &hist,
                 k,
                 &p,
-                &mut ws.workspace(),
+                &mut ws.workspace()?,
                 &mut out,
             )?)
         }
@@ -155,7 +144,50 @@ pub fn frame_from_planes(
     })
 }
 
+/// Planes in a core history ring, and where a file tick falls in it.
+#[derive(Debug)]
+pub struct Ring {
+    buf: HistoryBuf,
+    pushed: u32,
+    /// The ring tick of the file tick asked for.
+    pub tick: u32,
+}
+
+impl Ring {
+    /// The history over the planes pushed.
+    pub fn history(&mut self) -> Result<History<'_>, spiv_core::Error> {
+        self.buf.resume(self.pushed)
+    }
+}
+
 impl Planes {
+    /// The planes in a ring at least `window` deep (at most the 256 the
+    /// core holds: the last ones), with the ring tick of file tick `k`.
+    pub fn ring(&self, k: u64, window: u16) -> Result<Ring, ReconstructError> {
+        let (w, h) = (self.width, self.height);
+        let pb = usize::from(w) * usize::from(h) / 8;
+        let n = self.data.len() / pb.max(1);
+        // `max` then `min`: the bounds cross for a window above 256, which
+        // the core then refuses.
+        let depth = n.max(usize::from(window.max(2))).min(256) as u16;
+        let mut buf = HistoryBuf::new(w, h, depth)?;
+        let mut hist = buf.history()?;
+        // Ring ticks count from 0 at the first plane pushed: the last `depth`.
+        let skip = n.saturating_sub(usize::from(depth));
+        for chunk in self.data.chunks_exact(pb).skip(skip) {
+            hist.push(&PlaneView::new(chunk, w, h)?)?;
+        }
+        let pushed = hist.next_tick();
+        let tick = k
+            .checked_sub(self.first + skip as u64)
+            .and_then(|t| u32::try_from(t).ok())
+            .ok_or(ReconstructError::TickOutside {
+                tick: k,
+                planes: self.first + n as u64,
+            })?;
+        Ok(Ring { buf, pushed, tick })
+    }
+
     /// A frame the core made from these planes (stored row order, `width`
     /// wide) as the user sees it: upright, padding columns cropped
     /// (`crop_width` wide).

@@ -71,6 +71,26 @@ impl SpikeVolume {
         (lo, (hi - lo).max(0) as u32)
     }
 
+    /// Rows `s0..s1` alone (clamped to the volume), and the first row kept.
+    fn rows_of(&self, s0: usize, s1: usize) -> (SpikeVolume, usize) {
+        let s1 = s1.min(self.rows);
+        let s0 = s0.min(s1);
+        let w = self.width;
+        let plane = self.rows * w;
+        let mut data = Vec::with_capacity(self.ticks * (s1 - s0) * w);
+        for t in 0..self.ticks {
+            data.extend_from_slice(&self.data[t * plane + s0 * w..t * plane + s1 * w]);
+        }
+        let strip = SpikeVolume {
+            width: w,
+            rows: s1 - s0,
+            first: self.first,
+            ticks: self.ticks,
+            data,
+        };
+        (strip, s0)
+    }
+
     /// Spikes of pixel (r, c) in the window of `n` ticks centred on `k`.
     pub fn count(&self, k: u32, n: u16, r: usize, c: usize) -> u32 {
         let (s, len) = self.window(k, n);
@@ -144,21 +164,7 @@ pub fn adaptive_rows(
     fs: f64,
     (s0, s1): (usize, usize),
 ) -> RefFrame {
-    let s1 = s1.min(vol.rows);
-    let s0 = s0.min(s1);
-    let w = vol.width;
-    let plane = vol.rows * w;
-    let mut data = Vec::with_capacity(vol.ticks * (s1 - s0) * w);
-    for t in 0..vol.ticks {
-        data.extend_from_slice(&vol.data[t * plane + s0 * w..t * plane + s1 * w]);
-    }
-    let strip = SpikeVolume {
-        width: w,
-        rows: s1 - s0,
-        first: vol.first,
-        ticks: vol.ticks,
-        data,
-    };
+    let (strip, s0) = vol.rows_of(s0, s1);
     strip_frame(&strip, s0, k, p, fs, None)
 }
 
@@ -175,21 +181,7 @@ pub fn adaptive_rows_compensated(
     (s0, s1): (usize, usize),
     (vx, vy): (&[i16], &[i16]),
 ) -> RefFrame {
-    let s1 = s1.min(vol.rows);
-    let s0 = s0.min(s1);
-    let w = vol.width;
-    let plane = vol.rows * w;
-    let mut data = Vec::with_capacity(vol.ticks * (s1 - s0) * w);
-    for t in 0..vol.ticks {
-        data.extend_from_slice(&vol.data[t * plane + s0 * w..t * plane + s1 * w]);
-    }
-    let strip = SpikeVolume {
-        width: w,
-        rows: s1 - s0,
-        first: vol.first,
-        ticks: vol.ticks,
-        data,
-    };
+    let (strip, s0) = vol.rows_of(s0, s1);
     strip_frame(&strip, s0, k, p, fs, Some((vol, vx, vy)))
 }
 
