@@ -5,6 +5,7 @@
 use std::vec;
 use std::vec::Vec;
 
+use crate::downlink::DownlinkBuffers;
 use crate::gray::Gray;
 use crate::history::History;
 use crate::region::Region;
@@ -126,12 +127,12 @@ pub struct SidecarBuf<G> {
     payload: Vec<u8>,
     wire: Vec<u8>,
     scratch: Vec<u16>,
-    /// Adaptive window limit per band of [`crate::sidecar::CAP_BAND`]
-    /// upright rows; empty: `n_max` everywhere.
-    pub caps: Vec<u16>,
-    /// `Mc` frames: the predicted x and y velocity of each stored row,
-    /// 1/256 px per tick; empty: none.
-    pub motion: (Vec<i16>, Vec<i16>),
+    downlink_rx: Vec<u8>,
+    /// Applied and waiting velocities per stored row: vx, vy, next vx,
+    /// next vy.
+    rows: [Vec<i16>; 4],
+    /// Applied and waiting caps.
+    caps: [Vec<u16>; 2],
     refined: (Vec<i16>, Vec<i16>),
     refine_scratch: Vec<u8>,
 }
@@ -163,7 +164,9 @@ impl<G: Gray> SidecarBuf<G> {
             frame: vec![G::from_level(0); px],
             counts: vec![
                 0;
-                if cfg.method == crate::Method::Tfp {
+                if cfg.method == crate::Method::Tfp
+                    || (cfg.method == crate::Method::Mc && cfg.bootstrap == crate::Method::Tfp)
+                {
                     px
                 } else {
                     0
@@ -172,8 +175,11 @@ impl<G: Gray> SidecarBuf<G> {
             payload: vec![0; MAX_PAYLOAD],
             wire: vec![0; MAX_ENCODED],
             scratch: vec![0; scratch],
-            caps: Vec::new(),
-            motion: (Vec::new(), Vec::new()),
+            downlink_rx: vec![0; crate::wire::control::MAX_CONTROL_ENCODED],
+            rows: core::array::from_fn(|_| vec![0; usize::from(height)]),
+            caps: core::array::from_fn(|_| {
+                vec![0; usize::from(height.div_ceil(crate::sidecar::CAP_BAND))]
+            }),
             refined: (vec![0; rows], vec![0; rows]),
             refine_scratch: vec![0; band * usize::from(width)],
         })
@@ -192,17 +198,37 @@ impl<G: Gray> SidecarBuf<G> {
                 wire: &mut self.wire,
                 scratch: &mut self.scratch,
             },
-            caps: &self.caps,
-            motion: crate::motion::Motion {
-                vx: &self.motion.0,
-                vy: &self.motion.1,
-            },
+            downlink: Self::downlink_of(&mut self.downlink_rx, &mut self.rows, &mut self.caps),
             refine: crate::sidecar::RefineBuffers {
                 vx: &mut self.refined.0,
                 vy: &mut self.refined.1,
                 scratch: &mut self.refine_scratch,
             },
         })
+    }
+
+    /// The downlink's buffers alone (to hear control messages between
+    /// planes).
+    pub fn downlink(&mut self) -> DownlinkBuffers<'_> {
+        Self::downlink_of(&mut self.downlink_rx, &mut self.rows, &mut self.caps)
+    }
+
+    fn downlink_of<'a>(
+        rx: &'a mut [u8],
+        rows: &'a mut [Vec<i16>; 4],
+        caps: &'a mut [Vec<u16>; 2],
+    ) -> DownlinkBuffers<'a> {
+        let [vx, vy, next_vx, next_vy] = rows;
+        let [caps, next_caps] = caps;
+        DownlinkBuffers {
+            rx,
+            vx,
+            vy,
+            caps,
+            next_vx,
+            next_vy,
+            next_caps,
+        }
     }
 
     /// The sender's buffers alone (for the final status).

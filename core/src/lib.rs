@@ -20,6 +20,7 @@
 //! | [`frame`] | one adaptive frame at any tick, in row strips |
 //! | `context` | what every strip of one frame shares (crate-private) |
 //! | [`gray`] | the output pixel type: 8- or 16-bit gray levels |
+//! | [`downlink`] | the host's control messages heard, checked, held and applied per pair |
 //! | [`sidecar`] | the sidecar loop over borrowed memory: planes in, scheduled frames out through the sender; the dwell cap |
 //! | `buffers` | owned buffers of the history, the workspace and the loop (`std` feature) |
 //! | [`state`] | the caller-owned per-pixel working memory |
@@ -41,6 +42,7 @@
 #[cfg(feature = "std")]
 pub mod buffers;
 mod context;
+pub mod downlink;
 pub mod error;
 pub mod frame;
 pub mod gray;

@@ -15,6 +15,7 @@
 //! the M4 firmware brackets its cost markers with it, the simulator keeps
 //! copies of frames; `()` is the probe that does nothing (and costs nothing).
 
+use crate::downlink::{Downlink, DownlinkBuffers, DownlinkStats, Fit};
 use crate::error::Error;
 use crate::frame::{reconstruct_adaptive, reconstruct_compensated, reconstruct_rows};
 use crate::gray::Gray;
@@ -56,6 +57,12 @@ pub struct Config {
     /// [`Method::Mc`]: refine the predicted motion from the spikes before
     /// each frame (contrast maximisation, `crate::motion::refine`).
     pub refine: Option<Refine>,
+    /// [`Method::Mc`]: how frames are made while no motion was heard —
+    /// [`Method::Tfp`] (the default: short windows do not streak, so the
+    /// host's PIV of them gives the first prediction) or
+    /// [`Method::Adaptive`] (the paper's; at `n_max` = 128 fast particles
+    /// streak and PIV of those frames measures nothing to predict from).
+    pub bootstrap: Method,
 }
 
 impl Config {
@@ -77,14 +84,17 @@ impl Config {
             lossy: Lossy::default(),
             status_every: 16,
             refine: None,
+            bootstrap: Method::Tfp,
         }
     }
 
     /// The window a frame needs, ticks: `n_max` for adaptive and TFI, the
-    /// TFP window for TFP.
+    /// TFP window for TFP, the larger of both for motion-compensated frames
+    /// bootstrapped by TFP.
     pub fn window(&self) -> u16 {
         match self.method {
             Method::Tfp => self.tfp_window,
+            Method::Mc if self.bootstrap == Method::Tfp => self.params.n_max.max(self.tfp_window),
             Method::Adaptive | Method::Tfi | Method::Mc => self.params.n_max,
         }
     }
@@ -199,14 +209,13 @@ pub struct Memory<'a, G: Gray> {
     pub counts: &'a mut [u8],
     /// The sender's payload, COBS and codec buffers.
     pub send: SendBuffers<'a>,
-    /// Adaptive window limit per band of [`CAP_BAND`] upright rows (see
-    /// [`capped_frame`]); empty: `n_max` everywhere.
-    pub caps: &'a [u16],
-    /// [`Method::Mc`]: the predicted velocity of each band row (stored
-    /// order), 1/256 px per tick (`crate::motion`); the workspace needs its
-    /// motion counts. Empty slices: no prediction, and an `Mc` frame is
-    /// refused.
-    pub motion: Motion<'a>,
+    /// What the host told the sidecar ([`crate::downlink`]): the predicted
+    /// velocity of each stored row for [`Method::Mc`] frames (the workspace
+    /// then needs its motion counts), the window caps per band of
+    /// [`CAP_BAND`] upright rows for adaptive ones ([`capped_frame`]).
+    /// [`DownlinkBuffers::none`]: the sidecar does not listen and runs the
+    /// paper's algorithm.
+    pub downlink: DownlinkBuffers<'a>,
     /// With [`Config::refine`]: where the refined velocities go (one per
     /// band row each) and the refinement's scratch (`band × width` bytes).
     pub refine: RefineBuffers<'a>,
@@ -271,6 +280,9 @@ pub struct Sidecar {
     sender: Sender,
     next: u64,
     next_tick: u32,
+    downlink: Downlink,
+    width: u16,
+    height: u16,
 }
 
 impl Sidecar {
@@ -279,6 +291,12 @@ impl Sidecar {
         let window = cfg.window();
         if !(1..=255).contains(&window) {
             return Err(SidecarError::Config(ConfigError::Window(window)));
+        }
+        if cfg.method == Method::Mc
+            && cfg.bootstrap == Method::Tfp
+            && !(1..=255).contains(&cfg.tfp_window)
+        {
+            return Err(SidecarError::Config(ConfigError::Window(cfg.tfp_window)));
         }
         let s = &cfg.schedule;
         if s.dt == 0 || s.every < s.dt {
@@ -297,6 +315,9 @@ impl Sidecar {
             sender: Sender::new(width, height, rows)?,
             next: 0,
             next_tick: 0,
+            downlink: Downlink::default(),
+            width,
+            height,
         })
     }
 
@@ -321,9 +342,41 @@ impl Sidecar {
         self.next_tick
     }
 
+    /// The pair whose first frame the next plane completes, if it does
+    /// (a driver that paces itself on the host's answers waits here).
+    pub fn pair_due(&self) -> Option<u32> {
+        let slot = self.cfg.schedule.slot(self.next)?;
+        (slot.member == 0 && Schedule::ready(slot.tick, self.cfg.window(), self.next_tick))
+            .then_some(slot.pair)
+    }
+
     /// True once every scheduled pair was sent.
     pub fn done(&self) -> bool {
         self.cfg.schedule.slot(self.next).is_none()
+    }
+
+    /// Takes bytes from the downlink (the host's control messages, any
+    /// chunking; [`crate::downlink`]). A valid control applies from the
+    /// start of its pair; anything else is counted and dropped.
+    pub fn hear(&mut self, buf: &mut DownlinkBuffers<'_>, bytes: &[u8]) {
+        let fit = Fit {
+            width: self.width,
+            height: self.height,
+            n_max: self.cfg.params.n_max,
+        };
+        self.downlink.hear(buf, fit, bytes);
+    }
+
+    /// What the downlink heard so far.
+    pub fn downlink(&self) -> DownlinkStats {
+        self.downlink.stats()
+    }
+
+    /// The status counts of the downlink into the sender's.
+    fn sync_downlink(&mut self) {
+        let d = self.downlink.stats();
+        self.sender.sent.controls_applied = d.applied;
+        self.sender.sent.controls_refused = d.refused;
     }
 
     /// Ingests the next plane (stored row order, `width·height/8` bytes) and
@@ -346,16 +399,20 @@ impl Sidecar {
                 break;
             }
             self.next += 1;
+            if slot.member == 0 {
+                self.downlink.start_pair(&mut mem.downlink, slot.pair);
+            }
             probe.enter(Stage::Frame);
-            self.make_frame(mem, slot.tick)?;
+            let method = self.make_frame(mem, slot.tick)?;
             probe.leave(Stage::Frame);
             let frame_id = self.sender.sent.frames;
             probe.enter(Stage::Send);
-            self.send_frame(mem, slot, link)?;
+            self.send_frame(mem, slot, method, link)?;
             probe.leave(Stage::Send);
             probe.sent(frame_id, slot, mem.frame);
             let every = self.cfg.status_every;
             if slot.member == 1 && every > 0 && (slot.pair + 1) % every == 0 {
+                self.sync_downlink();
                 self.sender.send_status(&mut mem.send, link)?;
             }
         }
@@ -368,6 +425,7 @@ impl Sidecar {
         send: &mut SendBuffers<'_>,
         link: &mut L,
     ) -> Result<Sent, SidecarError<L::Error>> {
+        self.sync_downlink();
         self.sender.send_status(send, link)?;
         Ok(self.sender.sent)
     }
@@ -381,12 +439,30 @@ impl Sidecar {
         history.push(&PlaneView::new(plane, history.width(), history.height())?)
     }
 
+    /// Makes the frame at `k`; returns the method it used: an `Mc` frame
+    /// without an applied motion is made by [`Config::bootstrap`] (adaptive
+    /// with the applied caps, if any).
     #[inline(never)]
-    fn make_frame<G: Gray>(&self, mem: &mut Memory<'_, G>, k: u32) -> Result<(), Error> {
-        let p = &self.cfg.params;
+    fn make_frame<G: Gray>(&self, mem: &mut Memory<'_, G>, k: u32) -> Result<Method, Error> {
+        let mut p = self.cfg.params;
+        if let Some(n) = self.downlink.n_max() {
+            p.n_max = n.min(p.n_max);
+            p.n0 = p.n0.min(p.n_max);
+        }
+        let p = &p;
         let hist = &mem.history;
-        match self.cfg.method {
-            Method::Tfp => {
+        let dl = &mem.downlink;
+        let caps = self.downlink.caps(dl);
+        let motion = self.downlink.motion(dl);
+        let method = match (self.cfg.method, motion) {
+            (Method::Mc, None) => match self.cfg.bootstrap {
+                Method::Mc => Method::Adaptive,
+                b => b,
+            },
+            (m, _) => m,
+        };
+        match (method, motion) {
+            (Method::Tfp, _) => {
                 tfp(
                     hist,
                     k,
@@ -395,21 +471,25 @@ impl Sidecar {
                     mem.counts,
                     mem.frame,
                 )?;
+                Ok(Method::Tfp)
             }
-            Method::Tfi => tfi(hist, k, p.n_max, p.full_scale, mem.frame)?,
-            Method::Mc => {
+            (Method::Tfi, _) => {
+                tfi(hist, k, p.n_max, p.full_scale, mem.frame)?;
+                Ok(Method::Tfi)
+            }
+            (Method::Mc, Some(motion)) => {
                 let rows = usize::from(hist.rows());
-                if mem.motion.vx.len() < rows || mem.motion.vy.len() < rows {
+                if motion.vx.len() < rows || motion.vy.len() < rows {
                     return Err(Error::BufferTooSmall {
                         needed: rows,
-                        got: mem.motion.vx.len().min(mem.motion.vy.len()),
+                        got: motion.vx.len().min(motion.vy.len()),
                     });
                 }
                 let m = match &self.cfg.refine {
-                    None => mem.motion,
+                    None => motion,
                     Some(cfg) => {
                         let r = &mut mem.refine;
-                        refine(hist, k, &mem.motion, cfg, r.scratch, r.vx, r.vy)?;
+                        refine(hist, k, &motion, cfg, r.scratch, r.vx, r.vy)?;
                         Motion { vx: r.vx, vy: r.vy }
                     }
                 };
@@ -422,15 +502,17 @@ impl Sidecar {
                     &m,
                     mem.frame,
                 )?;
+                Ok(Method::Mc)
             }
-            Method::Adaptive if mem.caps.is_empty() => {
-                reconstruct_adaptive(hist, k, p, &mut mem.workspace, mem.frame)?;
-            }
-            Method::Adaptive => {
-                capped_frame(hist, k, p, mem.caps, &mut mem.workspace, mem.frame)?;
+            (Method::Adaptive | Method::Mc, _) => {
+                if caps.is_empty() {
+                    reconstruct_adaptive(hist, k, p, &mut mem.workspace, mem.frame)?;
+                } else {
+                    capped_frame(hist, k, p, caps, &mut mem.workspace, mem.frame)?;
+                }
+                Ok(Method::Adaptive)
             }
         }
-        Ok(())
     }
 
     #[inline(never)]
@@ -438,11 +520,12 @@ impl Sidecar {
         &mut self,
         mem: &mut Memory<'_, G>,
         slot: Slot,
+        method: Method,
         link: &mut L,
     ) -> Result<(), SendError<L::Error>> {
         let info = FrameInfo {
             slot,
-            method: self.cfg.method,
+            method,
             full_scale: self.cfg.params.full_scale,
             dt: self.cfg.schedule.dt,
         };

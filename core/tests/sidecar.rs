@@ -9,8 +9,11 @@
 use spiv_core::buffers::{SidecarBuf, WorkspaceBuf};
 use spiv_core::sidecar::{Config, ConfigError, Probe, Sidecar, SidecarError};
 use spiv_core::window::{tfi, tfp};
+use spiv_core::wire::control::{
+    control_header, encode_control, ControlHead, MAX_CONTROL_ENCODED, MAX_CONTROL_PAYLOAD,
+};
 use spiv_core::wire::sender::{Link, Slot};
-use spiv_core::wire::{Decoder, FrameEnd, Kind, WireError, MAX_ENCODED};
+use spiv_core::wire::{encode_message, Decoder, FrameEnd, Kind, WireError, MAX_ENCODED};
 use spiv_core::{reconstruct_adaptive, History, Method, PlaneView};
 
 const W: u16 = 64;
@@ -71,13 +74,43 @@ fn mc_velocity() -> Vec<i16> {
     (0..H).map(|r| if r < H / 2 { 77 } else { 26 }).collect()
 }
 
+/// The control message telling the sidecar [`mc_velocity`] from pair 0,
+/// one node per row.
+fn mc_control() -> Vec<u8> {
+    let zero = vec![0i16; usize::from(H)];
+    control(0, 0, 0, (&mc_velocity(), &zero), &[], (W, H))
+}
+
+/// A framed control message `seq` for a `size` sensor from `from_pair`:
+/// window limit `n_max` (0: the sidecar's), velocities per row, caps.
+fn control(
+    from_pair: u32,
+    seq: u32,
+    n_max: u16,
+    (vx, vy): (&[i16], &[i16]),
+    caps: &[u16],
+    (w, h): (u16, u16),
+) -> Vec<u8> {
+    let head = ControlHead {
+        from_pair,
+        n_max,
+        pitch: 1,
+    };
+    let mut payload = vec![0u8; MAX_CONTROL_PAYLOAD];
+    let n = encode_control(&head, vx, vy, caps, &mut payload).unwrap();
+    let mut out = vec![0u8; MAX_CONTROL_ENCODED];
+    let m = encode_message(&control_header(seq, w, h), &payload[..n], &mut out).unwrap();
+    out.truncate(m);
+    out
+}
+
 fn run(cfg: Config, planes: &[Vec<u8>]) -> (Vec<(Slot, Vec<u16>)>, Vec<u8>) {
     let mut buf = SidecarBuf::<u16>::new(W, H, &cfg).unwrap();
+    let mut sc = Sidecar::new::<()>(W, H, cfg).unwrap();
     if cfg.method == Method::Mc {
-        buf.motion = (mc_velocity(), vec![0; usize::from(H)]);
+        sc.hear(&mut buf.downlink(), &mc_control());
     }
     let mut mem = buf.memory(0).unwrap();
-    let mut sc = Sidecar::new::<()>(W, H, cfg).unwrap();
     let (mut link, mut kept) = (Bytes(Vec::new()), Kept::default());
     for p in planes {
         if sc.done() {
@@ -204,24 +237,31 @@ fn bad_configurations_and_planes_are_refused() {
         Err(SidecarError::Core(spiv_core::Error::PlaneSize { .. }))
     ));
     assert_eq!(sc.sent().planes, 0, "a refused plane is not counted");
-    // An Mc frame without a predicted motion is refused when it is due.
-    let mut cfg = Config::new(4, 2);
-    cfg.method = Method::Mc;
-    cfg.params.n_max = 8;
-    let mut buf = SidecarBuf::<u16>::new(W, H, &cfg).unwrap();
-    let mut mem = buf.memory(0).unwrap();
-    let mut sc = Sidecar::new::<()>(W, H, cfg).unwrap();
-    let refused = planes(10).iter().find_map(|p| {
-        sc.push_plane(&mut mem, p, &mut Bytes(Vec::new()), &mut ())
-            .err()
-    });
-    assert!(
-        matches!(
-            refused,
-            Some(SidecarError::Core(spiv_core::Error::BufferTooSmall { .. }))
-        ),
-        "{refused:?}"
-    );
+}
+
+#[test]
+fn an_mc_sidecar_that_heard_no_motion_sends_its_bootstrap_frames() {
+    let planes = planes(120);
+    for bootstrap in [Method::Tfp, Method::Adaptive] {
+        let mut cfg = Config::new(40, 9);
+        cfg.method = Method::Mc;
+        cfg.bootstrap = bootstrap;
+        cfg.params.n_max = 48;
+        cfg.schedule.pairs = Some(2);
+        let mut buf = SidecarBuf::<u16>::new(W, H, &cfg).unwrap();
+        let mut mem = buf.memory(0).unwrap();
+        let mut sc = Sidecar::new::<()>(W, H, cfg).unwrap();
+        let (mut link, mut kept) = (Bytes(Vec::new()), Kept::default());
+        for p in &planes {
+            sc.push_plane(&mut mem, p, &mut link, &mut kept).unwrap();
+        }
+        assert_eq!(kept.0.len(), 4);
+        for (slot, frame) in &kept.0 {
+            assert!(frame == &direct(bootstrap, &cfg, &planes, slot.tick));
+        }
+        let (methods, _) = methods_and_status(&link.0);
+        assert_eq!(methods, [bootstrap; 4]);
+    }
 }
 
 #[test]
@@ -240,4 +280,211 @@ fn an_unknown_method_code_is_a_malformed_frame_end() {
     assert_eq!(FrameEnd::parse(&b), Ok(end));
     b[5] = 4;
     assert_eq!(FrameEnd::parse(&b), Err(WireError::Payload));
+}
+
+/// The frame ends' methods and the last status of a message stream.
+fn methods_and_status(bytes: &[u8]) -> (Vec<Method>, Option<spiv_core::wire::Status>) {
+    let mut rx = vec![0u8; MAX_ENCODED];
+    let mut dec = Decoder::new(&mut rx);
+    let mut input = bytes;
+    let (mut methods, mut status) = (Vec::new(), None);
+    while let Some(m) = dec.feed(&mut input) {
+        let m = m.unwrap();
+        match m.header.kind {
+            Kind::FrameEnd => methods.push(FrameEnd::parse(m.payload).unwrap().method),
+            Kind::Status => status = Some(spiv_core::wire::Status::parse(m.payload).unwrap()),
+            _ => {}
+        }
+    }
+    (methods, status)
+}
+
+/// What [`run_heard`] returns: the configuration, the frames as sent, the
+/// wire bytes and the downlink's counts.
+type Heard = (
+    Config,
+    Vec<(Slot, Vec<u16>)>,
+    Vec<u8>,
+    spiv_core::downlink::DownlinkStats,
+);
+
+/// An Mc sidecar over `planes`, 4 pairs; `talk(plane index, pair due)`
+/// returns downlink bytes to hear before that plane.
+fn run_heard(planes: &[Vec<u8>], mut talk: impl FnMut(usize, Option<u32>) -> Vec<u8>) -> Heard {
+    let mut cfg = Config::new(40, 9);
+    cfg.method = Method::Mc;
+    cfg.params.n_max = 48;
+    cfg.schedule.every = 30;
+    cfg.schedule.pairs = Some(4);
+    let mut buf = SidecarBuf::<u16>::new(W, H, &cfg).unwrap();
+    let mut sc = Sidecar::new::<()>(W, H, cfg).unwrap();
+    let (mut link, mut kept) = (Bytes(Vec::new()), Kept::default());
+    for (i, p) in planes.iter().enumerate() {
+        if sc.done() {
+            break;
+        }
+        let bytes = talk(i, sc.pair_due());
+        sc.hear(&mut buf.downlink(), &bytes);
+        let mut mem = buf.memory(sc.next_tick()).unwrap();
+        sc.push_plane(&mut mem, p, &mut link, &mut kept).unwrap();
+    }
+    let mut mem = buf.memory(sc.next_tick()).unwrap();
+    sc.finish(&mut mem.send, &mut link).unwrap();
+    (cfg, kept.0, link.0, sc.downlink())
+}
+
+#[test]
+fn a_control_applies_from_its_pair_and_both_frames_of_a_pair_share_it() {
+    let planes = planes(200);
+    let zero = vec![0i16; usize::from(H)];
+    // Heard at plane 0 for pair 2, and again (newer) between the frames of
+    // pair 2 (made when planes 123 and 132 arrive): that one waits for
+    // pair 3.
+    let (cfg, sent, bytes, dl) = run_heard(&planes, |i, _| match i {
+        0 => control(2, 0, 0, (&mc_velocity(), &zero), &[], (W, H)),
+        128 => control(2, 1, 0, (&zero, &zero), &[], (W, H)),
+        _ => Vec::new(),
+    });
+    let (methods, status) = methods_and_status(&bytes);
+    use Method::{Mc, Tfp as T};
+    assert_eq!(methods, [T, T, T, T, Mc, Mc, Mc, Mc]);
+    for (slot, frame) in &sent {
+        let method = if slot.pair >= 2 { Mc } else { T };
+        let want = if slot.pair == 3 {
+            // Pair 3 uses the second control: zero motion.
+            let mut words = vec![0u64; History::words_needed(W, H, 255).unwrap()];
+            let mut hist = History::new(&mut words, W, H, 0, H, 255).unwrap();
+            for p in &planes[..=(slot.tick as usize + 24)] {
+                hist.push(&PlaneView::new(p, W, H).unwrap()).unwrap();
+            }
+            let mut ws = WorkspaceBuf::new(spiv_core::WorkspaceSizes::for_motion(W, H));
+            let m = spiv_core::motion::Motion {
+                vx: &zero,
+                vy: &zero,
+            };
+            let mut out = vec![0u16; PX];
+            spiv_core::reconstruct_compensated(
+                &hist,
+                slot.tick,
+                &cfg.params,
+                &mut ws.workspace().unwrap(),
+                (0, H),
+                &m,
+                &mut out,
+            )
+            .unwrap();
+            out
+        } else {
+            direct(method, &cfg, &planes, slot.tick)
+        };
+        assert!(frame == &want, "pair {} member {}", slot.pair, slot.member);
+    }
+    assert_eq!((dl.heard, dl.applied, dl.refused), (2, 2, 0));
+    let status = status.unwrap();
+    assert_eq!((status.controls_applied, status.controls_refused), (2, 0));
+}
+
+#[test]
+fn corrupted_malformed_foreign_and_stale_controls_are_counted_never_applied() {
+    let planes = planes(200);
+    let zero = vec![0i16; usize::from(H)];
+    let good = control(1, 0, 0, (&mc_velocity(), &zero), &[], (W, H));
+    let mut flipped = good.clone();
+    flipped[20] ^= 0x10;
+    let foreign = control(0, 1, 0, (&mc_velocity(), &zero), &[], (W + 8, H));
+    let too_long = control(0, 2, 200, (&mc_velocity(), &zero), &[], (W, H));
+    let too_many_caps = control(0, 3, 0, (&[], &[]), &[8; 5], (W, H));
+    let stale = control(0, 4, 0, (&mc_velocity(), &zero), &[], (W, H));
+    let (_, _, bytes, dl) = run_heard(&planes, |i, _| match i {
+        0 => [
+            flipped.clone(),
+            foreign.clone(),
+            too_long.clone(),
+            too_many_caps.clone(),
+        ]
+        .concat(),
+        1 => vec![0x55; 40], // noise, then its delimiter
+        2 => vec![0],
+        3 => good.clone(),
+        4 => stale.clone(),
+        _ => Vec::new(),
+    });
+    let (methods, status) = methods_and_status(&bytes);
+    use Method::{Mc, Tfp as T};
+    assert_eq!(methods, [T, T, Mc, Mc, Mc, Mc, Mc, Mc]);
+    assert_eq!((dl.heard, dl.applied, dl.refused), (1, 1, 6));
+    assert_eq!(status.unwrap().controls_refused, 6);
+}
+
+#[test]
+fn caps_and_a_lower_n_max_from_the_host_make_the_adaptive_frame() {
+    let planes = planes(200);
+    let mut cfg = Config::new(40, 9);
+    cfg.params.n_max = 48;
+    cfg.schedule.pairs = Some(1);
+    for (n_max, caps) in [(0u16, vec![8u16]), (20, vec![])] {
+        let mut buf = SidecarBuf::<u16>::new(W, H, &cfg).unwrap();
+        let mut sc = Sidecar::new::<()>(W, H, cfg).unwrap();
+        sc.hear(
+            &mut buf.downlink(),
+            &control(0, 0, n_max, (&[], &[]), &caps, (W, H)),
+        );
+        let mut mem = buf.memory(0).unwrap();
+        let (mut link, mut kept) = (Bytes(Vec::new()), Kept::default());
+        for p in &planes {
+            if sc.done() {
+                break;
+            }
+            sc.push_plane(&mut mem, p, &mut link, &mut kept).unwrap();
+        }
+        let mut q = cfg.params;
+        if n_max > 0 {
+            q.n_max = n_max;
+            q.n0 = q.n0.min(n_max);
+        }
+        for (slot, frame) in &kept.0 {
+            let mut words = vec![0u64; History::words_needed(W, H, 255).unwrap()];
+            let mut hist = History::new(&mut words, W, H, 0, H, 255).unwrap();
+            for p in &planes[..=(slot.tick as usize + 24)] {
+                hist.push(&PlaneView::new(p, W, H).unwrap()).unwrap();
+            }
+            let mut ws = WorkspaceBuf::whole(W, H);
+            let mut want = vec![0u16; PX];
+            spiv_core::sidecar::capped_frame(
+                &hist,
+                slot.tick,
+                &q,
+                &caps,
+                &mut ws.workspace().unwrap(),
+                &mut want,
+            )
+            .unwrap();
+            assert!(frame == &want, "n_max {n_max} caps {caps:?}");
+            let plain = direct(Method::Adaptive, &cfg, &planes, slot.tick);
+            assert!(frame != &plain, "the control changed nothing");
+        }
+    }
+}
+
+proptest::proptest! {
+    /// Any bytes on the downlink, in any chunking: never a panic, and a
+    /// valid control after them is still heard.
+    #[test]
+    fn the_downlink_takes_any_bytes(
+        junk in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..600),
+        cut in 1usize..64,
+    ) {
+        let cfg = Config::new(40, 9);
+        let mut buf = SidecarBuf::<u16>::new(W, H, &cfg).unwrap();
+        let mut sc = Sidecar::new::<()>(W, H, cfg).unwrap();
+        let zero = vec![0i16; usize::from(H)];
+        let good = control(0, 9, 0, (&mc_velocity(), &zero), &[4], (W, H));
+        let mut stream = junk.clone();
+        stream.push(0);
+        stream.extend_from_slice(&good);
+        for part in stream.chunks(cut) {
+            sc.hear(&mut buf.downlink(), part);
+        }
+        proptest::prop_assert!(sc.downlink().heard >= 1);
+    }
 }

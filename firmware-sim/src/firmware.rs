@@ -10,8 +10,11 @@
 //! strip workspace would send each strip as it is done).
 
 use spiv_core::buffers::SidecarBuf;
+use spiv_core::downlink::DownlinkStats;
 use spiv_core::sidecar::{Probe, Sidecar, SidecarError};
+use spiv_core::wire::control::{control_header, encode_control, ControlHead, MAX_NODES};
 use spiv_core::wire::sender::Slot;
+use spiv_core::wire::{encode_message, WireError};
 
 pub use spiv_core::sidecar::{capped_frame, Config, CAP_BAND};
 
@@ -143,18 +146,26 @@ impl<L: Link> Firmware<L> {
         })
     }
 
-    /// Sets the adaptive window limit per band of [`CAP_BAND`] upright rows
-    /// (top first, the camera's stored rows being bottom-up); empty: `n_max`
-    /// everywhere. The host computes them and would send them down the
-    /// control endpoint.
-    pub fn set_caps(&mut self, caps: Vec<u16>) {
-        self.buf.caps = caps;
+    /// Takes bytes from the downlink (control messages from the host, any
+    /// chunking): a valid control applies from the start of its pair,
+    /// anything else is counted and dropped (`spiv_core::downlink`).
+    pub fn hear(&mut self, bytes: &[u8]) {
+        self.sidecar.hear(&mut self.buf.downlink(), bytes);
     }
 
-    /// Sets the predicted velocity of each stored row (1/256 px per tick)
-    /// for `Mc` frames — what the host would send down the control link.
-    pub fn set_motion(&mut self, vx: Vec<i16>, vy: Vec<i16>) {
-        self.buf.motion = (vx, vy);
+    /// What the downlink heard so far.
+    pub fn downlink(&self) -> DownlinkStats {
+        self.sidecar.downlink()
+    }
+
+    /// The pair whose first frame the next plane completes, if it does.
+    pub fn pair_due(&self) -> Option<u32> {
+        self.sidecar.pair_due()
+    }
+
+    /// Pushes out what the link holds.
+    pub fn flush(&mut self) -> Result<(), FirmwareError> {
+        Ok(self.link.flush()?)
     }
 
     /// Rows per tile message.
@@ -290,6 +301,11 @@ impl<L: Link> Faulty<L> {
         self.inner
     }
 
+    /// The link underneath, to take what it holds.
+    pub fn inner_mut(&mut self) -> &mut L {
+        &mut self.inner
+    }
+
     fn hit(&mut self, p: f64) -> bool {
         use rand::Rng;
         p > 0.0 && self.rng.gen::<f64>() < p
@@ -353,11 +369,13 @@ pub enum DriveError {
 /// from the sensor into the loop (never stored). `req.ticks` is set from
 /// the schedule when `cfg.schedule.pairs` is given. Returns the firmware (its
 /// counters, link and kept frames) and the simulation (truth, frame camera).
+/// With a `downlink`, the firmware hears the host between planes.
 pub fn run_on_scene<L: Link>(
     req: &crate::simulation::Request,
     cfg: Config,
     link: L,
     keep: bool,
+    mut downlink: Option<&mut crate::downlink::ControlStream>,
     progress: impl FnMut(u32, u32),
 ) -> Result<(Firmware<L>, crate::simulation::Simulated), DriveError> {
     let mut req = req.clone();
@@ -373,7 +391,11 @@ pub fn run_on_scene<L: Link>(
         if failed.is_some() || fw.done() {
             return Ok(());
         }
-        if let Err(e) = fw.push_plane(plane) {
+        let heard = match downlink.as_deref_mut() {
+            Some(d) => d.before_plane(&mut fw),
+            None => Ok(()),
+        };
+        if let Err(e) = heard.and_then(|()| fw.push_plane(plane)) {
             failed = Some(e);
         }
         Ok(())
@@ -385,7 +407,9 @@ pub fn run_on_scene<L: Link>(
     Ok((fw, sim))
 }
 
-/// Runs the firmware on a `.dat` file, plane by plane.
+/// Runs the firmware on a `.dat` file, plane by plane (hearing the host
+/// between planes when given a `downlink`).
+#[allow(clippy::too_many_arguments)]
 pub fn run_on_dat<L: Link>(
     path: &std::path::Path,
     width: u16,
@@ -394,6 +418,7 @@ pub fn run_on_dat<L: Link>(
     cfg: Config,
     link: L,
     keep: bool,
+    mut downlink: Option<&mut crate::downlink::ControlStream>,
 ) -> Result<Firmware<L>, DriveError> {
     let mut r = spiv_formats::dat::DatReader::open(path, width, height, opts)?;
     let mut fw = Firmware::new(r.width(), r.height(), cfg, link)?;
@@ -402,20 +427,64 @@ pub fn run_on_dat<L: Link>(
     }
     let mut plane = vec![0u8; r.out_plane_bytes()];
     while !fw.done() && r.read_plane(&mut plane)? {
+        if let Some(d) = downlink.as_deref_mut() {
+            d.before_plane(&mut fw)?;
+        }
         fw.push_plane(&plane)?;
     }
     fw.finish()?;
     Ok(fw)
 }
 
-/// What the host tells the sidecar — what the control link will carry
-/// (issue 14): window caps per band and the predicted motion per row.
+/// What the host tells the sidecar down the control link
+/// (`spiv_core::wire::control`): window caps per band, the predicted motion
+/// per row and a lower window limit.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct Control {
-    /// Adaptive window limit per band (see [`Firmware::set_caps`]).
+    /// Adaptive window limit per band of [`CAP_BAND`] upright rows (top
+    /// first, the camera's stored rows being bottom-up); empty: `n_max`
+    /// everywhere.
     pub caps: Vec<u16>,
-    /// `Mc` frames: x and y velocity of each stored row, 1/256 px per tick.
+    /// `Mc` frames: x and y velocity of each stored row, 1/256 px per tick
+    /// (empty: none).
     pub motion: (Vec<i16>, Vec<i16>),
+    /// Window limit, ticks; 0: the sidecar's own.
+    pub n_max: u16,
+}
+
+impl Control {
+    /// True when it tells nothing.
+    pub fn is_empty(&self) -> bool {
+        self.caps.is_empty() && self.motion.0.is_empty() && self.n_max == 0
+    }
+
+    /// The framed control message `seq` for a `width × height` sensor,
+    /// applying from pair `from_pair`. Rows beyond [`MAX_NODES`] are sent
+    /// as every `⌈rows / MAX_NODES⌉`-th row (the sidecar interpolates).
+    pub fn message(
+        &self,
+        from_pair: u32,
+        seq: u32,
+        width: u16,
+        height: u16,
+    ) -> Result<Vec<u8>, WireError> {
+        let (vx, vy) = &self.motion;
+        let rows = vx.len().min(vy.len());
+        let pitch = rows.div_ceil(MAX_NODES).max(1);
+        let nx: Vec<i16> = vx.iter().take(rows).step_by(pitch).copied().collect();
+        let ny: Vec<i16> = vy.iter().take(rows).step_by(pitch).copied().collect();
+        let head = ControlHead {
+            from_pair,
+            n_max: self.n_max,
+            pitch: u16::try_from(pitch).map_err(|_| WireError::Payload)?,
+        };
+        let mut payload = vec![0u8; spiv_core::wire::control::MAX_CONTROL_PAYLOAD];
+        let n = encode_control(&head, &nx, &ny, &self.caps, &mut payload)?;
+        let mut out = vec![0u8; spiv_core::wire::control::MAX_CONTROL_ENCODED];
+        let m = encode_message(&control_header(seq, width, height), &payload[..n], &mut out)?;
+        out.truncate(m);
+        Ok(out)
+    }
 }
 
 /// Runs the firmware on planes held in memory (back to back, stored row
@@ -430,8 +499,9 @@ pub fn run_on_planes<L: Link>(
     keep: bool,
 ) -> Result<Firmware<L>, FirmwareError> {
     let mut fw = Firmware::new(width, height, cfg, link)?;
-    fw.set_caps(control.caps);
-    fw.set_motion(control.motion.0, control.motion.1);
+    if !control.is_empty() {
+        fw.hear(&control.message(0, 0, width, height)?);
+    }
     if keep {
         fw.keep = Some(Vec::new());
     }

@@ -6,6 +6,7 @@
 //! | [`sensor`] | the integrate-and-fire spike sensor and the frame camera |
 //! | [`simulation`] | one scene through both cameras, in memory or as files (`spiv simulate`) |
 //! | [`meta`] | `scene.json` of a simulated recording: the layout (`spiv_formats::capture`) and the scene that made it |
+//! | [`downlink`] | the host's control bytes, read on a thread with faults injected, heard between planes; optional pacing |
 //! | [`firmware`] | the simulated sidecar: the core's loop (`spiv_core::sidecar`) over owned buffers, its links, fault injection and drivers |
 //! | [`cli`] | what the two binaries share on the command line |
 //!
@@ -14,6 +15,7 @@
 #![warn(missing_docs)]
 
 pub mod cli;
+pub mod downlink;
 pub mod firmware;
 pub mod meta;
 pub mod scene;

@@ -2,6 +2,8 @@
 //! simulated sensor (`--scene`) or a `.dat` file (`--input`) go through
 //! spiv-core's firmware loop; framed messages go to stdout, a file, or a
 //! loopback TCP socket it listens on; faults can be injected on the way.
+//! Control messages from the host (predicted motion, window caps) come back
+//! on the TCP connection or from `--control` (a file, a FIFO or stdin).
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -10,6 +12,7 @@ use std::time::Instant;
 use clap::Parser;
 use spiv_core::wire::{frame_crc, Encoding, CRC};
 use spiv_core::Method;
+use spiv_firmware_sim::downlink::ControlStream;
 use spiv_firmware_sim::firmware::{
     run_on_dat, run_on_scene, Config, Counters, DriveError, Faults, Faulty, Plain,
 };
@@ -75,9 +78,27 @@ struct Args {
     /// sample above background) over this, so dim particles stay exact; 0: off.
     #[arg(long, default_value_t = 4)]
     contrast: u16,
-    /// Frame method: adaptive, tfp or tfi (mc needs a prediction downlink).
+    /// Frame method: adaptive, tfp, tfi or mc (motion-compensated: needs
+    /// the host's predicted motion over the downlink — `--tcp` or
+    /// `--control` — and sends the paper's adaptive frames until it has one).
     #[arg(long, default_value = "adaptive")]
     method: String,
+    /// mc: how frames are made until the host's first motion arrives: tfp
+    /// (8 ticks; default) or adaptive (the paper's).
+    #[arg(long, default_value = "tfp")]
+    bootstrap: String,
+    /// Read the host's control messages from this file or FIFO (`-`:
+    /// stdin). With `--tcp` they come back on the connection.
+    #[arg(long, value_name = "PATH", conflicts_with = "tcp")]
+    control: Option<PathBuf>,
+    /// Before each pair after the first, wait up to MS milliseconds for the
+    /// host's answer to the previous pair (a simulation runs faster than
+    /// the host's PIV; a real sensor never waits). 0: never wait.
+    #[arg(long, value_name = "MS", default_value_t = 0)]
+    control_wait: u64,
+    /// Faults per control message on the downlink (as --fault).
+    #[arg(long, value_name = "SPEC")]
+    control_fault: Option<String>,
     /// Adaptive/TFI window limit n_max, or the TFP window, ticks.
     #[arg(long)]
     window: Option<u16>,
@@ -143,14 +164,21 @@ fn config(a: &Args, dt: u32) -> Result<Config, Error> {
     let mut cfg = Config::new(0, dt);
     cfg.method = Method::from_name(&a.method).ok_or_else(|| {
         Error::Usage(format!(
-            "unknown --method {} (adaptive, tfp, tfi)",
+            "unknown --method {} (adaptive, tfp, tfi, mc)",
             a.method
         ))
     })?;
     if cfg.method == Method::Mc {
-        return Err(Error::Usage(
-            "--method mc: the sidecar needs the host's predicted motion, and the wire has no downlink for it yet (spiv flow and spiv run make mc frames in the host)".into(),
-        ));
+        cfg.refine = Some(spiv_core::motion::Refine::default());
+        cfg.bootstrap = match a.bootstrap.as_str() {
+            "tfp" => Method::Tfp,
+            "adaptive" => Method::Adaptive,
+            b => {
+                return Err(Error::Usage(format!(
+                    "unknown --bootstrap {b} (tfp, adaptive)"
+                )))
+            }
+        };
     }
     match (cfg.method, a.window) {
         (Method::Tfp, Some(n)) => cfg.tfp_window = n,
@@ -186,12 +214,38 @@ fn config(a: &Args, dt: u32) -> Result<Config, Error> {
     Ok(cfg)
 }
 
-/// Where messages go: stdout, a file or the first TCP client.
-fn open_link(a: &Args, shared: &Shared) -> Result<Box<dyn Write>, Error> {
+/// Where messages go: stdout, a file or the first TCP client; and where
+/// the host's control messages come from, if anywhere.
+fn open_link(a: &Args, shared: &Shared) -> Result<(Box<dyn Write>, Option<ControlStream>), Error> {
     if a.checksum {
-        return Ok(Box::new(shared.clone()));
+        return Ok((Box::new(shared.clone()), None));
     }
-    Ok(match (&a.tcp, &a.out) {
+    let faults = match &a.control_fault {
+        Some(f) => Faults::parse(f).map_err(|e| Error::Usage(format!("--control-fault: {e}")))?,
+        None => Faults::default(),
+    };
+    let paced = |c: ControlStream| match a.control_wait {
+        0 => c,
+        ms => c.wait(std::time::Duration::from_millis(ms)),
+    };
+    let seed = a.seed ^ 0x00d0_117e;
+    let mut control = match &a.control {
+        Some(p) if p.as_os_str() == "-" => Some(paced(ControlStream::spawn(
+            || Ok(std::io::stdin()),
+            faults,
+            seed,
+        ))),
+        Some(p) => {
+            let p = p.clone();
+            Some(paced(ControlStream::spawn(
+                move || std::fs::File::open(p),
+                faults,
+                seed,
+            )))
+        }
+        None => None,
+    };
+    let link: Box<dyn Write> = match (&a.tcp, &a.out) {
         (Some(addr), _) => {
             let l = std::net::TcpListener::bind(addr)
                 .map_err(|e| Error::Usage(format!("--tcp {addr}: cannot listen ({e})")))?;
@@ -202,6 +256,8 @@ fn open_link(a: &Args, shared: &Shared) -> Result<Box<dyn Write>, Error> {
             if !a.quiet {
                 eprintln!("spiv-firmware-sim: host {peer} connected");
             }
+            let back = s.try_clone()?;
+            control = Some(paced(ControlStream::spawn(move || Ok(back), faults, seed)));
             Box::new(std::io::BufWriter::with_capacity(1 << 16, s))
         }
         (None, Some(p)) => Box::new(std::io::BufWriter::new(
@@ -212,7 +268,8 @@ fn open_link(a: &Args, shared: &Shared) -> Result<Box<dyn Write>, Error> {
             1 << 16,
             std::io::stdout().lock(),
         )),
-    })
+    };
+    Ok((link, control))
 }
 
 fn run(a: &Args) -> Result<(), Error> {
@@ -223,6 +280,12 @@ fn run(a: &Args) -> Result<(), Error> {
     let t0 = Instant::now();
     let shared = Shared::default();
     let kept;
+    let heard;
+    if a.method == "mc" && a.tcp.is_none() && a.control.is_none() && !a.quiet && !a.checksum {
+        eprintln!(
+            "spiv-firmware-sim: --method mc without a downlink (--tcp or --control): the paper's adaptive frames"
+        );
+    }
     let (counters, width, height, fault_counts) = if let Some(name) = &a.scene {
         let kind = SceneKind::parse(name).map_err(|e| Error::Usage(e.to_string()))?;
         let mut p = SceneParams::new(kind);
@@ -244,10 +307,12 @@ fn run(a: &Args) -> Result<(), Error> {
         let mut cfg = config(a, p.pair_dt)?;
         cfg.schedule.pairs = Some(a.pairs.unwrap_or(4).max(1));
         let req = Request::new(p, a.seed);
-        let link = Faulty::new(Plain(open_link(a, &shared)?), faults, a.seed);
-        let (mut fw, _) = run_on_scene(&req, cfg, link, a.checksum, |_, _| {})?;
+        let (out, mut control) = open_link(a, &shared)?;
+        let link = Faulty::new(Plain(out), faults, a.seed);
+        let (mut fw, _) = run_on_scene(&req, cfg, link, a.checksum, control.as_mut(), |_, _| {})?;
         kept = fw.keep.take().unwrap_or_default();
         let c = fw.counters();
+        heard = (fw.downlink(), control);
         let fc = fw.into_link().counts;
         (c, w, h, fc)
     } else {
@@ -272,10 +337,13 @@ fn run(a: &Args) -> Result<(), Error> {
             a.dt.or_else(|| meta.as_ref().map(|m| m.pair[1].saturating_sub(m.pair[0])))
                 .unwrap_or(13);
         let cfg = config(a, dt)?;
-        let link = Faulty::new(Plain(open_link(a, &shared)?), faults, a.seed);
-        let mut fw = run_on_dat(path, w, h, DatOptions::default(), cfg, link, a.checksum)?;
+        let (out, mut control) = open_link(a, &shared)?;
+        let link = Faulty::new(Plain(out), faults, a.seed);
+        let opts = DatOptions::default();
+        let mut fw = run_on_dat(path, w, h, opts, cfg, link, a.checksum, control.as_mut())?;
         kept = fw.keep.take().unwrap_or_default();
         let c = fw.counters();
+        heard = (fw.downlink(), control);
         let fc = fw.into_link().counts;
         (c, w, h, fc)
     };
@@ -298,6 +366,24 @@ fn run(a: &Args) -> Result<(), Error> {
                 fault_counts.truncated,
                 fault_counts.stalled,
                 fault_counts.reordered
+            );
+        }
+        if let (d, Some(c)) = &heard {
+            let f = c.fault_counts();
+            eprintln!(
+                "spiv-firmware-sim: downlink: {} controls heard, {} applied, {} refused; {} pairs began without an answer{}",
+                d.heard,
+                d.applied,
+                d.refused,
+                c.timeouts,
+                if f == Default::default() {
+                    String::new()
+                } else {
+                    format!(
+                        "; faults: {} dropped, {} corrupted, {} truncated, {} reordered",
+                        f.dropped, f.corrupted, f.truncated, f.reordered
+                    )
+                }
             );
         }
     }

@@ -3,6 +3,7 @@
 //! | module | owns |
 //! |---|---|
 //! | [`receive`] | byte sources (USB, TCP, pipe, file), the stream decoder, frame reassembly within a size limit, pairing, loss counts |
+//! | [`downlink`] | the host's end of the control link: each received pair's PIV as the next pair's predicted motion |
 //! | [`link`] | the sidecar link in process: the firmware loop's messages through the receiver |
 //! | [`reconstruct`] | frames from spike files (`.dat`, `.npz`) through the core: TFP, TFI, adaptive |
 //! | [`reference`](mod@reference) | the `f64` reference of the core's algorithm, and its tolerance |
@@ -19,6 +20,7 @@
 #![warn(missing_docs)]
 
 pub mod bench;
+pub mod downlink;
 pub mod dwell;
 pub mod flow;
 pub mod link;

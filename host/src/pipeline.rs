@@ -220,8 +220,8 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
     let tfp = up(&tfp_t, "TFP")?;
     let adaptive = up(&ad_t, "adaptive")?;
     // Motion-compensated: the TFP pair's PIV predicts each row's velocity
-    // (as `spiv flow` does), handed to the sidecar as the control link will
-    // carry it; the sidecar refines it from the spikes and sends the pair.
+    // (as `spiv flow` does), sent to the sidecar as a control message on its
+    // downlink; the sidecar refines it from the spikes and sends the pair.
     // Without a usable field, the adaptive pair.
     let (wu, hu) = (usize::from(w), usize::from(h));
     let dt_ticks = f64::from(kb - ka);
@@ -240,8 +240,8 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
             ..base
         };
         let control = Control {
-            caps: Vec::new(),
             motion: row_velocities(&pred, h, true, dt_ticks),
+            ..Control::default()
         };
         let t = transfer_with(&data, w, h, cfg, control)?;
         (up(&t, "motion-compensated")?, Some(t))

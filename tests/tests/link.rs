@@ -61,8 +61,15 @@ fn in_process(pairs: u32, seed: u64) -> BTreeMap<(u32, u8), SentFrame> {
     cfg.schedule.first = u32::from(WINDOW / 2);
     cfg.schedule.every = 4 * p.pair_dt;
     cfg.schedule.pairs = Some(pairs);
-    let (mut fw, _) =
-        run_on_scene(&Request::new(p, seed), cfg, Vec::new(), true, |_, _| {}).expect("firmware");
+    let (mut fw, _) = run_on_scene(
+        &Request::new(p, seed),
+        cfg,
+        Vec::new(),
+        true,
+        None,
+        |_, _| {},
+    )
+    .expect("firmware");
     let sent = fw.keep.take().expect("kept frames");
     assert_eq!(sent.len(), 2 * pairs as usize, "two frames per pair");
     sent.into_iter().map(|f| ((f.pair, f.member), f)).collect()

@@ -64,7 +64,9 @@ impl FrameEnd {
     }
 }
 
-/// Payload of [`super::Kind::Status`] (24 bytes): the firmware's counters.
+/// Payload of [`super::Kind::Status`] (32 bytes): the firmware's counters.
+/// A 24-byte status (firmware from before the downlink) still parses, its
+/// control counts 0.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Status {
@@ -78,11 +80,18 @@ pub struct Status {
     pub dropped_planes: u32,
     /// Bytes sent before this message.
     pub bytes: u64,
+    /// Control messages from the host that took effect.
+    pub controls_applied: u32,
+    /// Chunks on the downlink that were refused: corrupted, malformed, for
+    /// another sensor size, or older than one already heard.
+    pub controls_refused: u32,
 }
 
 impl Status {
     /// Payload bytes.
-    pub const LEN: usize = 24;
+    pub const LEN: usize = 32;
+    /// Payload bytes of a status without the control counts.
+    pub const LEN_V0: usize = 24;
 
     /// The payload.
     pub fn to_bytes(&self) -> [u8; Self::LEN] {
@@ -92,13 +101,20 @@ impl Status {
         b[8..12].copy_from_slice(&self.messages.to_le_bytes());
         b[12..16].copy_from_slice(&self.dropped_planes.to_le_bytes());
         b[16..24].copy_from_slice(&self.bytes.to_le_bytes());
+        b[24..28].copy_from_slice(&self.controls_applied.to_le_bytes());
+        b[28..32].copy_from_slice(&self.controls_refused.to_le_bytes());
         b
     }
 
-    /// Parses a payload.
+    /// Parses a payload of [`Status::LEN`] or [`Status::LEN_V0`] bytes.
     pub fn parse(b: &[u8]) -> Result<Status, WireError> {
-        let b: &[u8; Self::LEN] = b.try_into().map_err(|_| WireError::Payload)?;
-        let u32_at = |i: usize| u32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
+        if b.len() != Self::LEN && b.len() != Self::LEN_V0 {
+            return Err(WireError::Payload);
+        }
+        let u32_at = |i: usize| match b.get(i..i + 4) {
+            Some(s) => u32::from_le_bytes([s[0], s[1], s[2], s[3]]),
+            None => 0,
+        };
         let mut bytes = [0u8; 8];
         bytes.copy_from_slice(&b[16..24]);
         Ok(Status {
@@ -107,6 +123,8 @@ impl Status {
             messages: u32_at(8),
             dropped_planes: u32_at(12),
             bytes: u64::from_le_bytes(bytes),
+            controls_applied: u32_at(24),
+            controls_refused: u32_at(28),
         })
     }
 }

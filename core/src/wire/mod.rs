@@ -11,7 +11,9 @@
 //! All integers little-endian. A message carries a band of rows of one frame
 //! ([`Kind::FrameTile`]), the end of a frame with its pairing and checksum
 //! ([`Kind::FrameEnd`], payload [`FrameEnd`]), or the firmware's counters
-//! ([`Kind::Status`], payload [`Status`]). Payloads are at most
+//! ([`Kind::Status`], payload [`Status`]) up the link, and what the host
+//! tells the sidecar ([`Kind::Control`], payload [`control::ControlView`])
+//! down it. Payloads are at most
 //! [`MAX_PAYLOAD`] = 16 KiB, so a device needs one message buffer of
 //! [`MAX_MESSAGE`] bytes and one COBS buffer of [`MAX_ENCODED`] bytes.
 //!
@@ -26,10 +28,12 @@
 //! | [`header`] | the 30-byte message header |
 //! | [`stream`] | COBS framing with CRC, and the stream decoder |
 //! | [`message`] | the frame-end and status payloads, the frame checksum |
+//! | [`control`] | the downlink's control payload: predicted motion, window caps |
 //! | [`codec`] | tile codecs: raw, lossless Rice, lossy sparse |
 //! | [`sender`] | the pair schedule and the messages that carry a frame |
 
 pub mod codec;
+pub mod control;
 pub mod header;
 pub mod message;
 pub mod sender;
@@ -37,7 +41,7 @@ pub mod stream;
 
 pub use header::Header;
 pub use message::{frame_crc, FrameEnd, Status};
-pub use stream::{encode_message, Decoder, DecoderStats, Message};
+pub use stream::{encode_message, Decoder, DecoderState, DecoderStats, Message};
 
 use crc::{Crc, CRC_32_ISO_HDLC};
 
@@ -70,6 +74,9 @@ pub enum Kind {
     FrameEnd = 2,
     /// The firmware's counters; payload [`Status`].
     Status = 3,
+    /// Host to sidecar: predicted motion and window caps; payload
+    /// [`control::ControlView`].
+    Control = 4,
 }
 
 impl Kind {
@@ -78,6 +85,7 @@ impl Kind {
             1 => Some(Kind::FrameTile),
             2 => Some(Kind::FrameEnd),
             3 => Some(Kind::Status),
+            4 => Some(Kind::Control),
             _ => None,
         }
     }
@@ -257,7 +265,13 @@ mod tests {
             messages: 3,
             dropped_planes: 4,
             bytes: 1 << 40,
+            controls_applied: 5,
+            controls_refused: 6,
         };
         assert_eq!(Status::parse(&s.to_bytes()), Ok(s));
+        // A status from before the downlink: no control counts.
+        let old = Status::parse(&s.to_bytes()[..Status::LEN_V0]).unwrap();
+        assert_eq!((old.bytes, old.controls_applied), (1 << 40, 0));
+        assert!(Status::parse(&s.to_bytes()[..28]).is_err());
     }
 }

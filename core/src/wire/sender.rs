@@ -156,6 +156,11 @@ pub struct Sent {
     pub bytes: u64,
     /// Tiles per encoding actually used: raw8, raw16, rice, sparse.
     pub tiles: [u32; 4],
+    /// Control messages that took effect (the caller counts them; status
+    /// reports them).
+    pub controls_applied: u32,
+    /// Downlink chunks refused (the caller counts them).
+    pub controls_refused: u32,
 }
 
 /// The sender: message sequence numbers, frame ids and counts. It holds no
@@ -281,6 +286,8 @@ impl Sender {
             messages: self.sent.messages.wrapping_add(1),
             dropped_planes: 0,
             bytes: self.sent.bytes,
+            controls_applied: self.sent.controls_applied,
+            controls_refused: self.sent.controls_refused,
         };
         let h = self.header(Kind::Status, 0, 0, 0, 0, Encoding::None);
         let m = encode_message(&h, &s.to_bytes(), buf.wire)?;

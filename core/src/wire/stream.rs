@@ -61,6 +61,15 @@ pub struct DecoderStats {
 #[derive(Debug)]
 pub struct Decoder<'b> {
     buf: &'b mut [u8],
+    state: DecoderState,
+}
+
+/// Where a [`Decoder`] stands, without its buffer: a caller that borrows
+/// the receive buffer only for each call (the sidecar's downlink) keeps
+/// this between calls.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct DecoderState {
     len: usize,
     overflow: bool,
     next_seq: Option<u32>,
@@ -70,24 +79,34 @@ pub struct Decoder<'b> {
 impl<'b> Decoder<'b> {
     /// A decoder receiving into `buf`.
     pub fn new(buf: &'b mut [u8]) -> Self {
-        Decoder {
-            buf,
-            len: 0,
-            overflow: false,
-            next_seq: None,
-            stats: DecoderStats::default(),
+        Decoder::resume(buf, DecoderState::default())
+    }
+
+    /// A decoder that goes on from `state` with `buf` holding the bytes of
+    /// the message it had begun (a buffer shorter than those bytes drops
+    /// that message as an overflow).
+    pub fn resume(buf: &'b mut [u8], mut state: DecoderState) -> Self {
+        if state.len > buf.len() {
+            state.len = 0;
+            state.overflow = true;
         }
+        Decoder { buf, state }
+    }
+
+    /// Where it stands (for [`Decoder::resume`]).
+    pub fn state(&self) -> DecoderState {
+        self.state
     }
 
     /// The counts so far.
     pub fn stats(&self) -> DecoderStats {
-        self.stats
+        self.state.stats
     }
 
     /// Bytes held of a message not yet delimited (a truncated tail at the
     /// end of a stream shows here).
     pub fn pending(&self) -> usize {
-        self.len
+        self.state.len
     }
 
     /// Consumes `input` up to and including the next delimiter that closes
@@ -97,38 +116,41 @@ impl<'b> Decoder<'b> {
         loop {
             let Some(pos) = input.iter().position(|&b| b == 0) else {
                 self.take(input);
-                self.stats.bytes += input.len() as u64;
+                self.state.stats.bytes += input.len() as u64;
                 *input = &[];
                 return None;
             };
             let (body, rest) = input.split_at(pos);
             self.take(body);
-            self.stats.bytes += pos as u64 + 1;
+            self.state.stats.bytes += pos as u64 + 1;
             *input = &rest[1..];
-            if self.overflow {
-                self.overflow = false;
-                self.len = 0;
-                self.stats.overflow += 1;
+            if self.state.overflow {
+                self.state.overflow = false;
+                self.state.len = 0;
+                self.state.stats.overflow += 1;
                 return Some(Err(WireError::Overflow));
             }
-            if self.len == 0 {
+            if self.state.len == 0 {
                 continue;
             }
-            let len = core::mem::take(&mut self.len);
+            let len = core::mem::take(&mut self.state.len);
             return Some(self.check(len));
         }
     }
 
     fn take(&mut self, bytes: &[u8]) {
-        if self.overflow {
+        if self.state.overflow {
             return;
         }
-        match self.buf.get_mut(self.len..self.len + bytes.len()) {
+        match self
+            .buf
+            .get_mut(self.state.len..self.state.len + bytes.len())
+        {
             Some(dst) => {
                 dst.copy_from_slice(bytes);
-                self.len += bytes.len();
+                self.state.len += bytes.len();
             }
-            None => self.overflow = true,
+            None => self.state.overflow = true,
         }
     }
 
@@ -137,23 +159,23 @@ impl<'b> Decoder<'b> {
         let (header, n) = match r {
             Ok(v) => v,
             Err(e) => {
-                self.stats.corrupt += 1;
+                self.state.stats.corrupt += 1;
                 return Err(e);
             }
         };
-        self.stats.messages += 1;
-        match self.next_seq {
+        self.state.stats.messages += 1;
+        match self.state.next_seq {
             Some(next) if header.seq != next => {
                 let gap = header.seq.wrapping_sub(next);
                 if gap < 1 << 31 {
-                    self.stats.lost += u64::from(gap);
-                    self.next_seq = Some(header.seq.wrapping_add(1));
+                    self.state.stats.lost += u64::from(gap);
+                    self.state.next_seq = Some(header.seq.wrapping_add(1));
                 } else {
-                    self.stats.late += 1;
-                    self.stats.lost = self.stats.lost.saturating_sub(1);
+                    self.state.stats.late += 1;
+                    self.state.stats.lost = self.state.stats.lost.saturating_sub(1);
                 }
             }
-            _ => self.next_seq = Some(header.seq.wrapping_add(1)),
+            _ => self.state.next_seq = Some(header.seq.wrapping_add(1)),
         }
         let payload = &self.buf[HEADER_LEN..HEADER_LEN + n];
         Ok(Message { header, payload })

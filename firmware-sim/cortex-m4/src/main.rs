@@ -253,8 +253,7 @@ fn run() -> Result<(), Failure> {
             wire: &mut ram.wire,
             scratch: &mut [],
         },
-        caps: &[],
-        motion: spiv_core::motion::Motion { vx: &[], vy: &[] },
+        downlink: spiv_core::downlink::DownlinkBuffers::none(),
         refine: spiv_core::sidecar::RefineBuffers::none(),
     };
     let mut link = CrcLink {

@@ -30,6 +30,9 @@ pub enum CliError {
     /// Receiving from a sidecar.
     #[error(transparent)]
     Source(#[from] spiv_host::receive::SourceError),
+    /// Talking back to it.
+    #[error(transparent)]
+    Downlink(#[from] spiv_host::downlink::DownlinkError),
     /// A bad option value.
     #[error("{0}")]
     Usage(String),

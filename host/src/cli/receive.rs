@@ -1,4 +1,4 @@
-//! `spiv receive (--usb [VID:PID] | --tcp ADDR | --pipe | --file PATH) [--out DIR] [--piv]`
+//! `spiv receive (--usb [VID:PID] | --tcp ADDR | --pipe | --file PATH) [--out DIR] [--piv [--control [PATH]]]`
 
 use std::path::PathBuf;
 
@@ -6,6 +6,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use spiv_formats::image::write_levels;
 use spiv_formats::vectors::write_vectors;
+use spiv_host::downlink::{control_for, Downlink};
 use spiv_host::link::{receiver_settings, upright_f32};
 use spiv_host::piv::piv;
 use spiv_host::receive::source::{open, parse_vid_pid};
@@ -35,6 +36,12 @@ pub struct ReceiveArgs {
     /// Run PIV on every pair received.
     #[arg(long)]
     piv: bool,
+    /// After each pair, send the sidecar the motion its PIV measured, for
+    /// motion-compensated frames from the next pair on: back on the TCP
+    /// connection or the USB OUT endpoint, or into PATH (a file or FIFO
+    /// that `spiv-firmware-sim --control` reads) for --pipe and --file.
+    #[arg(long, num_args = 0..=1, value_name = "PATH", requires = "piv")]
+    control: Option<Option<PathBuf>>,
     /// PIV window side of each pass, px.
     #[arg(long, value_delimiter = ',', default_value = "64,32,32")]
     windows: Vec<usize>,
@@ -60,6 +67,30 @@ pub fn run(a: &ReceiveArgs) -> Result<(), CliError> {
         Spec::Pipe
     };
     let mut source = open(&spec).map_err(|e| CliError::Usage(e.to_string()))?;
+    let mut downlink = match &a.control {
+        None => None,
+        Some(Some(path)) => {
+            let f = std::fs::OpenOptions::new()
+                .write(true)
+                .create(true)
+                .truncate(true)
+                .open(path)
+                .map_err(|e| CliError::Usage(format!("--control {}: {e}", path.display())))?;
+            Some(Downlink::new(Box::new(f)))
+        }
+        Some(None) => match source.downlink() {
+            Some(out) => Some(Downlink::new(
+                out.map_err(|e| CliError::Usage(e.to_string()))?,
+            )),
+            None => {
+                return Err(CliError::Usage(format!(
+                    "--control: {} has no way back to the sidecar; give --control PATH",
+                    source.name()
+                )))
+            }
+        },
+    };
+    let core = spiv_core::Params::default();
     if let Some(d) = &a.out {
         std::fs::create_dir_all(d).map_err(|e| CliError::Usage(format!("{}: {e}", d.display())))?;
     }
@@ -87,6 +118,9 @@ pub fn run(a: &ReceiveArgs) -> Result<(), CliError> {
                         let field = piv(&upright_f32(fa), &upright_f32(fb), None, &settings)?;
                         let v = field.vectors();
                         vectors += v.len();
+                        if let Some(d) = downlink.as_mut() {
+                            d.send(&pair, &control_for(&pair, &v, None, &core))?;
+                        }
                         if let Some(d) = &a.out {
                             write_vectors(&d.join(format!("vectors_{:05}.csv", fa.end.pair)), &v)?;
                         }
@@ -105,10 +139,14 @@ pub fn run(a: &ReceiveArgs) -> Result<(), CliError> {
     )?;
     bar.finish_and_clear();
     if a.json {
-        println!(
-            "{}",
-            serde_json::to_string_pretty(&report).unwrap_or_default()
-        );
+        let mut v = serde_json::to_value(report).unwrap_or_default();
+        if let (Some(d), Some(m)) = (&downlink, v.as_object_mut()) {
+            m.insert(
+                "downlink".into(),
+                serde_json::to_value(d.report).unwrap_or_default(),
+            );
+        }
+        println!("{}", serde_json::to_string_pretty(&v).unwrap_or_default());
     } else {
         println!(
             "received {} frames ({} pairs{}), {} bytes, {} messages; lost {} frames ({} messages, {} broken pairs); corrupted {}{}",
@@ -131,6 +169,19 @@ pub fn run(a: &ReceiveArgs) -> Result<(), CliError> {
                 String::new()
             }
         );
+        if let Some(d) = &downlink {
+            let r = d.report;
+            println!(
+                "sent {} controls ({} with motion){}",
+                r.sent,
+                r.with_motion,
+                if r.failed > 0 {
+                    format!("; {} refused by the link", r.failed)
+                } else {
+                    String::new()
+                }
+            );
+        }
     }
     if report.bytes > 0 && report.messages == 0 {
         return Err(CliError::Usage(

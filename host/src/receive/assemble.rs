@@ -157,6 +157,11 @@ impl Assembler {
             self.last_status = Status::parse(m.payload).ok();
             return None;
         }
+        if h.kind == Kind::Control {
+            // A downlink message has no business on the uplink.
+            self.stats.rejected += 1;
+            return None;
+        }
         let id = h.frame_id;
         // Frames never seen between the highest so far and this one are lost.
         match self.highest {
@@ -222,7 +227,7 @@ impl Assembler {
                 Ok(e) => p.end = Some(e),
                 Err(_) => return self.reject(id),
             },
-            Kind::Status => return None,
+            Kind::Status | Kind::Control => return None,
         }
         self.try_complete(id)
     }

@@ -1,6 +1,9 @@
 //! Where the sidecar's bytes come from, behind one trait: a stdin pipe, a
 //! TCP connection to a listening sidecar, a file of recorded messages, or a
-//! USB device's bulk IN endpoint (rusb against the system libusb).
+//! USB device's bulk IN endpoint (rusb against the system libusb). A TCP
+//! connection and a USB device also carry the downlink back
+//! ([`Source::downlink`]: the connection's other direction, the bulk OUT
+//! endpoint).
 
 use std::io::Read;
 use std::net::TcpStream;
@@ -32,6 +35,11 @@ pub trait Source {
     fn read(&mut self, buf: &mut [u8]) -> Result<usize, SourceError>;
     /// A short name for messages.
     fn name(&self) -> String;
+    /// Where control messages to the sidecar go on this link, if it has a
+    /// way back (TCP, USB); `None` for pipes and files.
+    fn downlink(&self) -> Option<Result<Box<dyn std::io::Write + Send>, SourceError>> {
+        None
+    }
 }
 
 /// Any `Read` (stdin, a file, a TCP stream).
@@ -39,6 +47,7 @@ pub trait Source {
 pub struct Reader<R: Read> {
     inner: R,
     name: String,
+    back: Option<TcpStream>,
 }
 
 impl<R: Read> Source for Reader<R> {
@@ -59,6 +68,17 @@ impl<R: Read> Source for Reader<R> {
     fn name(&self) -> String {
         self.name.clone()
     }
+    fn downlink(&self) -> Option<Result<Box<dyn std::io::Write + Send>, SourceError>> {
+        let s = self.back.as_ref()?;
+        Some(
+            s.try_clone()
+                .map(|s| Box::new(s) as Box<dyn std::io::Write + Send>)
+                .map_err(|source| SourceError::Io {
+                    what: self.name.clone(),
+                    source,
+                }),
+        )
+    }
 }
 
 /// Standard input.
@@ -66,6 +86,7 @@ pub fn pipe() -> Reader<std::io::Stdin> {
     Reader {
         inner: std::io::stdin(),
         name: "pipe".into(),
+        back: None,
     }
 }
 
@@ -76,7 +97,11 @@ pub fn file(path: &Path) -> Result<Reader<std::fs::File>, SourceError> {
         what: name.clone(),
         source,
     })?;
-    Ok(Reader { inner: f, name })
+    Ok(Reader {
+        inner: f,
+        name,
+        back: None,
+    })
 }
 
 /// Connects to a sidecar listening at `addr`, retrying for up to `wait`
@@ -86,10 +111,16 @@ pub fn tcp(addr: &str, wait: Duration) -> Result<Reader<TcpStream>, SourceError>
     loop {
         match TcpStream::connect(addr) {
             Ok(s) => {
+                let name = format!("tcp {addr}");
+                let back = s.try_clone().map_err(|source| SourceError::Io {
+                    what: name.clone(),
+                    source,
+                })?;
                 return Ok(Reader {
                     inner: s,
-                    name: format!("tcp {addr}"),
-                })
+                    name,
+                    back: Some(back),
+                });
             }
             Err(e) if t0.elapsed() < wait => {
                 let _ = e;
@@ -114,6 +145,8 @@ pub const USB_PID: u16 = 0xcafe;
 pub const USB_INTERFACE: u8 = 0;
 /// Bulk IN endpoint address.
 pub const USB_EP_IN: u8 = 0x81;
+/// Bulk OUT endpoint address (the downlink).
+pub const USB_EP_OUT: u8 = 0x01;
 
 /// Parses `VID:PID` in hex.
 pub fn parse_vid_pid(s: &str) -> Result<(u16, u16), SourceError> {
@@ -127,8 +160,22 @@ pub fn parse_vid_pid(s: &str) -> Result<(u16, u16), SourceError> {
 
 /// A sidecar on USB: bulk IN reads into buffers of whole 512-byte packets.
 pub struct Usb {
-    handle: rusb::DeviceHandle<rusb::Context>,
+    handle: std::sync::Arc<rusb::DeviceHandle<rusb::Context>>,
     name: String,
+}
+
+/// The bulk OUT endpoint as a writer (the downlink on USB).
+struct UsbOut(std::sync::Arc<rusb::DeviceHandle<rusb::Context>>);
+
+impl std::io::Write for UsbOut {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.0
+            .write_bulk(USB_EP_OUT, buf, Duration::from_secs(1))
+            .map_err(|e| std::io::Error::other(format!("usb bulk OUT: {e}")))
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
 }
 
 impl std::fmt::Debug for Usb {
@@ -156,7 +203,7 @@ impl Usb {
         let _ = handle.set_auto_detach_kernel_driver(true);
         handle.claim_interface(USB_INTERFACE).map_err(usb)?;
         Ok(Usb {
-            handle,
+            handle: std::sync::Arc::new(handle),
             name: format!("usb {vid:04x}:{pid:04x}"),
         })
     }
@@ -180,6 +227,9 @@ impl Source for Usb {
     }
     fn name(&self) -> String {
         self.name.clone()
+    }
+    fn downlink(&self) -> Option<Result<Box<dyn std::io::Write + Send>, SourceError>> {
+        Some(Ok(Box::new(UsbOut(self.handle.clone()))))
     }
 }
 

@@ -1,0 +1,119 @@
+//! The host's end of the downlink: after each received pair, a control
+//! message back to the sidecar (`spiv_core::wire::control`) with the motion
+//! that pair's PIV measured, as a velocity per stored row, for the sidecar's
+//! motion-compensated frames from the next pair on — and, optionally, the
+//! dwell caps of its adaptive frames. Time-resolved: the field of pair `p`
+//! predicts pair `p + 1`, and the sidecar refines it from its own spikes.
+//!
+//! A field with fewer than half its vectors measured predicts nothing: the
+//! control then carries no motion and the sidecar goes back to the paper's
+//! adaptive frames until a usable field comes.
+
+use std::io::Write;
+
+use spiv_core::Params;
+use spiv_firmware_sim::firmware::Control;
+use spiv_formats::vectors::Vector;
+
+use crate::predict::row_velocities;
+use crate::receive::ReceivedFrame;
+
+/// Errors of the downlink.
+#[derive(Debug, thiserror::Error)]
+pub enum DownlinkError {
+    /// Framing (a control that does not fit a message).
+    #[error("control: {0}")]
+    Wire(#[from] spiv_core::wire::WireError),
+}
+
+/// What the host sent.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+pub struct DownlinkReport {
+    /// Controls written.
+    pub sent: u64,
+    /// Of those, carrying a motion.
+    pub with_motion: u64,
+    /// Controls the link refused to take (the sidecar gone, no OUT
+    /// endpoint); not retried.
+    pub failed: u64,
+}
+
+/// The control for the pair after `pair`, from its PIV `field` (upright,
+/// px per pair): row velocities when at least half the field was measured,
+/// caps per band when `dwell_budget` (px of blur) is given.
+pub fn control_for(
+    pair: &[ReceivedFrame; 2],
+    field: &[Vector],
+    dwell_budget: Option<f64>,
+    core: &Params,
+) -> Control {
+    let a = &pair[0];
+    let dt = f64::from(a.end.dt.max(1));
+    let measured = field.iter().filter(|v| v.state.is_measured()).count();
+    let motion = if measured > 0 && 2 * measured >= field.len() {
+        row_velocities(field, a.height, true, dt)
+    } else {
+        (Vec::new(), Vec::new())
+    };
+    let caps = match dwell_budget {
+        Some(b) => crate::dwell::band_caps(field, usize::from(a.height), dt, b, core),
+        None => Vec::new(),
+    };
+    Control {
+        caps,
+        motion,
+        n_max: 0,
+    }
+}
+
+/// Writes controls to the sidecar.
+pub struct Downlink {
+    out: Box<dyn Write + Send>,
+    seq: u32,
+    /// What was sent.
+    pub report: DownlinkReport,
+}
+
+impl std::fmt::Debug for Downlink {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Downlink")
+            .field("seq", &self.seq)
+            .field("report", &self.report)
+            .finish()
+    }
+}
+
+impl Downlink {
+    /// Controls into `out` (a TCP stream, a USB OUT endpoint, a file or
+    /// FIFO).
+    pub fn new(out: Box<dyn Write + Send>) -> Self {
+        Downlink {
+            out,
+            seq: 0,
+            report: DownlinkReport::default(),
+        }
+    }
+
+    /// Sends `control` for the pairs after `pair` (a frame of it gives the
+    /// sensor size). A link that refuses is counted, not fatal: the
+    /// sidecar runs on without the prediction.
+    pub fn send(
+        &mut self,
+        pair: &[ReceivedFrame; 2],
+        control: &Control,
+    ) -> Result<(), DownlinkError> {
+        let a = &pair[0];
+        let m = control.message(a.end.pair.wrapping_add(1), self.seq, a.width, a.height)?;
+        self.seq = self.seq.wrapping_add(1);
+        match self.out.write_all(&m).and_then(|()| self.out.flush()) {
+            Ok(()) => {
+                self.report.sent += 1;
+                if !control.motion.0.is_empty() {
+                    self.report.with_motion += 1;
+                }
+            }
+            Err(_) => self.report.failed += 1,
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,206 @@
+//! The closed loop over the control link, as a user runs it:
+//! `spiv-firmware-sim --method mc` sends TFP pairs until it hears a motion,
+//! `spiv receive --piv --control` answers each pair with the motion its PIV
+//! measured, and the sidecar's motion-compensated pairs measure the flow
+//! better than the TFP pair it started from — over a loopback TCP socket
+//! (the connection's other direction) and over a pipe with a FIFO back,
+//! with faults injected on both directions.
+//!
+//! Bounds (paper-linear seed 2, rows outside the glare, y ≥ 50 px): the
+//! mean RMAE of the motion-compensated pairs is about 0.01 and the TFP
+//! bootstrap's 0.03; the test asks for less than 0.02 and for the
+//! compensated pairs to beat the bootstrap, so a sidecar that never applied
+//! the prediction fails it.
+
+use std::io::{BufRead, BufReader, Read};
+use std::path::Path;
+use std::process::{Command, Stdio};
+
+use spiv_firmware_sim::scene::{Scene, SceneKind, SceneParams};
+use spiv_formats::vectors::read_vectors;
+use spiv_host::metrics::{region_error, row_profile};
+use spiv_tests::command;
+
+const SEED: u64 = 2;
+const PAIRS: u32 = 5;
+
+fn sim_args(extra: &[&str]) -> Vec<String> {
+    let mut a: Vec<String> = [
+        "--scene",
+        "paper-linear",
+        "--method",
+        "mc",
+        "--pairs",
+        &PAIRS.to_string(),
+        "--seed",
+        &SEED.to_string(),
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    a.extend(extra.iter().map(|s| s.to_string()));
+    a
+}
+
+/// Other-row RMAE of each pair's vectors in `dir` against the scene's
+/// truth, by pair number.
+fn errors(dir: &Path) -> Vec<(u32, f64)> {
+    let p = SceneParams::new(SceneKind::PaperLinear);
+    let (h, dt) = (f64::from(p.height), f64::from(p.pair_dt));
+    let scene = Scene::new(p, SEED, 1000);
+    let mut out = Vec::new();
+    for pair in 0..PAIRS {
+        let path = dir.join(format!("vectors_{pair:05}.csv"));
+        let Ok(field) = read_vectors(&path) else {
+            continue;
+        };
+        let points: Vec<(f64, f64)> = field.iter().map(|v| (v.x, v.y)).collect();
+        let truth = scene.truth_vectors(&points, dt);
+        let rows = row_profile(&field, &truth, h);
+        out.push((pair, region_error(&rows, |y| y >= 50.0).rmae));
+    }
+    out
+}
+
+/// The firmware's downlink line: (heard, applied, refused).
+fn downlink_line(stderr: &str) -> (u32, u32, u32) {
+    let line = stderr
+        .lines()
+        .find_map(|l| l.strip_prefix("spiv-firmware-sim: downlink: "))
+        .unwrap_or_else(|| panic!("no downlink line in: {stderr}"));
+    let n: Vec<u32> = line
+        .split(|c: char| !c.is_ascii_digit())
+        .filter_map(|t| t.parse().ok())
+        .collect();
+    (n[0], n[1], n[2])
+}
+
+fn json(stdout: &[u8]) -> serde_json::Value {
+    serde_json::from_slice(stdout).unwrap_or_else(|e| {
+        panic!(
+            "spiv receive --json: {e}: {}",
+            String::from_utf8_lossy(stdout)
+        )
+    })
+}
+
+/// The bootstrap pair against the compensated ones.
+fn assert_compensation_helps(dir: &Path) {
+    let e = errors(dir);
+    let boot = e.iter().find(|(p, _)| *p == 0).expect("pair 0 received").1;
+    let mc: Vec<f64> = e.iter().filter(|(p, _)| *p > 0).map(|e| e.1).collect();
+    assert!(mc.len() >= 2, "compensated pairs received: {e:?}");
+    let mean = mc.iter().sum::<f64>() / mc.len() as f64;
+    assert!(
+        mean < 0.02 && mean < boot,
+        "compensated other-row RMAE {mean:.4} (each {mc:?}) against the TFP bootstrap's {boot:.4}"
+    );
+}
+
+#[test]
+fn closed_loop_over_tcp_compensates_every_pair_after_the_first() {
+    let out = tempfile::tempdir().expect("tempdir");
+    let mut sim = command("spiv-firmware-sim")
+        .args(sim_args(&[
+            "--tcp",
+            "127.0.0.1:0",
+            "--control-wait",
+            "30000",
+        ]))
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn spiv-firmware-sim");
+    let mut err = BufReader::new(sim.stderr.take().expect("stderr"));
+    let mut line = String::new();
+    err.read_line(&mut line).expect("listening line");
+    let addr = line
+        .trim()
+        .strip_prefix("spiv-firmware-sim: listening on ")
+        .unwrap_or_else(|| panic!("no listening line: {line}"))
+        .to_string();
+    let rx = command("spiv")
+        .args(["receive", "--tcp", &addr, "--piv", "--control", "--json"])
+        .arg("--out")
+        .arg(out.path())
+        .output()
+        .expect("spawn spiv receive");
+    let mut rest = String::new();
+    err.read_to_string(&mut rest).expect("stderr");
+    assert!(sim.wait().expect("wait").success(), "firmware-sim: {rest}");
+    assert!(
+        rx.status.success(),
+        "spiv receive: {}",
+        String::from_utf8_lossy(&rx.stderr)
+    );
+    let report = json(&rx.stdout);
+    assert_eq!(report["pairs"], PAIRS);
+    assert_eq!(report["downlink"]["with_motion"], PAIRS, "{report}");
+    // Every pair after the first ran on the previous pair's motion.
+    let (heard, applied, refused) = downlink_line(&rest);
+    assert_eq!((applied, refused), (PAIRS - 1, 0), "{rest}");
+    assert!(heard >= applied);
+    assert!(rest.contains("0 pairs began without an answer"), "{rest}");
+    assert_compensation_helps(out.path());
+}
+
+#[test]
+fn closed_loop_over_a_pipe_and_a_fifo_survives_faults_both_ways() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let fifo = dir.path().join("control");
+    let made = Command::new("mkfifo").arg(&fifo).status().expect("mkfifo");
+    assert!(made.success());
+    let out = dir.path().join("rx");
+    let fifo_s = fifo.to_str().expect("utf-8");
+    let mut sim = command("spiv-firmware-sim")
+        .args(sim_args(&[
+            "--control",
+            fifo_s,
+            "--control-wait",
+            "3000",
+            "--control-fault",
+            "corrupt=0.4",
+            "--fault",
+            "reorder=0.1,stall=0.05",
+        ]))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn spiv-firmware-sim");
+    let up = sim.stdout.take().expect("stdout");
+    let rx = command("spiv")
+        .args(["receive", "--pipe", "--piv", "--json", "--control", fifo_s])
+        .arg("--out")
+        .arg(&out)
+        .stdin(up)
+        .output()
+        .expect("spawn spiv receive");
+    let sim = sim.wait_with_output().expect("firmware-sim");
+    let err = String::from_utf8_lossy(&sim.stderr);
+    assert!(sim.status.success(), "firmware-sim: {err}");
+    assert!(
+        rx.status.success(),
+        "spiv receive: {}",
+        String::from_utf8_lossy(&rx.stderr)
+    );
+    let report = json(&rx.stdout);
+    let (heard, applied, refused) = downlink_line(&err);
+    let corrupted: u32 = err
+        .split("faults: ")
+        .last()
+        .and_then(|t| t.split(" corrupted").next())
+        .and_then(|t| t.rsplit(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or(0);
+    // Corrupted controls are refused, counted, never applied; the rest are.
+    assert!(corrupted > 0 && refused >= 1, "{err}");
+    assert!(applied >= 1 && applied <= heard, "{err}");
+    assert!(
+        u64::from(heard + refused) <= report["downlink"]["sent"].as_u64().unwrap_or(0) + 1,
+        "{err} {report}"
+    );
+    // Frames hit on the way up are counted lost, never delivered wrong.
+    let frames = report["frames"].as_u64().unwrap_or(0);
+    let lost = report["lost_frames"].as_u64().unwrap_or(0);
+    assert_eq!(frames + lost, 2 * u64::from(PAIRS), "{report}");
+}
