@@ -37,8 +37,9 @@ parity=$(grep '^planes=' <<<"$run")
 get() { sed -n "s/.*\b$1=\([0-9a-f]*\).*/\1/p" <<<"$parity"; }
 planes=$(get planes); frames=$(get frames); bytes=$(get bytes)
 px=$((128 * 64))
-# The final status message: 58 bytes, 59 after COBS, plus the delimiter.
-frame_bytes=$((bytes - 60))
+# The final status message: 66 bytes (header, 32-byte status, CRC), 67
+# after COBS, plus the delimiter.
+frame_bytes=$((bytes - 68))
 
 fifo=$(mktemp -u)
 mkfifo "$fifo"
