@@ -15,7 +15,7 @@ use spiv_core::Params;
 use spiv_firmware_sim::firmware::Control;
 use spiv_formats::vectors::Vector;
 
-use crate::predict::row_velocities;
+use crate::predict::{predicts, row_velocities};
 use crate::receive::ReceivedFrame;
 
 /// Errors of the downlink.
@@ -49,8 +49,7 @@ pub fn control_for(
 ) -> Control {
     let a = &pair[0];
     let dt = f64::from(a.end.dt.max(1));
-    let measured = field.iter().filter(|v| v.state.is_measured()).count();
-    let motion = if measured > 0 && 2 * measured >= field.len() {
+    let motion = if !field.is_empty() && predicts(field) {
         row_velocities(field, a.height, true, dt)
     } else {
         (Vec::new(), Vec::new())

@@ -344,8 +344,7 @@ pub fn run_flow(
                 // TFP prediction exact enough outside them.
                 let [a, b] = frames(rec, Method::Tfp, BOOTSTRAP_WINDOW)?;
                 let pred = field(&a, &b)?;
-                let measured = pred.iter().filter(|v| v.state.is_measured()).count();
-                if 2 * measured < pred.len() {
+                if !crate::predict::predicts(&pred) {
                     // No flow to predict from (a TFP pair too dark or too
                     // noisy for PIV): compensating a guess would move static
                     // light into "particles". The plain adaptive frames,

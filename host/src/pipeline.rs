@@ -232,8 +232,7 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
         &job.piv,
     )?
     .vectors();
-    let measured = pred.iter().filter(|v| v.state.is_measured()).count();
-    let (mc, mc_t) = if 2 * measured >= pred.len() {
+    let (mc, mc_t) = if crate::predict::predicts(&pred) {
         let cfg = Config {
             method: Method::Mc,
             refine: Some(Refine::default()),

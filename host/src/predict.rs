@@ -14,6 +14,14 @@ use crate::reconstruct::{Planes, ReconstructError};
 /// Velocities per stored row, 1/256 px per tick: `(vx, vy)`.
 pub type RowVelocities = (Vec<i16>, Vec<i16>);
 
+/// True when at least half of `field` was measured: the one rule for
+/// whether a PIV field can predict motion-compensated frames (below it,
+/// compensating a guess would move static light into "particles").
+pub fn predicts(field: &[Vector]) -> bool {
+    let measured = field.iter().filter(|v| v.state.is_measured()).count();
+    2 * measured >= field.len()
+}
+
 /// The velocity of every stored row of an `h`-row frame from an upright
 /// `field` measured over `dt` ticks: the mean of each grid row's measured
 /// vectors, linear between grid rows and constant beyond the outer ones;

@@ -1,8 +1,9 @@
 //! End-to-end tests live in `tests/`; this library holds what they share:
 //! finding the workspace's binaries and running them.
 
+use std::io::{BufRead, BufReader};
 use std::path::PathBuf;
-use std::process::{Command, Output};
+use std::process::{Child, ChildStderr, Command, Output, Stdio};
 
 /// The path of a workspace binary (`spiv`, `spiv-firmware-sim`) built by the
 /// same `cargo test` run: it sits in the profile directory two levels above
@@ -29,6 +30,30 @@ pub fn binary(name: &str) -> PathBuf {
 /// A command for a workspace binary.
 pub fn command(name: &str) -> Command {
     Command::new(binary(name))
+}
+
+/// Starts `spiv-firmware-sim` with `args` (which include `--tcp HOST:0`)
+/// and waits for its listening line: the child, the rest of its stderr,
+/// and the address the OS gave it.
+///
+/// # Panics
+/// When it does not start or prints no listening line.
+pub fn listening_sidecar(args: &[String]) -> (Child, BufReader<ChildStderr>, String) {
+    let mut sim = command("spiv-firmware-sim")
+        .args(args)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn spiv-firmware-sim");
+    let mut err = BufReader::new(sim.stderr.take().expect("stderr"));
+    let mut line = String::new();
+    err.read_line(&mut line).expect("read listening line");
+    let addr = line
+        .trim()
+        .strip_prefix("spiv-firmware-sim: listening on ")
+        .unwrap_or_else(|| panic!("no listening line: {line}"))
+        .to_string();
+    (sim, err, addr)
 }
 
 /// Runs `name args` to its end and returns its output.

@@ -13,14 +13,14 @@
 //! prediction fails it. (The glare rows drift in this time-resolved loop:
 //! README, "The control link".)
 
-use std::io::{BufRead, BufReader, Read};
+use std::io::Read;
 use std::path::Path;
 use std::process::{Command, Stdio};
 
 use spiv_firmware_sim::scene::{Scene, SceneKind, SceneParams};
 use spiv_formats::vectors::read_vectors;
 use spiv_host::metrics::{region_error, row_profile};
-use spiv_tests::command;
+use spiv_tests::{command, listening_sidecar};
 
 const SEED: u64 = 2;
 const PAIRS: u32 = 5;
@@ -101,25 +101,12 @@ fn assert_compensation_helps(dir: &Path) {
 #[test]
 fn closed_loop_over_tcp_compensates_every_pair_after_the_first() {
     let out = tempfile::tempdir().expect("tempdir");
-    let mut sim = command("spiv-firmware-sim")
-        .args(sim_args(&[
-            "--tcp",
-            "127.0.0.1:0",
-            "--control-wait",
-            "30000",
-        ]))
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn spiv-firmware-sim");
-    let mut err = BufReader::new(sim.stderr.take().expect("stderr"));
-    let mut line = String::new();
-    err.read_line(&mut line).expect("listening line");
-    let addr = line
-        .trim()
-        .strip_prefix("spiv-firmware-sim: listening on ")
-        .unwrap_or_else(|| panic!("no listening line: {line}"))
-        .to_string();
+    let (mut sim, mut err, addr) = listening_sidecar(&sim_args(&[
+        "--tcp",
+        "127.0.0.1:0",
+        "--control-wait",
+        "30000",
+    ]));
     let rx = command("spiv")
         .args(["receive", "--tcp", &addr, "--piv", "--control", "--json"])
         .arg("--out")

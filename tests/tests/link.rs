@@ -6,7 +6,7 @@
 //! equal PIV run in process on the in-process frames.
 
 use std::collections::BTreeMap;
-use std::io::{BufRead, BufReader};
+
 use std::path::Path;
 use std::process::Stdio;
 
@@ -19,7 +19,7 @@ use spiv_formats::vectors::write_vectors;
 use spiv_host::link::receiver_settings;
 use spiv_host::piv::piv;
 use spiv_host::reconstruct::upright;
-use spiv_tests::{command, run};
+use spiv_tests::{command, listening_sidecar, run};
 
 /// The paper's camera (paper-linear at its own size).
 const W: u16 = 400;
@@ -238,21 +238,9 @@ fn loopback_tcp_delivers_every_frame_bit_exact() {
     let sent = in_process(pairs, SEED);
     let out = tempfile::tempdir().expect("tempdir");
     // Port 0: the OS picks a free port and firmware-sim prints it.
-    let mut sim = command("spiv-firmware-sim")
-        .args(sim_args(pairs, SEED))
-        .args(["--tcp", "127.0.0.1:0"])
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn spiv-firmware-sim");
-    let mut err = BufReader::new(sim.stderr.take().expect("stderr"));
-    let mut line = String::new();
-    err.read_line(&mut line).expect("read listening line");
-    let addr = line
-        .trim()
-        .strip_prefix("spiv-firmware-sim: listening on ")
-        .unwrap_or_else(|| panic!("no listening line: {line}"))
-        .to_string();
+    let mut args = sim_args(pairs, SEED);
+    args.extend(["--tcp".to_string(), "127.0.0.1:0".to_string()]);
+    let (mut sim, mut err, addr) = listening_sidecar(&args);
     let rx = command("spiv")
         .args(["receive", "--tcp", &addr])
         .args(receive_args(out.path()))
