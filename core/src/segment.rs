@@ -15,8 +15,9 @@
 //! Memory: the workspace's per-pixel bytes; one 512-byte histogram on the stack.
 
 use crate::history::History;
-use crate::motion::add_compensated;
+use crate::motion::{add_compensated, travel, MIN_TRAVEL};
 use crate::params::Params;
+use crate::q::B_FRAC_BITS;
 use crate::state::Workspace;
 use crate::window::{add_counts, add_plane_counts, Window};
 
@@ -219,6 +220,12 @@ pub(crate) fn tile_pos(i: usize, lo: usize, hi: usize) -> (usize, usize, u32) {
 /// motion the particle test (and the tile backgrounds it compares with)
 /// runs on motion-compensated counts, kept in `ws.mc`, and saturation on
 /// the plain counts; a particle's `c_t` is then its compensated count.
+/// Compensated, a pixel's background is the larger of the tile background
+/// and its own plain count: static light (glare whose gradient the 16-px
+/// tiles cannot follow, a hot pixel) counts the same with and without
+/// compensation, while a particle piles its spikes up only along its path
+/// (on the paper's scenes this took the glare-row RMAE of `spiv bench
+/// paper` from 0.280 to 0.063 on the linear profile).
 pub(crate) fn segment(
     ctx: &crate::context::Ctx<'_, '_>,
     ws: &mut Workspace<'_>,
@@ -297,6 +304,12 @@ pub(crate) fn segment(
             } else {
                 counts
             };
+            // Compensated over a path longer than a particle, the pixel's
+            // own plain count is a floor of its background (docs above).
+            let floor = match (mc, &motion) {
+                (true, Some(m)) => travel(m.at(r), win.start, win.end(), k) >= MIN_TRAVEL,
+                _ => false,
+            };
             let class = &mut ws.class[base..base + width];
             let c_t = &mut ws.c_t[base..base + width];
             // Runs of pixels between the same two tile centres: x in [0, 8),
@@ -313,7 +326,13 @@ pub(crate) fn segment(
                 for i in x..run_end {
                     if class[i] == active {
                         let c = counts[i];
-                        let b_q10 = b as u32;
+                        // Compensated, the background is also the pixel's
+                        // own plain count: see the function's docs.
+                        let b_q10 = if floor {
+                            (b as u32).max(u32::from(c) << B_FRAC_BITS)
+                        } else {
+                            b as u32
+                        };
                         if th.is_particle(tested[i], b_q10, p) {
                             class[i] = decided_particle;
                             c_t[i] = tested[i];

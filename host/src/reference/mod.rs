@@ -261,6 +261,14 @@ fn strip_frame(
         };
         let last = j + 1 == levels.len();
         for r in 0..h {
+            // Compensated over a path of at least MIN_TRAVEL px, a particle
+            // must also stand out against the pixel's own plain count
+            // (static light gives the same count either way).
+            let floor = comp.is_some_and(|(band, vx, vy)| {
+                let v = |a: &[i16]| a.get(row0 + r).copied().unwrap_or(0);
+                motion::travel(band, k, n, (v(vx), v(vy)))
+                    >= i64::from(spiv_core::motion::MIN_TRAVEL)
+            });
             for c in 0..w {
                 let i = r * w + c;
                 if class[i].is_some() {
@@ -273,6 +281,7 @@ fn strip_frame(
                     + fy * ((1.0 - fx) * m(a1, b0) + fx * m(a1, b1));
                 let cnt = f64::from(counts[i]);
                 let tc = f64::from(tested[i]);
+                let bgd = if floor { bgd.max(cnt) } else { bgd };
                 let particle =
                     tc > bgd && (tc - bgd).powi(2) > k_sig * k_sig * count_variance(bgd, sigma, g);
                 let saturated = len > 0 && cnt / f64::from(len) >= f64::from(p.n_fs) / f64::from(n);

@@ -40,6 +40,20 @@ pub fn compensated_count(
         .count() as u32
 }
 
+/// Farthest the motion `(vx, vy)` moves a pixel within the window of `n`
+/// ticks centred on `kc`, px (largest |x| or |y| shift over its ticks; 0
+/// for an empty window).
+pub fn travel(vol: &SpikeVolume, kc: u32, n: u16, (vx, vy): (i16, i16)) -> i64 {
+    let (start, len) = vol.window(kc, n);
+    (start..start + i64::from(len))
+        .map(|t| {
+            let dt = t - i64::from(kc);
+            shift(vx, dt).abs().max(shift(vy, dt).abs())
+        })
+        .max()
+        .unwrap_or(0)
+}
+
 /// The candidates around `(vx, vy)`: the prediction; scaled by
 /// 1 ± 2 %·k (k = 1..=rel, + before −); offset by ±3k/256 px/tick in x,
 /// then in y (k = 1..=abs); each component clamped to `i16`.
