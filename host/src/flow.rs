@@ -7,7 +7,8 @@
 //!   adaptive frames. PIV of the TFP pair (window 8) at the same ticks
 //!   predicts each row's velocity, the core refines it from the spikes by
 //!   contrast maximisation, and the core counts every particle along its
-//!   path (`crate::predict`).
+//!   path (`crate::predict`); the compensated pair's own field then
+//!   predicts it once more (`predict::ROUNDS`).
 //! - `adaptive` with a dwell cap (SPEC 5): a time-resolved loop; the field
 //!   of the previous pair predicts each 32-row band's fastest particle, and
 //!   the band's adaptive window is capped so it blurs by at most the budget.
@@ -356,11 +357,23 @@ pub fn run_flow(
                     made = Method::Adaptive;
                     ([a, b], caps, true)
                 } else {
-                    let vel = row_velocities(&pred, rec.height, rec.flip, dt);
                     let mut out = [Vec::new(), Vec::new()];
-                    for (o, k) in out.iter_mut().zip([ka, kb]) {
-                        let pl = rec.around(k, core.n_max)?;
-                        *o = compensated_frame(&pl, k, &core, &vel, Some(Refine::default()))?.0;
+                    let mut pred = pred;
+                    // The TFP field, then the compensated pair's own
+                    // (`predict::ROUNDS`).
+                    for round in 0..crate::predict::ROUNDS {
+                        if round > 0 {
+                            let own = field(&out[0], &out[1])?;
+                            if !crate::predict::predicts(&own) {
+                                break;
+                            }
+                            pred = own;
+                        }
+                        let vel = row_velocities(&pred, rec.height, rec.flip, dt);
+                        for (o, k) in out.iter_mut().zip([ka, kb]) {
+                            let pl = rec.around(k, core.n_max)?;
+                            *o = compensated_frame(&pl, k, &core, &vel, Some(Refine::default()))?.0;
+                        }
                     }
                     (out, Vec::new(), true)
                 }

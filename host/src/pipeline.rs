@@ -31,6 +31,8 @@ pub struct Job {
     pub tfp_window: u16,
     /// PIV settings for all three pairs.
     pub piv: Settings,
+    /// PIV settings of the frame camera's pair.
+    pub frame_piv: Settings,
     /// Beyond the paper (SPEC 5): cap each band's adaptive window so that
     /// the fastest particle the TFP pair's PIV sees there blurs by at most
     /// this many px (`None`: the paper's algorithm, one n_max everywhere).
@@ -49,6 +51,7 @@ impl Job {
             core: Params::default(),
             tfp_window: 8,
             piv: Settings::for_spike_frames(),
+            frame_piv: Settings::for_frame_camera(),
             dwell_cap: None,
             encoding: spiv_core::wire::Encoding::Rice,
             lossy: spiv_core::wire::codec::Lossy::default(),
@@ -221,8 +224,9 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
     let adaptive = up(&ad_t, "adaptive")?;
     // Motion-compensated: the TFP pair's PIV predicts each row's velocity
     // (as `spiv flow` does), sent to the sidecar as a control message on its
-    // downlink; the sidecar refines it from the spikes and sends the pair.
-    // Without a usable field, the adaptive pair.
+    // downlink; the sidecar refines it from the spikes and sends the pair,
+    // whose own field predicts it once more. Without a usable field, the
+    // adaptive pair.
     let (wu, hu) = (usize::from(w), usize::from(h));
     let dt_ticks = f64::from(kb - ka);
     let pred = piv(
@@ -242,7 +246,21 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
             motion: row_velocities(&pred, h, true, dt_ticks),
             ..Control::default()
         };
-        let t = transfer_with(&data, w, h, cfg, control)?;
+        let mut t = transfer_with(&data, w, h, cfg, control)?;
+        // Later rounds: the compensated pair's own field predicts it again
+        // (what the live loop's previous pair does; `predict::ROUNDS`).
+        for _ in 1..crate::predict::ROUNDS {
+            let [a, b] = up(&t, "motion-compensated")?;
+            let f = piv(&to_f32(&a, wu, hu), &to_f32(&b, wu, hu), None, &job.piv)?.vectors();
+            if !crate::predict::predicts(&f) {
+                break;
+            }
+            let control = Control {
+                motion: row_velocities(&f, h, true, dt_ticks),
+                ..Control::default()
+            };
+            t = transfer_with(&data, w, h, cfg, control)?;
+        }
         (up(&t, "motion-compensated")?, Some(t))
     } else {
         (adaptive.clone(), None)
@@ -269,15 +287,28 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
     let mut measured: Vec<Measured> = Vec::new();
     for (source, pair, full_scale) in pairs {
         let t = std::time::Instant::now();
+        let settings = match source {
+            FrameKind::Frame => &job.frame_piv,
+            _ => &job.piv,
+        };
         let field = piv(
             &to_f32(&pair[0], wu, hu),
             &to_f32(&pair[1], wu, hu),
             None,
-            &job.piv,
+            settings,
         )?;
         let piv_ms = t.elapsed().as_secs_f64() * 1e3;
         let vectors = field.vectors();
-        let rows = row_profile(&vectors, &truth, f64::from(h));
+        // The truth on this field's grid (the frame camera's settings may
+        // end on another window).
+        let own_truth;
+        let truth = if settings.centres(w, h) == job.piv.centres(w, h) {
+            &truth
+        } else {
+            own_truth = sim.scene.truth_vectors(&settings.centres(w, h), dt);
+            &own_truth
+        };
+        let rows = row_profile(&vectors, truth, f64::from(h));
         let glare = region_error(&rows, |y| y < glare_limit);
         let rest = region_error(&rows, |y| y >= glare_limit);
         measured.push(Measured {

@@ -11,6 +11,18 @@ use spiv_formats::Vector;
 
 use crate::reconstruct::{Planes, ReconstructError};
 
+/// Rounds of prediction for a motion-compensated pair made offline (`spiv
+/// run`, `spiv flow`, the benches): the TFP pair at the same ticks predicts
+/// the first, the compensated pair's own field each later one. The TFP
+/// field is biased where glare hides the particles nearest the wall and
+/// noisy elsewhere; the compensated field is neither, so a second round
+/// compensates with a better velocity (`spiv bench paper`, 10 seeds, other
+/// rows, one round → two: linear 0.007 → 0.005, quadratic 0.009 → 0.007,
+/// log 0.004 → 0.004; glare rows 0.042 → 0.031, 0.093 → 0.101, 0.157 →
+/// 0.141). A third round changed nothing beyond the seeds' spread. Live,
+/// the previous pair's field plays the second round's part.
+pub const ROUNDS: usize = 2;
+
 /// Velocities per stored row, 1/256 px per tick: `(vx, vy)`.
 pub type RowVelocities = (Vec<i16>, Vec<i16>);
 

@@ -62,7 +62,14 @@ pub fn speed_against_error(mut progress: impl FnMut()) -> Result<Vec<SpeedRow>, 
         Ok((ms, region_error(&rows, |_| true).rmse))
     };
     let mut rows: Vec<SpeedRow> = Vec::new();
-    let base = job.piv.clone();
+    let base = job.frame_piv.clone();
+    let passes = |s: &Settings| {
+        let w: Vec<String> = s.windows.iter().map(|w| w.to_string()).collect();
+        w.join(",")
+    };
+    // Spike frames get their own passes (`Settings::for_spike_frames`).
+    let spike = job.piv.clone();
+    let spike_name = format!("PIV {} B-spline", passes(&spike));
     let piv_cfgs = [
         ("PIV 64,32,32 B-spline", base.clone()),
         (
@@ -106,28 +113,26 @@ pub fn speed_against_error(mut progress: impl FnMut()) -> Result<Vec<SpeedRow>, 
         (Method::Adaptive, 128),
     ] {
         let (rms, a, bb) = recon(m, n)?;
-        for (name, s) in &piv_cfgs[..1] {
-            let (ms, e) = err(&a, &bb, s)?;
-            rows.push(SpeedRow {
-                name: format!("core {m:?} n={n} (fixed point), {name}"),
-                ms: rms + ms,
-                rmse: e,
-            });
-        }
+        let (ms, e) = err(&a, &bb, &spike)?;
+        rows.push(SpeedRow {
+            name: format!("core {m:?} n={n} (fixed point), {spike_name}"),
+            ms: rms + ms,
+            rmse: e,
+        });
         progress();
     }
     // Beyond the paper: adaptive windows capped per band by the TFP field.
     for cap in [6.0, 8.0, 16.0] {
         let t = Instant::now();
         let (_, ta, tb) = recon(Method::Tfp, 8)?;
-        let tfp_field = piv(&ta, &tb, None, &piv_cfgs[0].1)?;
+        let tfp_field = piv(&ta, &tb, None, &spike)?;
         let caps = crate::dwell::band_caps(&tfp_field.vectors(), hu, dt, cap, &job.core);
         let a = crate::dwell::adaptive_banded(&planes, ka, &job.core, &caps)?;
         let bb = crate::dwell::adaptive_banded(&planes, kb, &job.core, &caps)?;
         let rec_ms = t.elapsed().as_secs_f64() * 1e3;
-        let (ms, e) = err(&to(&a), &to(&bb), &piv_cfgs[0].1)?;
+        let (ms, e) = err(&to(&a), &to(&bb), &spike)?;
         rows.push(SpeedRow {
-            name: format!("core Adaptive, dwell cap {cap} px, PIV 64,32,32 B-spline"),
+            name: format!("core Adaptive, dwell cap {cap} px, {spike_name}"),
             ms: rec_ms + ms,
             rmse: e,
         });
@@ -146,15 +151,15 @@ pub fn speed_against_error(mut progress: impl FnMut()) -> Result<Vec<SpeedRow>, 
         base.params = job.core;
         base.schedule.pairs = Some(1);
         base.encoding = enc;
-        let (caps, _) = dwell_caps(&planes.data, w, h, &base, 8, 8.0, &piv_cfgs[0].1)?;
+        let (caps, _) = dwell_caps(&planes.data, w, h, &base, 8, 8.0, &spike)?;
         let ad_t = transfer(&planes.data, w, h, base, caps)?;
         let [a, bb] = ad_t.pairs.first().ok_or(JobError::NoPair("adaptive"))?;
         let (a, bb) = (upright_f32(a), upright_f32(bb));
         let rec_ms = t.elapsed().as_secs_f64() * 1e3;
-        let (ms, e) = err(&a, &bb, &piv_cfgs[0].1)?;
+        let (ms, e) = err(&a, &bb, &spike)?;
         rows.push(SpeedRow {
             name: format!(
-                "sidecar + wire {label}, {:.0} KB/pair, dwell cap 8 px, PIV 64,32,32",
+                "sidecar + wire {label}, {:.0} KB/pair, dwell cap 8 px, {spike_name}",
                 ad_t.bytes as f64 / 1e3
             ),
             ms: rec_ms + ms,
@@ -168,16 +173,15 @@ pub fn speed_against_error(mut progress: impl FnMut()) -> Result<Vec<SpeedRow>, 
     {
         let t = Instant::now();
         let (_, ta, tb) = recon(Method::Tfp, 8)?;
-        let tfp_field = piv(&ta, &tb, None, &piv_cfgs[0].1)?;
+        let tfp_field = piv(&ta, &tb, None, &spike)?;
         let vel = crate::predict::row_velocities(&tfp_field.vectors(), h, planes.flip, dt);
         let refine = Some(spiv_core::motion::Refine::default());
         let a = crate::predict::compensated_frame(&planes, ka, &job.core, &vel, refine)?.0;
         let bb = crate::predict::compensated_frame(&planes, kb, &job.core, &vel, refine)?.0;
         let rec_ms = t.elapsed().as_secs_f64() * 1e3;
-        let (ms, e) = err(&to(&a), &to(&bb), &piv_cfgs[0].1)?;
+        let (ms, e) = err(&to(&a), &to(&bb), &spike)?;
         rows.push(SpeedRow {
-            name: "core motion-compensated n=128, TFP prediction refined, PIV 64,32,32 B-spline"
-                .into(),
+            name: format!("core motion-compensated n=128, TFP prediction refined, {spike_name}"),
             ms: rec_ms + ms,
             rmse: e,
         });
@@ -194,9 +198,9 @@ pub fn speed_against_error(mut progress: impl FnMut()) -> Result<Vec<SpeedRow>, 
         Array2::from_shape_fn((hu, wu), |(i, j)| v[(hu - 1 - i) * wu + j] as f32)
     };
     let (a, bb) = (up(&ra.gray), up(&rb.gray));
-    let (ms, e) = err(&a, &bb, &piv_cfgs[0].1)?;
+    let (ms, e) = err(&a, &bb, &spike)?;
     rows.push(SpeedRow {
-        name: format!("f64 reference Adaptive n=128, {}", piv_cfgs[0].0),
+        name: format!("f64 reference Adaptive n=128, {spike_name}"),
         ms: ref_ms + ms,
         rmse: e,
     });
