@@ -31,8 +31,8 @@ pub struct Job {
     pub tfp_window: u16,
     /// PIV settings for all three pairs.
     pub piv: Settings,
-    /// PIV settings of the frame camera's pair.
-    pub frame_piv: Settings,
+    /// PIV settings of the motion-compensated pair.
+    pub mc_piv: Settings,
     /// Beyond the paper (SPEC 5): cap each band's adaptive window so that
     /// the fastest particle the TFP pair's PIV sees there blurs by at most
     /// this many px (`None`: the paper's algorithm, one n_max everywhere).
@@ -51,7 +51,7 @@ impl Job {
             core: Params::default(),
             tfp_window: 8,
             piv: Settings::for_spike_frames(),
-            frame_piv: Settings::for_frame_camera(),
+            mc_piv: Settings::for_compensated_frames(),
             dwell_cap: None,
             encoding: spiv_core::wire::Encoding::Rice,
             lossy: spiv_core::wire::codec::Lossy::default(),
@@ -251,7 +251,7 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
         // (what the live loop's previous pair does; `predict::ROUNDS`).
         for _ in 1..crate::predict::ROUNDS {
             let [a, b] = up(&t, "motion-compensated")?;
-            let f = piv(&to_f32(&a, wu, hu), &to_f32(&b, wu, hu), None, &job.piv)?.vectors();
+            let f = piv(&to_f32(&a, wu, hu), &to_f32(&b, wu, hu), None, &job.mc_piv)?.vectors();
             if !crate::predict::predicts(&f) {
                 break;
             }
@@ -288,7 +288,7 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
     for (source, pair, full_scale) in pairs {
         let t = std::time::Instant::now();
         let settings = match source {
-            FrameKind::Frame => &job.frame_piv,
+            FrameKind::Mc => &job.mc_piv,
             _ => &job.piv,
         };
         let field = piv(
@@ -299,8 +299,8 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
         )?;
         let piv_ms = t.elapsed().as_secs_f64() * 1e3;
         let vectors = field.vectors();
-        // The truth on this field's grid (the frame camera's settings may
-        // end on another window).
+        // The truth on this field's grid (the compensated pair's settings
+        // may end on another window).
         let own_truth;
         let truth = if settings.centres(w, h) == job.piv.centres(w, h) {
             &truth

@@ -89,7 +89,7 @@ fn check(kind: SceneKind, glare_max: f64, rest_max: f64, mc_rest_max: f64, mc_gl
 #[test]
 fn paper_linear_spike_frames_measure_the_flow() {
     // Today: glare 0.130 / 0.173, other rows 0.027 / 0.036 (seeds 1, 2).
-    // Motion-compensated (mean of seeds 1, 2): glare 0.014, other rows
+    // Motion-compensated (mean of seeds 1, 2): glare 0.038, other rows
     // 0.005 (frame camera 0.004).
     check(SceneKind::PaperLinear, 0.23, 0.05, 0.01, 0.06);
 }
@@ -97,14 +97,14 @@ fn paper_linear_spike_frames_measure_the_flow() {
 #[test]
 fn paper_quadratic_spike_frames_measure_the_flow() {
     // Today: glare 0.211 / 0.259, other rows 0.083 / 0.046.
-    // Motion-compensated: glare 0.105, other rows 0.007.
+    // Motion-compensated: glare 0.060, other rows 0.008.
     check(SceneKind::PaperQuadratic, 0.35, 0.10, 0.012, 0.16);
 }
 
 #[test]
 fn paper_log_spike_frames_measure_the_flow() {
     // Today: glare 0.191 / 0.350, other rows 0.009 / 0.026.
-    // Motion-compensated: glare 0.167, other rows 0.004.
+    // Motion-compensated: glare 0.104, other rows 0.004.
     check(SceneKind::PaperLog, 0.40, 0.03, 0.008, 0.25);
 }
 

@@ -62,13 +62,13 @@ pub fn speed_against_error(mut progress: impl FnMut()) -> Result<Vec<SpeedRow>, 
         Ok((ms, region_error(&rows, |_| true).rmse))
     };
     let mut rows: Vec<SpeedRow> = Vec::new();
-    let base = job.frame_piv.clone();
+    let base = job.piv.clone();
     let passes = |s: &Settings| {
         let w: Vec<String> = s.windows.iter().map(|w| w.to_string()).collect();
         w.join(",")
     };
-    // Spike frames get their own passes (`Settings::for_spike_frames`).
     let spike = job.piv.clone();
+    let mc_name = format!("PIV {} B-spline", passes(&job.mc_piv));
     let spike_name = format!("PIV {} B-spline", passes(&spike));
     let piv_cfgs = [
         ("PIV 64,32,32 B-spline", base.clone()),
@@ -179,9 +179,9 @@ pub fn speed_against_error(mut progress: impl FnMut()) -> Result<Vec<SpeedRow>, 
         let a = crate::predict::compensated_frame(&planes, ka, &job.core, &vel, refine)?.0;
         let bb = crate::predict::compensated_frame(&planes, kb, &job.core, &vel, refine)?.0;
         let rec_ms = t.elapsed().as_secs_f64() * 1e3;
-        let (ms, e) = err(&to(&a), &to(&bb), &spike)?;
+        let (ms, e) = err(&to(&a), &to(&bb), &job.mc_piv)?;
         rows.push(SpeedRow {
-            name: format!("core motion-compensated n=128, TFP prediction refined, {spike_name}"),
+            name: format!("core motion-compensated n=128, TFP prediction refined, {mc_name}"),
             ms: rec_ms + ms,
             rmse: e,
         });

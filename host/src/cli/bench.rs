@@ -178,7 +178,12 @@ fn blasius(seeds: u64) -> Result<(), CliError> {
                 .filter_map(|r| r.measured.map(|m| (m - r.truth).powi(2)))
                 .collect();
             lost[k] += x.rows.iter().filter(|r| r.measured.is_none()).count();
-            let rms = (used.iter().sum::<f64>() / used.len().max(1) as f64).sqrt();
+            // No measured row: undefined (NaN), not a perfect 0.
+            let rms = if used.is_empty() {
+                f64::NAN
+            } else {
+                (used.iter().sum::<f64>() / used.len() as f64).sqrt()
+            };
             dev[k].push(100.0 * rms / u_pair);
         }
         b.inc(1);

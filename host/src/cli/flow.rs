@@ -51,9 +51,8 @@ pub struct FlowArgs {
     /// for the paper's algorithm with one n_max everywhere.
     #[arg(long, default_value = "8")]
     dwell_cap: String,
-    /// PIV window side of each pass, px (the default: 64, then 32 four
-    /// times, `spiv_host::piv::SPIKE_WINDOWS`).
-    #[arg(long, value_delimiter = ',', default_value = "64,32,32,32,32")]
+    /// PIV window side of each pass, px.
+    #[arg(long, value_delimiter = ',', default_value = "64,32,32")]
     windows: Vec<usize>,
     /// The file's rows are stored upright (some public simulators).
     #[arg(long)]

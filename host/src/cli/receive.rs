@@ -42,9 +42,8 @@ pub struct ReceiveArgs {
     /// that `spiv-firmware-sim --control` reads) for --pipe and --file.
     #[arg(long, num_args = 0..=1, value_name = "PATH", requires = "piv")]
     control: Option<Option<PathBuf>>,
-    /// PIV window side of each pass, px (the default: 64, then 32 four
-    /// times, `spiv_host::piv::SPIKE_WINDOWS`).
-    #[arg(long, value_delimiter = ',', default_value = "64,32,32,32,32")]
+    /// PIV window side of each pass, px.
+    #[arg(long, value_delimiter = ',', default_value = "64,32,32")]
     windows: Vec<usize>,
     /// Largest frame accepted, WxH px: a message claiming a larger (or an
     /// empty) frame is counted as corrupt before anything is allocated.

@@ -33,14 +33,16 @@ pub use peak::Subpixel;
 /// field to deform the next pass.
 const MIN_SUPPORT: f64 = 0.25;
 
-/// Window of each pass for spike frames, px: 64 → 32, then the 32-px
-/// pass three times. The repeated passes let the deformation converge where
-/// a window's particles sit off its centre in a gradient — in glare rows,
-/// where the particles nearest the wall drown, the last of three passes
-/// still reports the velocity of the particles above (`spiv bench paper`,
-/// 10 seeds, motion-compensated glare rows, linear profile: 0.063 with
-/// three passes, 0.042 with five, 0.035 with eight).
-pub const SPIKE_WINDOWS: [usize; 5] = [64, 32, 32, 32, 32];
+/// Window of each pass for motion-compensated spike frames, px: 64 → 32,
+/// then the 32-px pass three times. Their particles are sharp and dense,
+/// and the repeated passes let the deformation converge where a window's
+/// particles sit off its centre in a gradient — in glare rows, where the
+/// particles nearest the wall drown (`spiv bench paper`, 10 seeds,
+/// compensated glare rows, linear profile: 0.064 with three passes, 0.031
+/// with five). Noisy frames lose by it: the TFP pair's field went from 3.4
+/// to 4.8 % of U on `spiv bench blasius`, and dwell caps set from it
+/// streaked the adaptive pair there, so TFP and adaptive frames keep three.
+pub const COMPENSATED_WINDOWS: [usize; 5] = [64, 32, 32, 32, 32];
 
 /// Settings of a PIV run.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -112,29 +114,28 @@ impl Default for Settings {
 }
 
 impl Settings {
-    /// The settings for spike frames (`spiv run`, `spiv flow`, `spiv
-    /// receive --piv`): the defaults with a peak-ratio floor of 1.2 (they
-    /// have no frame-camera noise floor, and their true peaks often stand
-    /// only 1.2–1.5× above the next one) and [`SPIKE_WINDOWS`].
+    /// The defaults with a peak-ratio floor of 1.2, for spike frames (`spiv
+    /// run`, `spiv receive --piv`): they have no frame-camera noise floor,
+    /// and their true peaks often stand only 1.2–1.5× above the next one.
+    /// The frame camera's pair in `spiv run` and the benches gets the same
+    /// (six passes measured no better for it: other-row RMAE 0.004 / 0.005
+    /// / 0.003 against 0.003 / 0.006 / 0.002).
     pub fn for_spike_frames() -> Settings {
-        Settings {
-            windows: SPIKE_WINDOWS.to_vec(),
-            ..Settings::for_frame_camera()
-        }
-    }
-
-    /// The settings for frame-camera pairs next to spike frames (`spiv
-    /// run`, the benches): 64 → 32 → 32 and the same peak-ratio floor.
-    /// More passes do not help it (`spiv bench paper`, 10 seeds, six
-    /// passes: other-row RMAE 0.004 / 0.005 / 0.003 against 0.003 / 0.006 /
-    /// 0.002), so it keeps the defaults' three.
-    pub fn for_frame_camera() -> Settings {
         Settings {
             validation: Validation {
                 min_peak_ratio: 1.2,
                 ..Validation::default()
             },
             ..Settings::default()
+        }
+    }
+
+    /// [`Settings::for_spike_frames`] with [`COMPENSATED_WINDOWS`], for
+    /// motion-compensated pairs.
+    pub fn for_compensated_frames() -> Settings {
+        Settings {
+            windows: COMPENSATED_WINDOWS.to_vec(),
+            ..Settings::for_spike_frames()
         }
     }
 
@@ -353,8 +354,16 @@ pub fn piv(
         let (field, support) = pass(ia, ib, mask, excluded, grid, pred.as_ref(), s);
         // A pass where fewer than a quarter of the windows with signal
         // passed validation has failed (e.g. displacements beyond the
-        // window): its replaced field would only spread noise, so the next
-        // pass starts again from the undeformed images.
+        // window): its replaced field would only spread noise. After a
+        // good pass on the same grid (a repeated final window), that pass
+        // stands: it stays the predictor and the result. Otherwise the
+        // next pass starts again from the undeformed images.
+        let good_same_grid = prev
+            .as_ref()
+            .is_some_and(|(f, sup)| *sup >= MIN_SUPPORT && f.grid == field.grid);
+        if support < MIN_SUPPORT && good_same_grid {
+            continue;
+        }
         predictor = (support >= MIN_SUPPORT).then(|| field.clone());
         prev = Some((field, support));
     }
