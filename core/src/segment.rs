@@ -220,8 +220,9 @@ pub(crate) fn tile_pos(i: usize, lo: usize, hi: usize) -> (usize, usize, u32) {
 /// motion the particle test (and the tile backgrounds it compares with)
 /// runs on motion-compensated counts, kept in `ws.mc`, and saturation on
 /// the plain counts; a particle's `c_t` is then its compensated count.
-/// Compensated, a pixel's background is the larger of the tile background
-/// and its own plain count: static light (glare whose gradient the 16-px
+/// Compensated, wherever the row's motion moves anything within the
+/// level's window ([`travel`] ≥ [`MIN_TRAVEL`]), a pixel's background is
+/// the larger of the tile background and its own plain count: static light (glare whose gradient the 16-px
 /// tiles cannot follow, a hot pixel) counts the same with and without
 /// compensation, while a particle piles its spikes up only along its path
 /// (on the paper's scenes this took the glare-row RMAE of `spiv bench
@@ -304,11 +305,13 @@ pub(crate) fn segment(
             } else {
                 counts
             };
-            // Compensated over a path longer than a particle, the pixel's
-            // own plain count is a floor of its background (docs above).
-            let floor = match (mc, &motion) {
-                (true, Some(m)) => travel(m.at(r), win.start, win.end(), k) >= MIN_TRAVEL,
-                _ => false,
+            // Where the row moves, the pixel's own plain count is a floor
+            // of its background (docs above): all ones to keep it, else 0.
+            let floor: u32 = match (mc, &motion) {
+                (true, Some(m)) if travel(m.at(r), win.start, win.end(), k) >= MIN_TRAVEL => {
+                    u32::MAX
+                }
+                _ => 0,
             };
             let class = &mut ws.class[base..base + width];
             let c_t = &mut ws.c_t[base..base + width];
@@ -326,13 +329,8 @@ pub(crate) fn segment(
                 for i in x..run_end {
                     if class[i] == active {
                         let c = counts[i];
-                        // Compensated, the background is also the pixel's
-                        // own plain count: see the function's docs.
-                        let b_q10 = if floor {
-                            (b as u32).max(u32::from(c) << B_FRAC_BITS)
-                        } else {
-                            b as u32
-                        };
+                        // Branch-free: the floor is 0 where it does not apply.
+                        let b_q10 = (b as u32).max((u32::from(c) << B_FRAC_BITS) & floor);
                         if th.is_particle(tested[i], b_q10, p) {
                             class[i] = decided_particle;
                             c_t[i] = tested[i];
