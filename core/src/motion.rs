@@ -232,7 +232,9 @@ pub fn candidate(cfg: &Refine, vx: i16, vy: i16, n: usize) -> Option<(i16, i16)>
 /// prediction when nothing is sharper). The winners are written to
 /// `out_vx`, `out_vy` (one per band row), piecewise linear between band
 /// centres (rounded down) and constant beyond the outer ones. `scratch`
-/// holds `cfg.band × width` bytes.
+/// holds `cfg.band × width` bytes. Kept out of line (one call per frame)
+/// so instruction counters can attribute its cost (`firmware-sim/cost.sh`).
+#[inline(never)]
 pub fn refine(
     hist: &History<'_>,
     kc: u32,

@@ -4,9 +4,12 @@
 //! same 8-bit frames and sender. callgrind brackets the three kernels the
 //! loop calls by their symbols (`History::push`, `reconstruct_adaptive`,
 //! `Sender::send_frame`), which the core keeps out of line. Prints the
-//! parity line the firmware prints.
+//! parity line the firmware prints. With the argument `mc`, the firmware's
+//! second run: motion-compensated frames (refine on) after hearing the
+//! committed control (`cortex-m4/data/control.bin`); its line without the
+//! firmware's `mc ` prefix.
 //!
-//! `cargo run --release -p spiv-firmware-sim --example strip_kernels`
+//! `cargo run --release -p spiv-firmware-sim --example strip_kernels [mc]`
 
 use std::convert::Infallible;
 
@@ -19,6 +22,7 @@ const W: u16 = 128;
 const H: u16 = 64;
 const DT: u32 = 13;
 static STRIP: &[u8] = include_bytes!("../cortex-m4/data/strip.dat");
+static CONTROL: &[u8] = include_bytes!("../cortex-m4/data/control.bin");
 
 struct Memory(Vec<u8>);
 
@@ -45,9 +49,18 @@ fn main() -> Result<(), SidecarError<Infallible>> {
     let mut cfg = Config::new(0, DT);
     cfg.schedule.first = u32::from(cfg.params.n_max / 2);
     cfg.schedule.pairs = Some(1);
+    let mc = std::env::args().nth(1).as_deref() == Some("mc");
+    if mc {
+        cfg.method = spiv_core::Method::Mc;
+        cfg.bootstrap = spiv_core::Method::Adaptive;
+        cfg.refine = Some(spiv_core::motion::Refine::default());
+    }
     let mut sidecar = Sidecar::new(W, H, cfg)?;
     let mut buf = SidecarBuf::<u8>::new(W, H, &cfg)?;
     let mut mem = buf.memory(0)?;
+    if mc {
+        sidecar.hear(&mut mem.downlink, CONTROL);
+    }
     let (mut link, mut crcs) = (Memory(Vec::new()), Crcs(Vec::new()));
     for plane in STRIP.chunks_exact(usize::from(W) * usize::from(H) / 8) {
         if sidecar.done() {

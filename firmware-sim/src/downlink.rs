@@ -107,6 +107,35 @@ impl ControlStream {
         }
     }
 
+    /// All of `bytes` (a whole control stream, already read) with `faults`
+    /// per message, heard before the first plane: deterministic, for
+    /// `--checksum` runs that must print the same line on every run (and
+    /// on the Cortex-M4, which hears its committed control the same way).
+    pub fn preloaded(bytes: &[u8], faults: Faults, seed: u64) -> ControlStream {
+        let (tx, rx) = channel();
+        let mut split = Splitter {
+            faulty: Faulty::new(Vec::new(), faults, seed),
+            partial: Vec::new(),
+        };
+        let mut all = split.push(bytes);
+        let _ = split.faulty.flush();
+        all.append(&mut split.take());
+        all.append(&mut split.partial);
+        let counts = std::sync::Arc::new(std::sync::Mutex::new(split.faulty.counts));
+        if !all.is_empty() {
+            // The receiver is alive: it is returned below.
+            let _ = tx.send(all);
+        }
+        ControlStream {
+            rx,
+            faults: counts,
+            wait: None,
+            mark: 0,
+            closed: true,
+            timeouts: 0,
+        }
+    }
+
     /// Before each pair after the first, waits up to `limit` for the
     /// host's answer to the previous pair (any control chunk, valid or
     /// not).

@@ -88,7 +88,9 @@ struct Args {
     #[arg(long, default_value = "tfp")]
     bootstrap: String,
     /// Read the host's control messages from this file or FIFO (`-`:
-    /// stdin). With `--tcp` they come back on the connection.
+    /// stdin). With `--tcp` they come back on the connection. With
+    /// `--checksum` the whole stream (at most 4 MiB) is heard before the
+    /// first plane, so the line is the same on every run.
     #[arg(long, value_name = "PATH", conflicts_with = "tcp")]
     control: Option<PathBuf>,
     /// Before each pair after the first, wait up to MS milliseconds for the
@@ -217,18 +219,24 @@ fn config(a: &Args, dt: u32) -> Result<Config, Error> {
 /// Where messages go: stdout, a file or the first TCP client; and where
 /// the host's control messages come from, if anywhere.
 fn open_link(a: &Args, shared: &Shared) -> Result<(Box<dyn Write>, Option<ControlStream>), Error> {
-    if a.checksum {
-        return Ok((Box::new(shared.clone()), None));
-    }
     let faults = match &a.control_fault {
         Some(f) => Faults::parse(f).map_err(|e| Error::Usage(format!("--control-fault: {e}")))?,
         None => Faults::default(),
     };
+    let seed = a.seed ^ 0x00d0_117e;
+    if a.checksum {
+        // Deterministic: the whole control stream is heard before the first
+        // plane (as the Cortex-M4 firmware hears its committed control).
+        let control = match &a.control {
+            Some(p) => Some(ControlStream::preloaded(&read_control(p)?, faults, seed)),
+            None => None,
+        };
+        return Ok((Box::new(shared.clone()), control));
+    }
     let paced = |c: ControlStream| match a.control_wait {
         0 => c,
         ms => c.wait(std::time::Duration::from_millis(ms)),
     };
-    let seed = a.seed ^ 0x00d0_117e;
     let mut control = match &a.control {
         Some(p) if p.as_os_str() == "-" => Some(paced(ControlStream::spawn(
             || Ok(std::io::stdin()),
@@ -270,6 +278,37 @@ fn open_link(a: &Args, shared: &Shared) -> Result<(Box<dyn Write>, Option<Contro
         )),
     };
     Ok((link, control))
+}
+
+/// Most bytes `--checksum` reads from `--control` (a few hundred control
+/// messages of the largest size).
+const MAX_CONTROL_FILE: u64 = 1 << 22;
+
+/// The whole control stream at `path` (`-`: stdin), bounded.
+fn read_control(path: &std::path::Path) -> Result<Vec<u8>, Error> {
+    use std::io::Read;
+    let mut bytes = Vec::new();
+    let what = |e: std::io::Error| Error::Usage(format!("--control {}: {e}", path.display()));
+    if path.as_os_str() == "-" {
+        std::io::stdin()
+            .lock()
+            .take(MAX_CONTROL_FILE + 1)
+            .read_to_end(&mut bytes)
+            .map_err(what)?;
+    } else {
+        std::fs::File::open(path)
+            .map_err(what)?
+            .take(MAX_CONTROL_FILE + 1)
+            .read_to_end(&mut bytes)
+            .map_err(what)?;
+    }
+    if bytes.len() as u64 > MAX_CONTROL_FILE {
+        return Err(Error::Usage(format!(
+            "--control {}: more than {MAX_CONTROL_FILE} bytes",
+            path.display()
+        )));
+    }
+    Ok(bytes)
 }
 
 fn run(a: &Args) -> Result<(), Error> {

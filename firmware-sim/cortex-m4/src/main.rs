@@ -10,7 +10,15 @@
 //! ```
 //!
 //! (`spiv-firmware-sim --input data/strip.dat --pairs 1 --checksum` on the
-//! host). It also prints the RAM it reserves and checks the core's
+//! host). Then it runs the loop again with motion-compensated frames
+//! (`Method::Mc`, refine on), hearing the committed control message
+//! (`data/control.bin`: the strip's true motion per row, from pair 0)
+//! before the first plane, and prints that run's line after `mc `
+//! (`spiv-firmware-sim --method mc --control data/control.bin …`,
+//! `expected-mc.txt`). Both runs share one set of statics, sized for the
+//! larger (motion-compensated) region tables.
+//!
+//! It also prints the RAM it reserves and checks the core's
 //! documented bytes per pixel against it, then exits 0 through semihosting,
 //! or 1 on any error. The `spiv_mark_*` functions, called by the loop's
 //! probe, bracket the kernels for `cost.sh`, which counts QEMU's executed
@@ -27,9 +35,14 @@ use core::convert::Infallible;
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
 use panic_semihosting as _;
+use spiv_core::downlink::DownlinkBuffers;
+use spiv_core::motion::Refine;
 use spiv_core::region::Region;
-use spiv_core::sidecar::{Config, Memory, Probe, Sidecar, SidecarError, Stage};
+use spiv_core::sidecar::{
+    Config, Memory, Probe, RefineBuffers, Sidecar, SidecarError, Stage, CAP_BAND,
+};
 use spiv_core::state::{Buffers, STATE_MILLIBYTES_PER_PIXEL};
+use spiv_core::wire::control::MAX_CONTROL_ENCODED;
 use spiv_core::wire::sender::{Link, SendBuffers, Slot};
 use spiv_core::wire::{frame_crc, MAX_ENCODED, MAX_PAYLOAD};
 use spiv_core::{History, Params, Workspace, WorkspaceSizes};
@@ -41,6 +54,10 @@ const H: u16 = 64;
 const PX: usize = W as usize * H as usize;
 const PLANE_BYTES: usize = PX / 8;
 static STRIP: &[u8] = include_bytes!("../data/strip.dat");
+/// The host's control for the motion-compensated run: the strip's true
+/// velocity of every stored row, applying from pair 0
+/// (`firmware-sim/tests/m4_parity.rs` rebuilds it from `data/scene.json`).
+static CONTROL: &[u8] = include_bytes!("../data/control.bin");
 
 /// Ticks between the frames of the pair (the strip's `scene.json`).
 const DT: u32 = 13;
@@ -51,6 +68,12 @@ const HIST_WORDS: usize = match History::words_needed(W, H, DEPTH) {
     None => 0,
 };
 const SIZES: WorkspaceSizes = WorkspaceSizes::for_strip(W, H);
+/// Motion-compensated frames find more regions (1 per 16 px).
+const MC_SIZES: WorkspaceSizes = WorkspaceSizes::for_motion(W, H);
+/// Refine's defaults: one velocity per band of this many rows.
+const REFINE_BAND: usize = 16;
+const ROWS: usize = H as usize;
+const CAP_BANDS: usize = H.div_ceil(CAP_BAND) as usize;
 
 const EMPTY_REGION: Region = Region {
     pixels: 0,
@@ -75,11 +98,22 @@ struct Ram {
     labels: [u16; PX],
     masks: [u64; SIZES.mask_words()],
     tiles: [u8; SIZES.tiles()],
-    parents: [u16; SIZES.parents()],
-    regions: [Region; SIZES.regions()],
+    /// Sized for the larger, motion-compensated tables; the adaptive run
+    /// takes the first `SIZES.parents()` / `SIZES.regions()`.
+    parents: [u16; MC_SIZES.parents()],
+    regions: [Region; MC_SIZES.regions()],
     frame: [u8; PX],
     payload: [u8; MAX_PAYLOAD],
     wire: [u8; MAX_ENCODED],
+    /// Motion-compensated counts (the particle test's).
+    mc: [u8; PX],
+    /// The downlink: receive buffer, applied and waiting rows and caps.
+    control_rx: [u8; MAX_CONTROL_ENCODED],
+    rows: [[i16; ROWS]; 4],
+    caps: [[u16; CAP_BANDS]; 2],
+    /// Refined velocities and refine's scratch.
+    refined: [[i16; ROWS]; 2],
+    refine_scratch: [u8; REFINE_BAND * W as usize],
 }
 
 static CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
@@ -118,23 +152,31 @@ macro_rules! markers {
 /// frame as sent (for the parity line).
 struct Marks {
     frame_crcs: [u32; 2],
+    /// The motion-compensated run (its own markers).
+    mc: bool,
 }
 
 impl Probe<u8> for Marks {
     #[inline(always)]
     fn enter(&mut self, stage: Stage) {
-        match stage {
-            Stage::Ingest => spiv_mark_ingest_begin(),
-            Stage::Frame => spiv_mark_frame_begin(),
-            Stage::Send => spiv_mark_send_begin(),
+        match (stage, self.mc) {
+            (Stage::Ingest, false) => spiv_mark_ingest_begin(),
+            (Stage::Frame, false) => spiv_mark_frame_begin(),
+            (Stage::Send, false) => spiv_mark_send_begin(),
+            (Stage::Ingest, true) => spiv_mark_mc_ingest_begin(),
+            (Stage::Frame, true) => spiv_mark_mc_frame_begin(),
+            (Stage::Send, true) => spiv_mark_mc_send_begin(),
         }
     }
     #[inline(always)]
     fn leave(&mut self, stage: Stage) {
-        match stage {
-            Stage::Ingest => spiv_mark_ingest_end(),
-            Stage::Frame => spiv_mark_frame_end(),
-            Stage::Send => spiv_mark_send_end(),
+        match (stage, self.mc) {
+            (Stage::Ingest, false) => spiv_mark_ingest_end(),
+            (Stage::Frame, false) => spiv_mark_frame_end(),
+            (Stage::Send, false) => spiv_mark_send_end(),
+            (Stage::Ingest, true) => spiv_mark_mc_ingest_end(),
+            (Stage::Frame, true) => spiv_mark_mc_frame_end(),
+            (Stage::Send, true) => spiv_mark_mc_send_end(),
         }
     }
     fn sent(&mut self, _frame_id: u32, slot: Slot, frame: &[u8]) {
@@ -153,6 +195,14 @@ markers!(
     spiv_mark_send_end = 6,
     spiv_mark_link_begin = 7,
     spiv_mark_link_end = 8,
+    spiv_mark_mc_ingest_begin = 9,
+    spiv_mark_mc_ingest_end = 10,
+    spiv_mark_mc_frame_begin = 11,
+    spiv_mark_mc_frame_end = 12,
+    spiv_mark_mc_send_begin = 13,
+    spiv_mark_mc_send_end = 14,
+    spiv_mark_hear_begin = 15,
+    spiv_mark_hear_end = 16,
 );
 
 #[entry]
@@ -217,11 +267,17 @@ fn run() -> Result<(), Failure> {
         labels: [0; PX],
         masks: [0; SIZES.mask_words()],
         tiles: [0; SIZES.tiles()],
-        parents: [0; SIZES.parents()],
-        regions: [EMPTY_REGION; SIZES.regions()],
+        parents: [0; MC_SIZES.parents()],
+        regions: [EMPTY_REGION; MC_SIZES.regions()],
         frame: [0; PX],
         payload: [0; MAX_PAYLOAD],
         wire: [0; MAX_ENCODED],
+        mc: [0; PX],
+        control_rx: [0; MAX_CONTROL_ENCODED],
+        rows: [[0; ROWS]; 4],
+        caps: [[0; CAP_BANDS]; 2],
+        refined: [[0; ROWS]; 2],
+        refine_scratch: [0; REFINE_BAND * W as usize],
     })
     .ok_or(Failure::Memory("RAM taken twice"))?;
     report_memory(ram)?;
@@ -230,22 +286,49 @@ fn run() -> Result<(), Failure> {
     let params = Params::default();
     let mut cfg = Config::new(u32::from(params.n_max / 2), DT);
     cfg.schedule.pairs = Some(1);
+    strip(ram, cfg, false)?;
+
+    // `spiv-firmware-sim --method mc`: refine on. The control applies from
+    // the first frame, so the bootstrap never runs; adaptive needs no TFP
+    // counts (the native loop's default TFP bootstrap prints the same line).
+    let mut mc = cfg;
+    mc.method = spiv_core::Method::Mc;
+    mc.bootstrap = spiv_core::Method::Adaptive;
+    mc.refine = Some(Refine::default());
+    if mc.refine.map(|r| usize::from(r.band)) != Some(REFINE_BAND) {
+        return Err(Failure::Memory("refine band differs from REFINE_BAND"));
+    }
+    strip(ram, mc, true)
+}
+
+/// The sidecar loop over the committed strip with `cfg`; motion-compensated
+/// (`mc`) after hearing [`CONTROL`]. Prints the parity line.
+fn strip(ram: &mut Ram, cfg: Config, mc: bool) -> Result<(), Failure> {
     let mut sidecar = Sidecar::new::<Infallible>(W, H, cfg)?;
+    let sizes = if mc { MC_SIZES } else { SIZES };
+    let workspace = Workspace::new(
+        sizes,
+        Buffers {
+            counts: &mut ram.counts,
+            c_t: &mut ram.c_t,
+            class: &mut ram.class,
+            labels: &mut ram.labels,
+            masks: &mut ram.masks,
+            tiles: &mut ram.tiles,
+            parents: &mut ram.parents[..sizes.parents()],
+            regions: &mut ram.regions[..sizes.regions()],
+        },
+    )?;
+    let [vx, vy, next_vx, next_vy] = &mut ram.rows;
+    let [caps, next_caps] = &mut ram.caps;
+    let [rvx, rvy] = &mut ram.refined;
     let mut mem = Memory {
         history: History::new(&mut ram.history, W, H, 0, H, DEPTH)?,
-        workspace: Workspace::new(
-            SIZES,
-            Buffers {
-                counts: &mut ram.counts,
-                c_t: &mut ram.c_t,
-                class: &mut ram.class,
-                labels: &mut ram.labels,
-                masks: &mut ram.masks,
-                tiles: &mut ram.tiles,
-                parents: &mut ram.parents,
-                regions: &mut ram.regions,
-            },
-        )?,
+        workspace: if mc {
+            workspace.with_motion_counts(&mut ram.mc)?
+        } else {
+            workspace
+        },
         frame: &mut ram.frame,
         counts: &mut [],
         send: SendBuffers {
@@ -253,13 +336,45 @@ fn run() -> Result<(), Failure> {
             wire: &mut ram.wire,
             scratch: &mut [],
         },
-        downlink: spiv_core::downlink::DownlinkBuffers::none(),
-        refine: spiv_core::sidecar::RefineBuffers::none(),
+        downlink: if mc {
+            DownlinkBuffers {
+                rx: &mut ram.control_rx,
+                vx,
+                vy,
+                caps,
+                next_vx,
+                next_vy,
+                next_caps,
+            }
+        } else {
+            DownlinkBuffers::none()
+        },
+        refine: if mc {
+            RefineBuffers {
+                vx: rvx,
+                vy: rvy,
+                scratch: &mut ram.refine_scratch,
+            }
+        } else {
+            RefineBuffers::none()
+        },
     };
+    if mc {
+        spiv_mark_hear_begin();
+        sidecar.hear(&mut mem.downlink, CONTROL);
+        spiv_mark_hear_end();
+        let d = sidecar.downlink();
+        if d.heard != 1 || d.refused != 0 {
+            return Err(Failure::Memory("the committed control was not heard"));
+        }
+    }
     let mut link = CrcLink {
         digest: CRC32.digest(),
     };
-    let mut marks = Marks { frame_crcs: [0; 2] };
+    let mut marks = Marks {
+        frame_crcs: [0; 2],
+        mc,
+    };
     for plane in STRIP.chunks_exact(PLANE_BYTES) {
         if sidecar.done() {
             break;
@@ -268,7 +383,8 @@ fn run() -> Result<(), Failure> {
     }
     let s = sidecar.finish(&mut mem.send, &mut link)?;
     hprintln!(
-        "planes={} frames={} messages={} bytes={} stream_crc={:08x} frame_crcs={:08x},{:08x}",
+        "{}planes={} frames={} messages={} bytes={} stream_crc={:08x} frame_crcs={:08x},{:08x}",
+        if mc { "mc " } else { "" },
         s.planes,
         s.frames,
         s.messages,
@@ -292,8 +408,14 @@ fn report_memory(ram: &Ram) -> Result<(), Failure> {
         + size_of_val(&ram.masks);
     let tables = size_of_val(&ram.tiles) + size_of_val(&ram.parents) + size_of_val(&ram.regions);
     let io = size_of_val(&ram.frame) + size_of_val(&ram.payload) + size_of_val(&ram.wire);
+    let motion = size_of_val(&ram.mc)
+        + size_of_val(&ram.control_rx)
+        + size_of_val(&ram.rows)
+        + size_of_val(&ram.caps)
+        + size_of_val(&ram.refined)
+        + size_of_val(&ram.refine_scratch);
     hprintln!(
-        "memory: {}x{} px, history {} B ({} planes, {} milli-B/px), state {} B ({} milli-B/px), tables {} B, frame+payload+wire {} B, total {} B",
+        "memory: {}x{} px, history {} B ({} planes, {} milli-B/px), state {} B ({} milli-B/px), tables {} B (motion-compensated sizes), frame+payload+wire {} B, motion (counts, downlink, refine) {} B, total {} B",
         W,
         H,
         history,
@@ -303,6 +425,7 @@ fn report_memory(ram: &Ram) -> Result<(), Failure> {
         state * 1000 / PX,
         tables,
         io,
+        motion,
         core::mem::size_of::<Ram>()
     );
     if state * 1000 != STATE_MILLIBYTES_PER_PIXEL * PX || state != SIZES.per_pixel_bytes() {
