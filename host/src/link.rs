@@ -141,6 +141,53 @@ pub fn piv_pairs(
         .collect()
 }
 
+/// The control of motion-compensated pairs, predicted as `spiv run` and
+/// `spiv bench link` do it: the row velocities of `field` (PIV of a TFP
+/// pair, measured over `dt` ticks), then [`crate::predict::ROUNDS`] − 1
+/// more rounds, each from the PIV (`mc_piv`) of the first compensated pair
+/// the previous control made through the link with `cfg` (its method is
+/// set to [`Method::Mc`]; refine as `cfg` says). Returns the last control
+/// and the transfer it made, or `None` when `field` cannot predict
+/// ([`crate::predict::predicts`]). A round whose field cannot predict ends
+/// the rounds.
+pub fn mc_transfer(
+    planes: &[u8],
+    (width, height): (u16, u16),
+    cfg: Config,
+    field: &[Vector],
+    dt: f64,
+    mc_piv: &Settings,
+) -> Result<Option<(Control, Transfer)>, LinkError> {
+    use crate::predict::{predicts, row_velocities, ROUNDS};
+    if !predicts(field) {
+        return Ok(None);
+    }
+    let cfg = Config {
+        method: Method::Mc,
+        ..cfg
+    };
+    let mut control = Control {
+        motion: row_velocities(field, height, true, dt),
+        ..Control::default()
+    };
+    let mut t = transfer_with(planes, width, height, cfg, control.clone())?;
+    for _ in 1..ROUNDS {
+        let Some([a, b]) = t.pairs.first() else {
+            break;
+        };
+        let f = piv(&upright_f32(a), &upright_f32(b), None, mc_piv)?.vectors();
+        if !predicts(&f) {
+            break;
+        }
+        control = Control {
+            motion: row_velocities(&f, height, true, dt),
+            ..Control::default()
+        };
+        t = transfer_with(planes, width, height, cfg, control.clone())?;
+    }
+    Ok(Some((control, t)))
+}
+
 /// Beyond the paper (SPEC 5): adaptive window limits per band of 32 upright
 /// rows from the TFP pair's PIV, so the fastest particle near a band blurs
 /// by at most `budget` px. The TFP pair goes through the link like any
@@ -155,6 +202,31 @@ pub fn dwell_caps(
     budget: f64,
     s: &Settings,
 ) -> Result<(Vec<u16>, Transfer), LinkError> {
+    let (field, t) = tfp_field(planes, width, height, base, tfp_window, s)?;
+    if field.is_empty() {
+        return Ok((Vec::new(), t));
+    }
+    let caps = crate::dwell::band_caps(
+        &field,
+        usize::from(height),
+        f64::from(base.schedule.dt),
+        budget,
+        &base.params,
+    );
+    Ok((caps, t))
+}
+
+/// The first TFP pair (window `tfp_window`, lossless) through the link and
+/// its PIV with `s` (upright, px per pair; empty when no pair arrived):
+/// what the host predicts dwell caps and motion from.
+pub fn tfp_field(
+    planes: &[u8],
+    width: u16,
+    height: u16,
+    base: &Config,
+    tfp_window: u16,
+    s: &Settings,
+) -> Result<(Vec<Vector>, Transfer), LinkError> {
     let mut cfg = Config {
         method: Method::Tfp,
         tfp_window,
@@ -167,12 +239,5 @@ pub fn dwell_caps(
         return Ok((Vec::new(), t));
     };
     let field = piv(&upright_f32(a), &upright_f32(b), None, s)?.vectors();
-    let caps = crate::dwell::band_caps(
-        &field,
-        usize::from(height),
-        f64::from(base.schedule.dt),
-        budget,
-        &base.params,
-    );
-    Ok((caps, t))
+    Ok((field, t))
 }

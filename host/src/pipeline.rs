@@ -11,14 +11,13 @@ use spiv_firmware_sim::simulation::{simulate_planes, Request, Simulated};
 use spiv_formats::vectors::Vector;
 use spiv_formats::FormatError;
 
-use crate::link::{dwell_caps, transfer, transfer_with, Transfer};
+use crate::link::{dwell_caps, mc_transfer, transfer, Transfer};
 use crate::metrics::{region_error, row_profile, ProfileRow, RegionError};
 use crate::piv::{piv, to_f32, PivError, Settings};
-use crate::predict::row_velocities;
 use crate::reconstruct::ReconstructError;
 use spiv_core::motion::Refine;
 use spiv_core::Method;
-use spiv_firmware_sim::firmware::{Config, Control};
+use spiv_firmware_sim::firmware::Config;
 
 /// What one run does.
 #[derive(Debug, Clone)]
@@ -236,34 +235,13 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
         &job.piv,
     )?
     .vectors();
-    let (mc, mc_t) = if crate::predict::predicts(&pred) {
-        let cfg = Config {
-            method: Method::Mc,
-            refine: Some(Refine::default()),
-            ..base
-        };
-        let control = Control {
-            motion: row_velocities(&pred, h, true, dt_ticks),
-            ..Control::default()
-        };
-        let mut t = transfer_with(&data, w, h, cfg, control)?;
-        // Later rounds: the compensated pair's own field predicts it again
-        // (what the live loop's previous pair does; `predict::ROUNDS`).
-        for _ in 1..crate::predict::ROUNDS {
-            let [a, b] = up(&t, "motion-compensated")?;
-            let f = piv(&to_f32(&a, wu, hu), &to_f32(&b, wu, hu), None, &job.mc_piv)?.vectors();
-            if !crate::predict::predicts(&f) {
-                break;
-            }
-            let control = Control {
-                motion: row_velocities(&f, h, true, dt_ticks),
-                ..Control::default()
-            };
-            t = transfer_with(&data, w, h, cfg, control)?;
-        }
-        (up(&t, "motion-compensated")?, Some(t))
-    } else {
-        (adaptive.clone(), None)
+    let cfg = Config {
+        refine: Some(Refine::default()),
+        ..base
+    };
+    let (mc, mc_t) = match mc_transfer(&data, (w, h), cfg, &pred, dt_ticks, &job.mc_piv)? {
+        Some((_, t)) => (up(&t, "motion-compensated")?, Some(t)),
+        None => (adaptive.clone(), None),
     };
     let link = LinkSummary {
         lost_frames: link.lost_frames + mc_t.as_ref().map_or(0, |t| t.report.lost_frames),

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use clap::Args;
-use spiv_host::bench::link::{link_bench, LinkBench};
+use spiv_host::bench::link::{link_bench, LinkBench, LinkFrames};
 
 use super::CliError;
 
@@ -31,6 +31,10 @@ pub struct LinkArgs {
     /// of blur, or "off" for the paper's one n_max everywhere.
     #[arg(long, default_value = "8")]
     dwell_cap: String,
+    /// The frames to send: tfp (n = 8), adaptive (with the dwell cap) and
+    /// mc (motion-compensated, with the control `spiv run` predicts).
+    #[arg(long, value_delimiter = ',', default_value = "tfp,adaptive,mc")]
+    frames: Vec<String>,
     /// Write the rows as JSON here.
     #[arg(long)]
     json: Option<PathBuf>,
@@ -47,6 +51,21 @@ pub fn run(a: &LinkArgs) -> Result<(), CliError> {
         ));
     }
     let dwell_cap = super::parse_dwell_cap(&a.dwell_cap)?;
+    let mut frames = Vec::new();
+    for name in &a.frames {
+        let f = LinkFrames::ALL
+            .into_iter()
+            .find(|f| f.name() == name.as_str())
+            .ok_or_else(|| {
+                CliError::Usage(format!("--frames: unknown {name:?} (tfp, adaptive, mc)"))
+            })?;
+        if !frames.contains(&f) {
+            frames.push(f);
+        }
+    }
+    if frames.is_empty() {
+        return Err(CliError::Usage("--frames: name at least one".into()));
+    }
     let bench = LinkBench {
         seeds: a.seeds,
         pairs: a.pairs,
@@ -54,6 +73,7 @@ pub fn run(a: &LinkArgs) -> Result<(), CliError> {
         tolerance: a.tolerance,
         contrast: a.contrast,
         dwell_cap,
+        frames,
     };
     let bar = super::bar(3 * a.seeds, "link benchmark (scene x seed)");
     let rows = link_bench(&bench, || bar.inc(1))?;
@@ -62,12 +82,17 @@ pub fn run(a: &LinkArgs) -> Result<(), CliError> {
         "sidecar link, {} seeds x {} pairs per scene, lossy tolerance {} gray levels (bytes per pair; reduction against the raw spike stream over M ticks)",
         a.seeds, a.pairs, a.tolerance
     );
-    println!("| scene | M (ticks) | raw | lossless | × | lossy | × | u(y) RMSE lossless (px) | u(y) RMSE lossy (px) | added error | rows lost (lossless/lossy) | lossless bit-exact |");
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("| scene | frames | M (ticks) | raw | lossless | × | lossy | × | u(y) RMSE lossless (px) | u(y) RMSE lossy (px) | added error | rows lost (lossless/lossy) | lossless bit-exact |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for r in &rows {
+        let frames = match r.fallbacks {
+            0 => r.frames.name().to_string(),
+            n => format!("{} ({n} seeds adaptive: no prediction)", r.frames.name()),
+        };
         println!(
-            "| {} | {}·dt = {} | {:.0} | {:.0} | {:.1} | {:.0} | {:.1} | {:.4} | {:.4} | {:+.1} % | {}/{} | {} |",
+            "| {} | {} | {}·dt = {} | {:.0} | {:.0} | {:.1} | {:.0} | {:.1} | {:.4} | {:.4} | {:+.1} % | {}/{} | {} |",
             r.scene,
+            frames,
             r.every_dt,
             r.every_ticks,
             r.raw_bytes_per_pair,
