@@ -100,6 +100,27 @@ pub fn travel(v: (i16, i16), start: u32, end: u32, kc: u32) -> i32 {
         .unwrap_or(0)
 }
 
+/// Distinct pixels a particle at velocity `v` (Q8) visits within the ticks
+/// `start..end` of a window centred on `kc`: 1 plus the ticks at which its
+/// [`shift`] changes (the spikes of that many pixels make one compensated
+/// count; 1 for a still row or an empty window). At most 255 ticks are
+/// looked at, the longest window a count holds.
+pub fn positions(v: (i16, i16), start: u32, end: u32, kc: u32) -> u32 {
+    let dt = |t: u32| (i64::from(t) - i64::from(kc)).clamp(-65_535, 65_535) as i32;
+    let at = |t: u32| (shift(v.0, dt(t)), shift(v.1, dt(t)));
+    let end = end.min(start.saturating_add(255));
+    let mut n = 1;
+    let mut prev = at(start);
+    for t in start.saturating_add(1)..end {
+        let p = at(t);
+        if p != prev {
+            n += 1;
+            prev = p;
+        }
+    }
+    n
+}
+
 /// Word `j` of band row `r` of a plane (`rows × wpr` words) moved by
 /// `(sx, sy)`: bit `i` is the spike at row `r + sy`, column `64j + i + sx`
 /// (0 outside the band).

@@ -7,7 +7,9 @@
 //!    counts of each 16×16 tile, interpolated bilinearly between tile
 //!    centres (exact, in 1/1024 counts);
 //! 2. particle when `c > b` and `(c − b)² > k_sig²·var(b)`, with the count
-//!    noise of an integrate-and-fire pixel `var(b) = 1/4 + (σ_fpn·b)² + b/g`;
+//!    noise of an integrate-and-fire pixel `var(b) = 1/4 + (σ_fpn·b)² + b/g`
+//!    (of the `S` pixels a motion-compensated count sums:
+//!    [`crate::particle::is_particle_compensated`]);
 //! 3. otherwise saturated when `c_n ≥ N_fs` (over a clipped window: when the
 //!    rate reaches `N_fs/n`); its saturation time `t_bgmax` is n.
 //!
@@ -15,8 +17,9 @@
 //! Memory: the workspace's per-pixel bytes; one 512-byte histogram on the stack.
 
 use crate::history::History;
-use crate::motion::{add_compensated, travel, MIN_TRAVEL};
+use crate::motion::{add_compensated, positions, travel, MIN_TRAVEL};
 use crate::params::Params;
+use crate::particle::is_particle_compensated;
 use crate::q::B_FRAC_BITS;
 use crate::state::Workspace;
 use crate::window::{add_counts, add_plane_counts, Window};
@@ -214,6 +217,71 @@ pub(crate) fn tile_pos(i: usize, lo: usize, hi: usize) -> (usize, usize, u32) {
     (clamp(t0), clamp(t0 + 1), f)
 }
 
+/// One band row of one segmentation level: what its undecided pixels are
+/// tested against.
+struct Row<'a, B> {
+    /// Background of tile column `tx` at this row, in 1/32 of 1/1024
+    /// counts (bilinear between the two tile rows).
+    bg: B,
+    tiles_x: usize,
+    counts: &'a [u8],
+    tested: &'a [u8],
+    /// All ones where the plain count floors the background, else 0.
+    floor: u32,
+    sat_c: u32,
+    last: bool,
+    /// Class bytes of a particle and a background decided at this level.
+    decided: (u8, u8),
+}
+
+impl<B: Fn(usize) -> u32> Row<'_, B> {
+    /// Decides the row's active pixels with `is_particle(count, b_q10)`.
+    #[inline(always)]
+    fn decide(
+        &self,
+        class: &mut [u8],
+        c_t: &mut [u8],
+        stats: &mut SegmentStats,
+        is_particle: impl Fn(u8, u32) -> bool,
+    ) {
+        let active = encode(Class::Active, 0);
+        let (decided_particle, decided_bg) = self.decided;
+        let width = class.len();
+        // Runs of pixels between the same two tile centres: x in [0, 8),
+        // then [8 + 16t, 24 + 16t). Along a run the background is linear
+        // in x, so it advances by a constant step (exact, in 1/1024).
+        let mut x = 0usize;
+        while x < width {
+            let run_end = if x < 8 { 8 } else { x + 16 - (x - 8) % 16 }.min(width);
+            let (tx0, tx1, fx) = tile_pos(x, 0, self.tiles_x - 1);
+            let (r0, r1) = ((self.bg)(tx0), (self.bg)(tx1));
+            let mut b = i64::from((32 - fx) * r0 + fx * r1);
+            let step = 2 * (i64::from(r1) - i64::from(r0));
+            for i in x..run_end {
+                if class[i] == active {
+                    let c = self.counts[i];
+                    // Branch-free: the floor is 0 where it does not apply.
+                    let b_q10 = (b as u32).max((u32::from(c) << B_FRAC_BITS) & self.floor);
+                    if is_particle(self.tested[i], b_q10) {
+                        class[i] = decided_particle;
+                        c_t[i] = self.tested[i];
+                        stats.particle_pixels += 1;
+                    } else if u32::from(c) >= self.sat_c {
+                        class[i] = decided_bg;
+                        c_t[i] = c;
+                        stats.saturated_pixels += 1;
+                    } else if self.last {
+                        class[i] = decided_bg;
+                        c_t[i] = c;
+                    }
+                }
+                b += step;
+            }
+            x = run_end;
+        }
+    }
+}
+
 /// Runs the segmentation over strip rows `s0..s1` (band rows) for a frame at
 /// tick `k`. Leaves every pixel's class and `c_t` (count at its deciding
 /// window); `span` holds the planes of the n_max window. With a predicted
@@ -297,7 +365,6 @@ pub(crate) fn segment(
             let (wy0, wy1) = (32 - fy, fy);
             let row_t0 = (ty0 - tiles.y0) * tiles.x;
             let row_t1 = (ty1 - tiles.y0) * tiles.x;
-            let m = |t: usize| u32::from(ws.tiles.get(t).copied().unwrap_or(0));
             let base = usize::from(r - s0) * width;
             let counts = &ws.counts[base..base + width];
             let tested: &[u8] = if mc {
@@ -313,40 +380,33 @@ pub(crate) fn segment(
                 }
                 _ => 0,
             };
+            // A compensated count sums this many pixels' spikes: its own
+            // noise model (1: the plain test, by the tables).
+            let segs = match (mc, &motion) {
+                (true, Some(m)) => positions(m.at(r), win.start, win.end(), k),
+                _ => 1,
+            };
             let class = &mut ws.class[base..base + width];
             let c_t = &mut ws.c_t[base..base + width];
-            // Runs of pixels between the same two tile centres: x in [0, 8),
-            // then [8 + 16t, 24 + 16t). Along a run the background is linear
-            // in x, so it advances by a constant step (exact, in 1/1024).
-            let mut x = 0usize;
-            while x < width {
-                let run_end = if x < 8 { 8 } else { x + 16 - (x - 8) % 16 }.min(width);
-                let (tx0, tx1, fx) = tile_pos(x, 0, tiles.x - 1);
-                let r0 = wy0 * m(row_t0 + tx0) + wy1 * m(row_t1 + tx0);
-                let r1 = wy0 * m(row_t0 + tx1) + wy1 * m(row_t1 + tx1);
-                let mut b = i64::from((32 - fx) * r0 + fx * r1);
-                let step = 2 * (i64::from(r1) - i64::from(r0));
-                for i in x..run_end {
-                    if class[i] == active {
-                        let c = counts[i];
-                        // Branch-free: the floor is 0 where it does not apply.
-                        let b_q10 = (b as u32).max((u32::from(c) << B_FRAC_BITS) & floor);
-                        if th.is_particle(tested[i], b_q10, p) {
-                            class[i] = decided_particle;
-                            c_t[i] = tested[i];
-                            stats.particle_pixels += 1;
-                        } else if u32::from(c) >= sat_c {
-                            class[i] = decided_bg;
-                            c_t[i] = c;
-                            stats.saturated_pixels += 1;
-                        } else if last {
-                            class[i] = decided_bg;
-                            c_t[i] = c;
-                        }
-                    }
-                    b += step;
-                }
-                x = run_end;
+            // Tile medians of this row's two tile rows, weighted in 1/32.
+            let tile = |t: usize| u32::from(ws.tiles.get(t).copied().unwrap_or(0));
+            let row = Row {
+                bg: |tx: usize| wy0 * tile(row_t0 + tx) + wy1 * tile(row_t1 + tx),
+                tiles_x: tiles.x,
+                counts,
+                tested,
+                floor,
+                sat_c,
+                last,
+                decided: (decided_particle, decided_bg),
+            };
+            // One loop per test, so the plain frame's loop stays as it was.
+            if segs > 1 {
+                row.decide(class, c_t, &mut stats, |c, b| {
+                    is_particle_compensated(c, b, p, segs)
+                });
+            } else {
+                row.decide(class, c_t, &mut stats, |c, b| th.is_particle(c, b, p));
             }
         }
     }

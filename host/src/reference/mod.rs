@@ -134,6 +134,23 @@ pub fn count_variance(b: f64, sigma_fpn: f64, g: f64) -> f64 {
     0.25 + (sigma_fpn * b).powi(2) + b / g
 }
 
+/// Count noise of a motion-compensated count with mean `b` that sums the
+/// spikes of `segs` pixels along the path (SPEC 5's pixel noise per
+/// segment: a segment of mean μ = b/S varies by {μ}(1 − {μ}) — μ(1 − μ)
+/// when dim, 1/6 on average when bright — never below one pixel's 1/4 in
+/// all; fixed-pattern noise averages over the S thresholds). One segment
+/// is [`count_variance`].
+pub fn compensated_variance(b: f64, segs: u32, sigma_fpn: f64, g: f64) -> f64 {
+    if segs <= 1 {
+        return count_variance(b, sigma_fpn, g);
+    }
+    let s = f64::from(segs);
+    let mu = b / s;
+    let per_segment = if mu < 0.5 { mu * (1.0 - mu) } else { 1.0 };
+    let quantisation = (s * per_segment.min(1.0 / 6.0)).max(0.25);
+    quantisation + (sigma_fpn * b).powi(2) / s + b / g
+}
+
 /// The segmentation windows n0, 2n0, …, n_max.
 pub fn levels(p: &Params) -> Vec<u16> {
     let mut v = Vec::new();
@@ -269,6 +286,11 @@ fn strip_frame(
                 motion::travel(band, k, n, (v(vx), v(vy)))
                     >= i64::from(spiv_core::motion::MIN_TRAVEL)
             });
+            // The pixels a compensated count sums: its noise.
+            let segs = comp.map_or(1, |(band, vx, vy)| {
+                let v = |a: &[i16]| a.get(row0 + r).copied().unwrap_or(0);
+                motion::positions(band, k, n, (v(vx), v(vy)))
+            });
             for c in 0..w {
                 let i = r * w + c;
                 if class[i].is_some() {
@@ -282,8 +304,9 @@ fn strip_frame(
                 let cnt = f64::from(counts[i]);
                 let tc = f64::from(tested[i]);
                 let bgd = if floor { bgd.max(cnt) } else { bgd };
-                let particle =
-                    tc > bgd && (tc - bgd).powi(2) > k_sig * k_sig * count_variance(bgd, sigma, g);
+                let particle = tc > bgd
+                    && (tc - bgd).powi(2)
+                        > k_sig * k_sig * compensated_variance(bgd, segs, sigma, g);
                 let saturated = len > 0 && cnt / f64::from(len) >= f64::from(p.n_fs) / f64::from(n);
                 if particle {
                     class[i] = Some(RefClass::Particle(j as u8));

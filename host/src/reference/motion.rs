@@ -54,6 +54,19 @@ pub fn travel(vol: &SpikeVolume, kc: u32, n: u16, (vx, vy): (i16, i16)) -> i64 {
         .unwrap_or(0)
 }
 
+/// How many distinct pixels the motion `(vx, vy)` visits over the window
+/// of `n` ticks centred on `kc` (1 for an empty window).
+pub fn positions(vol: &SpikeVolume, kc: u32, n: u16, (vx, vy): (i16, i16)) -> u32 {
+    let (start, len) = vol.window(kc, n);
+    let set: std::collections::BTreeSet<(i64, i64)> = (start..start + i64::from(len))
+        .map(|t| {
+            let dt = t - i64::from(kc);
+            (shift(vx, dt), shift(vy, dt))
+        })
+        .collect();
+    set.len().max(1) as u32
+}
+
 /// The candidates around `(vx, vy)`: the prediction; scaled by
 /// 1 ± 2 %·k (k = 1..=rel, + before −); offset by ±3k/256 px/tick in x,
 /// then in y (k = 1..=abs); each component clamped to `i16`.
