@@ -7,15 +7,15 @@
 //! with faults injected on both directions.
 //!
 //! Bounds (paper-linear seed 2, rows outside the glare, y ≥ 50 px): the
-//! compensated pairs measure 0.009–0.016 RMAE (mean 0.012 over 20 pairs)
+//! compensated pairs measure 0.002–0.005 RMAE (mean 0.004 over 20 pairs)
 //! and the TFP bootstrap pair 0.052; the test asks for a mean below 0.02
 //! and below the bootstrap's, so a sidecar that never applied the
 //! prediction fails it. Glare rows (y < 50 px) over TCP: bootstrap 0.167,
-//! compensated pairs 0.059–0.188 (mean 0.108 over 20 pairs, 0.143 over the
-//! test's 4); the test asks every compensated pair for less than 0.3. Before
-//! the compensated particle test's plain-count floor the loop drifted there
-//! (0.06–1.05, mean 0.60: each pair's fast-biased field predicted the next;
-//! README, "The control link").
+//! compensated pairs 0.013–0.111 (mean 0.054 over 20 pairs); the test asks
+//! every compensated pair for less than 0.3. Before the compensated
+//! particle test's plain-count floor the loop drifted there (0.06–1.05,
+//! mean 0.60: each pair's fast-biased field predicted the next; README,
+//! "The control link").
 
 use std::io::Read;
 use std::path::Path;
