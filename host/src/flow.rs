@@ -161,8 +161,12 @@ pub struct FlowOptions {
     pub end: u64,
     /// Core parameters (`n_max` is set from `window`).
     pub core: Params,
-    /// PIV settings.
+    /// PIV settings of TFP, TFI and adaptive pairs (and of the TFP pairs
+    /// that predict motion).
     pub piv: Settings,
+    /// PIV settings of motion-compensated pairs (more passes: their
+    /// deformation converges where glare hides a window's lower particles).
+    pub mc_piv: Settings,
 }
 
 impl FlowOptions {
@@ -184,6 +188,7 @@ impl FlowOptions {
             end: rec.planes,
             core,
             piv: Settings::for_spike_frames(),
+            mc_piv: Settings::for_compensated_frames(),
         }
     }
 
@@ -305,9 +310,10 @@ pub fn run_flow(
     let dt = f64::from(opts.dt);
     let (w, h) = (rec.crop_width, rec.height);
     let (wu, hu) = (usize::from(w), usize::from(h));
-    let field = |a: &[u16], b: &[u16]| -> Result<Vec<Vector>, FlowError> {
-        Ok(piv(&to_f32(a, wu, hu), &to_f32(b, wu, hu), None, &opts.piv)?.vectors())
+    let field_with = |a: &[u16], b: &[u16], s: &Settings| -> Result<Vec<Vector>, FlowError> {
+        Ok(piv(&to_f32(a, wu, hu), &to_f32(b, wu, hu), None, s)?.vectors())
     };
+    let field = |a: &[u16], b: &[u16]| field_with(a, b, &opts.piv);
     let mut prediction: Option<Vec<Vector>> = None;
     let mut pairs = Vec::with_capacity(ticks.len());
     let mut first_frames = None;
@@ -363,7 +369,7 @@ pub fn run_flow(
                     // (`predict::ROUNDS`).
                     for round in 0..crate::predict::ROUNDS {
                         if round > 0 {
-                            let own = field(&out[0], &out[1])?;
+                            let own = field_with(&out[0], &out[1], &opts.mc_piv)?;
                             if !crate::predict::predicts(&own) {
                                 break;
                             }
@@ -380,7 +386,11 @@ pub fn run_flow(
             }
             (m, _) => (frames(rec, m, opts.window)?, Vec::new(), false),
         };
-        let vectors = field(&pair[0], &pair[1])?;
+        let settings = match made {
+            Method::Mc => &opts.mc_piv,
+            _ => &opts.piv,
+        };
+        let vectors = field_with(&pair[0], &pair[1], settings)?;
         let valid = vectors.iter().filter(|v| v.state == State::Valid).count();
         // A pair that mostly failed predicts nothing: bootstrap again.
         prediction = (2 * valid >= vectors.len()).then(|| vectors.clone());

@@ -51,9 +51,10 @@ pub struct FlowArgs {
     /// for the paper's algorithm with one n_max everywhere.
     #[arg(long, default_value = "8")]
     dwell_cap: String,
-    /// PIV window side of each pass, px.
-    #[arg(long, value_delimiter = ',', default_value = "64,32,32")]
-    windows: Vec<usize>,
+    /// PIV window side of each pass, px (default: 64,32,32, and
+    /// 64,32,32,32,32 for motion-compensated pairs).
+    #[arg(long, value_delimiter = ',')]
+    windows: Option<Vec<usize>>,
     /// The file's rows are stored upright (some public simulators).
     #[arg(long)]
     no_flip: bool,
@@ -102,7 +103,10 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
     o.every = a.every.unwrap_or(o.every);
     o.start = a.start.unwrap_or(o.start);
     o.end = a.end.unwrap_or(o.end).min(rec.planes);
-    o.piv.windows = a.windows.clone();
+    if let Some(w) = &a.windows {
+        o.piv.windows = w.clone();
+        o.mc_piv.windows = w.clone();
+    }
     std::fs::create_dir_all(&a.out)
         .map_err(|e| CliError::Usage(format!("{}: {e}", a.out.display())))?;
     let pairs = o.pair_ticks().len() as u64;

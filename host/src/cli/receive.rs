@@ -42,9 +42,10 @@ pub struct ReceiveArgs {
     /// that `spiv-firmware-sim --control` reads) for --pipe and --file.
     #[arg(long, num_args = 0..=1, value_name = "PATH", requires = "piv")]
     control: Option<Option<PathBuf>>,
-    /// PIV window side of each pass, px.
-    #[arg(long, value_delimiter = ',', default_value = "64,32,32")]
-    windows: Vec<usize>,
+    /// PIV window side of each pass, px (default: 64,32,32, and
+    /// 64,32,32,32,32 for motion-compensated pairs).
+    #[arg(long, value_delimiter = ',')]
+    windows: Option<Vec<usize>>,
     /// Largest frame accepted, WxH px: a message claiming a larger (or an
     /// empty) frame is counted as corrupt before anything is allocated.
     #[arg(long, value_name = "WxH", default_value = "8192x8192")]
@@ -94,7 +95,11 @@ pub fn run(a: &ReceiveArgs) -> Result<(), CliError> {
     if let Some(d) = &a.out {
         std::fs::create_dir_all(d).map_err(|e| CliError::Usage(format!("{}: {e}", d.display())))?;
     }
-    let settings = receiver_settings(a.windows.clone());
+    let settings = receiver_settings(a.windows.clone().unwrap_or_else(|| vec![64, 32, 32]));
+    let mc_settings = match &a.windows {
+        Some(w) => receiver_settings(w.clone()),
+        None => spiv_host::piv::Settings::for_compensated_frames(),
+    };
     let bar = ProgressBar::new_spinner();
     bar.set_style(
         ProgressStyle::with_template("{spinner} receiving from {prefix}: {msg} {elapsed}")
@@ -115,7 +120,11 @@ pub fn run(a: &ReceiveArgs) -> Result<(), CliError> {
                 Event::Pair(pair) => {
                     if a.piv {
                         let [fa, fb] = &*pair;
-                        let field = piv(&upright_f32(fa), &upright_f32(fb), None, &settings)?;
+                        let s = match fa.end.method {
+                            spiv_core::Method::Mc => &mc_settings,
+                            _ => &settings,
+                        };
+                        let field = piv(&upright_f32(fa), &upright_f32(fb), None, s)?;
                         let v = field.vectors();
                         vectors += v.len();
                         if let Some(d) = downlink.as_mut() {
