@@ -48,6 +48,15 @@ impl Splitter {
         self.take()
     }
 
+    /// The stream ended: a held (reordered) message and a tail without
+    /// delimiter go through as they are.
+    fn finish(&mut self) -> Vec<u8> {
+        let _ = self.faulty.flush();
+        let mut rest = self.take();
+        rest.append(&mut self.partial);
+        rest
+    }
+
     fn take(&mut self) -> Vec<u8> {
         std::mem::take(self.faulty.inner_mut())
     }
@@ -85,11 +94,7 @@ impl ControlStream {
                     return;
                 }
             }
-            // The host hung up: a held (reordered) message and a tail
-            // without delimiter go through as they are.
-            let _ = split.faulty.flush();
-            let mut rest = split.take();
-            rest.append(&mut split.partial);
+            let rest = split.finish();
             if let Ok(mut c) = shared.lock() {
                 *c = split.faulty.counts;
             }
@@ -118,9 +123,7 @@ impl ControlStream {
             partial: Vec::new(),
         };
         let mut all = split.push(bytes);
-        let _ = split.faulty.flush();
-        all.append(&mut split.take());
-        all.append(&mut split.partial);
+        all.append(&mut split.finish());
         let counts = std::sync::Arc::new(std::sync::Mutex::new(split.faulty.counts));
         if !all.is_empty() {
             // The receiver is alive: it is returned below.

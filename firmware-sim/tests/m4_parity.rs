@@ -4,14 +4,14 @@
 //! print too (`firmware-sim/cost.sh`, run by `.ci/run`). A change of the
 //! core's output shows here first; a platform difference shows there.
 
+use std::ffi::OsString;
 use std::process::Command;
 
-#[test]
-fn native_loop_prints_the_committed_parity_line() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("cortex-m4");
+/// The parity line of `spiv-firmware-sim --pairs 1 --checksum ARGS`.
+fn checksum_line(args: &[OsString]) -> String {
     let out = Command::new(env!("CARGO_BIN_EXE_spiv-firmware-sim"))
-        .args(["--pairs", "1", "--checksum", "--input"])
-        .arg(dir.join("data/strip.dat"))
+        .args(["--pairs", "1", "--checksum"])
+        .args(args)
         .output()
         .expect("run spiv-firmware-sim");
     assert!(
@@ -19,8 +19,15 @@ fn native_loop_prints_the_committed_parity_line() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
+    String::from_utf8_lossy(&out.stdout).trim().to_string()
+}
+
+#[test]
+fn native_loop_prints_the_committed_parity_line() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("cortex-m4");
+    let line = checksum_line(&["--input".into(), dir.join("data/strip.dat").into()]);
     let want = std::fs::read_to_string(dir.join("expected.txt")).expect("expected.txt");
-    assert_eq!(String::from_utf8_lossy(&out.stdout).trim(), want.trim());
+    assert_eq!(line, want.trim());
 }
 
 /// The control message the Cortex-M4 firmware's motion-compensated run
@@ -76,20 +83,16 @@ fn committed_control_is_the_strips_true_motion() {
 fn native_mc_loop_prints_the_committed_parity_line() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("cortex-m4");
     let run = |bootstrap: &str| {
-        let out = Command::new(env!("CARGO_BIN_EXE_spiv-firmware-sim"))
-            .args(["--pairs", "1", "--checksum", "--method", "mc"])
-            .args(["--bootstrap", bootstrap, "--control"])
-            .arg(dir.join("data/control.bin"))
-            .arg("--input")
-            .arg(dir.join("data/strip.dat"))
-            .output()
-            .expect("run spiv-firmware-sim");
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        String::from_utf8_lossy(&out.stdout).trim().to_string()
+        checksum_line(&[
+            "--method".into(),
+            "mc".into(),
+            "--bootstrap".into(),
+            bootstrap.into(),
+            "--control".into(),
+            dir.join("data/control.bin").into(),
+            "--input".into(),
+            dir.join("data/strip.dat").into(),
+        ])
     };
     let line = run("tfp");
     // The control applied from the first frame: how frames are made before
