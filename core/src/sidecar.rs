@@ -121,7 +121,7 @@ impl Config {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ConfigError {
-    /// The frame window is outside `1..=255` ticks.
+    /// The frame window is outside `1..=255` ticks (`2..=255` for TFI).
     Window(u16),
     /// `every` below `dt`, or `dt` zero.
     Schedule {
@@ -289,7 +289,9 @@ impl Sidecar {
     /// The loop for a `width × height` sensor; checks the configuration.
     pub fn new<E>(width: u16, height: u16, cfg: Config) -> Result<Sidecar, SidecarError<E>> {
         let window = cfg.window();
-        if !(1..=255).contains(&window) {
+        // TFI needs two ticks to see an interval.
+        let least = if cfg.method == Method::Tfi { 2 } else { 1 };
+        if !(least..=255).contains(&window) {
             return Err(SidecarError::Config(ConfigError::Window(window)));
         }
         if cfg.method == Method::Mc
@@ -439,80 +441,28 @@ impl Sidecar {
         history.push(&PlaneView::new(plane, history.width(), history.height())?)
     }
 
-    /// Makes the frame at `k`; returns the method it used: an `Mc` frame
-    /// without an applied motion is made by [`Config::bootstrap`] (adaptive
-    /// with the applied caps, if any).
+    /// Makes the frame at `k` with what the downlink applied; returns the
+    /// method it used ([`make_frame`]).
     #[inline(never)]
     fn make_frame<G: Gray>(&self, mem: &mut Memory<'_, G>, k: u32) -> Result<Method, Error> {
-        let mut p = self.cfg.params;
-        if let Some(n) = self.downlink.n_max() {
-            p.n_max = n.min(p.n_max);
-            p.n0 = p.n0.min(p.n_max);
-        }
-        let p = &p;
-        let hist = &mem.history;
         let dl = &mem.downlink;
-        let caps = self.downlink.caps(dl);
-        let motion = self.downlink.motion(dl);
-        let method = match (self.cfg.method, motion) {
-            (Method::Mc, None) => match self.cfg.bootstrap {
-                Method::Mc => Method::Adaptive,
-                b => b,
-            },
-            (m, _) => m,
+        let guide = Guide {
+            n_max: self.downlink.n_max(),
+            caps: self.downlink.caps(dl),
+            motion: self.downlink.motion(dl),
         };
-        match (method, motion) {
-            (Method::Tfp, _) => {
-                tfp(
-                    hist,
-                    k,
-                    self.cfg.tfp_window,
-                    p.full_scale,
-                    mem.counts,
-                    mem.frame,
-                )?;
-                Ok(Method::Tfp)
-            }
-            (Method::Tfi, _) => {
-                tfi(hist, k, p.n_max, p.full_scale, mem.frame)?;
-                Ok(Method::Tfi)
-            }
-            (Method::Mc, Some(motion)) => {
-                let rows = usize::from(hist.rows());
-                if motion.vx.len() < rows || motion.vy.len() < rows {
-                    return Err(Error::BufferTooSmall {
-                        needed: rows,
-                        got: motion.vx.len().min(motion.vy.len()),
-                    });
-                }
-                let m = match &self.cfg.refine {
-                    None => motion,
-                    Some(cfg) => {
-                        let r = &mut mem.refine;
-                        refine(hist, k, &motion, cfg, r.scratch, r.vx, r.vy)?;
-                        Motion { vx: r.vx, vy: r.vy }
-                    }
-                };
-                reconstruct_compensated(
-                    hist,
-                    k,
-                    p,
-                    &mut mem.workspace,
-                    (0, hist.rows()),
-                    &m,
-                    mem.frame,
-                )?;
-                Ok(Method::Mc)
-            }
-            (Method::Adaptive | Method::Mc, _) => {
-                if caps.is_empty() {
-                    reconstruct_adaptive(hist, k, p, &mut mem.workspace, mem.frame)?;
-                } else {
-                    capped_frame(hist, k, p, caps, &mut mem.workspace, mem.frame)?;
-                }
-                Ok(Method::Adaptive)
-            }
-        }
+        make_frame(
+            &self.cfg,
+            k,
+            &guide,
+            &mem.history,
+            FrameBuffers {
+                workspace: &mut mem.workspace,
+                counts: mem.counts,
+                refine: &mut mem.refine,
+                frame: mem.frame,
+            },
+        )
     }
 
     #[inline(never)]
@@ -537,6 +487,100 @@ impl Sidecar {
             &self.cfg.lossy,
             link,
         )
+    }
+}
+
+/// What a frame is made with besides the spikes: the host's word
+/// ([`crate::downlink`] applies it in the loop; a firmware that schedules
+/// its own frames passes it here).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Guide<'m> {
+    /// A window limit below [`Params::n_max`] (ticks).
+    pub n_max: Option<u16>,
+    /// Window caps per band of [`CAP_BAND`] upright rows, ticks (empty:
+    /// none; adaptive frames only).
+    pub caps: &'m [u16],
+    /// Predicted velocity of each stored row ([`Method::Mc`] frames; `None`:
+    /// the frame is made by [`Config::bootstrap`]).
+    pub motion: Option<Motion<'m>>,
+}
+
+/// The buffers one frame is made in (borrowed from a [`Memory`]).
+#[derive(Debug)]
+pub struct FrameBuffers<'m, 'a, G> {
+    /// Per-pixel state of the adaptive frame (with motion counts for
+    /// [`Method::Mc`]).
+    pub workspace: &'m mut Workspace<'a>,
+    /// TFP's window counts (`width × height`; empty unless TFP is used).
+    pub counts: &'m mut [u8],
+    /// With [`Config::refine`]: the refined velocities and scratch.
+    pub refine: &'m mut RefineBuffers<'a>,
+    /// The frame, `width × height` samples, stored row order.
+    pub frame: &'m mut [G],
+}
+
+/// Makes the frame centred at tick `k` of `hist` by `cfg`'s method, guided by
+/// `guide`; returns the method it used: an [`Method::Mc`] frame without a
+/// motion is made by [`Config::bootstrap`] (adaptive with the caps, if
+/// any). The one frame maker of the loop, public for firmware that
+/// schedules frames itself (the C ABI's `spiv_make_frame`).
+pub fn make_frame<G: Gray>(
+    cfg: &Config,
+    k: u32,
+    guide: &Guide<'_>,
+    hist: &History<'_>,
+    mem: FrameBuffers<'_, '_, G>,
+) -> Result<Method, Error> {
+    let mut p = cfg.params;
+    if let Some(n) = guide.n_max {
+        p.n_max = n.min(p.n_max);
+        p.n0 = p.n0.min(p.n_max);
+    }
+    let p = &p;
+    let caps = guide.caps;
+    let method = match (cfg.method, guide.motion) {
+        (Method::Mc, None) => match cfg.bootstrap {
+            Method::Mc => Method::Adaptive,
+            b => b,
+        },
+        (m, _) => m,
+    };
+    match (method, guide.motion) {
+        (Method::Tfp, _) => {
+            tfp(hist, k, cfg.tfp_window, p.full_scale, mem.counts, mem.frame)?;
+            Ok(Method::Tfp)
+        }
+        (Method::Tfi, _) => {
+            tfi(hist, k, p.n_max, p.full_scale, mem.frame)?;
+            Ok(Method::Tfi)
+        }
+        (Method::Mc, Some(motion)) => {
+            let rows = usize::from(hist.rows());
+            if motion.vx.len() < rows || motion.vy.len() < rows {
+                return Err(Error::BufferTooSmall {
+                    needed: rows,
+                    got: motion.vx.len().min(motion.vy.len()),
+                });
+            }
+            let m = match &cfg.refine {
+                None => motion,
+                Some(rc) => {
+                    let r = mem.refine;
+                    refine(hist, k, &motion, rc, r.scratch, r.vx, r.vy)?;
+                    Motion { vx: r.vx, vy: r.vy }
+                }
+            };
+            reconstruct_compensated(hist, k, p, mem.workspace, (0, hist.rows()), &m, mem.frame)?;
+            Ok(Method::Mc)
+        }
+        (Method::Adaptive | Method::Mc, _) => {
+            if caps.is_empty() {
+                reconstruct_adaptive(hist, k, p, mem.workspace, mem.frame)?;
+            } else {
+                capped_frame(hist, k, p, caps, mem.workspace, mem.frame)?;
+            }
+            Ok(Method::Adaptive)
+        }
     }
 }
 
