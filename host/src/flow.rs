@@ -205,6 +205,88 @@ impl FlowOptions {
     }
 }
 
+/// What a user asks of a flow run (`spiv flow`'s options, the Python
+/// binding's keywords); `None` takes the default [`FlowOptions::new`]
+/// gives. [`FlowRequest::options`] checks it against the recording.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FlowRequest {
+    /// Ticks between the frames of a pair (default: the `scene.json`
+    /// beside the file).
+    pub dt: Option<u32>,
+    /// Ticks between pairs (default `4·dt`).
+    pub every: Option<u32>,
+    /// Tick of the first pair's first frame.
+    pub start: Option<u64>,
+    /// No frame at or after this tick (default: the recording's end).
+    pub end: Option<u64>,
+    /// Frame method (default motion-compensated).
+    pub method: Method,
+    /// TFP window or adaptive/TFI n_max, ticks (default 8 TFP, else 128).
+    pub window: Option<u16>,
+    /// Adaptive: blur budget of the window caps, px (`None`: the paper's
+    /// algorithm, one n_max everywhere). Default 8.
+    pub dwell_cap: Option<f64>,
+    /// PIV window side of each pass, px (default: 64,32,32, and
+    /// 64,32,32,32,32 for motion-compensated pairs).
+    pub windows: Option<Vec<usize>>,
+}
+
+impl Default for FlowRequest {
+    fn default() -> Self {
+        FlowRequest {
+            dt: None,
+            every: None,
+            start: None,
+            end: None,
+            method: Method::Mc,
+            window: None,
+            dwell_cap: Some(8.0),
+            windows: None,
+        }
+    }
+}
+
+impl FlowRequest {
+    /// The run's options over `rec` (read from `input`, named in the
+    /// messages).
+    pub fn options(&self, rec: &Recording, input: &Path) -> Result<FlowOptions, FlowError> {
+        let dt = self.dt.or(rec.meta_dt).ok_or_else(|| {
+            FlowError::Schedule(format!(
+                "{}: give --dt (ticks between the frames of a pair): no scene.json beside it names one",
+                input.display()
+            ))
+        })?;
+        if dt == 0 || u64::from(dt) >= rec.planes {
+            return Err(FlowError::Schedule(format!(
+                "--dt {dt}: expected 1..{} (the recording has {} planes)",
+                rec.planes, rec.planes
+            )));
+        }
+        if let Some(c) = self.dwell_cap {
+            if !(c.is_finite() && c > 0.0 && c <= 1000.0) {
+                return Err(FlowError::Schedule(format!(
+                    "--dwell-cap {c}: expected px in (0, 1000] or off"
+                )));
+            }
+        }
+        let mut o = FlowOptions::new(rec, dt);
+        o.method = self.method;
+        o.window = self.window.unwrap_or(match self.method {
+            Method::Tfp => 8,
+            _ => 128,
+        });
+        o.dwell_cap = self.dwell_cap;
+        o.every = self.every.unwrap_or(o.every);
+        o.start = self.start.unwrap_or(o.start);
+        o.end = self.end.unwrap_or(o.end).min(rec.planes);
+        if let Some(w) = &self.windows {
+            o.piv.windows = w.clone();
+            o.mc_piv.windows = w.clone();
+        }
+        Ok(o)
+    }
+}
+
 /// One pair's result.
 #[derive(Debug, Clone)]
 pub struct PairResult {

@@ -32,3 +32,4 @@ pub mod receive;
 pub mod reconstruct;
 pub mod reference;
 pub mod report;
+pub mod simulate;

@@ -8,7 +8,7 @@ use serde_json::json;
 use spiv_formats::dat::DatOptions;
 use spiv_formats::image::write_levels;
 use spiv_formats::vectors::write_vectors;
-use spiv_host::flow::{run_flow, FlowOptions, Recording};
+use spiv_host::flow::{run_flow, FlowRequest, Recording};
 use spiv_host::reconstruct::FileOptions;
 use spiv_host::report::plot;
 
@@ -81,32 +81,18 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
         },
     };
     let mut rec = Recording::open(&a.input, &fopts).map_err(flow_err)?;
-    let dt = a.dt.or(rec.meta_dt).ok_or_else(|| {
-        CliError::Usage(format!(
-            "{}: give --dt (ticks between the frames of a pair): no scene.json beside it names one",
-            a.input.display()
-        ))
-    })?;
-    if dt == 0 || u64::from(dt) >= rec.planes {
-        return Err(CliError::Usage(format!(
-            "--dt {dt}: expected 1..{} (the recording has {} planes)",
-            rec.planes, rec.planes
-        )));
+    let o = FlowRequest {
+        dt: a.dt,
+        every: a.every,
+        start: a.start,
+        end: a.end,
+        method: a.method,
+        window: a.window,
+        dwell_cap: parse_dwell_cap(&a.dwell_cap)?,
+        windows: a.windows.clone(),
     }
-    let mut o = FlowOptions::new(&rec, dt);
-    o.method = a.method;
-    o.window = a.window.unwrap_or(match a.method {
-        spiv_core::Method::Tfp => 8,
-        _ => 128,
-    });
-    o.dwell_cap = parse_dwell_cap(&a.dwell_cap)?;
-    o.every = a.every.unwrap_or(o.every);
-    o.start = a.start.unwrap_or(o.start);
-    o.end = a.end.unwrap_or(o.end).min(rec.planes);
-    if let Some(w) = &a.windows {
-        o.piv.windows = w.clone();
-        o.mc_piv.windows = w.clone();
-    }
+    .options(&rec, &a.input)
+    .map_err(flow_err)?;
     std::fs::create_dir_all(&a.out)
         .map_err(|e| CliError::Usage(format!("{}: {e}", a.out.display())))?;
     let pairs = o.pair_ticks().len() as u64;

@@ -2,24 +2,12 @@
 
 use std::path::PathBuf;
 
-use clap::{Args, ValueEnum};
+use clap::Args;
 use spiv_formats::vectors::write_vectors;
-use spiv_host::piv::{load_image, load_mask, piv, Clip, Interp, Settings, Subpixel, Validation};
+use spiv_host::piv::options::PivOptions;
+use spiv_host::piv::{load_image, load_mask, piv};
 
 use super::CliError;
-
-/// Image resampling for the deformation passes.
-#[derive(Debug, Clone, Copy, ValueEnum)]
-pub enum InterpArg {
-    /// Cubic B-spline.
-    Bspline,
-    /// Quintic B-spline.
-    Bspline5,
-    /// Keys' bicubic.
-    Bicubic,
-    /// Bilinear (least accurate).
-    Bilinear,
-}
 
 /// PIV on an image pair: PNG/TIFF/BMP, 8- or 16-bit gray.
 #[derive(Debug, Args)]
@@ -40,9 +28,10 @@ pub struct PivArgs {
     /// Mask image: pixels above 0 are excluded.
     #[arg(long)]
     mask: Option<PathBuf>,
-    /// Deformation resampling.
-    #[arg(long, value_enum, default_value = "bspline")]
-    interp: InterpArg,
+    /// Deformation resampling: bspline (cubic B-spline), bspline5
+    /// (quintic), bicubic (Keys) or bilinear (least accurate).
+    #[arg(long, default_value = "bspline")]
+    interp: String,
     /// Normalised median test threshold (0 disables).
     #[arg(long, default_value_t = 2.0)]
     median_threshold: f64,
@@ -53,7 +42,7 @@ pub struct PivArgs {
     /// High-pass pre-filter: σ of the subtracted background blur, px (0 = off).
     #[arg(long, default_value_t = 3.0)]
     highpass: f32,
-    /// Sub-pixel estimator: gaussian or parabolic.
+    /// Sub-pixel estimator: parabolic, gaussian or gaussian2d.
     #[arg(long, default_value = "parabolic")]
     subpixel: String,
     /// Minimum correlation peak ratio (1 disables).
@@ -67,53 +56,17 @@ pub struct PivArgs {
 
 /// Runs it.
 pub fn run(a: &PivArgs) -> Result<(), CliError> {
-    let clip = match a.clip.as_str() {
-        "auto" => Clip::Auto,
-        "off" => Clip::Off,
-        v => Clip::Level(
-            v.parse::<f32>()
-                .ok()
-                .filter(|l| l.is_finite())
-                .ok_or_else(|| {
-                    CliError::Usage(format!("--clip {v}: expected auto, off or a gray level"))
-                })?,
-        ),
-    };
-    if !(0.0..=1000.0).contains(&a.highpass) {
-        return Err(CliError::Usage(format!(
-            "--highpass {}: expected 0..=1000 px",
-            a.highpass
-        )));
-    }
-    let subpixel = match a.subpixel.as_str() {
-        "gaussian" => Subpixel::Gaussian,
-        "parabolic" => Subpixel::Parabolic,
-        "gaussian2d" => Subpixel::Gaussian2d,
-        v => {
-            return Err(CliError::Usage(format!(
-                "--subpixel {v}: gaussian or parabolic"
-            )))
-        }
-    };
-    let settings = Settings {
-        subpixel,
-        clip,
-        highpass: a.highpass,
+    let settings = PivOptions {
         windows: a.windows.clone(),
         overlap: a.overlap,
-        interp: match a.interp {
-            InterpArg::Bspline => Interp::Bspline,
-            InterpArg::Bspline5 => Interp::Bspline5,
-            InterpArg::Bicubic => Interp::Bicubic,
-            InterpArg::Bilinear => Interp::Bilinear,
-        },
-        validation: Validation {
-            median_threshold: a.median_threshold,
-            min_peak_ratio: a.min_peak_ratio,
-            ..Validation::default()
-        },
-        ..Settings::default()
-    };
+        interp: a.interp.clone(),
+        median_threshold: a.median_threshold,
+        clip: a.clip.clone(),
+        highpass: a.highpass,
+        subpixel: a.subpixel.clone(),
+        min_peak_ratio: a.min_peak_ratio,
+    }
+    .settings()?;
     let ia = load_image(&a.a)?;
     let ib = load_image(&a.b)?;
     let mask = a.mask.as_deref().map(load_mask).transpose()?;

@@ -4,9 +4,8 @@ use std::path::PathBuf;
 
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use spiv_firmware_sim::scene::{SceneKind, SceneParams};
-use spiv_firmware_sim::simulation::{simulate_to_dir, Request};
-use spiv_formats::MAX_FRAME_PIXELS;
+use spiv_firmware_sim::simulation::simulate_to_dir;
+use spiv_host::simulate::SimulateRequest;
 
 use super::CliError;
 
@@ -44,59 +43,27 @@ pub struct SimulateArgs {
 
 /// Runs it.
 pub fn run(a: &SimulateArgs) -> Result<(), CliError> {
-    let kind = SceneKind::parse(&a.scene).map_err(|e| CliError::Usage(e.to_string()))?;
-    let mut p = SceneParams::new(kind);
-    if let Some(w) = a.width {
-        p.width = w;
-    }
-    if let Some(h) = a.height {
-        p.height = h;
-    }
-    if p.width < 8 || p.height < 8 || (usize::from(p.width) * usize::from(p.height)) % 8 != 0 {
-        return Err(CliError::Usage(format!(
-            "--width {} --height {}: both at least 8 and width*height a multiple of 8",
-            p.width, p.height
-        )));
-    }
-    let px = u64::from(p.width) * u64::from(p.height);
-    if px > MAX_FRAME_PIXELS {
-        return Err(CliError::Usage(format!(
-            "--width {} --height {}: {px} px, at most {MAX_FRAME_PIXELS}",
-            p.width, p.height
-        )));
-    }
-    if let Some(dt) = a.dt {
-        if !(1..=1_000_000).contains(&dt) {
-            return Err(CliError::Usage("--dt must be in 1..=1000000 ticks".into()));
-        }
-        p.pair_dt = dt;
-    }
-    if let Some(sh) = &a.shift {
-        if kind != SceneKind::Uniform {
-            return Err(CliError::Usage(
-                "--shift applies to the uniform scene".into(),
-            ));
-        }
-        if sh.len() != 2 || sh.iter().any(|v| !v.is_finite() || v.abs() > 1000.0) {
+    let shift = match a.shift.as_deref() {
+        None => None,
+        Some(&[u, v]) => Some((u, v)),
+        Some(_) => {
             return Err(CliError::Usage(
                 "--shift U,V: two numbers within ±1000 px".into(),
-            ));
+            ))
         }
-        p.shift = (sh[0], sh[1]);
+    };
+    let req = SimulateRequest {
+        scene: a.scene.clone(),
+        seed: a.seed,
+        width: a.width,
+        height: a.height,
+        ticks: a.ticks,
+        dt: a.dt,
+        shift,
+        spacing: a.spacing,
     }
-    if let Some(s) = a.spacing {
-        if !(0.0..=64.0).contains(&s) {
-            return Err(CliError::Usage(format!(
-                "--spacing {s}: expected 0..=64 px"
-            )));
-        }
-        p.min_spacing = s;
-    }
-    if a.ticks == Some(0) || a.ticks.is_some_and(|t| t > 1_000_000) {
-        return Err(CliError::Usage("--ticks must be in 1..=1000000".into()));
-    }
-    let mut req = Request::new(p, a.seed);
-    req.ticks = a.ticks;
+    .request()
+    .map_err(|e| CliError::Usage(e.0))?;
     let (ticks, _) = req.layout()?;
     let bar = ProgressBar::new(u64::from(ticks));
     bar.set_style(

@@ -10,6 +10,7 @@
 pub mod correlate;
 pub mod deform;
 pub mod filter;
+pub mod options;
 pub mod peak;
 pub mod resample;
 pub mod validate;

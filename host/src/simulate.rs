@@ -1,0 +1,119 @@
+//! A simulation as a user asks for it (`spiv simulate`'s options, the
+//! Python binding's keywords), checked once for both: every size is
+//! bounded before anything is simulated.
+
+use spiv_firmware_sim::scene::{SceneKind, SceneParams};
+use spiv_firmware_sim::simulation::Request;
+use spiv_formats::MAX_FRAME_PIXELS;
+
+/// A value out of range, named as the CLI names it.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct SimulateError(pub String);
+
+/// What to simulate; `None` takes the scene's default.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimulateRequest {
+    /// Scene: paper-linear, paper-quadratic, paper-log, blasius, uniform,
+    /// vortex.
+    pub scene: String,
+    /// Seed of particles and noise.
+    pub seed: u64,
+    /// Width, px (≥ 8; `width·height` a multiple of 8, at most
+    /// [`MAX_FRAME_PIXELS`]).
+    pub width: Option<u16>,
+    /// Height, px.
+    pub height: Option<u16>,
+    /// Planes (1..=1_000_000; default the pair and 64 ticks each side).
+    pub ticks: Option<u32>,
+    /// Pair separation, ticks (1..=1_000_000).
+    pub dt: Option<u32>,
+    /// Displacement of the `uniform` scene per pair, px (right, down),
+    /// each within ±1000.
+    pub shift: Option<(f64, f64)>,
+    /// Minimum particle spacing, px (0..=64).
+    pub spacing: Option<f64>,
+}
+
+impl SimulateRequest {
+    /// The default scene with `seed`.
+    pub fn new(scene: &str, seed: u64) -> SimulateRequest {
+        SimulateRequest {
+            scene: scene.into(),
+            seed,
+            width: None,
+            height: None,
+            ticks: None,
+            dt: None,
+            shift: None,
+            spacing: None,
+        }
+    }
+
+    /// The simulator's request, or the first value out of range.
+    pub fn request(&self) -> Result<Request, SimulateError> {
+        let bad = |m: String| Err(SimulateError(m));
+        let kind = SceneKind::parse(&self.scene).map_err(|e| SimulateError(e.to_string()))?;
+        let mut p = SceneParams::new(kind);
+        p.width = self.width.unwrap_or(p.width);
+        p.height = self.height.unwrap_or(p.height);
+        let px = u64::from(p.width) * u64::from(p.height);
+        if p.width < 8 || p.height < 8 || px % 8 != 0 {
+            return bad(format!(
+                "--width {} --height {}: both at least 8 and width*height a multiple of 8",
+                p.width, p.height
+            ));
+        }
+        if px > MAX_FRAME_PIXELS {
+            return bad(format!(
+                "--width {} --height {}: {px} px, at most {MAX_FRAME_PIXELS}",
+                p.width, p.height
+            ));
+        }
+        if let Some(dt) = self.dt {
+            if !(1..=1_000_000).contains(&dt) {
+                return bad("--dt must be in 1..=1000000 ticks".into());
+            }
+            p.pair_dt = dt;
+        }
+        if let Some((u, v)) = self.shift {
+            if kind != SceneKind::Uniform {
+                return bad("--shift applies to the uniform scene".into());
+            }
+            if !(u.is_finite() && v.is_finite() && u.abs() <= 1000.0 && v.abs() <= 1000.0) {
+                return bad("--shift U,V: two numbers within ±1000 px".into());
+            }
+            p.shift = (u, v);
+        }
+        if let Some(s) = self.spacing {
+            if !(0.0..=64.0).contains(&s) {
+                return bad(format!("--spacing {s}: expected 0..=64 px"));
+            }
+            p.min_spacing = s;
+        }
+        if self.ticks == Some(0) || self.ticks.is_some_and(|t| t > 1_000_000) {
+            return bad("--ticks must be in 1..=1000000".into());
+        }
+        let mut req = Request::new(p, self.seed);
+        req.ticks = self.ticks;
+        Ok(req)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes_are_bounded_before_anything_is_simulated() {
+        let mut r = SimulateRequest::new("paper-linear", 1);
+        assert!(r.request().is_ok());
+        r.width = Some(65528);
+        r.height = Some(65528);
+        assert!(r.request().unwrap_err().0.contains("at most"));
+        let mut r = SimulateRequest::new("paper-linear", 1);
+        r.shift = Some((1.0, 0.0));
+        assert!(r.request().unwrap_err().0.contains("uniform"));
+        assert!(SimulateRequest::new("nope", 1).request().is_err());
+    }
+}
