@@ -1,0 +1,152 @@
+"""spiv: particle image velocimetry with spike cameras (type stubs).
+
+Conventions: images and spike planes are upright arrays, row 0 at the top,
+indexed [row, column] (spikes [tick, row, column]). Vector fields are 2-D
+arrays (ny, nx) on the PIV grid: x to the right and y down the rows, in
+pixels (pixel centres on integers); u and v in pixels per pair, v positive
+down the rows, as in `spiv piv`'s CSV and OpenPIV's windef output before
+tools.transform_coordinates. Flags: 0 valid, 1 replaced from neighbours,
+2 invalid (then u = v = 0). Ticks are spike planes (1/20 000 s at 20 kHz).
+"""
+
+from os import PathLike
+from typing import Optional, Sequence, Tuple, TypedDict, Union
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+class SpivError(ValueError):
+    """A value spiv refuses; the message is the `spiv` CLI's one line."""
+
+_Path = Union[str, PathLike]
+_F64 = npt.NDArray[np.float64]
+
+def read_dat(
+    path: _Path,
+    width: Optional[int] = None,
+    height: Optional[int] = None,
+    flip: bool = True,
+    strip_head: int = 0,
+    start: int = 0,
+    count: Optional[int] = None,
+) -> npt.NDArray[np.uint8]:
+    """Spike planes of a Vidar .dat: uint8 0/1, (ticks, height, width - strip_head), upright.
+
+    width, height: px (default: the scene.json beside the file).
+    flip: False for files whose rows are stored upright.
+    strip_head: columns dropped at the right of every row (16 for 416-wide captures).
+    start, count: the planes (ticks) to read. At most 2**31 bytes are returned.
+    """
+
+def read_image(path: _Path) -> npt.NDArray[np.uint16]:
+    """A gray PNG/TIFF/BMP (8- or 16-bit) as uint16 (height, width)."""
+
+def reconstruct(
+    spikes: npt.ArrayLike,
+    at: int,
+    method: str = "adaptive",
+    window: Optional[int] = None,
+    full_scale: int = 255,
+) -> npt.NDArray[np.uint16]:
+    """One frame from spikes (ticks, height, width; nonzero = spike) at tick `at`.
+
+    method: "adaptive" (the paper's), "tfp" or "tfi".
+    window: TFP window or adaptive/TFI n_max, ticks (default 8 for TFP, else 128).
+    Returns gray levels 0..=full_scale, (height, width), upright.
+    """
+
+def piv(
+    a: npt.ArrayLike,
+    b: npt.ArrayLike,
+    windows: Sequence[int] = (64, 32, 32),
+    overlap: float = 0.5,
+    mask: Optional[npt.ArrayLike] = None,
+    interp: str = "bspline",
+    median_threshold: float = 2.0,
+    clip: str = "auto",
+    highpass: float = 3.0,
+    subpixel: str = "parabolic",
+    min_peak_ratio: float = 1.5,
+) -> Tuple[_F64, _F64, _F64, _F64, npt.NDArray[np.uint8]]:
+    """PIV on an image pair (height, width), as `spiv piv`: returns (x, y, u, v, flags), each (ny, nx).
+
+    windows: window side of each pass, px (4..=1024). overlap: 0..=0.9.
+    mask: nonzero pixels are excluded. interp: bspline, bspline5, bicubic, bilinear.
+    median_threshold: normalised median test (0 off). clip: "auto", "off" or a gray level.
+    highpass: background blur sigma, px (0 off). subpixel: parabolic, gaussian, gaussian2d.
+    min_peak_ratio: correlation peak ratio floor (1 off).
+    x, y: window centres, px; u, v: px per pair (v down); flags 0/1/2.
+    """
+
+class Truth(TypedDict):
+    x: _F64
+    y: _F64
+    u: _F64
+    v: _F64
+
+class Simulation(TypedDict):
+    spikes: npt.NDArray[np.uint8]
+    frames: npt.NDArray[np.uint16]
+    frame_full_scale: int
+    pair: Tuple[int, int]
+    truth: Truth
+
+def simulate(
+    scene: str = "paper-linear",
+    seed: int = 1,
+    width: Optional[int] = None,
+    height: Optional[int] = None,
+    ticks: Optional[int] = None,
+    dt: Optional[int] = None,
+    shift: Optional[Tuple[float, float]] = None,
+    spacing: Optional[float] = None,
+    out: Optional[_Path] = None,
+) -> Simulation:
+    """A simulated recording, as `spiv simulate`.
+
+    scene: paper-linear, paper-quadratic, paper-log, blasius, uniform, vortex.
+    width, height: px. ticks: planes. dt: ticks between the pair's frames.
+    shift: the uniform scene's (u, v), px per pair. spacing: minimum particle spacing, px.
+    out: a folder to also write `spiv simulate`'s files to (spikes.dat, scene.json, ...).
+    Returns spikes uint8 (ticks, height, width), the frame camera's pair uint16
+    (2, height, width) with frame_full_scale, the pair's ticks, and the truth
+    (x, y, u, v on the 32-px grid with a 16-px step, px per pair).
+    """
+
+class Flow(TypedDict):
+    ticks: npt.NDArray[np.int64]
+    methods: list
+    x: _F64
+    y: _F64
+    u: _F64
+    v: _F64
+    flags: npt.NDArray[np.uint8]
+    mean_u: _F64
+    mean_v: _F64
+    mean_flags: npt.NDArray[np.uint8]
+
+def flow(
+    path: _Path,
+    dt: Optional[int] = None,
+    every: Optional[int] = None,
+    start: Optional[int] = None,
+    end: Optional[int] = None,
+    method: str = "mc",
+    window: Optional[int] = None,
+    dwell_cap: Optional[float] = 8.0,
+    windows: Optional[Sequence[int]] = None,
+    width: Optional[int] = None,
+    height: Optional[int] = None,
+    flip: bool = True,
+    strip_head: int = 0,
+) -> Flow:
+    """The flow job on a .dat or .npz recording, as `spiv flow` (without its files).
+
+    dt: ticks between a pair's frames (default: scene.json's); every: between pairs
+    (default 4*dt); start, end: ticks. method: "mc" (motion-compensated, the default),
+    "adaptive" or "tfp". window: ticks. dwell_cap: px, or None for off.
+    windows: PIV passes, px. Returns per-pair u, v, flags (pairs, ny, nx), the grid
+    x, y (ny, nx), each pair's ticks and method, and the mean field.
+    """

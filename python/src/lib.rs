@@ -1,0 +1,609 @@
+//! The Python module `spiv`: spike files, frames, PIV, simulation and the
+//! flow job over numpy arrays, by the same library calls as the `spiv`
+//! command line (so the same vectors and the same one-line errors).
+//!
+//! Conventions (as OpenPIV's before `tools.transform_coordinates`):
+//! images and spike planes are upright arrays, row 0 at the top, indexed
+//! `[row, column]` (spikes `[tick, row, column]`); vector fields are 2-D
+//! arrays `(ny, nx)` on the PIV grid, `x` to the right and `y` down the rows
+//! in pixels (pixel centres on integers), `u` and `v` in pixels per pair,
+//! `v` positive down the rows, as in `spiv piv`'s CSV. Heavy work releases
+//! the GIL. Errors raise `spiv.SpivError` (a `ValueError`) or `OSError`
+//! with the CLI's message.
+
+use std::path::{Path, PathBuf};
+
+use numpy::ndarray::{Array2, Array3};
+use numpy::{
+    IntoPyArray, PyArray2, PyArray3, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods,
+};
+use pyo3::exceptions::{PyOSError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use spiv_core::{Method, Params};
+use spiv_firmware_sim::simulation::{simulate_planes, simulate_to_dir};
+use spiv_formats::capture::Capture;
+use spiv_formats::dat::{unpack_upright, DatOptions, DatReader};
+use spiv_formats::grid::Grid;
+use spiv_formats::image::read_gray;
+use spiv_formats::{FormatError, Vector, MAX_FRAME_PIXELS};
+use spiv_host::flow::{run_flow, FlowError, FlowRequest, Recording};
+use spiv_host::piv::options::PivOptions;
+use spiv_host::piv::{piv as run_piv, PivError};
+use spiv_host::reconstruct::{frame_from_planes, FileOptions, Planes, ReconstructError};
+use spiv_host::simulate::SimulateRequest;
+
+pyo3::create_exception!(
+    spiv,
+    SpivError,
+    PyValueError,
+    "A value spiv refuses (the message is the CLI's one line)."
+);
+
+/// Largest array the module returns, bytes: a bound on sizes that come
+/// from files and arguments, checked before anything is allocated.
+const MAX_ARRAY_BYTES: u64 = 1 << 31;
+
+/// The Python exception for a library error: `OSError` when a file could
+/// not be read or written, else [`SpivError`]; the message is the one the
+/// CLI prints after `spiv: error:`.
+fn err(e: impl Into<Failure>) -> PyErr {
+    match e.into() {
+        Failure::Io(m) => PyOSError::new_err(m),
+        Failure::Value(m) => SpivError::new_err(m),
+    }
+}
+
+/// What went wrong, sorted for Python.
+enum Failure {
+    Io(String),
+    Value(String),
+}
+
+impl From<FormatError> for Failure {
+    fn from(e: FormatError) -> Self {
+        match e {
+            FormatError::Io { .. } => Failure::Io(e.to_string()),
+            e => Failure::Value(e.to_string()),
+        }
+    }
+}
+
+impl From<ReconstructError> for Failure {
+    fn from(e: ReconstructError) -> Self {
+        match e {
+            ReconstructError::Format(f) => f.into(),
+            e => Failure::Value(e.to_string()),
+        }
+    }
+}
+
+impl From<PivError> for Failure {
+    fn from(e: PivError) -> Self {
+        match e {
+            PivError::Format(f) => f.into(),
+            e => Failure::Value(e.to_string()),
+        }
+    }
+}
+
+impl From<FlowError> for Failure {
+    fn from(e: FlowError) -> Self {
+        match e {
+            FlowError::Format(f) => f.into(),
+            FlowError::Reconstruct(r) => r.into(),
+            FlowError::Piv(p) => p.into(),
+            e => Failure::Value(e.to_string()),
+        }
+    }
+}
+
+impl From<String> for Failure {
+    fn from(m: String) -> Self {
+        Failure::Value(m)
+    }
+}
+
+/// `obj` as a C-contiguous numpy array of `dtype` (a copy only when it is
+/// not one already).
+fn contiguous<'py>(obj: &Bound<'py, PyAny>, dtype: &str) -> PyResult<Bound<'py, PyAny>> {
+    let np = obj.py().import("numpy")?;
+    np.call_method1("ascontiguousarray", (obj, dtype))
+}
+
+/// A 2-D image of any numeric dtype as the library's `f32` array.
+fn image(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<ndarray::Array2<f32>> {
+    let a = contiguous(obj, "float32")?;
+    let a: PyReadonlyArray2<f32> = a
+        .extract()
+        .map_err(|_| SpivError::new_err(format!("{name}: expected a 2-D image array")))?;
+    let (h, w) = (a.shape()[0], a.shape()[1]);
+    let v = a
+        .as_slice()
+        .map_err(|e| SpivError::new_err(e.to_string()))?;
+    ndarray::Array2::from_shape_vec((h, w), v.to_vec())
+        .map_err(|e| SpivError::new_err(e.to_string()))
+}
+
+fn method_named(name: &str) -> PyResult<Method> {
+    Method::from_name(name).ok_or_else(|| {
+        SpivError::new_err(format!("method {name}: expected adaptive, tfp, tfi or mc"))
+    })
+}
+
+fn dat_size(path: &Path, width: Option<u16>, height: Option<u16>) -> Result<(u16, u16), Failure> {
+    match (width, height) {
+        (Some(w), Some(h)) => Ok((w, h)),
+        (None, None) => match Capture::beside(path)? {
+            Some(m) => Ok((m.width, m.height)),
+            None => Err(FormatError::NoSize(path.to_path_buf()).into()),
+        },
+        _ => Err("give both width and height, or neither".to_string().into()),
+    }
+}
+
+/// Spike planes of a Vidar `.dat` file as a `uint8` array `(ticks, height,
+/// width − strip_head)` of 0 and 1, upright (row 0 at the top).
+///
+/// `width` and `height` (px) come from the `scene.json` beside the file
+/// when not given; `flip=False` for files whose rows are stored upright;
+/// `strip_head` drops that many columns at the right of every row (16 for
+/// 416-wide captures); `start` and `count` select planes (ticks).
+#[pyfunction]
+#[pyo3(signature = (path, width=None, height=None, flip=true, strip_head=0, start=0, count=None))]
+#[allow(clippy::too_many_arguments)]
+fn read_dat<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    width: Option<u16>,
+    height: Option<u16>,
+    flip: bool,
+    strip_head: u16,
+    start: u64,
+    count: Option<u64>,
+) -> PyResult<Bound<'py, PyArray3<u8>>> {
+    let (w, h) = dat_size(&path, width, height).map_err(err)?;
+    let opts = DatOptions {
+        flip,
+        strip_head,
+        allow_truncated: false,
+    };
+    let out = py
+        .detach(|| -> Result<Array3<u8>, Failure> {
+            let mut r = DatReader::open(&path, w, h, opts)?;
+            let planes = r.planes();
+            if start >= planes {
+                return Err(format!(
+                    "start {start}: the file has {planes} planes (0..{planes})"
+                )
+                .into());
+            }
+            let n = count.unwrap_or(planes - start).min(planes - start);
+            let (ow, oh) = (r.width(), r.height());
+            let px = u64::from(ow) * u64::from(oh);
+            if n.saturating_mul(px) > MAX_ARRAY_BYTES {
+                return Err(format!(
+                    "{n} planes of {ow}x{oh} px exceed {MAX_ARRAY_BYTES} bytes: read fewer (start, count)"
+                )
+                .into());
+            }
+            let data = r.read_range(start, n)?;
+            let pb = (px / 8) as usize;
+            let mut out = Vec::with_capacity((n * px) as usize);
+            for plane in data.chunks_exact(pb) {
+                out.extend(unpack_upright(plane, ow, oh, r.flip()));
+            }
+            Array3::from_shape_vec((n as usize, usize::from(oh), usize::from(ow)), out)
+                .map_err(|e| e.to_string().into())
+        })
+        .map_err(err)?;
+    Ok(out.into_pyarray(py))
+}
+
+/// A gray image file (PNG, TIFF or BMP; 8- or 16-bit) as a `uint16`
+/// array `(height, width)`, as `spiv piv` reads it.
+#[pyfunction]
+fn read_image<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyArray2<u16>>> {
+    let g = py.detach(|| read_gray(&path)).map_err(err)?;
+    let out = Array2::from_shape_vec((g.height as usize, g.width as usize), g.data)
+        .map_err(|e| SpivError::new_err(e.to_string()))?;
+    Ok(out.into_pyarray(py))
+}
+
+/// Packs upright 0/1 planes `(n, h, w)` into the core's stored order
+/// (bottom-up rows, bit `p % 8` of byte `p / 8`), as a `.dat` holds them.
+/// Hand-written: a bit-packing loop no crate does in this layout.
+fn pack_bottom_up(spikes: &[u8], n: usize, h: usize, w: usize) -> Vec<u8> {
+    let pb = w * h / 8;
+    let mut out = vec![0u8; n * pb];
+    for (t, plane) in out.chunks_exact_mut(pb).enumerate() {
+        for r in 0..h {
+            let src = &spikes[(t * h + (h - 1 - r)) * w..][..w];
+            for (c, &s) in src.iter().enumerate() {
+                if s != 0 {
+                    let p = r * w + c;
+                    plane[p / 8] |= 1 << (p % 8);
+                }
+            }
+        }
+    }
+    out
+}
+
+/// One frame from spike planes, through the core: `spikes` is `(ticks,
+/// height, width)`, nonzero where a pixel fired (upright, as
+/// [`read_dat`] returns it); `at` the frame's centre tick (index into the
+/// first axis). `method` is "adaptive" (the paper's), "tfp" or "tfi";
+/// `window` the TFP window or the adaptive/TFI n_max, ticks (default 8 for
+/// TFP, else 128). Returns `uint16` gray levels `0..=full_scale`, `(height,
+/// width)`, upright.
+#[pyfunction]
+#[pyo3(signature = (spikes, at, method="adaptive", window=None, full_scale=255))]
+fn reconstruct<'py>(
+    py: Python<'py>,
+    spikes: &Bound<'py, PyAny>,
+    at: u64,
+    method: &str,
+    window: Option<u16>,
+    full_scale: u16,
+) -> PyResult<Bound<'py, PyArray2<u16>>> {
+    let method = method_named(method)?;
+    let window = window.unwrap_or(if method == Method::Tfp { 8 } else { 128 });
+    let s = contiguous(spikes, "uint8")?;
+    let s: PyReadonlyArray3<u8> = s
+        .extract()
+        .map_err(|_| SpivError::new_err("spikes: expected a 3-D array (ticks, height, width)"))?;
+    let (n, h, w) = (s.shape()[0], s.shape()[1], s.shape()[2]);
+    let (Ok(w16), Ok(h16)) = (u16::try_from(w), u16::try_from(h)) else {
+        return Err(SpivError::new_err(format!(
+            "{w}x{h} px: at most 65535 each"
+        )));
+    };
+    if w * h == 0 || (w * h) % 8 != 0 || (w * h) as u64 > MAX_FRAME_PIXELS {
+        return Err(SpivError::new_err(format!(
+            "{w}x{h} px: width*height must be a positive multiple of 8, at most {MAX_FRAME_PIXELS}"
+        )));
+    }
+    if full_scale == 0 {
+        return Err(SpivError::new_err("full_scale must be 1..=65535"));
+    }
+    let data = s
+        .as_slice()
+        .map_err(|e| SpivError::new_err(e.to_string()))?;
+    let packed = pack_bottom_up(data, n, h, w);
+    let frame = py
+        .detach(|| {
+            let planes = Planes::simulated(w16, h16, packed);
+            let p = Params {
+                full_scale,
+                ..Params::default()
+            };
+            frame_from_planes(&planes, at, method, window, &p)
+        })
+        .map_err(err)?;
+    let out = Array2::from_shape_vec((h, w), frame.data)
+        .map_err(|e| SpivError::new_err(e.to_string()))?;
+    Ok(out.into_pyarray(py))
+}
+
+/// A field's nodes as `(ny, nx)` arrays: x, y, u, v and flags (0 valid, 1
+/// replaced from neighbours, 2 invalid: then u = v = 0, as in the CSV).
+type FieldArrays = (
+    Array2<f64>,
+    Array2<f64>,
+    Array2<f64>,
+    Array2<f64>,
+    Array2<u8>,
+);
+
+fn field_arrays(vectors: &[Vector], grid: &Grid) -> FieldArrays {
+    let (ny, nx) = (grid.ny, grid.nx);
+    let at = |f: &dyn Fn(&Vector) -> f64| {
+        Array2::from_shape_fn((ny, nx), |(r, c)| vectors.get(r * nx + c).map_or(0.0, f))
+    };
+    let measured = |v: &Vector| v.state.is_measured();
+    (
+        at(&|v| v.x),
+        at(&|v| v.y),
+        at(&|v| if measured(v) { v.u } else { 0.0 }),
+        at(&|v| if measured(v) { v.v } else { 0.0 }),
+        Array2::from_shape_fn((ny, nx), |(r, c)| {
+            vectors.get(r * nx + c).map_or(2, |v| v.state.flag())
+        }),
+    )
+}
+
+/// PIV on an image pair (any numeric dtype, `(height, width)`), by the
+/// same code and defaults as `spiv piv`: multi-pass window deformation
+/// (`windows`, px, one pass each), `overlap` 0..=0.9, `mask` (nonzero
+/// pixels excluded), `interp` "bspline" | "bspline5" | "bicubic" |
+/// "bilinear", the normalised median test (`median_threshold`, 0 off),
+/// `clip` "auto" | "off" | a gray level, a high-pass of σ `highpass` px,
+/// `subpixel` "parabolic" | "gaussian" | "gaussian2d", `min_peak_ratio`
+/// (1 off).
+///
+/// Returns `(x, y, u, v, flags)`, each `(ny, nx)`: window centres in px
+/// (x right, y down), displacements in px per pair (v positive down the
+/// rows), flags 0 valid, 1 replaced, 2 invalid (u = v = 0).
+#[pyfunction]
+#[pyo3(signature = (a, b, windows=vec![64, 32, 32], overlap=0.5, mask=None, interp="bspline", median_threshold=2.0, clip="auto", highpass=3.0, subpixel="parabolic", min_peak_ratio=1.5))]
+#[pyo3(
+    text_signature = "(a, b, windows=(64, 32, 32), overlap=0.5, mask=None, interp='bspline', median_threshold=2.0, clip='auto', highpass=3.0, subpixel='parabolic', min_peak_ratio=1.5)"
+)]
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+fn piv<'py>(
+    py: Python<'py>,
+    a: &Bound<'py, PyAny>,
+    b: &Bound<'py, PyAny>,
+    windows: Vec<usize>,
+    overlap: f64,
+    mask: Option<&Bound<'py, PyAny>>,
+    interp: &str,
+    median_threshold: f64,
+    clip: &str,
+    highpass: f32,
+    subpixel: &str,
+    min_peak_ratio: f64,
+) -> PyResult<(
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray2<u8>>,
+)> {
+    let settings = PivOptions {
+        windows,
+        overlap,
+        interp: interp.into(),
+        median_threshold,
+        clip: clip.into(),
+        highpass,
+        subpixel: subpixel.into(),
+        min_peak_ratio,
+    }
+    .settings()
+    .map_err(err)?;
+    let ia = image(a, "a")?;
+    let ib = image(b, "b")?;
+    let m = mask
+        .map(|m| image(m, "mask").map(|m| m.mapv(|v| v != 0.0)))
+        .transpose()?;
+    let (vectors, grid) = py
+        .detach(|| run_piv(&ia, &ib, m.as_ref(), &settings).map(|f| (f.vectors(), f.grid)))
+        .map_err(err)?;
+    let (x, y, u, v, f) = field_arrays(&vectors, &grid);
+    Ok((
+        x.into_pyarray(py),
+        y.into_pyarray(py),
+        u.into_pyarray(py),
+        v.into_pyarray(py),
+        f.into_pyarray(py),
+    ))
+}
+
+/// A simulated recording (the same as `spiv simulate`): `scene` is
+/// "paper-linear", "paper-quadratic", "paper-log", "blasius", "uniform" or
+/// "vortex"; `width`, `height` px; `ticks` planes; `dt` the pair's
+/// separation, ticks; `shift` the uniform scene's (u, v) px per pair;
+/// `spacing` the minimum particle spacing, px; `out` a folder to also
+/// write `spiv simulate`'s files to (spikes.dat, scene.json, frame_a.png,
+/// frame_b.png, truth.csv, profile.csv).
+///
+/// Returns a dict: `spikes` `uint8 (ticks, height, width)` upright 0/1,
+/// `frames` the frame camera's pair `uint16 (2, height, width)` with its
+/// `frame_full_scale`, `pair` the pair's ticks `(k_a, k_b)`, and `truth`
+/// a dict of `x, y, u, v` `(ny, nx)` on the 32-px, 16-px-step grid of
+/// `truth.csv` (px per pair, v down).
+#[pyfunction]
+#[pyo3(signature = (scene="paper-linear", seed=1, width=None, height=None, ticks=None, dt=None, shift=None, spacing=None, out=None))]
+#[allow(clippy::too_many_arguments)]
+fn simulate<'py>(
+    py: Python<'py>,
+    scene: &str,
+    seed: u64,
+    width: Option<u16>,
+    height: Option<u16>,
+    ticks: Option<u32>,
+    dt: Option<u32>,
+    shift: Option<(f64, f64)>,
+    spacing: Option<f64>,
+    out: Option<PathBuf>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let req = SimulateRequest {
+        scene: scene.into(),
+        seed,
+        width,
+        height,
+        ticks,
+        dt,
+        shift,
+        spacing,
+    }
+    .request()
+    .map_err(|e| SpivError::new_err(e.0))?;
+    let (w, h) = (req.scene.width, req.scene.height);
+    let (n, _) = req.layout().map_err(err)?;
+    let px = u64::from(w) * u64::from(h);
+    if u64::from(n).saturating_mul(px) > MAX_ARRAY_BYTES {
+        return Err(SpivError::new_err(format!(
+            "{n} planes of {w}x{h} px exceed {MAX_ARRAY_BYTES} bytes"
+        )));
+    }
+    let (spikes, frames, pair, truth, grid, full) = py
+        .detach(|| -> Result<_, Failure> {
+            let (planes, sim) = match &out {
+                None => simulate_planes(&req)?,
+                Some(dir) => {
+                    // The CLI's files, then the planes read back from them.
+                    let sim = simulate_to_dir(&req, dir, |_, _| {})?;
+                    let mut r =
+                        DatReader::open(&dir.join("spikes.dat"), w, h, DatOptions::default())?;
+                    (r.read_range(0, r.planes())?, sim)
+                }
+            };
+            let pb = (px / 8) as usize;
+            let mut spikes = Vec::with_capacity(planes.len() * 8);
+            for p in planes.chunks_exact(pb) {
+                spikes.extend(unpack_upright(p, w, h, true));
+            }
+            let pair = sim.meta.capture.pair;
+            let dtp = f64::from(pair[1] - pair[0]);
+            let grid = Grid::new(usize::from(w), usize::from(h), 32, 16)
+                .ok_or_else(|| format!("{w}x{h} px: smaller than the 32-px truth grid"))?;
+            let truth = sim.scene.truth_vectors(&grid.centres(), dtp);
+            let [fa, fb] = sim.frames;
+            Ok((
+                spikes,
+                [fa, fb].concat(),
+                pair,
+                truth,
+                grid,
+                req.camera.max_dn(),
+            ))
+        })
+        .map_err(err)?;
+    let (h, w) = (usize::from(h), usize::from(w));
+    let t = spikes.len() / (h * w);
+    let shape = |e: numpy::ndarray::ShapeError| SpivError::new_err(e.to_string());
+    let d = PyDict::new(py);
+    d.set_item(
+        "spikes",
+        Array3::from_shape_vec((t, h, w), spikes)
+            .map_err(shape)?
+            .into_pyarray(py),
+    )?;
+    d.set_item(
+        "frames",
+        Array3::from_shape_vec((2, h, w), frames)
+            .map_err(shape)?
+            .into_pyarray(py),
+    )?;
+    d.set_item("frame_full_scale", full)?;
+    d.set_item("pair", (pair[0], pair[1]))?;
+    let (x, y, u, v, _) = field_arrays(&truth, &grid);
+    let td = PyDict::new(py);
+    td.set_item("x", x.into_pyarray(py))?;
+    td.set_item("y", y.into_pyarray(py))?;
+    td.set_item("u", u.into_pyarray(py))?;
+    td.set_item("v", v.into_pyarray(py))?;
+    d.set_item("truth", td)?;
+    Ok(d)
+}
+
+/// The flow job on a spike recording (the same as `spiv flow`, without
+/// the files): frame pairs through the core's closed loop, PIV of each.
+///
+/// `path` is a Vidar `.dat` (size from `width`/`height` or the
+/// `scene.json` beside it) or a `.npz` capture; `dt` ticks between a
+/// pair's frames (default: scene.json's), `every` between pairs (default
+/// 4·dt), `start`/`end` ticks; `method` "mc" (default), "adaptive" or
+/// "tfp"; `window` ticks; `dwell_cap` px or None (off); `windows` the PIV
+/// passes, px.
+///
+/// Returns a dict: `ticks` `int64 (pairs, 2)`, `methods` (each pair's),
+/// `x`, `y` `(ny, nx)`, `u`, `v`, `flags` `(pairs, ny, nx)`, and the mean
+/// field over pairs `mean_u`, `mean_v`, `mean_flags` `(ny, nx)`.
+#[pyfunction]
+#[pyo3(signature = (path, dt=None, every=None, start=None, end=None, method="mc", window=None, dwell_cap=Some(8.0), windows=None, width=None, height=None, flip=true, strip_head=0))]
+#[allow(clippy::too_many_arguments)]
+fn flow<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    dt: Option<u32>,
+    every: Option<u32>,
+    start: Option<u64>,
+    end: Option<u64>,
+    method: &str,
+    window: Option<u16>,
+    dwell_cap: Option<f64>,
+    windows: Option<Vec<usize>>,
+    width: Option<u16>,
+    height: Option<u16>,
+    flip: bool,
+    strip_head: u16,
+) -> PyResult<Bound<'py, PyDict>> {
+    let req = FlowRequest {
+        dt,
+        every,
+        start,
+        end,
+        method: method_named(method)?,
+        window,
+        dwell_cap,
+        windows,
+    };
+    if width.is_some() != height.is_some() {
+        return Err(SpivError::new_err("give both width and height, or neither"));
+    }
+    let fopts = FileOptions {
+        width,
+        height,
+        dat: DatOptions {
+            flip,
+            strip_head,
+            allow_truncated: false,
+        },
+    };
+    let (out, grid_of) = py
+        .detach(|| -> Result<_, Failure> {
+            let mut rec = Recording::open(&path, &fopts)?;
+            let o = req.options(&rec, &path)?;
+            let out = run_flow(&mut rec, &o, |_, _| {})?;
+            let (w, h) = out.size;
+            let settings = if o.method == Method::Mc {
+                &o.mc_piv
+            } else {
+                &o.piv
+            };
+            let grid = settings
+                .grid(usize::from(w), usize::from(h))
+                .ok_or_else(|| format!("{w}x{h} px: no PIV window fits"))?;
+            Ok((out, grid))
+        })
+        .map_err(err)?;
+    let (ny, nx) = (grid_of.ny, grid_of.nx);
+    let p = out.pairs.len();
+    let mut us = Array3::<f64>::zeros((p, ny, nx));
+    let mut vs = Array3::<f64>::zeros((p, ny, nx));
+    let mut fs = Array3::<u8>::zeros((p, ny, nx));
+    let mut ticks = Array2::<i64>::zeros((p, 2));
+    let mut methods = Vec::with_capacity(p);
+    for (i, pr) in out.pairs.iter().enumerate() {
+        let (_, _, u, v, f) = field_arrays(&pr.vectors, &grid_of);
+        us.index_axis_mut(numpy::ndarray::Axis(0), i).assign(&u);
+        vs.index_axis_mut(numpy::ndarray::Axis(0), i).assign(&v);
+        fs.index_axis_mut(numpy::ndarray::Axis(0), i).assign(&f);
+        ticks[[i, 0]] = pr.ticks[0] as i64;
+        ticks[[i, 1]] = pr.ticks[1] as i64;
+        methods.push(pr.method.name());
+    }
+    let mean = out.mean_field();
+    let (x, y, mu, mv, mf) = field_arrays(&mean, &grid_of);
+    let d = PyDict::new(py);
+    d.set_item("ticks", ticks.into_pyarray(py))?;
+    d.set_item("methods", methods)?;
+    d.set_item("x", x.into_pyarray(py))?;
+    d.set_item("y", y.into_pyarray(py))?;
+    d.set_item("u", us.into_pyarray(py))?;
+    d.set_item("v", vs.into_pyarray(py))?;
+    d.set_item("flags", fs.into_pyarray(py))?;
+    d.set_item("mean_u", mu.into_pyarray(py))?;
+    d.set_item("mean_v", mv.into_pyarray(py))?;
+    d.set_item("mean_flags", mf.into_pyarray(py))?;
+    Ok(d)
+}
+
+/// spiv: particle image velocimetry with spike cameras.
+#[pymodule]
+fn spiv(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("SpivError", m.py().get_type::<SpivError>())?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add_function(wrap_pyfunction!(read_dat, m)?)?;
+    m.add_function(wrap_pyfunction!(read_image, m)?)?;
+    m.add_function(wrap_pyfunction!(reconstruct, m)?)?;
+    m.add_function(wrap_pyfunction!(piv, m)?)?;
+    m.add_function(wrap_pyfunction!(simulate, m)?)?;
+    m.add_function(wrap_pyfunction!(flow, m)?)?;
+    Ok(())
+}

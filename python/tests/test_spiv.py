@@ -1,0 +1,206 @@
+"""The Python module against the `spiv` command line on the same input
+(same spikes, frames and vectors), against ground truth on known shifts,
+and on bad input (the CLI's messages, never a crash)."""
+
+import csv
+import threading
+
+import numpy as np
+import pytest
+
+import spiv
+
+
+def read_csv(path):
+    with open(path) as f:
+        rows = list(csv.DictReader(f))
+    cols = {k: np.array([float(r[k]) for r in rows]) for k in ("x", "y", "u", "v", "flag")}
+    return cols
+
+
+def cli_error(res):
+    """The CLI's one error line, without its `spiv: error: ` prefix."""
+    assert res.returncode != 0
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1, res.stderr
+    assert lines[0].startswith("spiv: error: ")
+    return lines[0][len("spiv: error: "):]
+
+
+def test_simulate_and_read_dat_match_the_cli(recording):
+    spikes = spiv.read_dat(recording / "spikes.dat")
+    sim = spiv.simulate("uniform", seed=3, width=128, height=128, shift=(2.0, 1.0))
+    assert spikes.dtype == np.uint8 and spikes.shape == sim["spikes"].shape
+    assert spikes.shape[1:] == (128, 128)
+    np.testing.assert_array_equal(spikes, sim["spikes"])
+    assert set(np.unique(spikes)) <= {0, 1}
+    truth = read_csv(recording / "truth.csv")
+    t = sim["truth"]
+    np.testing.assert_allclose(t["x"].ravel(), truth["x"])
+    np.testing.assert_allclose(t["y"].ravel(), truth["y"])
+    np.testing.assert_allclose(t["u"].ravel(), truth["u"], atol=1e-6)
+    np.testing.assert_allclose(t["v"].ravel(), truth["v"], atol=1e-6)
+    # The same files as the CLI's, when asked for.
+    again = spiv.simulate("uniform", seed=3, width=128, height=128, shift=(2.0, 1.0),
+                          out=recording.parent / "again")
+    np.testing.assert_array_equal(again["spikes"], spikes)
+    assert (recording.parent / "again" / "spikes.dat").read_bytes() == (
+        recording / "spikes.dat").read_bytes()
+    # A window of the file, by start and count.
+    part = spiv.read_dat(recording / "spikes.dat", start=10, count=5)
+    np.testing.assert_array_equal(part, spikes[10:15])
+
+
+@pytest.mark.parametrize("method", ["adaptive", "tfp", "tfi"])
+def test_reconstruct_matches_the_cli(cli, recording, tmp_path, method):
+    spikes = spiv.read_dat(recording / "spikes.dat")
+    at = 64
+    cli("reconstruct", recording / "spikes.dat", "--at", at, "--method", method,
+        "-o", tmp_path / "f.png")
+    want = spiv.read_image(tmp_path / "f.png")
+    got = spiv.reconstruct(spikes, at, method=method)
+    assert got.dtype == np.uint16 and got.shape == (128, 128)
+    np.testing.assert_array_equal(got, want)
+    assert got.max() > 0
+
+
+def test_piv_gives_the_cli_vectors(cli, recording, tmp_path):
+    spikes = spiv.read_dat(recording / "spikes.dat")
+    for k, name in [(64, "a.png"), (77, "b.png")]:
+        cli("reconstruct", recording / "spikes.dat", "--at", k, "--method", "tfp",
+            "-o", tmp_path / name)
+    a, b = spiv.read_image(tmp_path / "a.png"), spiv.read_image(tmp_path / "b.png")
+    cli("piv", tmp_path / "a.png", tmp_path / "b.png", "-o", tmp_path / "v.csv",
+        "--windows", "32,16", "--overlap", "0.5")
+    want = read_csv(tmp_path / "v.csv")
+    x, y, u, v, flags = spiv.piv(a, b, windows=(32, 16), overlap=0.5)
+    assert x.shape == y.shape == u.shape == v.shape == flags.shape
+    np.testing.assert_array_equal(x.ravel(), want["x"])
+    np.testing.assert_array_equal(y.ravel(), want["y"])
+    np.testing.assert_array_equal(flags.ravel(), want["flag"])
+    # The CSV holds 6 decimals.
+    np.testing.assert_allclose(u.ravel(), want["u"], atol=5.1e-7, rtol=0)
+    np.testing.assert_allclose(v.ravel(), want["v"], atol=5.1e-7, rtol=0)
+    # Any numeric dtype gives the same field.
+    x2, _, u2, _, _ = spiv.piv(a.astype(np.float64), b.astype(np.int32), windows=(32, 16))
+    np.testing.assert_array_equal(u2, u)
+
+
+def particles(h, w, n, seed):
+    """Gaussian particles (σ 1 px) at random places, as float64."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:h, 0:w]
+    img = np.zeros((h, w))
+    for py, px in zip(rng.uniform(0, h, n), rng.uniform(0, w, n)):
+        img += 200 * np.exp(-((xx - px) ** 2 + (yy - py) ** 2) / 2.0)
+    return img
+
+
+def test_conventions_on_a_known_shift():
+    # Independent of the simulator: a particle image rolled 3 px right
+    # and 2 px down (periodic, so every window sees the same shift).
+    a = particles(128, 160, 400, seed=1)
+    b = np.roll(a, shift=(2, 3), axis=(0, 1))
+    x, y, u, v, flags = spiv.piv(a, b)
+    inner = flags == 0
+    assert inner.sum() > 0.8 * flags.size
+    np.testing.assert_allclose(u[inner], 3.0, atol=0.05)
+    np.testing.assert_allclose(v[inner], 2.0, atol=0.05)  # v positive down the rows
+    assert (np.diff(x, axis=1) > 0).all() and (np.diff(x, axis=0) == 0).all()
+    assert (np.diff(y, axis=0) > 0).all() and (np.diff(y, axis=1) == 0).all()
+    assert x.shape[1] > x.shape[0]  # (ny, nx): 160 px wide, 128 high
+
+
+def test_simulated_pair_measures_the_truth():
+    sim = spiv.simulate("uniform", seed=5, width=192, height=128, shift=(-1.5, 0.75))
+    fa, fb = sim["frames"]
+    x, y, u, v, flags = spiv.piv(fa, fb)
+    t = sim["truth"]
+    assert u.shape == t["u"].shape
+    ok = flags < 2
+    assert np.sqrt(np.mean((u[ok] - t["u"][ok]) ** 2 + (v[ok] - t["v"][ok]) ** 2)) < 0.1
+    np.testing.assert_allclose(x, t["x"])
+
+
+def test_flow_gives_the_cli_mean_field(cli, tmp_path):
+    d = tmp_path / "rec"
+    cli("simulate", "--scene", "paper-linear", "--width", "128", "--height", "128",
+        "--ticks", "400", "--seed", "2", "--out", d)
+    cli("flow", d / "spikes.dat", "--out", tmp_path / "out")
+    want = read_csv(tmp_path / "out" / "mean.csv")
+    got = spiv.flow(d / "spikes.dat")
+    pairs = got["u"].shape[0]
+    assert pairs >= 2 and got["ticks"].shape == (pairs, 2) and len(got["methods"]) == pairs
+    assert got["methods"][-1] == "mc"
+    np.testing.assert_array_equal(got["x"].ravel(), want["x"])
+    np.testing.assert_array_equal(got["mean_flags"].ravel(), want["flag"])
+    np.testing.assert_allclose(got["mean_u"].ravel(), want["u"], atol=5.1e-7, rtol=0)
+    np.testing.assert_allclose(got["mean_v"].ravel(), want["v"], atol=5.1e-7, rtol=0)
+    assert np.abs(got["mean_u"][got["mean_flags"] == 0]).max() > 0.5  # it flows
+
+
+def test_bad_input_raises_the_cli_message(cli, recording, tmp_path):
+    spikes = spiv.read_dat(recording / "spikes.dat")
+    cli("reconstruct", recording / "spikes.dat", "--at", 64, "-o", tmp_path / "a.png")
+    msg = cli_error(cli("piv", tmp_path / "a.png", tmp_path / "a.png", "--windows", "2000",
+                        "-o", tmp_path / "v.csv", check=False))
+    a = spiv.read_image(tmp_path / "a.png")
+    with pytest.raises(spiv.SpivError) as e:
+        spiv.piv(a, a, windows=(2000,))
+    assert str(e.value) == msg
+    msg = cli_error(cli("piv", tmp_path / "a.png", tmp_path / "a.png", "--clip", "x",
+                        "-o", tmp_path / "v.csv", check=False))
+    with pytest.raises(spiv.SpivError, match="^--clip x") as e:
+        spiv.piv(a, a, clip="x")
+    assert str(e.value) == msg
+    msg = cli_error(cli("reconstruct", recording / "spikes.dat", "--at", 100000,
+                        "-o", tmp_path / "x.png", check=False))
+    with pytest.raises(spiv.SpivError) as e:
+        spiv.reconstruct(spikes, 100000)
+    assert str(e.value) == msg
+    msg = cli_error(cli("simulate", "--width", 3, "--height", 3, "--out", tmp_path / "s",
+                        check=False))
+    with pytest.raises(spiv.SpivError) as e:
+        spiv.simulate(width=3, height=3)
+    assert str(e.value) == msg
+
+    with pytest.raises(spiv.SpivError, match="differ in size"):
+        spiv.piv(a, a[:, :64])
+    with pytest.raises(spiv.SpivError, match="2-D"):
+        spiv.piv(spikes, spikes)
+    with pytest.raises(spiv.SpivError, match="3-D"):
+        spiv.reconstruct(a, 0)
+    with pytest.raises(spiv.SpivError, match="method nope"):
+        spiv.reconstruct(spikes, 64, method="nope")
+    with pytest.raises(spiv.SpivError, match="predicted motion"):
+        spiv.reconstruct(spikes, 64, method="mc")
+    with pytest.raises(spiv.SpivError, match="multiple of 8"):
+        spiv.reconstruct(np.zeros((4, 3, 3), np.uint8), 1)
+    with pytest.raises(OSError):
+        spiv.read_dat(tmp_path / "missing.dat", width=128, height=128)
+    with pytest.raises(spiv.SpivError, match="both width and height"):
+        spiv.read_dat(recording / "spikes.dat", width=128)
+    with pytest.raises(spiv.SpivError, match="start"):
+        spiv.read_dat(recording / "spikes.dat", start=10**9)
+    with pytest.raises(spiv.SpivError, match="--dt"):
+        spiv.flow(recording / "spikes.dat", dt=0)
+    with pytest.raises(TypeError):
+        spiv.piv(a)
+
+
+def test_heavy_work_releases_the_gil():
+    # Two PIV runs from two threads finish and agree (the GIL is released
+    # inside, so they overlap; correctness, not timing, is tested here).
+    a = particles(256, 256, 800, seed=2)
+    b = np.roll(a, shift=(1, 2), axis=(0, 1))
+    out = [None, None]
+
+    def run(i):
+        out[i] = spiv.piv(a, b)[2]
+
+    threads = [threading.Thread(target=run, args=(i,)) for i in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    np.testing.assert_array_equal(out[0], out[1])
