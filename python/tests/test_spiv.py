@@ -204,3 +204,20 @@ def test_heavy_work_releases_the_gil():
     for t in threads:
         t.join()
     np.testing.assert_array_equal(out[0], out[1])
+
+
+def test_quickstart_runs(tmp_path):
+    # The README's quick start: simulate, read the .dat, a TFP pair, PIV
+    # (and a plot when matplotlib is there).
+    import pathlib
+    import subprocess
+    import sys
+
+    script = pathlib.Path(__file__).resolve().parents[2] / "examples" / "quickstart.py"
+    res = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True,
+                         text=True, check=True)
+    assert "vectors" in res.stdout
+    assert (tmp_path / "quickstart" / "spikes.dat").exists()
+    top = [float(line.split("u =")[1].split()[0]) for line in res.stdout.splitlines()
+           if line.strip().startswith("y =")]
+    assert top and top[0] > 10.0 > top[-1] > 0.0  # the linear profile: fast at the top
