@@ -18,6 +18,7 @@
 
 pub mod capture;
 pub mod dat;
+pub mod dense;
 pub mod grid;
 pub mod image;
 pub mod npz;

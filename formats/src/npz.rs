@@ -147,7 +147,7 @@ pub fn read_npz_spikes_from<R: Read + Seek>(
 }
 
 /// The `.npy` header, its length checked before it is read.
-fn read_header(r: &mut impl Read) -> Result<Header, String> {
+pub(crate) fn read_header(r: &mut impl Read) -> Result<Header, String> {
     // Magic (6), version (2), header length (2 in version 1, else 4).
     let mut pre = [0u8; 12];
     r.read_exact(&mut pre[..10]).map_err(|e| e.to_string())?;
