@@ -106,7 +106,7 @@ def simulate(
 ) -> Simulation:
     """A simulated recording, as `spiv simulate`.
 
-    scene: paper-linear, paper-quadratic, paper-log, blasius, uniform, vortex.
+    scene: paper-linear, paper-quadratic, paper-log, blasius, uniform, vortex, turbulence, large-shift.
     width, height: px. ticks: planes. dt: ticks between the pair's frames.
     shift: the uniform scene's (u, v), px per pair. spacing: minimum particle spacing, px.
     out: a folder to also write `spiv simulate`'s files to (spikes.dat, scene.json, ...).

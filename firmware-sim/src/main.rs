@@ -32,7 +32,7 @@ const MAX_DT: u32 = 1_000_000;
     about = "The spiv sidecar, simulated: spike planes in, compressed frame pairs out over the wire protocol"
 )]
 struct Args {
-    /// Simulate this scene (paper-linear, paper-quadratic, paper-log, blasius, uniform, vortex).
+    /// Simulate this scene (paper-linear, paper-quadratic, paper-log, blasius, uniform, vortex, turbulence, large-shift).
     #[arg(long, conflicts_with = "input", required_unless_present = "input")]
     scene: Option<String>,
     /// Or read spike planes from this .dat.

@@ -13,6 +13,7 @@ use crate::scene::{Scene, SceneParams, PIXEL_MM, TICK_HZ};
 use crate::sensor::{FrameCamera, FrameCameraParams, SensorParams, SpikeSensor};
 use spiv_formats::capture::Capture;
 use spiv_formats::dat::{plane_bytes, DatWriter};
+use spiv_formats::dense::write_dense;
 use spiv_formats::grid::Grid;
 use spiv_formats::image::write_levels;
 use spiv_formats::vectors::{write_profile, write_vectors};
@@ -201,6 +202,7 @@ pub fn simulate_to_dir(
         dt,
     );
     write_vectors(&dir.join("truth.csv"), &truth)?;
+    write_dense(&dir.join("truth.flo"), &sim.scene.truth_dense(dt))?;
     write_profile(&dir.join("profile.csv"), &sim.scene.profile(dt))?;
     sim.meta.write(&dir.join("scene.json"))?;
     Ok(sim)

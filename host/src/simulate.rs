@@ -6,6 +6,9 @@ use spiv_firmware_sim::scene::{SceneKind, SceneParams};
 use spiv_firmware_sim::simulation::Request;
 use spiv_formats::MAX_FRAME_PIXELS;
 
+/// Longest turbulence simulation, ticks.
+pub const MAX_TURBULENCE_TICKS: u32 = 10_000;
+
 /// A value out of range, named as the CLI names it.
 #[derive(Debug, thiserror::Error)]
 #[error("{0}")]
@@ -93,6 +96,15 @@ impl SimulateRequest {
         }
         if self.ticks == Some(0) || self.ticks.is_some_and(|t| t > 1_000_000) {
             return bad("--ticks must be in 1..=1000000".into());
+        }
+        // Turbulence particles are integrated, not moved in closed form:
+        // their tracks are kept for at most this many ticks.
+        let integrated = matches!(kind, SceneKind::Turbulence | SceneKind::LargeShift);
+        if integrated && self.ticks.is_some_and(|t| t > MAX_TURBULENCE_TICKS) {
+            return bad(format!(
+                "--ticks must be in 1..={MAX_TURBULENCE_TICKS} for the {} scene",
+                self.scene
+            ));
         }
         let mut req = Request::new(p, self.seed);
         req.ticks = self.ticks;

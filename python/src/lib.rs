@@ -388,7 +388,7 @@ fn piv<'py>(
 /// separation, ticks; `shift` the uniform scene's (u, v) px per pair;
 /// `spacing` the minimum particle spacing, px; `out` a folder to also
 /// write `spiv simulate`'s files to (spikes.dat, scene.json, frame_a.png,
-/// frame_b.png, truth.csv, profile.csv).
+/// frame_b.png, truth.csv, truth.flo, profile.csv).
 ///
 /// Returns a dict: `spikes` `uint8 (ticks, height, width)` upright 0/1,
 /// `frames` the frame camera's pair `uint16 (2, height, width)` with its

@@ -45,6 +45,18 @@ pub enum Flow {
         /// px/tick, down.
         v: f64,
     },
+    /// Kinematic turbulence (beyond the paper; issue 17): a frozen,
+    /// divergence-free field of random Fourier modes of the stream function
+    /// ψ = Σ a·cos(kx·x + ky·row + φ), u = ∂ψ/∂row, v = −∂ψ/∂x, periodic
+    /// over `period` px in both directions (every k a multiple of
+    /// 2π/period), with a Kolmogorov-like spectrum ([`turbulence_modes`]).
+    /// Particles are advected by RK4 (steps of [`RK4_STEP`] ticks).
+    Turbulence {
+        /// Period of the field in x and rows, px.
+        period: f64,
+        /// The modes.
+        modes: Vec<Mode>,
+    },
     /// Lamb–Oseen vortex: v_θ(r) = Γ/(2πr)·(1 − exp(−r²/rc²)).
     Vortex {
         /// Centre column, px.
@@ -56,6 +68,87 @@ pub enum Flow {
         /// Core radius rc, px.
         rc: f64,
     },
+}
+
+/// One Fourier mode of a turbulence stream function:
+/// ψ = `amp`·cos(`kx`·x + `ky`·row + `phase`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Mode {
+    /// Wavenumber along x, rad/px.
+    pub kx: f64,
+    /// Wavenumber along rows, rad/px.
+    pub ky: f64,
+    /// Amplitude of ψ, px²/tick.
+    pub amp: f64,
+    /// Phase, rad.
+    pub phase: f64,
+}
+
+/// RK4 step of the turbulence advection, ticks (the error at the smallest
+/// eddies of the default scene is below 10⁻⁴ px per pair).
+pub const RK4_STEP: f64 = 0.25;
+
+/// Modes of a turbulence field periodic over `period` px: `n` wavevectors
+/// with integer indices (so the field is periodic), their wavelengths
+/// log-spread over `[l_min, l_max]` px, random directions and phases from
+/// `seed`; amplitudes of a Kolmogorov-like spectrum (E(k) ∝ k^(−5/3), so
+/// with log-spaced k each mode's speed ∝ k^(−1/3)) with a dissipation
+/// roll-off exp(−(k·l_min/2π)²) at the smallest eddies, scaled so the
+/// fastest point of the field moves `max_speed` px/tick.
+pub fn turbulence_modes(
+    seed: u64,
+    period: f64,
+    l_min: f64,
+    l_max: f64,
+    n: usize,
+    max_speed: f64,
+) -> Vec<Mode> {
+    use rand::{Rng, SeedableRng};
+    let tau = 2.0 * std::f64::consts::PI;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let (k_lo, k_hi) = (period / l_max.max(1.0), period / l_min.max(1.0));
+    let mut modes: Vec<Mode> = Vec::with_capacity(n);
+    for i in 0..n {
+        // Index magnitude log-spaced from k_lo to k_hi (the field's own
+        // harmonics of the period), random direction, snapped to integers.
+        let f = if n > 1 {
+            i as f64 / (n - 1) as f64
+        } else {
+            0.0
+        };
+        let m = (k_lo.max(1.0) * (k_hi.max(1.0) / k_lo.max(1.0)).powf(f)).max(1.0);
+        let a = rng.gen::<f64>() * tau;
+        let (mut nx, ny) = ((m * a.cos()).round(), (m * a.sin()).round());
+        if nx == 0.0 && ny == 0.0 {
+            nx = 1.0;
+        }
+        let (kx, ky) = (tau * nx / period, tau * ny / period);
+        let k = kx.hypot(ky);
+        modes.push(Mode {
+            kx,
+            ky,
+            amp: k.powf(-1.0 / 3.0) * (-(k * l_min / tau).powi(2)).exp() / k,
+            phase: rng.gen::<f64>() * tau,
+        });
+    }
+    let probe = Flow::Turbulence {
+        period,
+        modes: modes.clone(),
+    };
+    // The fastest point on a 1-px lattice over one period.
+    let cells = period.ceil().max(1.0) as usize;
+    let mut top: f64 = 0.0;
+    for i in 0..cells {
+        for j in 0..cells {
+            let (u, v) = probe.velocity(j as f64, i as f64);
+            top = top.max(u.hypot(v));
+        }
+    }
+    let scale = if top > 0.0 { max_speed / top } else { 0.0 };
+    for m in &mut modes {
+        m.amp *= scale;
+    }
+    modes
 }
 
 /// Blasius solution `f'(η)` on η ∈ [0, 10], step 0.01, with `f''(0)`.
@@ -157,6 +250,9 @@ impl Flow {
     /// Where a particle at `(x, row)` at tick `t0` is at tick `t1`.
     pub fn advect(&self, x: f64, row: f64, t0: f64, t1: f64) -> (f64, f64) {
         let dt = t1 - t0;
+        if let Flow::Turbulence { .. } = self {
+            return self.rk4(x, row, dt);
+        }
         match *self {
             Flow::Shear {
                 profile,
@@ -175,7 +271,43 @@ impl Flow {
                 let (s, c) = a.sin_cos();
                 (cx + c * dx - s * dy, cy + s * dx + c * dy)
             }
+            Flow::Turbulence { .. } => (x, row),
         }
+    }
+
+    /// The velocity at `(x, row)`, px/tick (right, down).
+    pub fn velocity(&self, x: f64, row: f64) -> (f64, f64) {
+        match self {
+            Flow::Turbulence { modes, .. } => {
+                let (mut u, mut v) = (0.0, 0.0);
+                for m in modes {
+                    let s = (m.kx * x + m.ky * row + m.phase).sin() * m.amp;
+                    u -= m.ky * s;
+                    v += m.kx * s;
+                }
+                (u, v)
+            }
+            _ => {
+                let (x1, r1) = self.advect(x, row, 0.0, 1e-3);
+                ((x1 - x) * 1e3, (r1 - row) * 1e3)
+            }
+        }
+    }
+
+    /// RK4 over `dt` ticks (either sign) in steps of at most [`RK4_STEP`].
+    fn rk4(&self, x: f64, row: f64, dt: f64) -> (f64, f64) {
+        let n = (dt.abs() / RK4_STEP).ceil().max(1.0);
+        let h = dt / n;
+        let (mut px, mut pr) = (x, row);
+        for _ in 0..n as usize {
+            let k1 = self.velocity(px, pr);
+            let k2 = self.velocity(px + 0.5 * h * k1.0, pr + 0.5 * h * k1.1);
+            let k3 = self.velocity(px + 0.5 * h * k2.0, pr + 0.5 * h * k2.1);
+            let k4 = self.velocity(px + h * k3.0, pr + h * k3.1);
+            px += h / 6.0 * (k1.0 + 2.0 * k2.0 + 2.0 * k3.0 + k4.0);
+            pr += h / 6.0 * (k1.1 + 2.0 * k2.1 + 2.0 * k3.1 + k4.1);
+        }
+        (px, pr)
     }
 
     /// The true displacement over `dt` ticks of the particle that is at
@@ -197,7 +329,7 @@ impl Flow {
                 delta99,
             } => Some(Self::shear_u(profile, top, height, delta99, y)),
             Flow::Uniform { u, .. } => Some(u),
-            Flow::Vortex { .. } => None,
+            Flow::Vortex { .. } | Flow::Turbulence { .. } => None,
         }
     }
 
@@ -255,6 +387,57 @@ mod tests {
         // Rotation keeps the radius.
         let (x, r) = f.advect(230.0, 125.0, 0.0, 500.0);
         assert!(((x - 200.0).hypot(r - 125.0) - 30.0).abs() < 1e-9);
+    }
+
+    fn turbulence() -> Flow {
+        Flow::Turbulence {
+            period: 320.0,
+            modes: turbulence_modes(1, 320.0, 16.0, 256.0, 64, 25.0 / 21.0),
+        }
+    }
+
+    #[test]
+    fn turbulence_is_divergence_free_periodic_and_as_fast_as_asked() {
+        let f = turbulence();
+        let e = 1e-4;
+        let mut top: f64 = 0.0;
+        for i in 0..40 {
+            for j in 0..40 {
+                let (x, r) = (j as f64 * 8.03, i as f64 * 7.97);
+                let div = (f.velocity(x + e, r).0 - f.velocity(x - e, r).0
+                    + f.velocity(x, r + e).1
+                    - f.velocity(x, r - e).1)
+                    / (2.0 * e);
+                let (u, v) = f.velocity(x, r);
+                assert!(div.abs() < 1e-6 * (1.0 + u.hypot(v)), "div {div}");
+                let (u2, v2) = f.velocity(x + 320.0, r - 320.0);
+                assert!((u - u2).abs() < 1e-9 && (v - v2).abs() < 1e-9);
+                top = top.max(u.hypot(v));
+            }
+        }
+        // The scaling's lattice max, seen on a coarser lattice.
+        assert!(
+            top <= 25.0 / 21.0 + 1e-9 && top > 0.8 * 25.0 / 21.0,
+            "top {top}"
+        );
+        let m = f.max_displacement(256.0, 256.0, 21.0);
+        assert!(m > 15.0 && m < 27.0, "largest displacement {m} px per pair");
+    }
+
+    #[test]
+    fn turbulence_advection_converges_and_reverses() {
+        let f = turbulence();
+        let (x, r) = f.advect(100.0, 80.0, 0.0, 21.0);
+        // Half the step: the same path within 10⁻⁴ px.
+        let n = 21 * 8;
+        let (mut a, mut b) = (100.0, 80.0);
+        for _ in 0..n {
+            (a, b) = f.rk4(a, b, 21.0 / n as f64);
+        }
+        assert!((x - a).hypot(r - b) < 1e-4, "{x},{r} vs {a},{b}");
+        // Back again.
+        let (x0, r0) = f.advect(x, r, 21.0, 0.0);
+        assert!((x0 - 100.0).hypot(r0 - 80.0) < 1e-6);
     }
 
     #[test]

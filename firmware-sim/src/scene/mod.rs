@@ -12,6 +12,7 @@ pub mod flow;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
+use spiv_formats::dense::DenseField;
 
 pub use flow::{Flow, Profile};
 
@@ -31,6 +32,11 @@ pub enum SceneKind {
     Uniform,
     /// Lamb–Oseen vortex, core radius H/8, peak 6 px per pair.
     Vortex,
+    /// Kinematic turbulence: eddies from 8 to 128 px, up to 25 px per pair
+    /// (beyond the paper; issue 17).
+    Turbulence,
+    /// Large smooth eddies (32 to 128 px) moving up to 40 px per pair.
+    LargeShift,
 }
 
 /// A scene name that is none of [`SceneKind::ALL`].
@@ -40,13 +46,15 @@ pub struct UnknownScene(pub String);
 
 impl SceneKind {
     /// Every scene, by name.
-    pub const ALL: [(&'static str, SceneKind); 6] = [
+    pub const ALL: [(&'static str, SceneKind); 8] = [
         ("paper-linear", SceneKind::PaperLinear),
         ("paper-quadratic", SceneKind::PaperQuadratic),
         ("paper-log", SceneKind::PaperLog),
         ("blasius", SceneKind::Blasius),
         ("uniform", SceneKind::Uniform),
         ("vortex", SceneKind::Vortex),
+        ("turbulence", SceneKind::Turbulence),
+        ("large-shift", SceneKind::LargeShift),
     ];
 
     /// The scene of a name, if any.
@@ -112,6 +120,33 @@ pub struct SceneParams {
     pub per_cell: usize,
     /// Minimum centre spacing, px (8 by default; the paper's 15 as an option).
     pub min_spacing: f64,
+    /// Turbulence scenes: the smallest and largest eddy (half a wavelength),
+    /// px.
+    #[serde(default = "default_eddies")]
+    pub eddies: (f64, f64),
+    /// Turbulence scenes: Fourier modes of the field.
+    #[serde(default = "default_modes")]
+    pub modes: usize,
+    /// Turbulence scenes: the largest displacement per pair, px.
+    #[serde(default = "default_max_shift")]
+    pub max_shift: f64,
+    /// Turbulence scenes: seed of the field (the scene's seed places the
+    /// particles).
+    #[serde(default = "default_flow_seed")]
+    pub flow_seed: u64,
+}
+
+fn default_eddies() -> (f64, f64) {
+    (8.0, 128.0)
+}
+fn default_modes() -> usize {
+    64
+}
+fn default_max_shift() -> f64 {
+    25.0
+}
+fn default_flow_seed() -> u64 {
+    1
 }
 
 impl SceneParams {
@@ -133,6 +168,21 @@ impl SceneParams {
             glare_sigma: 25.0,
             per_cell: 4,
             min_spacing: 8.0,
+            eddies: default_eddies(),
+            modes: default_modes(),
+            max_shift: default_max_shift(),
+            flow_seed: default_flow_seed(),
+        };
+        // Turbulence: the spike-flow datasets' layout (256×256 px, pairs
+        // 21 ticks apart), no glare, dense seeding for small eddies.
+        let turbulent = SceneParams {
+            width: 256,
+            height: 256,
+            pair_dt: 21,
+            glare_peak: 0.0,
+            per_cell: 12,
+            min_spacing: 5.0,
+            ..base.clone()
         };
         match kind {
             SceneKind::PaperLinear | SceneKind::PaperQuadratic | SceneKind::PaperLog => base,
@@ -149,7 +199,22 @@ impl SceneParams {
                 glare_peak: 0.0,
                 ..base
             },
+            SceneKind::Turbulence => turbulent,
+            SceneKind::LargeShift => SceneParams {
+                eddies: (32.0, 128.0),
+                modes: 24,
+                max_shift: 40.0,
+                ..turbulent
+            },
         }
+    }
+
+    /// The period of a turbulence field over this image, px: the larger
+    /// side plus 64 px (so the image never sees itself wrap), rounded up
+    /// to 32.
+    pub fn period(&self) -> f64 {
+        let side = f64::from(self.width.max(self.height)) + 64.0;
+        (side / 32.0).ceil() * 32.0
     }
 
     /// The flow this scene moves its particles with.
@@ -171,6 +236,21 @@ impl SceneParams {
                 Flow::Uniform {
                     u: self.shift.0 / dt,
                     v: self.shift.1 / dt,
+                }
+            }
+            SceneKind::Turbulence | SceneKind::LargeShift => {
+                let period = self.period();
+                let dt = f64::from(self.pair_dt.max(1));
+                Flow::Turbulence {
+                    period,
+                    modes: flow::turbulence_modes(
+                        self.flow_seed,
+                        period,
+                        2.0 * self.eddies.0,
+                        2.0 * self.eddies.1,
+                        self.modes,
+                        self.max_shift / dt,
+                    ),
                 }
             }
             SceneKind::Vortex => {
@@ -215,6 +295,67 @@ pub struct Scene {
     /// at tick 0, and all full cells of the image.
     pub density_reached: (usize, usize),
     static_rows: Vec<f32>,
+    /// Positions of every particle at every half tick, for fields whose
+    /// particles are integrated (turbulence), so a render costs one lookup
+    /// per particle instead of an integration from tick 0.
+    tracks: Option<Tracks>,
+}
+
+/// Particle positions sampled every [`Tracks::STEP`] ticks from tick 0,
+/// integrated once (RK4) in parallel over particles.
+#[derive(Debug, Clone)]
+struct Tracks {
+    samples: usize,
+    pos: Vec<(f32, f32)>,
+}
+
+impl Tracks {
+    /// Ticks between samples: linear interpolation between them is within
+    /// 0.002 px of the path at the default turbulence's accelerations.
+    const STEP: f64 = 0.25;
+    /// Most samples kept (2^26 positions, 512 MB): longer runs integrate
+    /// each render from tick 0.
+    const MAX: usize = 1 << 26;
+
+    fn new(flow: &Flow, particles: &[Particle], last_tick: u32) -> Option<Tracks> {
+        use rayon::prelude::*;
+        if !matches!(flow, Flow::Turbulence { .. }) {
+            return None;
+        }
+        let samples = ((f64::from(last_tick) + 1.0) / Self::STEP).ceil() as usize + 1;
+        if samples.saturating_mul(particles.len()) > Self::MAX {
+            return None;
+        }
+        let pos = particles
+            .par_iter()
+            .flat_map_iter(|p| {
+                let (mut x, mut r) = (p.x, p.row);
+                (0..samples).map(move |j| {
+                    if j > 0 {
+                        (x, r) = flow.advect(x, r, 0.0, Self::STEP);
+                    }
+                    (x as f32, r as f32)
+                })
+            })
+            .collect();
+        Some(Tracks { samples, pos })
+    }
+
+    /// Particle `i` at tick `t`, if `t` is within the samples.
+    fn at(&self, i: usize, t: f64) -> Option<(f64, f64)> {
+        let s = t / Self::STEP;
+        if !(0.0..(self.samples - 1) as f64).contains(&s) {
+            return None;
+        }
+        let j = s.floor() as usize;
+        let f = s - j as f64;
+        let base = i.checked_mul(self.samples)?;
+        let (a, b) = (self.pos.get(base + j)?, self.pos.get(base + j + 1)?);
+        Some((
+            f64::from(a.0) + f * f64::from(b.0 - a.0),
+            f64::from(a.1) + f * f64::from(b.1 - a.1),
+        ))
+    }
 }
 
 impl Scene {
@@ -246,6 +387,11 @@ impl Scene {
                 h + margin - v.min(0.0) * t,
             ),
             _ => (snap_lo(-margin), h + margin),
+        };
+        // A periodic field: seed one period; particles wrap around it.
+        let (x0, x1, r0, r1) = match &flow {
+            Flow::Turbulence { period, .. } => (0.0, *period, 0.0, *period),
+            _ => (x0, x1, r0, r1),
         };
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let mut particles: Vec<Particle> = Vec::new();
@@ -311,13 +457,57 @@ impl Scene {
         let static_rows = (0..params.height)
             .map(|i| Self::static_light_of(&params, usize::from(i)) as f32)
             .collect();
+        let tracks = Tracks::new(&flow, &particles, last_tick);
         Scene {
             params,
             flow,
             particles,
             density_reached: (image_ok, image_cells),
             static_rows,
+            tracks,
         }
+    }
+
+    /// Where particle `i` is at tick `t` (px; wrapped into the period of a
+    /// periodic field).
+    pub fn position(&self, i: usize, t: f64) -> (f64, f64) {
+        let p = &self.particles[i];
+        let (x, r) = match self.tracks.as_ref().and_then(|tr| tr.at(i, t)) {
+            Some(xr) => xr,
+            None => self.flow.advect(p.x, p.row, 0.0, t),
+        };
+        match self.flow {
+            Flow::Turbulence { period, .. } => (x.rem_euclid(period), r.rem_euclid(period)),
+            _ => (x, r),
+        }
+    }
+
+    /// The dense ground truth of a pair `dt` ticks apart: the displacement
+    /// of the particle at each pixel centre halfway through, px (u right, v
+    /// down), `width × height` upright.
+    pub fn truth_dense(&self, dt: f64) -> DenseField {
+        use rayon::prelude::*;
+        let (w, h) = (
+            usize::from(self.params.width),
+            usize::from(self.params.height),
+        );
+        let rows: Vec<Vec<(f32, f32)>> = (0..h)
+            .into_par_iter()
+            .map(|i| {
+                (0..w)
+                    .map(|j| {
+                        let (u, v) = self.flow.displacement(j as f64 + 0.5, i as f64 + 0.5, dt);
+                        (u as f32, v as f32)
+                    })
+                    .collect()
+            })
+            .collect();
+        let mut f = DenseField::zeros(w, h);
+        for (k, (u, v)) in rows.into_iter().flatten().enumerate() {
+            f.u[k] = u;
+            f.v[k] = v;
+        }
+        f
     }
 
     fn static_light_of(p: &SceneParams, i: usize) -> f64 {
@@ -343,8 +533,22 @@ impl Scene {
         }
         let mut ex = [0f32; 32];
         let mut ey = [0f32; 32];
-        for p in &self.particles {
-            let (x, r) = self.flow.advect(p.x, p.row, 0.0, t);
+        let period = match self.flow {
+            Flow::Turbulence { period, .. } => Some(period),
+            _ => None,
+        };
+        for (i, p) in self.particles.iter().enumerate() {
+            let (x, r) = self.position(i, t);
+            // A particle near the far edge of a period also shows at the
+            // near edge of the image.
+            let (x, r) = match period {
+                Some(per) if x > per - 16.0 => (x - per, r),
+                _ => (x, r),
+            };
+            let r = match period {
+                Some(per) if r > per - 16.0 => r - per,
+                _ => r,
+            };
             let sigma = p.diameter / 4.0;
             let rad = (3.0 * sigma).min(15.0);
             let (c0, c1) = ((x - rad).floor().max(0.0), (x + rad).ceil().min(w as f64));
@@ -419,6 +623,45 @@ impl Scene {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn turbulence_tracks_follow_the_flow_and_wrap() {
+        let p = SceneParams {
+            width: 128,
+            height: 128,
+            ..SceneParams::new(SceneKind::Turbulence)
+        };
+        let s = Scene::new(p, 3, 60);
+        let per = s.params.period();
+        assert_eq!(per, 192.0);
+        for (i, q) in s.particles.iter().enumerate().step_by(37) {
+            for t in [0.0, 10.3, 33.75, 59.9] {
+                let (x, r) = s.position(i, t);
+                let (ex, er) = s.flow.advect(q.x, q.row, 0.0, t);
+                let d = (x - ex.rem_euclid(per)).hypot(r - er.rem_euclid(per));
+                assert!(d < 0.005, "particle {i} at {t}: {d} px off");
+                assert!((0.0..per).contains(&x) && (0.0..per).contains(&r));
+            }
+        }
+        // Dense truth agrees with the vector truth where both are taken.
+        let dense = s.truth_dense(21.0);
+        for (x, y, u, v) in s.truth(&[(10.0, 20.0), (100.0, 64.0)], 21.0) {
+            let k = y as usize * 128 + x as usize;
+            assert!((f64::from(dense.u[k]) - u).abs() < 1e-4);
+            assert!((f64::from(dense.v[k]) - v).abs() < 1e-4);
+        }
+        // Seeding covers the period evenly (divergence-free: it stays so).
+        let inside = |t: f64| {
+            (0..s.particles.len())
+                .filter(|&i| {
+                    let (x, r) = s.position(i, t);
+                    x < 96.0 && r < 96.0
+                })
+                .count() as f64
+        };
+        let (n0, n1) = (inside(0.0), inside(59.0));
+        assert!((n1 - n0).abs() < 0.15 * n0, "{n0} then {n1} in a quarter");
+    }
 
     #[test]
     fn seeding_meets_the_density_rule() {

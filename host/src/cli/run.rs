@@ -19,7 +19,7 @@ use super::{parse_dwell_cap, parse_encoding, scene_params, CliError};
 /// paper's comparison table, images, vectors, plots and a JSON summary.
 #[derive(Debug, Args)]
 pub struct RunArgs {
-    /// Scene: paper-linear, paper-quadratic, paper-log, blasius, uniform, vortex.
+    /// Scene: paper-linear, paper-quadratic, paper-log, blasius, uniform, vortex, turbulence, large-shift.
     #[arg(long, default_value = "paper-linear")]
     scene: String,
     /// Output folder (created if missing).
