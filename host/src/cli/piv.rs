@@ -1,9 +1,11 @@
-//! `spiv piv A B -o vectors.csv [--windows 64,32,32] [--overlap 0.5] [--mask M.png]`
+//! `spiv piv A B -o vectors.csv [--windows 64,32,32] [--overlap 0.5] [--mask M.png] [--dense F.flo]`
 
 use std::path::PathBuf;
 
 use clap::Args;
+use spiv_formats::dense::write_dense;
 use spiv_formats::vectors::write_vectors;
+use spiv_host::piv::dense::{fill, for_piv, DenseMode};
 use spiv_host::piv::options::PivOptions;
 use spiv_host::piv::{load_image, load_mask, piv};
 
@@ -48,6 +50,15 @@ pub struct PivArgs {
     /// Minimum correlation peak ratio (1 disables).
     #[arg(long, default_value_t = 1.5)]
     min_peak_ratio: f64,
+    /// Where the last pass fails as a whole, report nothing (flags 2)
+    /// instead of the dense stage's field (flags 1).
+    #[arg(long)]
+    no_dense_fallback: bool,
+    /// Also write the dense field, one vector per pixel (`.flo` or `.npy`;
+    /// px per pair, v down): the PIV field refined below the window by the
+    /// variational stage, or, where PIV failed, that stage alone.
+    #[arg(long)]
+    dense: Option<PathBuf>,
     /// Run the PIV this many times (1..=1000) and report the median time:
     /// for benchmarks (the images are read once, the vectors written once).
     #[arg(long, default_value_t = 1)]
@@ -65,6 +76,8 @@ pub fn run(a: &PivArgs) -> Result<(), CliError> {
         highpass: a.highpass,
         subpixel: a.subpixel.clone(),
         min_peak_ratio: a.min_peak_ratio,
+        // With --dense the dense stage runs once, after PIV (below).
+        dense_fallback: !a.no_dense_fallback && a.dense.is_none(),
     }
     .settings()?;
     let ia = load_image(&a.a)?;
@@ -86,10 +99,33 @@ pub fn run(a: &PivArgs) -> Result<(), CliError> {
     times.sort();
     let took = times.get(times.len() / 2).copied().unwrap_or_default();
     let field = field.ok_or_else(|| CliError::Usage("--repeat 0".into()))?;
+    let mut field = field;
+    let dense_note = match &a.dense {
+        None => String::new(),
+        Some(path) => {
+            let t0 = std::time::Instant::now();
+            // Raw images, as the fallback (see `piv::piv`).
+            let (flow, mode) = for_piv(&ia, &ib, &field);
+            let (valid, replaced, _) = field.counts();
+            if !a.no_dense_fallback && valid + replaced == 0 {
+                fill(&mut field, &flow);
+            }
+            write_dense(path, &flow.to_field())?;
+            format!(
+                "; dense ({}) {:.0} ms -> {}",
+                match mode {
+                    DenseMode::Refine => "refined from PIV",
+                    DenseMode::Pyramid => "from rest: PIV measured under half",
+                },
+                t0.elapsed().as_secs_f64() * 1e3,
+                path.display()
+            )
+        }
+    };
     write_vectors(&a.out, &field.vectors())?;
     let (valid, replaced, invalid) = field.counts();
     println!(
-        "{} vectors ({}x{}): {valid} valid, {replaced} replaced, {invalid} invalid; {:.1} ms{} -> {}",
+        "{} vectors ({}x{}): {valid} valid, {replaced} replaced, {invalid} invalid; {:.1} ms{} -> {}{dense_note}",
         field.grid.len(),
         field.grid.nx,
         field.grid.ny,

@@ -9,6 +9,7 @@
 
 pub mod correlate;
 pub mod deform;
+pub mod dense;
 pub mod filter;
 pub mod options;
 pub mod peak;
@@ -64,6 +65,14 @@ pub struct Settings {
     pub highpass: f32,
     /// Sub-pixel estimator.
     pub subpixel: Subpixel,
+    /// When the last pass fails as a whole (fewer than a quarter of the
+    /// windows validate: eddies below the window, displacements beyond it),
+    /// report the dense stage's field ([`dense::DenseMode::Pyramid`]) at the
+    /// grid, flagged replaced, instead of nothing. Off in the library's
+    /// defaults (the closed loops predict only from what PIV validated); on
+    /// in `spiv piv` and the Python `piv`.
+    #[serde(default)]
+    pub dense_fallback: bool,
 }
 
 /// Which pixels count as clipped: a saturated pixel carries no particle, and
@@ -110,6 +119,7 @@ impl Default for Settings {
             clip: Clip::Auto,
             highpass: 3.0,
             subpixel: Subpixel::Parabolic,
+            dense_fallback: false,
         }
     }
 }
@@ -315,6 +325,10 @@ pub fn piv(
         }
         ex
     });
+    // The dense fallback works on the raw images (their high-pass removes
+    // the particles' own low frequencies, which guide its coarse levels:
+    // turbulence EPE 2.4 px raw, 5.0 px high-passed).
+    let raw = (a, b);
     let (fa, fb);
     let (a, b) = if s.highpass > 0.0 {
         (fa, fb) = rayon::join(
@@ -369,7 +383,14 @@ pub fn piv(
         prev = Some((field, support));
     }
     let (mut field, support) = prev.ok_or_else(|| PivError::Settings("no windows given".into()))?;
-    if support < MIN_SUPPORT {
+    if support < MIN_SUPPORT && s.dense_fallback {
+        // The last pass failed as a whole: the dense stage measures below
+        // the window and beyond its quarter rule. Its field at the grid is
+        // reported as replaced (measured, not by correlation); windows
+        // without signal stay invalid.
+        let f = dense::dense_flow(raw.0, raw.1, None, &dense::DenseMode::Pyramid.settings());
+        dense::fill(&mut field, &f);
+    } else if support < MIN_SUPPORT {
         // The last pass failed as a whole: what passed its tests are chance
         // matches (overlapping windows share particles, so two neighbours
         // can agree by chance). Nothing is reported as measured.

@@ -24,6 +24,9 @@ pub struct PivOptions {
     pub subpixel: String,
     /// Minimum correlation peak ratio (1 disables).
     pub min_peak_ratio: f64,
+    /// Report the dense stage's field where the last pass failed as a
+    /// whole ([`Settings::dense_fallback`]).
+    pub dense_fallback: bool,
 }
 
 impl Default for PivOptions {
@@ -37,6 +40,7 @@ impl Default for PivOptions {
             highpass: 3.0,
             subpixel: "parabolic".into(),
             min_peak_ratio: 1.5,
+            dense_fallback: true,
         }
     }
 }
@@ -101,6 +105,7 @@ impl PivOptions {
                 min_peak_ratio: self.min_peak_ratio,
                 ..Validation::default()
             },
+            dense_fallback: self.dense_fallback,
             ..Settings::default()
         })
     }
@@ -111,9 +116,14 @@ mod tests {
     use super::*;
 
     #[test]
-    fn defaults_are_the_libraries_defaults() {
+    fn defaults_are_the_libraries_defaults_with_the_dense_fallback() {
+        let s = PivOptions::default().settings().unwrap();
+        assert!(s.dense_fallback);
         assert_eq!(
-            PivOptions::default().settings().unwrap(),
+            Settings {
+                dense_fallback: false,
+                ..s
+            },
             Settings::default()
         );
     }

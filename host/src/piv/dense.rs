@@ -1,0 +1,393 @@
+//! Dense refinement below the window size (issue 17): a variational optical
+//! flow for particle images — Horn & Schunck's brightness constancy and
+//! smoothness, solved coarse to fine on an image pyramid with symmetric
+//! warping (the flow is referenced to the pair's midpoint, as PIV and the
+//! ground truth are) and a median filter of the flow after each warp (Sun,
+//! Roth & Black 2010). It outputs one displacement per pixel, px per pair,
+//! `u` right and `v` down, and may start from a PIV field.
+//!
+//! Hand-written: no crate solves this for `ndarray` images; every loop is
+//! a stencil over the image, parallel over rows (rayon).
+
+use ndarray::{Array2, Zip};
+use rayon::prelude::*;
+
+/// Settings of the dense stage.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct DenseSettings {
+    /// Smoothness weight α on normalised images (unit variance); larger is
+    /// smoother.
+    pub alpha: f32,
+    /// Pyramid levels below full resolution (each halves the image; the
+    /// coarsest keeps at least 16 px per side).
+    pub levels: usize,
+    /// Warps (re-linearisations) per level.
+    pub warps: usize,
+    /// Relaxation sweeps per warp.
+    pub iterations: usize,
+    /// Side of the median filter of the flow after each warp, px (0: off).
+    pub median: usize,
+    /// The pyramid level an initial field enters at (0: full resolution):
+    /// coarser levels are skipped, since the field already holds the large
+    /// scales.
+    pub init_level: usize,
+}
+
+impl Default for DenseSettings {
+    fn default() -> Self {
+        DenseSettings {
+            alpha: 0.5,
+            levels: 5,
+            warps: 4,
+            iterations: 60,
+            median: 5,
+            init_level: 1,
+        }
+    }
+}
+
+/// A dense field: `u` and `v` per pixel, px per pair.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Flow {
+    /// Displacement right.
+    pub u: Array2<f32>,
+    /// Displacement down.
+    pub v: Array2<f32>,
+}
+
+/// The image at zero mean and unit variance (a flat image stays zero).
+fn normalise(a: &Array2<f32>) -> Array2<f32> {
+    let n = a.len().max(1) as f64;
+    let mean = a.iter().map(|&x| f64::from(x)).sum::<f64>() / n;
+    let var = a
+        .iter()
+        .map(|&x| (f64::from(x) - mean).powi(2))
+        .sum::<f64>()
+        / n;
+    let s = if var > 1e-12 { 1.0 / var.sqrt() } else { 0.0 };
+    a.mapv(|x| ((f64::from(x) - mean) * s) as f32)
+}
+
+/// Blurs with the binomial kernel [1 4 6 4 1]/16 along both axes
+/// (edges clamped), then keeps every second pixel.
+fn down(a: &Array2<f32>) -> Array2<f32> {
+    let (h, w) = a.dim();
+    const K: [f32; 5] = [1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0];
+    let clamp = |i: isize, n: usize| i.clamp(0, n as isize - 1) as usize;
+    let mut t = Array2::<f32>::zeros((h, w.div_ceil(2)));
+    t.axis_iter_mut(ndarray::Axis(0))
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(i, mut row)| {
+            for (j2, o) in row.iter_mut().enumerate() {
+                let j = 2 * j2 as isize;
+                *o = (0..5)
+                    .map(|k| K[k] * a[[i, clamp(j + k as isize - 2, w)]])
+                    .sum();
+            }
+        });
+    let mut out = Array2::<f32>::zeros((h.div_ceil(2), w.div_ceil(2)));
+    out.axis_iter_mut(ndarray::Axis(0))
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(i2, mut row)| {
+            let i = 2 * i2 as isize;
+            for (j, o) in row.iter_mut().enumerate() {
+                *o = (0..5)
+                    .map(|k| K[k] * t[[clamp(i + k as isize - 2, h), j]])
+                    .sum();
+            }
+        });
+    out
+}
+
+/// Bilinear sample of `a` at (row `y`, column `x`), edges clamped.
+#[inline]
+fn sample(a: &Array2<f32>, y: f32, x: f32) -> f32 {
+    let (h, w) = a.dim();
+    let y = y.clamp(0.0, (h - 1) as f32);
+    let x = x.clamp(0.0, (w - 1) as f32);
+    let (i, j) = (y.floor() as usize, x.floor() as usize);
+    let (i1, j1) = ((i + 1).min(h - 1), (j + 1).min(w - 1));
+    let (fy, fx) = (y - i as f32, x - j as f32);
+    let top = a[[i, j]] + fx * (a[[i, j1]] - a[[i, j]]);
+    let bot = a[[i1, j]] + fx * (a[[i1, j1]] - a[[i1, j]]);
+    top + fy * (bot - top)
+}
+
+/// The flow of a level upsampled to `(h, w)`, twice as long.
+fn up(f: &Flow, h: usize, w: usize) -> Flow {
+    let (hc, wc) = f.u.dim();
+    let map = |a: &Array2<f32>| {
+        Array2::from_shape_fn((h, w), |(i, j)| {
+            let y = ((i as f32 + 0.5) * hc as f32 / h as f32 - 0.5).max(0.0);
+            let x = ((j as f32 + 0.5) * wc as f32 / w as f32 - 0.5).max(0.0);
+            2.0 * sample(a, y, x)
+        })
+    };
+    Flow {
+        u: map(&f.u),
+        v: map(&f.v),
+    }
+}
+
+/// Central differences (one-sided at the edges): (d/dx, d/dy).
+fn gradients(a: &Array2<f32>) -> (Array2<f32>, Array2<f32>) {
+    let (h, w) = a.dim();
+    let gx = Array2::from_shape_fn((h, w), |(i, j)| {
+        let (l, r) = (j.saturating_sub(1), (j + 1).min(w - 1));
+        (a[[i, r]] - a[[i, l]]) / (r - l).max(1) as f32
+    });
+    let gy = Array2::from_shape_fn((h, w), |(i, j)| {
+        let (t, b) = (i.saturating_sub(1), (i + 1).min(h - 1));
+        (a[[b, j]] - a[[t, j]]) / (b - t).max(1) as f32
+    });
+    (gx, gy)
+}
+
+/// The median of each `n × n` neighbourhood (clamped at the edges).
+fn median(a: &Array2<f32>, n: usize) -> Array2<f32> {
+    if n < 2 {
+        return a.clone();
+    }
+    let (h, w) = a.dim();
+    let r = (n / 2) as isize;
+    let mut out = Array2::<f32>::zeros((h, w));
+    out.axis_iter_mut(ndarray::Axis(0))
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(i, mut row)| {
+            let mut buf = Vec::with_capacity(n * n);
+            for (j, o) in row.iter_mut().enumerate() {
+                buf.clear();
+                for di in -r..=r {
+                    let ii = (i as isize + di).clamp(0, h as isize - 1) as usize;
+                    for dj in -r..=r {
+                        let jj = (j as isize + dj).clamp(0, w as isize - 1) as usize;
+                        buf.push(a[[ii, jj]]);
+                    }
+                }
+                let m = buf.len() / 2;
+                buf.select_nth_unstable_by(m, f32::total_cmp);
+                *o = buf[m];
+            }
+        });
+    out
+}
+
+/// One level: `warps` re-linearisations around the current flow, each
+/// solved by `iterations` Jacobi sweeps of the Horn–Schunck equations.
+fn level(a: &Array2<f32>, b: &Array2<f32>, f: &mut Flow, s: &DenseSettings) {
+    let (h, w) = a.dim();
+    let (ax, ay) = gradients(a);
+    let (bx, by) = gradients(b);
+    let a2 = s.alpha * s.alpha;
+    for _ in 0..s.warps {
+        // Symmetric warp: a at x − w/2, b at x + w/2.
+        let mut ix = Array2::<f32>::zeros((h, w));
+        let mut iy = Array2::<f32>::zeros((h, w));
+        let mut it = Array2::<f32>::zeros((h, w));
+        Zip::indexed(&mut ix)
+            .and(&mut iy)
+            .and(&mut it)
+            .and(&f.u)
+            .and(&f.v)
+            .par_for_each(|(i, j), gx, gy, gt, &u, &v| {
+                let (y, x) = (i as f32, j as f32);
+                let (ya, xa, yb, xb) = (y - v / 2.0, x - u / 2.0, y + v / 2.0, x + u / 2.0);
+                *gx = 0.5 * (sample(&ax, ya, xa) + sample(&bx, yb, xb));
+                *gy = 0.5 * (sample(&ay, ya, xa) + sample(&by, yb, xb));
+                *gt = sample(b, yb, xb) - sample(a, ya, xa);
+            });
+        let (u0, v0) = (f.u.clone(), f.v.clone());
+        for _ in 0..s.iterations {
+            let (ub, vb) = (neighbour_mean(&f.u), neighbour_mean(&f.v));
+            Zip::indexed(&mut f.u)
+                .and(&mut f.v)
+                .and(&ub)
+                .and(&vb)
+                .par_for_each(|(i, j), u, v, &ub, &vb| {
+                    let (gx, gy, gt) = (ix[[i, j]], iy[[i, j]], it[[i, j]]);
+                    // Linearised constancy: gx·(u − u0) + gy·(v − v0) + gt = 0.
+                    let r = gx * (ub - u0[[i, j]]) + gy * (vb - v0[[i, j]]) + gt;
+                    let d = r / (a2 + gx * gx + gy * gy);
+                    *u = ub - gx * d;
+                    *v = vb - gy * d;
+                });
+        }
+        if s.median > 1 {
+            f.u = median(&f.u, s.median);
+            f.v = median(&f.v, s.median);
+        }
+    }
+}
+
+/// Horn & Schunck's neighbour mean: edge neighbours weigh 1/6, corners
+/// 1/12; edges clamped.
+fn neighbour_mean(a: &Array2<f32>) -> Array2<f32> {
+    let (h, w) = a.dim();
+    let mut out = Array2::<f32>::zeros((h, w));
+    out.axis_iter_mut(ndarray::Axis(0))
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(i, mut row)| {
+            let (t, b) = (i.saturating_sub(1), (i + 1).min(h - 1));
+            for (j, o) in row.iter_mut().enumerate() {
+                let (l, r) = (j.saturating_sub(1), (j + 1).min(w - 1));
+                let edge = a[[t, j]] + a[[b, j]] + a[[i, l]] + a[[i, r]];
+                let corner = a[[t, l]] + a[[t, r]] + a[[b, l]] + a[[b, r]];
+                *o = edge / 6.0 + corner / 12.0;
+            }
+        });
+    out
+}
+
+/// The dense flow from `a` to `b` (same size), starting from `init` (a
+/// dense field, e.g. a PIV field interpolated to every pixel) or from rest.
+pub fn dense_flow(
+    a: &Array2<f32>,
+    b: &Array2<f32>,
+    init: Option<&Flow>,
+    s: &DenseSettings,
+) -> Flow {
+    let (h, w) = a.dim();
+    let mut pa = vec![normalise(a)];
+    let mut pb = vec![normalise(b)];
+    for _ in 0..s.levels {
+        let (lh, lw) = pa[pa.len() - 1].dim();
+        if lh < 32 || lw < 32 {
+            break;
+        }
+        let (da, db) = rayon::join(|| down(&pa[pa.len() - 1]), || down(&pb[pb.len() - 1]));
+        pa.push(da);
+        pb.push(db);
+    }
+    let init = init.filter(|i| i.u.dim() == (h, w) && i.v.dim() == (h, w));
+    let top = match init {
+        Some(_) => s.init_level.min(pa.len() - 1),
+        None => pa.len() - 1,
+    };
+    let (th, tw) = pa[top].dim();
+    let mut f = match init {
+        Some(i) => {
+            // The initial field at the coarsest level (scaled down).
+            let k = (1usize << top) as f32;
+            let map = |a: &Array2<f32>| {
+                Array2::from_shape_fn((th, tw), |(r, c)| {
+                    sample(a, (r as f32 + 0.5) * k - 0.5, (c as f32 + 0.5) * k - 0.5) / k
+                })
+            };
+            Flow {
+                u: map(&i.u),
+                v: map(&i.v),
+            }
+        }
+        _ => Flow {
+            u: Array2::zeros((th, tw)),
+            v: Array2::zeros((th, tw)),
+        },
+    };
+    for l in (0..=top).rev() {
+        level(&pa[l], &pb[l], &mut f, s);
+        if l > 0 {
+            let (nh, nw) = pa[l - 1].dim();
+            f = up(&f, nh, nw);
+        }
+    }
+    f
+}
+
+/// How [`for_piv`] ran the dense stage.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DenseMode {
+    /// PIV measured the field (at least half its vectors valid): refined
+    /// from it at full resolution with strong smoothness (α = 1), which
+    /// keeps PIV's precision and adds the scales below the window.
+    Refine,
+    /// PIV did not (eddies below the window, displacements beyond it): the
+    /// whole pyramid from rest with weak smoothness (α = 0.2).
+    Pyramid,
+}
+
+impl DenseMode {
+    /// The settings of this mode.
+    pub fn settings(self) -> DenseSettings {
+        match self {
+            DenseMode::Refine => DenseSettings {
+                alpha: 1.0,
+                init_level: 0,
+                ..DenseSettings::default()
+            },
+            DenseMode::Pyramid => DenseSettings {
+                alpha: 0.2,
+                warps: 6,
+                ..DenseSettings::default()
+            },
+        }
+    }
+}
+
+/// The mode a PIV field calls for: [`DenseMode::Refine`] when at least half
+/// its vectors are valid.
+pub fn mode_for(field: &super::Field) -> DenseMode {
+    let (valid, _, _) = field.counts();
+    if 2 * valid >= field.grid.len().max(1) {
+        DenseMode::Refine
+    } else {
+        DenseMode::Pyramid
+    }
+}
+
+/// The dense stage after PIV: the mode [`mode_for`] picks, from the PIV
+/// field interpolated to every pixel or from rest.
+pub fn for_piv(a: &Array2<f32>, b: &Array2<f32>, field: &super::Field) -> (Flow, DenseMode) {
+    let mode = mode_for(field);
+    let (h, w) = a.dim();
+    let init = (mode == DenseMode::Refine).then(|| {
+        let (u, v) = super::deform::dense(&field.grid, &field.u, &field.v, h, w);
+        Flow { u, v }
+    });
+    (dense_flow(a, b, init.as_ref(), &mode.settings()), mode)
+}
+
+impl Flow {
+    /// The flow as a file's field (row-major, upright).
+    pub fn to_field(&self) -> spiv_formats::dense::DenseField {
+        let (h, w) = self.u.dim();
+        spiv_formats::dense::DenseField {
+            width: w,
+            height: h,
+            u: self.u.iter().copied().collect(),
+            v: self.v.iter().copied().collect(),
+        }
+    }
+
+    /// The flow at pixel `(x, y)` (FORMATS.md coordinates: pixel centres on
+    /// integers), bilinear.
+    pub fn at(&self, x: f64, y: f64) -> (f64, f64) {
+        (
+            f64::from(sample(&self.u, y as f32, x as f32)),
+            f64::from(sample(&self.v, y as f32, x as f32)),
+        )
+    }
+}
+
+/// Reports `flow` at the grid of a `field` whose last pass failed as a
+/// whole: every window with a correlation peak gets the dense vector at its
+/// centre, flagged replaced (measured, not by correlation); windows without
+/// signal or masked stay invalid.
+pub fn fill(field: &mut super::Field, flow: &Flow) {
+    for r in 0..field.grid.ny {
+        for c in 0..field.grid.nx {
+            if field.peak_height[[r, c]] == 0.0 {
+                continue;
+            }
+            let (x, y) = field.grid.centre(r, c);
+            let (u, v) = flow.at(x, y);
+            field.u[[r, c]] = u;
+            field.v[[r, c]] = v;
+            field.state[[r, c]] = super::State::Replaced;
+        }
+    }
+}

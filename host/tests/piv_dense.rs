@@ -1,0 +1,116 @@
+//! The dense stage (issue 17) against dense ground truth: turbulence whose
+//! eddies are smaller than the window and whose displacements exceed its
+//! quarter rule, where window PIV measures nothing; smooth flows, where it
+//! must not lose PIV's precision; flat and tiny images.
+
+mod common;
+
+use common::{pair, params};
+use ndarray::Array2;
+use spiv_firmware_sim::scene::{SceneKind, SceneParams};
+use spiv_host::piv::dense::{dense_flow, for_piv, DenseMode, DenseSettings};
+use spiv_host::piv::{deform, piv, Settings, State};
+
+fn mean_magnitude(t: &spiv_formats::dense::DenseField) -> f64 {
+    t.u.iter()
+        .zip(&t.v)
+        .map(|(&u, &v)| f64::from(u).hypot(f64::from(v)))
+        .sum::<f64>()
+        / t.u.len() as f64
+}
+
+#[test]
+fn turbulence_is_measured_densely_where_window_piv_fails() {
+    let p = SceneParams {
+        width: 192,
+        height: 192,
+        ..params(SceneKind::Turbulence)
+    };
+    let pr = pair(p, 4);
+    let truth = pr.scene.truth_dense(f64::from(pr.dt));
+    let mean = mean_magnitude(&truth);
+    // Window PIV with the library's defaults: the last pass fails as a
+    // whole, nothing is reported as measured.
+    let strict = piv(&pr.a, &pr.b, None, &Settings::default()).unwrap();
+    assert!(strict.state.iter().all(|s| *s == State::Invalid));
+    // The dense stage from rest (what `spiv piv --dense` runs here).
+    let (flow, mode) = for_piv(&pr.a, &pr.b, &strict);
+    assert_eq!(mode, DenseMode::Pyramid);
+    let epe = flow.to_field().epe(&truth, None).unwrap();
+    assert!(flow.u.iter().chain(flow.v.iter()).all(|x| x.is_finite()));
+    // Measured: 2.94 px against 8.10 px of mean displacement (OpenPIV
+    // windef 64-32-32 on the 256-px scene: 6.5 px grid EPE, README).
+    assert!(
+        epe < 0.42 * mean,
+        "dense EPE {epe:.2} px, mean displacement {mean:.2} px"
+    );
+    // With the fallback on, PIV reports that field at its grid, flagged
+    // replaced: never all-invalid where the pair holds a measurable flow.
+    let s = Settings {
+        dense_fallback: true,
+        ..Settings::default()
+    };
+    let f = piv(&pr.a, &pr.b, None, &s).unwrap();
+    let (valid, replaced, _) = f.counts();
+    assert_eq!(valid, 0);
+    assert!(replaced > f.grid.len() * 9 / 10);
+    let pts: Vec<(f64, f64)> = f.vectors().iter().map(|v| (v.x, v.y)).collect();
+    let t = pr.scene.truth(&pts, f64::from(pr.dt));
+    let grid_epe = f
+        .vectors()
+        .iter()
+        .zip(&t)
+        .filter(|(v, _)| v.state == State::Replaced)
+        .map(|(v, t)| (v.u - t.2).hypot(v.v - t.3))
+        .sum::<f64>()
+        / replaced as f64;
+    eprintln!(
+        "turbulence 192 px: dense EPE {epe:.3}, grid EPE {grid_epe:.3}, mean |d| {mean:.3} px"
+    );
+    assert!(grid_epe < 0.42 * mean, "grid EPE {grid_epe:.2} px"); // measured 2.59
+}
+
+#[test]
+fn smooth_flow_keeps_the_precision_of_piv() {
+    let p = SceneParams {
+        width: 256,
+        height: 256,
+        ..params(SceneKind::Vortex)
+    };
+    let pr = pair(p, 2);
+    let truth = pr.scene.truth_dense(f64::from(pr.dt));
+    let field = piv(&pr.a, &pr.b, None, &Settings::default()).unwrap();
+    let (h, w) = pr.a.dim();
+    let (du, dv) = deform::dense(&field.grid, &field.u, &field.v, h, w);
+    let piv_epe = spiv_host::piv::dense::Flow { u: du, v: dv }
+        .to_field()
+        .epe(&truth, None)
+        .unwrap();
+    let (flow, mode) = for_piv(&pr.a, &pr.b, &field);
+    assert_eq!(mode, DenseMode::Refine);
+    let epe = flow.to_field().epe(&truth, None).unwrap();
+    // Measured: 0.107 px refined, 0.128 px PIV interpolated.
+    eprintln!("vortex: dense EPE {epe:.4}, PIV interpolated {piv_epe:.4} px");
+    assert!(
+        epe < 1.05 * piv_epe && epe < 0.15,
+        "dense {epe:.3}, PIV {piv_epe:.3}"
+    );
+}
+
+#[test]
+fn flat_tiny_and_saturated_images_give_finite_zero_flow() {
+    for (h, w, value) in [
+        (64, 80, 0.0f32),
+        (64, 80, 65535.0),
+        (7, 5, 3.0),
+        (1, 1, 1.0),
+    ] {
+        let a = Array2::from_elem((h, w), value);
+        let f = dense_flow(&a, &a, None, &DenseSettings::default());
+        assert_eq!(f.u.dim(), (h, w));
+        assert!(
+            f.u.iter().chain(f.v.iter()).all(|x| *x == 0.0),
+            "{h}x{w} {value}"
+        );
+    }
+}
