@@ -69,6 +69,7 @@ def piv(
     highpass: float = 3.0,
     subpixel: str = "parabolic",
     min_peak_ratio: float = 1.5,
+    dense_fallback: bool = True,
 ) -> Tuple[_F64, _F64, _F64, _F64, npt.NDArray[np.uint8]]:
     """PIV on an image pair (height, width), as `spiv piv`: returns (x, y, u, v, flags), each (ny, nx).
 
@@ -77,7 +78,17 @@ def piv(
     median_threshold: normalised median test (0 off). clip: "auto", "off" or a gray level.
     highpass: background blur sigma, px (0 off). subpixel: parabolic, gaussian, gaussian2d.
     min_peak_ratio: correlation peak ratio floor (1 off).
+    dense_fallback: where the last pass fails as a whole, the dense stage's vectors (flag 1).
     x, y: window centres, px; u, v: px per pair (v down); flags 0/1/2.
+    """
+
+def dense(
+    a: npt.ArrayLike, b: npt.ArrayLike
+) -> Tuple[npt.NDArray[np.float32], npt.NDArray[np.float32], str]:
+    """The dense flow, one vector per pixel, as `spiv piv --dense`: (u, v, mode).
+
+    u, v: float32 (height, width), px per pair, v down. mode: "refine" (from the
+    PIV field, which measured at least half its vectors) or "pyramid" (from rest).
     """
 
 class Truth(TypedDict):
@@ -86,12 +97,17 @@ class Truth(TypedDict):
     u: _F64
     v: _F64
 
+class DenseTruth(TypedDict):
+    u: npt.NDArray[np.float32]
+    v: npt.NDArray[np.float32]
+
 class Simulation(TypedDict):
     spikes: npt.NDArray[np.uint8]
     frames: npt.NDArray[np.uint16]
     frame_full_scale: int
     pair: Tuple[int, int]
     truth: Truth
+    truth_dense: DenseTruth
 
 def simulate(
     scene: str = "paper-linear",
@@ -112,7 +128,8 @@ def simulate(
     out: a folder to also write `spiv simulate`'s files to (spikes.dat, scene.json, ...).
     Returns spikes uint8 (ticks, height, width), the frame camera's pair uint16
     (2, height, width) with frame_full_scale, the pair's ticks, and the truth
-    (x, y, u, v on the 32-px grid with a 16-px step, px per pair).
+    (x, y, u, v on the 32-px grid with a 16-px step, px per pair) and truth_dense
+    (u, v per pixel, float32 (height, width)).
     """
 
 class Flow(TypedDict):

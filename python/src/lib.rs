@@ -321,15 +321,17 @@ fn field_arrays(vectors: &[Vector], grid: &Grid) -> FieldArrays {
 /// "bilinear", the normalised median test (`median_threshold`, 0 off),
 /// `clip` "auto" | "off" | a gray level, a high-pass of σ `highpass` px,
 /// `subpixel` "parabolic" | "gaussian" | "gaussian2d", `min_peak_ratio`
-/// (1 off).
+/// (1 off); `dense_fallback`: where the last pass fails as a whole (eddies
+/// below the window, displacements beyond it), the dense stage's vectors,
+/// flagged 1, instead of nothing.
 ///
 /// Returns `(x, y, u, v, flags)`, each `(ny, nx)`: window centres in px
 /// (x right, y down), displacements in px per pair (v positive down the
 /// rows), flags 0 valid, 1 replaced, 2 invalid (u = v = 0).
 #[pyfunction]
-#[pyo3(signature = (a, b, windows=vec![64, 32, 32], overlap=0.5, mask=None, interp="bspline", median_threshold=2.0, clip="auto", highpass=3.0, subpixel="parabolic", min_peak_ratio=1.5))]
+#[pyo3(signature = (a, b, windows=vec![64, 32, 32], overlap=0.5, mask=None, interp="bspline", median_threshold=2.0, clip="auto", highpass=3.0, subpixel="parabolic", min_peak_ratio=1.5, dense_fallback=true))]
 #[pyo3(
-    text_signature = "(a, b, windows=(64, 32, 32), overlap=0.5, mask=None, interp='bspline', median_threshold=2.0, clip='auto', highpass=3.0, subpixel='parabolic', min_peak_ratio=1.5)"
+    text_signature = "(a, b, windows=(64, 32, 32), overlap=0.5, mask=None, interp='bspline', median_threshold=2.0, clip='auto', highpass=3.0, subpixel='parabolic', min_peak_ratio=1.5, dense_fallback=True)"
 )]
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
 fn piv<'py>(
@@ -345,6 +347,7 @@ fn piv<'py>(
     highpass: f32,
     subpixel: &str,
     min_peak_ratio: f64,
+    dense_fallback: bool,
 ) -> PyResult<(
     Bound<'py, PyArray2<f64>>,
     Bound<'py, PyArray2<f64>>,
@@ -361,6 +364,7 @@ fn piv<'py>(
         highpass,
         subpixel: subpixel.into(),
         min_peak_ratio,
+        dense_fallback,
     }
     .settings()
     .map_err(err)?;
@@ -382,6 +386,42 @@ fn piv<'py>(
     ))
 }
 
+/// The dense flow of an image pair, one vector per pixel (as `spiv piv
+/// --dense`): window PIV with the defaults, then the variational stage,
+/// refined from the PIV field where PIV measured at least half its vectors,
+/// else from rest. Returns `(u, v, mode)`: `float32 (height, width)` arrays,
+/// px per pair (v down), and "refine" or "pyramid".
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+fn dense<'py>(
+    py: Python<'py>,
+    a: &Bound<'py, PyAny>,
+    b: &Bound<'py, PyAny>,
+) -> PyResult<(
+    Bound<'py, PyArray2<f32>>,
+    Bound<'py, PyArray2<f32>>,
+    &'static str,
+)> {
+    let ia = image(a, "a")?;
+    let ib = image(b, "b")?;
+    let (flow, mode) = py
+        .detach(|| {
+            run_piv(&ia, &ib, None, &spiv_host::piv::Settings::default())
+                .map(|f| spiv_host::piv::dense::for_piv(&ia, &ib, &f))
+        })
+        .map_err(err)?;
+    let d = flow.to_field();
+    let (h, w) = (d.height, d.width);
+    let arr = |v: Vec<f32>| {
+        Array2::from_shape_vec((h, w), v).map_err(|e| SpivError::new_err(e.to_string()))
+    };
+    let mode = match mode {
+        spiv_host::piv::dense::DenseMode::Refine => "refine",
+        spiv_host::piv::dense::DenseMode::Pyramid => "pyramid",
+    };
+    Ok((arr(d.u)?.into_pyarray(py), arr(d.v)?.into_pyarray(py), mode))
+}
+
 /// A simulated recording (the same as `spiv simulate`): `scene` is
 /// "paper-linear", "paper-quadratic", "paper-log", "blasius", "uniform" or
 /// "vortex"; `width`, `height` px; `ticks` planes; `dt` the pair's
@@ -394,7 +434,8 @@ fn piv<'py>(
 /// `frames` the frame camera's pair `uint16 (2, height, width)` with its
 /// `frame_full_scale`, `pair` the pair's ticks `(k_a, k_b)`, and `truth`
 /// a dict of `x, y, u, v` `(ny, nx)` on the 32-px, 16-px-step grid of
-/// `truth.csv` (px per pair, v down).
+/// `truth.csv` (px per pair, v down), and `truth_dense`, `u, v` per pixel
+/// `float32 (height, width)` (`truth.flo`).
 #[pyfunction]
 #[pyo3(signature = (scene="paper-linear", seed=1, width=None, height=None, ticks=None, dt=None, shift=None, spacing=None, out=None))]
 #[allow(clippy::too_many_arguments)]
@@ -452,12 +493,13 @@ fn simulate<'py>(
             let grid = Grid::new(usize::from(w), usize::from(h), 32, 16)
                 .ok_or_else(|| format!("{w}x{h} px: smaller than the 32-px truth grid"))?;
             let truth = sim.scene.truth_vectors(&grid.centres(), dtp);
+            let dense = sim.scene.truth_dense(dtp);
             let [fa, fb] = sim.frames;
             Ok((
                 spikes,
                 [fa, fb].concat(),
                 pair,
-                truth,
+                (truth, dense),
                 grid,
                 req.camera.max_dn(),
             ))
@@ -481,6 +523,7 @@ fn simulate<'py>(
     )?;
     d.set_item("frame_full_scale", full)?;
     d.set_item("pair", (pair[0], pair[1]))?;
+    let (truth, dense) = truth;
     let (x, y, u, v, _) = field_arrays(&truth, &grid);
     let td = PyDict::new(py);
     td.set_item("x", x.into_pyarray(py))?;
@@ -488,6 +531,20 @@ fn simulate<'py>(
     td.set_item("u", u.into_pyarray(py))?;
     td.set_item("v", v.into_pyarray(py))?;
     d.set_item("truth", td)?;
+    let dd = PyDict::new(py);
+    dd.set_item(
+        "u",
+        Array2::from_shape_vec((h, w), dense.u)
+            .map_err(shape)?
+            .into_pyarray(py),
+    )?;
+    dd.set_item(
+        "v",
+        Array2::from_shape_vec((h, w), dense.v)
+            .map_err(shape)?
+            .into_pyarray(py),
+    )?;
+    d.set_item("truth_dense", dd)?;
     Ok(d)
 }
 
@@ -603,6 +660,7 @@ fn spiv(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(read_image, m)?)?;
     m.add_function(wrap_pyfunction!(reconstruct, m)?)?;
     m.add_function(wrap_pyfunction!(piv, m)?)?;
+    m.add_function(wrap_pyfunction!(dense, m)?)?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(flow, m)?)?;
     Ok(())

@@ -1,5 +1,6 @@
-//! `spiv bench (paper | blasius | speed | link)`: the paper's comparison over
-//! seeds, the Blasius validation, and speed against error.
+//! `spiv bench (paper | blasius | speed | link | turbulence)`: the paper's
+//! comparison over seeds, the Blasius validation, speed against error, the
+//! link, and PIV against eddies below the window.
 
 use std::path::{Path, PathBuf};
 
@@ -48,6 +49,17 @@ enum Which {
         #[arg(long, default_value = "speed.png")]
         plot: PathBuf,
     },
+    /// Window PIV and the dense stage on the turbulence and large-shift
+    /// scenes (frame camera and spike TFP pairs) against the dense truth:
+    /// EPE, outliers (> 3 px), time. OpenPIV: bench/openpiv_compare.sh.
+    Turbulence {
+        /// Seed of the particles.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Also write the rows as JSON.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
 }
 
 /// Runs it.
@@ -61,7 +73,36 @@ pub fn run(a: &BenchArgs) -> Result<(), CliError> {
         Which::Blasius { seeds } => blasius(*seeds),
         Which::Speed { plot } => speed(plot),
         Which::Link(l) => super::bench_link::run(l),
+        Which::Turbulence { seed, json } => turbulence(*seed, json.as_ref()),
     }
+}
+
+fn turbulence(seed: u64, json_out: Option<&PathBuf>) -> Result<(), CliError> {
+    use spiv_host::bench::turbulence::turbulence_rows;
+    let rows = turbulence_rows(seed).map_err(CliError::Job)?;
+    println!(
+        "{:<12} {:<13} {:<27} {:>13} {:>9} {:>9} {:>9} {:>9}",
+        "scene", "frames", "method", "measured", "EPE px", "> 3 px", "mean |d|", "ms"
+    );
+    for r in &rows {
+        let f = |v: Option<f64>, d: usize| v.map_or("-".to_string(), |x| format!("{x:.d$}"));
+        println!(
+            "{:<12} {:<13} {:<27} {:>13} {:>9} {:>9} {:>9.2} {:>9.1}",
+            r.scene,
+            r.frames,
+            r.method,
+            format!("{}/{}", r.measured.0, r.measured.1),
+            f(r.epe, 3),
+            f(r.outliers.map(|o| 100.0 * o), 1),
+            r.mean_displacement,
+            r.ms
+        );
+    }
+    if let Some(p) = json_out {
+        std::fs::write(p, serde_json::to_string_pretty(&rows).unwrap_or_default())
+            .map_err(|e| CliError::Usage(format!("{}: {e}", p.display())))?;
+    }
+    Ok(())
 }
 
 fn fmt(m: MeanCi) -> String {
