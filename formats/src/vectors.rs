@@ -73,6 +73,44 @@ pub fn write_vectors(path: &Path, vectors: &[Vector]) -> Result<(), FormatError>
     std::fs::write(path, s).map_err(io_err(path))
 }
 
+/// Writes a vector field with each vector's confidence after `flag`:
+/// `peak_ratio` (the correlation peak over the next highest, 0 where no
+/// peak) and `correlation` (the normalised correlation at the peak, −1..1,
+/// 0 where none), one `(peak_ratio, correlation)` per vector. Readers of
+/// `x,y,u,v,flag` ignore the extra columns.
+pub fn write_vectors_scored(
+    path: &Path,
+    vectors: &[Vector],
+    scores: &[(f64, f64)],
+) -> Result<(), FormatError> {
+    if scores.len() != vectors.len() {
+        return Err(FormatError::Parse {
+            path: path.to_path_buf(),
+            msg: format!("{} scores for {} vectors", scores.len(), vectors.len()),
+        });
+    }
+    let mut s = String::from("x,y,u,v,flag,peak_ratio,correlation\n");
+    for (v, &(ratio, corr)) in vectors.iter().zip(scores) {
+        let (u, vv) = if v.state.is_measured() {
+            (v.u, v.v)
+        } else {
+            (0.0, 0.0)
+        };
+        let _ = writeln!(
+            s,
+            "{},{},{:.6},{:.6},{},{:.4},{:.4}",
+            v.x,
+            v.y,
+            u,
+            vv,
+            v.state.flag(),
+            ratio,
+            corr
+        );
+    }
+    std::fs::write(path, s).map_err(io_err(path))
+}
+
 /// Reads a vector field (extra columns after `flag` are ignored).
 pub fn read_vectors(path: &Path) -> Result<Vec<Vector>, FormatError> {
     let text = std::fs::read_to_string(path).map_err(io_err(path))?;
@@ -123,4 +161,42 @@ pub fn write_profile(path: &Path, profile: &[(f64, f64)]) -> Result<(), FormatEr
         let _ = writeln!(s, "{y},{u:.6}");
     }
     std::fs::write(path, s).map_err(io_err(path))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn scored_fields_read_back_as_plain_fields() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("v.csv");
+        let vs = [
+            Vector {
+                x: 16.0,
+                y: 8.0,
+                u: 1.25,
+                v: -0.5,
+                state: State::Valid,
+            },
+            Vector {
+                x: 32.0,
+                y: 8.0,
+                u: 9.0,
+                v: 9.0,
+                state: State::Invalid,
+            },
+        ];
+        write_vectors_scored(&p, &vs, &[(1.8, 0.61), (0.0, 0.0)]).unwrap();
+        let text = std::fs::read_to_string(&p).unwrap();
+        assert!(text.starts_with("x,y,u,v,flag,peak_ratio,correlation\n"));
+        assert!(text.contains(",0,1.8000,0.6100\n"));
+        let back = read_vectors(&p).unwrap();
+        assert_eq!(back[0], vs[0]);
+        assert_eq!(
+            (back[1].u, back[1].v, back[1].state),
+            (0.0, 0.0, State::Invalid)
+        );
+        assert!(write_vectors_scored(&p, &vs, &[(1.0, 1.0)]).is_err());
+    }
 }

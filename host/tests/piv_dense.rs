@@ -38,7 +38,7 @@ fn turbulence_is_measured_densely_where_window_piv_fails() {
     assert_eq!(mode, DenseMode::Pyramid);
     let epe = flow.to_field().epe(&truth, None).unwrap();
     assert!(flow.u.iter().chain(flow.v.iter()).all(|x| x.is_finite()));
-    // Measured: 2.94 px against 8.10 px of mean displacement (OpenPIV
+    // Measured: 2.91 px against 8.10 px of mean displacement (OpenPIV
     // windef 64-32-32 on the 256-px scene: 6.5 px grid EPE, README).
     assert!(
         epe < 0.42 * mean,
@@ -67,7 +67,7 @@ fn turbulence_is_measured_densely_where_window_piv_fails() {
     eprintln!(
         "turbulence 192 px: dense EPE {epe:.3}, grid EPE {grid_epe:.3}, mean |d| {mean:.3} px"
     );
-    assert!(grid_epe < 0.42 * mean, "grid EPE {grid_epe:.2} px"); // measured 2.59
+    assert!(grid_epe < 0.42 * mean, "grid EPE {grid_epe:.2} px"); // measured 2.57
 }
 
 #[test]

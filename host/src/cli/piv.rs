@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 use spiv_formats::dense::write_dense;
-use spiv_formats::vectors::write_vectors;
+use spiv_formats::vectors::write_vectors_scored;
 use spiv_host::piv::dense::{fill, for_piv, DenseMode};
 use spiv_host::piv::options::PivOptions;
 use spiv_host::piv::{load_image, load_mask, piv};
@@ -18,7 +18,8 @@ pub struct PivArgs {
     a: PathBuf,
     /// Second image.
     b: PathBuf,
-    /// Output CSV (x,y,u,v,flag; FORMATS.md).
+    /// Output CSV (x,y,u,v,flag; FORMATS.md), then each vector's confidence:
+    /// peak_ratio and correlation (0 where no peak).
     #[arg(short = 'o', long = "out")]
     out: PathBuf,
     /// Window side of each pass, px; the list sets the passes.
@@ -122,7 +123,7 @@ pub fn run(a: &PivArgs) -> Result<(), CliError> {
             )
         }
     };
-    write_vectors(&a.out, &field.vectors())?;
+    write_vectors_scored(&a.out, &field.vectors(), &field.scores())?;
     let (valid, replaced, invalid) = field.counts();
     println!(
         "{} vectors ({}x{}): {valid} valid, {replaced} replaced, {invalid} invalid; {:.1} ms{} -> {}{dense_note}",

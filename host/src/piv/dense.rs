@@ -319,9 +319,10 @@ impl DenseMode {
                 init_level: 0,
                 ..DenseSettings::default()
             },
+            // 10 warps: turbulence EPE 1.94 px (6: 2.45, 16: 2.00).
             DenseMode::Pyramid => DenseSettings {
                 alpha: 0.2,
-                warps: 6,
+                warps: 10,
                 ..DenseSettings::default()
             },
         }

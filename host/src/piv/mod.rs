@@ -227,6 +227,16 @@ impl Field {
         out
     }
 
+    /// Each vector's confidence, row-major as [`Field::vectors`]: (peak
+    /// ratio, normalised correlation at the peak), 0 where no peak.
+    pub fn scores(&self) -> Vec<(f64, f64)> {
+        self.peak_ratio
+            .iter()
+            .zip(self.peak_height.iter())
+            .map(|(&r, &c)| (r, c))
+            .collect()
+    }
+
     /// Counts of (valid, replaced, invalid) vectors.
     pub fn counts(&self) -> (usize, usize, usize) {
         let mut n = (0, 0, 0);
