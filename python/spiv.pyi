@@ -143,6 +143,8 @@ class Flow(TypedDict):
     mean_u: _F64
     mean_v: _F64
     mean_flags: npt.NDArray[np.uint8]
+    mean_dense_u: npt.NDArray[np.float32]  # only with dense=True
+    mean_dense_v: npt.NDArray[np.float32]
 
 def flow(
     path: _Path,
@@ -158,12 +160,14 @@ def flow(
     height: Optional[int] = None,
     flip: bool = True,
     strip_head: int = 0,
+    dense: bool = False,
 ) -> Flow:
     """The flow job on a .dat or .npz recording, as `spiv flow` (without its files).
 
     dt: ticks between a pair's frames (default: scene.json's); every: between pairs
     (default 4*dt); start, end: ticks. method: "mc" (motion-compensated, the default),
     "adaptive" or "tfp". window: ticks. dwell_cap: px, or None for off.
-    windows: PIV passes, px. Returns per-pair u, v, flags (pairs, ny, nx), the grid
-    x, y (ny, nx), each pair's ticks and method, and the mean field.
+    windows: PIV passes, px. dense: also the dense stage per pair, averaged.
+    Returns per-pair u, v, flags (pairs, ny, nx), the grid x, y (ny, nx), each
+    pair's ticks and method, the mean field, and with dense the mean dense field.
     """

@@ -167,6 +167,9 @@ pub struct FlowOptions {
     /// PIV settings of motion-compensated pairs (more passes: their
     /// deformation converges where glare hides a window's lower particles).
     pub mc_piv: Settings,
+    /// Also run the dense stage on every pair ([`crate::piv::dense`]) and
+    /// average it into [`FlowOutcome::mean_dense`].
+    pub dense: bool,
 }
 
 impl FlowOptions {
@@ -189,6 +192,7 @@ impl FlowOptions {
             core,
             piv: Settings::for_spike_frames(),
             mc_piv: Settings::for_compensated_frames(),
+            dense: false,
         }
     }
 
@@ -229,6 +233,8 @@ pub struct FlowRequest {
     /// PIV window side of each pass, px (default: 64,32,32, and
     /// 64,32,32,32,32 for motion-compensated pairs).
     pub windows: Option<Vec<usize>>,
+    /// Run the dense stage on every pair and average it.
+    pub dense: bool,
 }
 
 impl Default for FlowRequest {
@@ -242,6 +248,7 @@ impl Default for FlowRequest {
             window: None,
             dwell_cap: Some(8.0),
             windows: None,
+            dense: false,
         }
     }
 }
@@ -283,6 +290,7 @@ impl FlowRequest {
             o.piv.windows = w.clone();
             o.mc_piv.windows = w.clone();
         }
+        o.dense = self.dense;
         Ok(o)
     }
 }
@@ -325,6 +333,9 @@ pub struct FlowOutcome {
     pub size: (u16, u16),
     /// Gray level of full scale of those frames.
     pub full_scale: u16,
+    /// With [`FlowOptions::dense`]: the mean over pairs of the dense stage's
+    /// field (px per pair, v down, upright).
+    pub mean_dense: Option<spiv_formats::dense::DenseField>,
 }
 
 impl FlowOutcome {
@@ -399,6 +410,7 @@ pub fn run_flow(
     let mut prediction: Option<Vec<Vector>> = None;
     let mut pairs = Vec::with_capacity(ticks.len());
     let mut first_frames = None;
+    let mut dense_sum: Option<(Vec<f64>, Vec<f64>, usize)> = None;
     for (i, &ka) in ticks.iter().enumerate() {
         let kb = ka + u64::from(opts.dt);
         let frames =
@@ -472,7 +484,20 @@ pub fn run_flow(
             Method::Mc => &opts.mc_piv,
             _ => &opts.piv,
         };
-        let vectors = field_with(&pair[0], &pair[1], settings)?;
+        let (fa, fb) = (to_f32(&pair[0], wu, hu), to_f32(&pair[1], wu, hu));
+        let f = piv(&fa, &fb, None, settings)?;
+        if opts.dense {
+            let (flow, _) = crate::piv::dense::for_piv(&fa, &fb, &f);
+            let d = dense_sum.get_or_insert_with(|| (vec![0.0; wu * hu], vec![0.0; wu * hu], 0));
+            for (s, x) in d.0.iter_mut().zip(flow.u.iter()) {
+                *s += f64::from(*x);
+            }
+            for (s, x) in d.1.iter_mut().zip(flow.v.iter()) {
+                *s += f64::from(*x);
+            }
+            d.2 += 1;
+        }
+        let vectors = f.vectors();
         let valid = vectors.iter().filter(|v| v.state == State::Valid).count();
         // A pair that mostly failed predicts nothing: bootstrap again.
         prediction = (2 * valid >= vectors.len()).then(|| vectors.clone());
@@ -493,5 +518,14 @@ pub fn run_flow(
         first_frames: first_frames.unwrap_or_default(),
         size: (w, h),
         full_scale: core.full_scale,
+        mean_dense: dense_sum.map(|(u, v, n)| {
+            let k = 1.0 / n.max(1) as f64;
+            spiv_formats::dense::DenseField {
+                width: wu,
+                height: hu,
+                u: u.iter().map(|x| (x * k) as f32).collect(),
+                v: v.iter().map(|x| (x * k) as f32).collect(),
+            }
+        }),
     })
 }

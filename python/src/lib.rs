@@ -556,13 +556,14 @@ fn simulate<'py>(
 /// pair's frames (default: scene.json's), `every` between pairs (default
 /// 4·dt), `start`/`end` ticks; `method` "mc" (default), "adaptive" or
 /// "tfp"; `window` ticks; `dwell_cap` px or None (off); `windows` the PIV
-/// passes, px.
+/// passes, px; `dense` also runs the dense stage on every pair.
 ///
 /// Returns a dict: `ticks` `int64 (pairs, 2)`, `methods` (each pair's),
 /// `x`, `y` `(ny, nx)`, `u`, `v`, `flags` `(pairs, ny, nx)`, and the mean
-/// field over pairs `mean_u`, `mean_v`, `mean_flags` `(ny, nx)`.
+/// field over pairs `mean_u`, `mean_v`, `mean_flags` `(ny, nx)`; with
+/// `dense`, `mean_dense_u`, `mean_dense_v` `float32 (height, width)`.
 #[pyfunction]
-#[pyo3(signature = (path, dt=None, every=None, start=None, end=None, method="mc", window=None, dwell_cap=Some(8.0), windows=None, width=None, height=None, flip=true, strip_head=0))]
+#[pyo3(signature = (path, dt=None, every=None, start=None, end=None, method="mc", window=None, dwell_cap=Some(8.0), windows=None, width=None, height=None, flip=true, strip_head=0, dense=false))]
 #[allow(clippy::too_many_arguments)]
 fn flow<'py>(
     py: Python<'py>,
@@ -579,6 +580,7 @@ fn flow<'py>(
     height: Option<u16>,
     flip: bool,
     strip_head: u16,
+    dense: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     let req = FlowRequest {
         dt,
@@ -589,6 +591,7 @@ fn flow<'py>(
         window,
         dwell_cap,
         windows,
+        dense,
     };
     if width.is_some() != height.is_some() {
         return Err(SpivError::new_err("give both width and height, or neither"));
@@ -648,6 +651,22 @@ fn flow<'py>(
     d.set_item("mean_u", mu.into_pyarray(py))?;
     d.set_item("mean_v", mv.into_pyarray(py))?;
     d.set_item("mean_flags", mf.into_pyarray(py))?;
+    if let Some(m) = out.mean_dense {
+        let shape = |e: numpy::ndarray::ShapeError| SpivError::new_err(e.to_string());
+        let (h, w) = (m.height, m.width);
+        d.set_item(
+            "mean_dense_u",
+            Array2::from_shape_vec((h, w), m.u)
+                .map_err(shape)?
+                .into_pyarray(py),
+        )?;
+        d.set_item(
+            "mean_dense_v",
+            Array2::from_shape_vec((h, w), m.v)
+                .map_err(shape)?
+                .into_pyarray(py),
+        )?;
+    }
     Ok(d)
 }
 

@@ -64,6 +64,10 @@ pub struct FlowArgs {
     /// Read a file whose last plane is truncated.
     #[arg(long)]
     allow_truncated: bool,
+    /// Also run the dense stage on every pair and write its mean,
+    /// `mean_dense.flo` (one vector per pixel, px per pair, v down).
+    #[arg(long)]
+    dense: bool,
     /// Output folder (created if missing).
     #[arg(long, default_value = "spiv-flow")]
     out: PathBuf,
@@ -90,6 +94,7 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
         window: a.window,
         dwell_cap: parse_dwell_cap(&a.dwell_cap)?,
         windows: a.windows.clone(),
+        dense: a.dense,
     }
     .options(&rec, &a.input)
     .map_err(flow_err)?;
@@ -102,6 +107,9 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
     b.finish_and_clear();
     for (i, p) in out.pairs.iter().enumerate() {
         write_vectors(&a.out.join(format!("vectors_{i:05}.csv")), &p.vectors)?;
+    }
+    if let Some(d) = &out.mean_dense {
+        spiv_formats::dense::write_dense(&a.out.join("mean_dense.flo"), d)?;
     }
     let mean = out.mean_field();
     write_vectors(&a.out.join("mean.csv"), &mean)?;
