@@ -11,9 +11,8 @@ use crate::history::History;
 use crate::region::Region;
 use crate::sidecar::{Config, Memory};
 use crate::state::{Buffers, Workspace, WorkspaceSizes};
-use crate::wire::codec::sparse_scratch;
-use crate::wire::sender::{tile_rows, SendBuffers};
-use crate::wire::{Encoding, MAX_ENCODED, MAX_PAYLOAD};
+use crate::wire::sender::SendBuffers;
+use crate::wire::{MAX_ENCODED, MAX_PAYLOAD};
 use crate::Error;
 
 /// Storage of a spike history ring.
@@ -142,46 +141,22 @@ impl<G: Gray> SidecarBuf<G> {
     /// [`Config::depth`] planes, TFP counts only for TFP, codec scratch only
     /// for the sparse encoding.
     pub fn new(width: u16, height: u16, cfg: &Config) -> Result<Self, Error> {
-        let px = usize::from(width) * usize::from(height);
-        let rows = tile_rows(width, height, cfg.params.full_scale > 255, cfg.lossy.block);
-        let scratch = if cfg.encoding == Encoding::Sparse {
-            sparse_scratch(width, rows, cfg.lossy.block)
-        } else {
-            0
-        };
-        let workspace = if cfg.method == crate::Method::Mc {
-            WorkspaceBuf::new(WorkspaceSizes::for_motion(width, height))
-        } else {
-            WorkspaceBuf::whole(width, height)
-        };
-        let (rows, band) = match cfg.refine {
-            Some(r) => (usize::from(height), usize::from(r.band)),
-            None => (0, 0),
-        };
+        let m = cfg
+            .memory_sizes(width, height)
+            .ok_or(Error::BadDimensions)?;
         Ok(SidecarBuf {
-            history: HistoryBuf::new(width, height, cfg.depth())?,
-            workspace,
-            frame: vec![G::from_level(0); px],
-            counts: vec![
-                0;
-                if cfg.method == crate::Method::Tfp
-                    || (cfg.method == crate::Method::Mc && cfg.bootstrap == crate::Method::Tfp)
-                {
-                    px
-                } else {
-                    0
-                }
-            ],
+            history: HistoryBuf::new(width, height, m.depth)?,
+            workspace: WorkspaceBuf::new(m.workspace),
+            frame: vec![G::from_level(0); m.frame],
+            counts: vec![0; m.tfp_counts],
             payload: vec![0; MAX_PAYLOAD],
             wire: vec![0; MAX_ENCODED],
-            scratch: vec![0; scratch],
+            scratch: vec![0; m.codec_scratch],
             downlink_rx: vec![0; crate::wire::control::MAX_CONTROL_ENCODED],
-            rows: core::array::from_fn(|_| vec![0; usize::from(height)]),
-            caps: core::array::from_fn(|_| {
-                vec![0; usize::from(height.div_ceil(crate::sidecar::CAP_BAND))]
-            }),
-            refined: (vec![0; rows], vec![0; rows]),
-            refine_scratch: vec![0; band * usize::from(width)],
+            rows: core::array::from_fn(|_| vec![0; m.rows]),
+            caps: core::array::from_fn(|_| vec![0; m.cap_bands]),
+            refined: (vec![0; m.refined], vec![0; m.refined]),
+            refine_scratch: vec![0; m.refine_scratch],
         })
     }
 

@@ -24,9 +24,9 @@ use crate::method::Method;
 use crate::motion::{refine, Motion, Refine};
 use crate::params::Params;
 use crate::plane::PlaneView;
-use crate::state::Workspace;
+use crate::state::{Workspace, WorkspaceSizes};
 use crate::window::{tfi, tfp};
-use crate::wire::codec::Lossy;
+use crate::wire::codec::{sparse_scratch, Lossy};
 use crate::wire::sender::{
     tile_rows, FrameInfo, Link, Schedule, SendBuffers, SendError, Sender, Sent, Slot,
 };
@@ -114,6 +114,83 @@ impl Config {
             .saturating_add(pairs.saturating_sub(1).saturating_mul(s.every))
             .saturating_add(s.dt)
             .saturating_add(ahead)
+    }
+}
+
+/// The buffers a sidecar running a [`Config`] needs, in elements: the one
+/// place that decides which [`Memory`] buffers a configuration uses (the
+/// owned `buffers::SidecarBuf` and the C ABI's caller-supplied block are
+/// both sized by it).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MemorySizes {
+    /// The workspace: one region per 16 px for [`Method::Mc`], else per 64.
+    pub workspace: WorkspaceSizes,
+    /// History depth, planes ([`Config::depth`]).
+    pub depth: u16,
+    /// `u64` words of the history.
+    pub history_words: usize,
+    /// Samples of the frame (`width × height`).
+    pub frame: usize,
+    /// Frames of 16-bit samples (`full_scale` above 255).
+    pub wide: bool,
+    /// Motion-compensated counts (`workspace` pixels for [`Method::Mc`]).
+    pub motion_counts: usize,
+    /// TFP counts (`width × height` when TFP frames are made, the MC
+    /// bootstrap included).
+    pub tfp_counts: usize,
+    /// Sparse codec scratch (`u16`; [`Encoding::Sparse`] only).
+    pub codec_scratch: usize,
+    /// Rows of the downlink's velocity buffers (each of four).
+    pub rows: usize,
+    /// Bands of the downlink's caps (each of two).
+    pub cap_bands: usize,
+    /// Refined velocities (each of two; with [`Config::refine`]).
+    pub refined: usize,
+    /// Refinement scratch, bytes.
+    pub refine_scratch: usize,
+}
+
+impl Config {
+    /// The buffers this configuration needs on a `width × height` sensor,
+    /// or `None` when a size overflows.
+    pub fn memory_sizes(&self, width: u16, height: u16) -> Option<MemorySizes> {
+        let px = usize::from(width).checked_mul(usize::from(height))?;
+        let mc = self.method == Method::Mc;
+        let workspace = if mc {
+            WorkspaceSizes::for_motion(width, height)
+        } else {
+            WorkspaceSizes::for_strip(width, height)
+        };
+        let depth = self.depth();
+        let wide = self.params.full_scale > 255;
+        let tfp = self.method == Method::Tfp || (mc && self.bootstrap == Method::Tfp);
+        let codec_scratch = if self.encoding == Encoding::Sparse {
+            let rows = tile_rows(width, height, wide, self.lossy.block);
+            sparse_scratch(width, rows, self.lossy.block)
+        } else {
+            0
+        };
+        let (refined, refine_scratch) = match self.refine {
+            Some(r) => (
+                usize::from(height),
+                usize::from(r.band).checked_mul(usize::from(width))?,
+            ),
+            None => (0, 0),
+        };
+        Some(MemorySizes {
+            workspace,
+            depth,
+            history_words: History::words_needed(width, height, depth)?,
+            frame: px,
+            wide,
+            motion_counts: if mc { workspace.pixels() } else { 0 },
+            tfp_counts: if tfp { px } else { 0 },
+            codec_scratch,
+            rows: usize::from(height),
+            cap_bands: usize::from(height.div_ceil(CAP_BAND)),
+            refined,
+            refine_scratch,
+        })
     }
 }
 

@@ -44,10 +44,9 @@ use spiv_core::motion::{Motion, Refine};
 use spiv_core::region::Region;
 use spiv_core::sidecar::{
     make_frame, Config, FrameBuffers, Guide, Memory, Probe, RefineBuffers, Sidecar, SidecarError,
-    CAP_BAND,
 };
 use spiv_core::state::Buffers;
-use spiv_core::wire::codec::{sparse_scratch, Lossy};
+use spiv_core::wire::codec::Lossy;
 use spiv_core::wire::control::MAX_CONTROL_ENCODED;
 use spiv_core::wire::sender::{
     tile_rows, FrameInfo, Link, SendBuffers, SendError, Sender, Sent, Slot,
@@ -278,7 +277,8 @@ impl Cursor {
 }
 
 /// The block's layout for one configuration: every buffer
-/// `spiv_core::buffers::SidecarBuf` would own, sized the same way.
+/// [`Config::memory_sizes`] names (as `spiv_core::buffers::SidecarBuf`
+/// owns them), at its type's alignment.
 #[derive(Debug, Clone, Copy)]
 struct Layout {
     sizes: WorkspaceSizes,
@@ -309,63 +309,43 @@ struct Layout {
 
 impl Layout {
     fn new(w: u16, h: u16, cfg: &Config) -> Option<Layout> {
-        let px = usize::from(w).checked_mul(usize::from(h))?;
-        let mc = cfg.method == Method::Mc;
-        let sizes = if mc {
-            WorkspaceSizes::for_motion(w, h)
-        } else {
-            WorkspaceSizes::for_strip(w, h)
-        };
-        let depth = cfg.depth();
-        let wide = cfg.params.full_scale > 255;
-        let tfp = cfg.method == Method::Tfp || (mc && cfg.bootstrap == Method::Tfp);
-        let rows = tile_rows(w, h, wide, cfg.lossy.block);
-        let scratch = if cfg.encoding == Encoding::Sparse {
-            sparse_scratch(w, rows, cfg.lossy.block)
-        } else {
-            0
-        };
-        let (refined, band) = match cfg.refine {
-            Some(r) => (usize::from(h), usize::from(r.band)),
-            None => (0, 0),
-        };
-        let hr = usize::from(h);
-        let bands = usize::from(h.div_ceil(CAP_BAND));
+        let m = cfg.memory_sizes(w, h)?;
+        let sizes = m.workspace;
         let sp = sizes.pixels();
         let mut c = Cursor(size_of::<State>());
         Some(Layout {
             sizes,
-            depth,
-            wide,
-            history: c.take::<u64>(History::words_needed(w, h, depth)?)?,
+            depth: m.depth,
+            wide: m.wide,
+            history: c.take::<u64>(m.history_words)?,
             masks: c.take::<u64>(sizes.mask_words())?,
             regions: c.take::<Region>(sizes.regions())?,
             labels: c.take::<u16>(sp)?,
             parents: c.take::<u16>(sizes.parents())?,
-            scratch: c.take::<u16>(scratch)?,
-            frame: if wide {
-                c.take::<u16>(px)?
+            scratch: c.take::<u16>(m.codec_scratch)?,
+            frame: if m.wide {
+                c.take::<u16>(m.frame)?
             } else {
-                c.take::<u8>(px)?
+                c.take::<u8>(m.frame)?
             },
             rows: [
-                c.take::<i16>(hr)?,
-                c.take::<i16>(hr)?,
-                c.take::<i16>(hr)?,
-                c.take::<i16>(hr)?,
+                c.take::<i16>(m.rows)?,
+                c.take::<i16>(m.rows)?,
+                c.take::<i16>(m.rows)?,
+                c.take::<i16>(m.rows)?,
             ],
-            caps: [c.take::<u16>(bands)?, c.take::<u16>(bands)?],
-            refined: [c.take::<i16>(refined)?, c.take::<i16>(refined)?],
+            caps: [c.take::<u16>(m.cap_bands)?, c.take::<u16>(m.cap_bands)?],
+            refined: [c.take::<i16>(m.refined)?, c.take::<i16>(m.refined)?],
             counts: c.take::<u8>(sp)?,
             c_t: c.take::<u8>(sp)?,
             class: c.take::<u8>(sp)?,
             tiles: c.take::<u8>(sizes.tiles())?,
-            mc: c.take::<u8>(if mc { sp } else { 0 })?,
-            tfp: c.take::<u8>(if tfp { px } else { 0 })?,
+            mc: c.take::<u8>(m.motion_counts)?,
+            tfp: c.take::<u8>(m.tfp_counts)?,
             payload: c.take::<u8>(MAX_PAYLOAD)?,
             wire: c.take::<u8>(MAX_ENCODED)?,
             rx: c.take::<u8>(MAX_CONTROL_ENCODED)?,
-            refine_scratch: c.take::<u8>(band.checked_mul(usize::from(w))?)?,
+            refine_scratch: c.take::<u8>(m.refine_scratch)?,
             total: c.0,
         })
     }
@@ -541,17 +521,6 @@ unsafe fn slice<'b, T: Plain>(base: *mut u8, span: Span) -> &'b mut [T] {
     unsafe { core::slice::from_raw_parts_mut(base.add(span.off).cast::<T>(), span.len) }
 }
 
-/// Every buffer of the block, borrowed for one call.
-struct Parts<'b, G> {
-    history: History<'b>,
-    workspace: Workspace<'b>,
-    frame: &'b mut [G],
-    counts: &'b mut [u8],
-    send: SendBuffers<'b>,
-    downlink: DownlinkBuffers<'b>,
-    refine: RefineBuffers<'b>,
-}
-
 /// Carves the block into its buffers, the history resumed at `next_tick`.
 ///
 /// # Safety
@@ -563,7 +532,7 @@ unsafe fn parts<'b, G: Gray + Plain>(
     w: u16,
     h: u16,
     next_tick: u32,
-) -> Result<Parts<'b, G>, SpivStatus> {
+) -> Result<Memory<'b, G>, SpivStatus> {
     // SAFETY (every call below): disjoint spans of the block, each taken
     // once (the function's contract).
     let s = |span| unsafe { slice::<u8>(base, span) };
@@ -592,7 +561,7 @@ unsafe fn parts<'b, G: Gray + Plain>(
     };
     let i = |span| unsafe { slice::<i16>(base, span) };
     let [r0, r1, r2, r3] = l.rows;
-    Ok(Parts {
+    Ok(Memory {
         history,
         workspace,
         frame: unsafe { slice(base, l.frame) },
@@ -802,7 +771,7 @@ fn push<G: Gray + Plain>(
     link: &SpivLink,
 ) -> Result<(), SpivStatus> {
     // SAFETY: the handle's own block; nothing else borrows it now.
-    let p = unsafe {
+    let mut mem = unsafe {
         parts::<G>(
             base,
             &st.layout,
@@ -810,15 +779,6 @@ fn push<G: Gray + Plain>(
             st.height,
             st.sidecar.next_tick(),
         )?
-    };
-    let mut mem = Memory {
-        history: p.history,
-        workspace: p.workspace,
-        frame: p.frame,
-        counts: p.counts,
-        send: p.send,
-        downlink: p.downlink,
-        refine: p.refine,
     };
     let mut probe = CProbe {
         link,
