@@ -11,7 +11,7 @@ use std::sync::{Arc, Mutex, OnceLock};
 use rustfft::num_complex::Complex32;
 use rustfft::{Fft, FftPlanner};
 
-use super::peak::{gaussian2d, parabolic, subpixel, Subpixel};
+use super::peak::{gaussian2d, parabolic, subpixel, width as peak_width, Subpixel};
 
 /// FFT plans for square windows of one size.
 pub struct Plan {
@@ -107,6 +107,9 @@ pub struct Peak {
     /// Highest peak / second highest outside its 5×5 neighbourhood (≥ 1;
     /// 1000 when there is no positive second peak).
     pub ratio: f64,
+    /// The peak's width, px: the larger of its Gaussian σ along x and y
+    /// (infinite on a plateau).
+    pub width: f64,
 }
 
 /// A window is flat (no signal: all-zero, clipped, masked) when its
@@ -224,11 +227,17 @@ pub fn correlate(plan: &Plan, s: &mut Scratch, method: Subpixel) -> Result<Peak,
             k as f64
         }
     };
+    let width = peak_width(c(bi + n - 1, bj), best, c(bi + 1, bj)).max(peak_width(
+        c(bi, bj + n - 1),
+        best,
+        c(bi, bj + 1),
+    ));
     Ok(Peak {
         dx: wrap(bj) + sx,
         dy: wrap(bi) + sy,
         height: best,
         ratio,
+        width,
     })
 }
 

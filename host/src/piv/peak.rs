@@ -69,9 +69,41 @@ pub fn subpixel(cm: f64, c0: f64, cp: f64) -> f64 {
     parabolic(cm, c0, cp)
 }
 
+/// The width of a peak `c0` between `cm` (at −1) and `cp` (at +1): the σ,
+/// px, of the Gaussian with the same relative second difference
+/// (2·c0 − cm − cp)/c0; infinite where the three values are flat or not a
+/// maximum (a ridge: a streak's correlation, or no peak at all).
+pub fn width(cm: f64, c0: f64, cp: f64) -> f64 {
+    let s = (2.0 * c0 - cm - cp) / c0;
+    if !(c0 > 0.0 && s > 0.0 && s.is_finite()) {
+        return f64::INFINITY;
+    }
+    if s >= 2.0 {
+        // Sharper than a Gaussian can be at ±1 px: below a pixel.
+        return 0.0;
+    }
+    (-1.0 / (2.0 * (1.0 - 0.5 * s).ln())).sqrt()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_width_of_a_gaussian_peak_is_its_sigma() {
+        for sigma in [0.8f64, 1.4, 2.0, 4.0, 9.0] {
+            let g = |x: f64| (-x * x / (2.0 * sigma * sigma)).exp();
+            let w = width(g(-1.0), g(0.0), g(1.0));
+            assert!((w - sigma).abs() < 1e-9 * sigma.max(1.0), "{sigma}: {w}");
+        }
+        // A plateau (a streak's ridge) and a minimum have no width.
+        assert_eq!(width(1.0, 1.0, 1.0), f64::INFINITY);
+        assert_eq!(width(2.0, 1.0, 2.0), f64::INFINITY);
+        assert_eq!(width(0.0, 0.0, 0.0), f64::INFINITY);
+        assert!(width(f64::NAN, 1.0, 0.5).is_infinite());
+        // A one-pixel spike is narrower than any Gaussian can say.
+        assert_eq!(width(-0.5, 1.0, -0.5), 0.0);
+    }
 
     #[test]
     fn subpixel_fallbacks_stay_finite() {
