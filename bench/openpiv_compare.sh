@@ -26,4 +26,15 @@ $SPIV simulate --scene uniform --shift 2.6,1.4 --width 1024 --height 1024 --out 
 # (spiv reports its dense stage's field where window PIV fails as a whole).
 $SPIV simulate --scene turbulence --out "$CASES/turbulence" --seed 1 >/dev/null
 $SPIV simulate --scene large-shift --out "$CASES/large-shift" --seed 1 >/dev/null
+# The same turbulence through the spike camera: TFP n=8 frames at the
+# pair's ticks, the frame camera's truth.
+spike_case() {
+  local from="$CASES/$1" to="$CASES/$1-tfp"
+  mkdir -p "$to"
+  cp "$from/truth.csv" "$from/truth.flo" "$to/"
+  read -r ka kb < <("$VENV/bin/python" -c "import json,sys; print(*json.load(open(sys.argv[1]))['pair'])" "$from/scene.json")
+  $SPIV reconstruct "$from/spikes.dat" --method tfp --at "$ka" -o "$to/frame_a.png" >/dev/null
+  $SPIV reconstruct "$from/spikes.dat" --method tfp --at "$kb" -o "$to/frame_b.png" >/dev/null
+}
+spike_case turbulence
 "$VENV/bin/python" bench/openpiv_compare.py "$CASES"/* --spiv "$SPIV" --json target/openpiv-compare.json "$@"

@@ -10,7 +10,7 @@ tools.transform_coordinates. Flags: 0 valid, 1 replaced from neighbours,
 """
 
 from os import PathLike
-from typing import Optional, Sequence, Tuple, TypedDict, Union
+from typing import Literal, Optional, Sequence, Tuple, TypedDict, Union, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -57,6 +57,7 @@ def reconstruct(
     Returns gray levels 0..=full_scale, (height, width), upright.
     """
 
+@overload
 def piv(
     a: npt.ArrayLike,
     b: npt.ArrayLike,
@@ -70,6 +71,7 @@ def piv(
     subpixel: str = "parabolic",
     min_peak_ratio: float = 1.5,
     dense_fallback: bool = True,
+    confidence: Literal[False] = False,
 ) -> Tuple[_F64, _F64, _F64, _F64, npt.NDArray[np.uint8]]:
     """PIV on an image pair (height, width), as `spiv piv`: returns (x, y, u, v, flags), each (ny, nx).
 
@@ -80,7 +82,27 @@ def piv(
     min_peak_ratio: correlation peak ratio floor (1 off).
     dense_fallback: where the last pass fails as a whole, the dense stage's vectors (flag 1).
     x, y: window centres, px; u, v: px per pair (v down); flags 0/1/2.
+    confidence: also return peak_ratio and correlation (float64, (ny, nx); 0 where no peak),
+    as the CSV's columns: (x, y, u, v, flags, peak_ratio, correlation).
     """
+
+@overload
+def piv(
+    a: npt.ArrayLike,
+    b: npt.ArrayLike,
+    windows: Sequence[int] = (64, 32, 32),
+    overlap: float = 0.5,
+    mask: Optional[npt.ArrayLike] = None,
+    interp: str = "bspline",
+    median_threshold: float = 2.0,
+    clip: str = "auto",
+    highpass: float = 3.0,
+    subpixel: str = "parabolic",
+    min_peak_ratio: float = 1.5,
+    dense_fallback: bool = True,
+    *,
+    confidence: Literal[True],
+) -> Tuple[_F64, _F64, _F64, _F64, npt.NDArray[np.uint8], _F64, _F64]: ...
 
 def dense(
     a: npt.ArrayLike, b: npt.ArrayLike

@@ -19,7 +19,7 @@ use numpy::{
 };
 use pyo3::exceptions::{PyOSError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyDict, PyTuple};
 
 use spiv_core::{Method, Params};
 use spiv_firmware_sim::simulation::{simulate_planes, simulate_to_dir};
@@ -327,11 +327,14 @@ fn field_arrays(vectors: &[Vector], grid: &Grid) -> FieldArrays {
 ///
 /// Returns `(x, y, u, v, flags)`, each `(ny, nx)`: window centres in px
 /// (x right, y down), displacements in px per pair (v positive down the
-/// rows), flags 0 valid, 1 replaced, 2 invalid (u = v = 0).
+/// rows), flags 0 valid, 1 replaced, 2 invalid (u = v = 0). With
+/// `confidence=True` also each vector's `peak_ratio` and `correlation`
+/// (the normalised correlation at the peak), as `spiv piv`'s CSV columns
+/// (0 where no peak).
 #[pyfunction]
-#[pyo3(signature = (a, b, windows=vec![64, 32, 32], overlap=0.5, mask=None, interp="bspline", median_threshold=2.0, clip="auto", highpass=3.0, subpixel="parabolic", min_peak_ratio=1.5, dense_fallback=true))]
+#[pyo3(signature = (a, b, windows=vec![64, 32, 32], overlap=0.5, mask=None, interp="bspline", median_threshold=2.0, clip="auto", highpass=3.0, subpixel="parabolic", min_peak_ratio=1.5, dense_fallback=true, confidence=false))]
 #[pyo3(
-    text_signature = "(a, b, windows=(64, 32, 32), overlap=0.5, mask=None, interp='bspline', median_threshold=2.0, clip='auto', highpass=3.0, subpixel='parabolic', min_peak_ratio=1.5, dense_fallback=True)"
+    text_signature = "(a, b, windows=(64, 32, 32), overlap=0.5, mask=None, interp='bspline', median_threshold=2.0, clip='auto', highpass=3.0, subpixel='parabolic', min_peak_ratio=1.5, dense_fallback=True, confidence=False)"
 )]
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
 fn piv<'py>(
@@ -348,13 +351,8 @@ fn piv<'py>(
     subpixel: &str,
     min_peak_ratio: f64,
     dense_fallback: bool,
-) -> PyResult<(
-    Bound<'py, PyArray2<f64>>,
-    Bound<'py, PyArray2<f64>>,
-    Bound<'py, PyArray2<f64>>,
-    Bound<'py, PyArray2<f64>>,
-    Bound<'py, PyArray2<u8>>,
-)> {
+    confidence: bool,
+) -> PyResult<Bound<'py, PyTuple>> {
     let settings = PivOptions {
         windows,
         overlap,
@@ -373,17 +371,22 @@ fn piv<'py>(
     let m = mask
         .map(|m| image(m, "mask").map(|m| m.mapv(|v| v != 0.0)))
         .transpose()?;
-    let (vectors, grid) = py
-        .detach(|| run_piv(&ia, &ib, m.as_ref(), &settings).map(|f| (f.vectors(), f.grid)))
+    let field = py
+        .detach(|| run_piv(&ia, &ib, m.as_ref(), &settings))
         .map_err(err)?;
-    let (x, y, u, v, f) = field_arrays(&vectors, &grid);
-    Ok((
-        x.into_pyarray(py),
-        y.into_pyarray(py),
-        u.into_pyarray(py),
-        v.into_pyarray(py),
-        f.into_pyarray(py),
-    ))
+    let (x, y, u, v, f) = field_arrays(&field.vectors(), &field.grid);
+    let mut out: Vec<Bound<'py, PyAny>> = vec![
+        x.into_pyarray(py).into_any(),
+        y.into_pyarray(py).into_any(),
+        u.into_pyarray(py).into_any(),
+        v.into_pyarray(py).into_any(),
+        f.into_pyarray(py).into_any(),
+    ];
+    if confidence {
+        out.push(field.peak_ratio.into_pyarray(py).into_any());
+        out.push(field.peak_height.into_pyarray(py).into_any());
+    }
+    PyTuple::new(py, out)
 }
 
 /// The dense flow of an image pair, one vector per pixel (as `spiv piv

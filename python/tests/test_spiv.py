@@ -14,7 +14,8 @@ import spiv
 def read_csv(path):
     with open(path) as f:
         rows = list(csv.DictReader(f))
-    cols = {k: np.array([float(r[k]) for r in rows]) for k in ("x", "y", "u", "v", "flag")}
+    keys = ("x", "y", "u", "v", "flag", "peak_ratio", "correlation")
+    cols = {k: np.array([float(r[k]) for r in rows]) for k in keys if k in rows[0]}
     return cols
 
 
@@ -81,6 +82,13 @@ def test_piv_gives_the_cli_vectors(cli, recording, tmp_path):
     # The CSV holds 6 decimals.
     np.testing.assert_allclose(u.ravel(), want["u"], atol=5.1e-7, rtol=0)
     np.testing.assert_allclose(v.ravel(), want["v"], atol=5.1e-7, rtol=0)
+    # Each vector's confidence, as the CSV's columns (4 decimals there).
+    *field, ratio, corr = spiv.piv(a, b, windows=(32, 16), overlap=0.5, confidence=True)
+    np.testing.assert_array_equal(field[2], u)
+    assert ratio.shape == corr.shape == u.shape
+    np.testing.assert_allclose(ratio.ravel(), want["peak_ratio"], atol=5.1e-5, rtol=0)
+    np.testing.assert_allclose(corr.ravel(), want["correlation"], atol=5.1e-5, rtol=0)
+    assert np.all((corr >= -1) & (corr <= 1)) and np.all(ratio >= 0)
     # Any numeric dtype gives the same field.
     x2, _, u2, _, _ = spiv.piv(a.astype(np.float64), b.astype(np.int32), windows=(32, 16))
     np.testing.assert_array_equal(u2, u)
