@@ -10,7 +10,9 @@ use crate::{io_err, FormatError};
 pub enum State {
     /// Passed every test (0).
     Valid,
-    /// Rejected and replaced from its neighbours (1).
+    /// Not validated on its own (1): rejected and replaced from its
+    /// neighbours, a weak peak only its neighbours confirm, or a value of
+    /// the dense stage or a coarser pass where correlation failed.
     Replaced,
     /// Masked, without signal, or rejected with nothing to replace it (2;
     /// then u = v = 0).

@@ -1,5 +1,5 @@
 //! Dense flow on a simulated pair against its dense truth:
-//! `cargo run --release -p spiv-host --example dense_probe DIR [alpha levels warps iterations median]`
+//! `cargo run --release -p spiv-host --example dense_probe DIR [alpha levels warps iterations median init_level div_weight]`
 //! (DIR from `spiv simulate`: frame_a.png, frame_b.png, truth.flo). Prints
 //! the EPE of the PIV field interpolated to every pixel and of the dense
 //! stage from rest and from that field, with times.
@@ -32,6 +32,7 @@ fn main() {
         iterations: num(5, 60.0) as usize,
         median: num(6, 5.0) as usize,
         init_level: num(7, 1.0) as usize,
+        div_weight: num(8, 0.0) as f32,
     };
     let a = load_image(&dir.join("frame_a.png")).expect("frame_a");
     let b = load_image(&dir.join("frame_b.png")).expect("frame_b");

@@ -38,10 +38,11 @@ fn turbulence_is_measured_densely_where_window_piv_fails() {
     assert_eq!(mode, DenseMode::Pyramid);
     let epe = flow.to_field().epe(&truth, None).unwrap();
     assert!(flow.u.iter().chain(flow.v.iter()).all(|x| x.is_finite()));
-    // Measured: 2.91 px against 8.10 px of mean displacement (OpenPIV
+    // Measured: 2.39 px against 8.10 px of mean displacement, 2.91 without
+    // the divergence penalty, which this bound would fail (OpenPIV
     // windef 64-32-32 on the 256-px scene: 6.5 px grid EPE, README).
     assert!(
-        epe < 0.42 * mean,
+        epe < 0.34 * mean,
         "dense EPE {epe:.2} px, mean displacement {mean:.2} px"
     );
     // With the fallback on, PIV reports that field at its grid, flagged
@@ -67,7 +68,8 @@ fn turbulence_is_measured_densely_where_window_piv_fails() {
     eprintln!(
         "turbulence 192 px: dense EPE {epe:.3}, grid EPE {grid_epe:.3}, mean |d| {mean:.3} px"
     );
-    assert!(grid_epe < 0.42 * mean, "grid EPE {grid_epe:.2} px"); // measured 2.57
+    // Measured 1.94 (2.57 without the divergence penalty).
+    assert!(grid_epe < 0.30 * mean, "grid EPE {grid_epe:.2} px");
 }
 
 #[test]
@@ -155,8 +157,8 @@ fn flow_averages_the_dense_stage_over_pairs() {
         "flow --dense, {} TFP pairs: EPE {epe:.3} of {mean:.3} px",
         out.pairs.len()
     );
-    assert!(epe < 0.5 * mean, "EPE {epe:.2} px of {mean:.2}"); // measured 3.52 of 8.10
-                                                               // Without the option nothing dense is computed.
+    assert!(epe < 0.42 * mean, "EPE {epe:.2} px of {mean:.2}"); // measured 2.71 of 8.10 (3.52 without the divergence penalty)
+                                                                // Without the option nothing dense is computed.
     let o = FlowRequest {
         method: spiv_core::Method::Tfp,
         every: Some(42),
