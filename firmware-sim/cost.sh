@@ -5,7 +5,8 @@
 # (firmware-sim/cortex-m4/data): ingest of 141 spike planes, two adaptive
 # frames (n_max = 128), and sending them (Rice tiles, COBS, CRC-32); then
 # the same strip with motion-compensated frames (refine on) after hearing
-# the committed control message (cortex-m4/data/control.bin).
+# the committed control message (cortex-m4/data/control.bin); then the last
+# frame coded by each tile codec (Rice, Context, Sparse, SparseContext).
 # Also: the firmware's RAM, its parity line, and what the counts mean for a
 # 400 MHz Cortex-M7-class MCU at 20 kHz.
 #
@@ -57,16 +58,24 @@ awk '
   s == "spiv_mark_mc_frame_begin"  { st = "mc_frame";  next }
   s == "spiv_mark_mc_send_begin"   { st = "mc_send";   next }
   s == "spiv_mark_hear_begin"      { st = "hear";      next }
+  s == "spiv_mark_rice_begin"      { st = "rice";      next }
+  s == "spiv_mark_context_begin"   { st = "context";   next }
+  s == "spiv_mark_sparse_begin"    { st = "sparse";    next }
+  s == "spiv_mark_sparse_context_begin" { st = "sparse_context"; next }
   s == "spiv_mark_link_begin"   { saved = st; st = "link"; next }
   s == "spiv_mark_link_end"     { st = saved; next }
   s ~ /^spiv_mark_.*_end$/      { st = ""; next }
   st != ""                      { n[st]++ }
-  END { printf "%d %d %d %d %d %d %d %d\n", n["ingest"], n["frame"], n["send"], n["link"],
-        n["mc_ingest"], n["mc_frame"], n["mc_send"], n["hear"] }
+  END { printf "%d %d %d %d %d %d %d %d %d %d %d %d\n", n["ingest"], n["frame"], n["send"], n["link"],
+        n["mc_ingest"], n["mc_frame"], n["mc_send"], n["hear"],
+        n["rice"], n["context"], n["sparse"], n["sparse_context"] }
 ' <"$fifo" >"$counts" &
 timeout 900 "${qemu[@]}" "${one[@]}" -d exec,nochain -D "$fifo" -kernel "$bin" >/dev/null
 wait
-read -r t_ingest t_frame t_send t_link t_mc_ingest t_mc_frame t_mc_send t_hear <"$counts"
+read -r t_ingest t_frame t_send t_link t_mc_ingest t_mc_frame t_mc_send t_hear \
+  t_rice t_context t_sparse t_sparse_context <"$counts"
+codec_line=$(grep '^codecs ' <<<"$run")
+codec_bytes() { sed -n "s/.*\b$1=\([0-9]*\).*/\1/p" <<<"$codec_line"; }
 mc_bytes=$(sed -n 's/.*\bbytes=\([0-9]*\).*/\1/p' <<<"$mc_parity")
 mc_frame_bytes=$((mc_bytes - 68))
 control_bytes=$(stat -c %s "$m4/data/control.bin")
@@ -101,8 +110,13 @@ printf '%-34s %16s %16s %16s\n' "  of which refine (host)" "" "$(ratio "$x_refin
 printf '%-34s %16s %16s %16s\n' "  its send" "$(ratio "$t_mc_send" $((px * frames)) 1)" "$(ratio "$x_mc_send" $((px * frames)) 1)" "per pixel"
 printf '%-34s %16s %16s %16s\n' "  its wire bytes per frame" "$((mc_frame_bytes / frames))" "" "(adaptive $((frame_bytes / frames)))"
 printf '%-34s %16s %16s %16s\n' "hear one control ($control_bytes B)" "$(ratio "$t_hear" "$control_bytes" 1)" "" "per control byte"
+echo "tile codecs on the last motion-compensated frame (one 128x64 tile, payload only):"
+for c in rice context sparse sparse_context; do
+  t=$(eval echo "\$t_$c"); b=$(codec_bytes "$c")
+  printf '%-34s %16s %16s %16s\n' "codec $c" "$(ratio "$t" "$px" 1)" "" "per pixel ($(ratio "$t" "$b" 0) per coded byte; $b B = $(ratio $((8 * b)) "$px" 2) bits/px)"
+done
 printf '%-34s %16s\n' "(parity CRC of the stream)" "$(ratio "$t_link" "$bytes" 1) per byte"
-echo "totals: Thumb-2 ingest $t_ingest, frame $t_frame, send $t_send, mc_frame $t_mc_frame, mc_send $t_mc_send, hear $t_hear; x86-64 ingest $x_ingest, frame $x_frame, send $x_send, mc_frame $x_mc_frame (refine $x_refine), mc_send $x_mc_send"
+echo "totals: Thumb-2 ingest $t_ingest, frame $t_frame, send $t_send, mc_frame $t_mc_frame, mc_send $t_mc_send, hear $t_hear, codecs rice $t_rice context $t_context sparse $t_sparse sparse_context $t_sparse_context; x86-64 ingest $x_ingest, frame $x_frame, send $x_send, mc_frame $x_mc_frame (refine $x_refine), mc_send $x_mc_send"
 
 # Static RAM of the firmware image.
 sec() {
@@ -156,7 +170,7 @@ echo "parity: Cortex-M4, host kernels, native firmware loop and cortex-m4/expect
 if [ "$check" = 1 ]; then
   base=$m4/cost-baseline.txt
   fail=0
-  for k in ingest frame send mc_frame mc_send; do
+  for k in ingest frame send mc_frame mc_send context sparse_context; do
     want=$(sed -n "s/^$k=//p" "$base")
     got=$(eval echo "\$t_$k")
     if [ "$got" -gt $((want + want / 10)) ]; then

@@ -26,7 +26,7 @@ use crate::params::Params;
 use crate::plane::PlaneView;
 use crate::state::{Workspace, WorkspaceSizes};
 use crate::window::{tfi, tfp};
-use crate::wire::codec::{sparse_scratch, Lossy};
+use crate::wire::codec::{tile_scratch, Lossy};
 use crate::wire::sender::{
     tile_rows, FrameInfo, Link, Schedule, SendBuffers, SendError, Sender, Sent, Slot,
 };
@@ -164,12 +164,8 @@ impl Config {
         let depth = self.depth();
         let wide = self.params.full_scale > 255;
         let tfp = self.method == Method::Tfp || (mc && self.bootstrap == Method::Tfp);
-        let codec_scratch = if self.encoding == Encoding::Sparse {
-            let rows = tile_rows(width, height, wide, self.lossy.block);
-            sparse_scratch(width, rows, self.lossy.block)
-        } else {
-            0
-        };
+        let rows = tile_rows(width, height, wide, self.lossy.block);
+        let codec_scratch = tile_scratch(self.encoding, width, rows, self.lossy.block);
         let (refined, refine_scratch) = match self.refine {
             Some(r) => (
                 usize::from(height),

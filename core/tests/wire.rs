@@ -5,7 +5,7 @@
 //! deterministic sweep feeds 10^6 mutated streams.
 
 use proptest::prelude::*;
-use spiv_core::wire::codec::{decode_tile, encode_tile, sparse_scratch, Lossy};
+use spiv_core::wire::codec::{decode_tile, encode_tile, tile_scratch, Lossy};
 use spiv_core::wire::{encode_message, Decoder, Encoding, Header, Kind, MAX_ENCODED};
 
 fn header(seq: u32) -> Header {
@@ -129,13 +129,25 @@ proptest! {
             if s % 11 == 0 { (s >> 20) as u16 % (peak.max(1)) } else { 20 + (s >> 40) as u16 % 6 }
         }).collect();
         let lossy = Lossy { block, tolerance, contrast };
-        let mut scratch = vec![0u16; sparse_scratch(w, h, block)];
+        let mut scratch = vec![0u16; tile_scratch(Encoding::SparseContext, w, h, block)];
         let mut buf = vec![0u8; 4 * n + 64];
-        for want in [Encoding::Raw8, Encoding::Raw16, Encoding::Rice, Encoding::Sparse] {
+        let mut sparse = Vec::new();
+        for want in [Encoding::Raw8, Encoding::Raw16, Encoding::Rice, Encoding::Sparse,
+                     Encoding::Context, Encoding::SparseContext] {
             let (enc, len) = encode_tile(want, &data, w, h, &lossy, &mut scratch, &mut buf).unwrap();
             let mut back = vec![0u16; n];
             decode_tile(enc, &buf[..len], w, h, &mut scratch, &mut back).unwrap();
+            // Each mode or its lossless fallback.
+            let fallback = [Encoding::Raw8, Encoding::Raw16, Encoding::Rice, Encoding::Context];
+            prop_assert!(enc == want || fallback.contains(&enc), "{:?} -> {:?}", want, enc);
             if enc == Encoding::Sparse {
+                sparse = back.clone();
+            }
+            if enc == Encoding::SparseContext && !sparse.is_empty() {
+                // The same decisions: the same decoded samples.
+                prop_assert_eq!(&back, &sparse);
+            }
+            if matches!(enc, Encoding::Sparse | Encoding::SparseContext) {
                 for (a, b) in data.iter().zip(&back) {
                     prop_assert!((i32::from(*a) - i32::from(*b)).abs() <= i32::from(tolerance));
                 }
@@ -150,7 +162,8 @@ proptest! {
         let mut scratch = vec![0u16; 4096];
         let mut out8 = vec![0u8; usize::from(w) * usize::from(h)];
         let mut out16 = vec![0u16; usize::from(w) * usize::from(h)];
-        for enc in [Encoding::None, Encoding::Raw8, Encoding::Raw16, Encoding::Rice, Encoding::Sparse] {
+        for enc in [Encoding::None, Encoding::Raw8, Encoding::Raw16, Encoding::Rice, Encoding::Sparse,
+                    Encoding::Context, Encoding::SparseContext] {
             let _ = decode_tile(enc, &bytes, w, h, &mut scratch, &mut out8);
             let _ = decode_tile(enc, &bytes, w, h, &mut scratch, &mut out16);
         }

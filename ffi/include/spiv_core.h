@@ -34,6 +34,12 @@
 // Background at low resolution, particles exact (lossy).
 #define SPIV_ENCODING_SPARSE 4
 
+// Context-modelled range coder (lossless; about half of Rice's bytes).
+#define SPIV_ENCODING_CONTEXT 5
+
+// Sparse's frames, context-modelled range coder (lossy).
+#define SPIV_ENCODING_SPARSE_CONTEXT 6
+
 // The block's alignment, bytes.
 #define SPIV_MEMORY_ALIGN 8
 

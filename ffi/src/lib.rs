@@ -132,6 +132,10 @@ pub const SPIV_ENCODING_RAW16: u8 = 2;
 pub const SPIV_ENCODING_RICE: u8 = 3;
 /// Background at low resolution, particles exact (lossy).
 pub const SPIV_ENCODING_SPARSE: u8 = 4;
+/// Context-modelled range coder (lossless; about half of Rice's bytes).
+pub const SPIV_ENCODING_CONTEXT: u8 = 5;
+/// Sparse's frames, context-modelled range coder (lossy).
+pub const SPIV_ENCODING_SPARSE_CONTEXT: u8 = 6;
 
 /// What the sidecar does (`spiv_config_default` fills the defaults).
 #[repr(C)]

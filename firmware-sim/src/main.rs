@@ -68,7 +68,9 @@ struct Args {
     /// Tick of the first frame (default: n_max/2, the first with a whole window).
     #[arg(long)]
     first: Option<u32>,
-    /// Tile coding: rice (lossless, default), raw (lossless), sparse (lossy).
+    /// Tile coding: rice (lossless, default), context (lossless,
+    /// context-modelled: about half of rice's bytes), sparse (lossy),
+    /// sparse-context (lossy, sparse's frames in fewer bytes), raw.
     #[arg(long, default_value = "rice")]
     encoding: String,
     /// Sparse mode: largest error of a background sample, gray levels.
@@ -187,16 +189,12 @@ fn config(a: &Args, dt: u32) -> Result<Config, Error> {
         (_, Some(n)) => cfg.params.n_max = n,
         (_, None) => {}
     }
-    cfg.encoding = match a.encoding.as_str() {
-        "rice" => Encoding::Rice,
-        "raw" => Encoding::Raw8,
-        "sparse" => Encoding::Sparse,
-        e => {
-            return Err(Error::Usage(format!(
-                "unknown --encoding {e} (rice, raw, sparse)"
-            )))
-        }
-    };
+    cfg.encoding = Encoding::from_name(&a.encoding).ok_or_else(|| {
+        Error::Usage(format!(
+            "unknown --encoding {} (rice, context, sparse, sparse-context, raw)",
+            a.encoding
+        ))
+    })?;
     cfg.lossy.tolerance = a.tolerance;
     cfg.lossy.contrast = a.contrast;
     let window = cfg.window();

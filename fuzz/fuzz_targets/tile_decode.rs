@@ -1,17 +1,18 @@
-//! The tile decoders (raw, Rice, sparse) on arbitrary payloads and
-//! geometries, into 8- and 16-bit frames: an error or samples, never a
-//! panic; what decodes as 8-bit decodes to the same levels as 16-bit.
+//! The tile decoders (raw, Rice, sparse, Context, SparseContext) on
+//! arbitrary payloads and geometries, into 8- and 16-bit frames: an error
+//! or samples, never a panic; what decodes as 8-bit decodes to the same
+//! levels as 16-bit.
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use spiv_core::wire::codec::{decode_tile, sparse_scratch};
+use spiv_core::wire::codec::{decode_tile, tile_scratch};
 use spiv_core::wire::Encoding;
 
 fuzz_target!(|input: &[u8]| {
     if input.len() < 4 {
         return;
     }
-    let Some(enc) = Encoding::from_u8(input[0] % 5) else {
+    let Some(enc) = Encoding::from_u8(input[0] % 7) else {
         return;
     };
     // Up to 256 × 32 samples: the codecs' loops, not the memory, are tested.
@@ -19,8 +20,7 @@ fuzz_target!(|input: &[u8]| {
     let rows = u16::from(input[2] % 32) + 1;
     let payload = &input[4..];
     let n = usize::from(width) * usize::from(rows);
-    let mut scratch =
-        vec![0u16; sparse_scratch(width, rows, 2).max(sparse_scratch(width, rows, 8))];
+    let mut scratch = vec![0u16; tile_scratch(enc, width, rows, 2)];
     let mut out8 = vec![0u8; n];
     let r8 = decode_tile(enc, payload, width, rows, &mut scratch, &mut out8);
     let mut out16 = vec![0u16; n];

@@ -61,7 +61,7 @@ pub struct Transfer {
     pub report: Report,
     /// Bytes on the wire.
     pub bytes: u64,
-    /// Tiles per encoding used: raw8, raw16, rice, sparse.
+    /// Tiles per encoding used: raw8, raw16, lossless coded, lossy.
     pub tiles: [u32; 4],
 }
 

@@ -107,9 +107,32 @@ pub enum Encoding {
     Rice = 3,
     /// Background at low resolution, particles exact (lossy).
     Sparse = 4,
+    /// Median-predictor residuals range-coded with neighbourhood contexts
+    /// (lossless).
+    Context = 5,
+    /// `Sparse`'s samples, range-coded with neighbourhood contexts (lossy,
+    /// decodes to exactly what `Sparse` decodes to).
+    SparseContext = 6,
 }
 
 impl Encoding {
+    /// The codecs a user picks, by the names the command lines take.
+    pub const NAMED: [(&'static str, Encoding); 5] = [
+        ("rice", Encoding::Rice),
+        ("context", Encoding::Context),
+        ("sparse", Encoding::Sparse),
+        ("sparse-context", Encoding::SparseContext),
+        ("raw", Encoding::Raw8),
+    ];
+
+    /// From its name in [`Encoding::NAMED`].
+    pub fn from_name(name: &str) -> Option<Encoding> {
+        Encoding::NAMED
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|&(_, e)| e)
+    }
+
     /// From the header byte.
     pub fn from_u8(b: u8) -> Option<Encoding> {
         match b {
@@ -118,6 +141,8 @@ impl Encoding {
             2 => Some(Encoding::Raw16),
             3 => Some(Encoding::Rice),
             4 => Some(Encoding::Sparse),
+            5 => Some(Encoding::Context),
+            6 => Some(Encoding::SparseContext),
             _ => None,
         }
     }

@@ -130,7 +130,7 @@ pub struct FrameInfo {
 
 /// The caller's buffers: a payload of [`MAX_PAYLOAD`] bytes, a COBS output
 /// of [`crate::wire::MAX_ENCODED`] bytes, and the sparse codec's scratch
-/// ([`crate::wire::codec::sparse_scratch`] samples for one tile; empty when
+/// ([`crate::wire::codec::tile_scratch`] samples for one tile; empty when
 /// the encoding is never `Sparse`).
 #[derive(Debug)]
 pub struct SendBuffers<'b> {
@@ -154,7 +154,8 @@ pub struct Sent {
     pub messages: u32,
     /// Bytes sent.
     pub bytes: u64,
-    /// Tiles per encoding actually used: raw8, raw16, rice, sparse.
+    /// Tiles per encoding actually used: raw8, raw16, lossless coded (Rice,
+    /// Context), lossy (Sparse, SparseContext).
     pub tiles: [u32; 4],
     /// Control messages that took effect (the caller counts them; status
     /// reports them).
@@ -226,7 +227,7 @@ impl Sender {
                 buf.scratch,
                 buf.payload,
             )?;
-            if enc == Encoding::Sparse {
+            if matches!(enc, Encoding::Sparse | Encoding::SparseContext) {
                 decode_tile(
                     enc,
                     &buf.payload[..len],
@@ -240,7 +241,7 @@ impl Sender {
             let slot = match enc {
                 Encoding::Raw8 => 0,
                 Encoding::Raw16 => 1,
-                Encoding::Rice => 2,
+                Encoding::Rice | Encoding::Context => 2,
                 _ => 3,
             };
             self.sent.tiles[slot] = self.sent.tiles[slot].saturating_add(1);

@@ -42,8 +42,10 @@ use spiv_core::sidecar::{
     Config, Memory, Probe, RefineBuffers, Sidecar, SidecarError, Stage, CAP_BAND,
 };
 use spiv_core::state::{Buffers, STATE_MILLIBYTES_PER_PIXEL};
+use spiv_core::wire::codec::{encode_tile, tile_scratch, Lossy};
 use spiv_core::wire::control::MAX_CONTROL_ENCODED;
-use spiv_core::wire::sender::{Link, SendBuffers, Slot};
+use spiv_core::wire::sender::{tile_rows, Link, SendBuffers, Slot};
+use spiv_core::wire::Encoding;
 use spiv_core::wire::{frame_crc, MAX_ENCODED, MAX_PAYLOAD};
 use spiv_core::{History, Params, Workspace, WorkspaceSizes};
 
@@ -114,7 +116,17 @@ struct Ram {
     /// Refined velocities and refine's scratch.
     refined: [[i16; ROWS]; 2],
     refine_scratch: [u8; REFINE_BAND * W as usize],
+    /// The tile codecs' scratch (the largest: `SparseContext`).
+    codec_scratch: [u16; CODEC_SCRATCH],
 }
+
+/// Scratch of the `SparseContext` codec for one tile of the strip.
+const CODEC_SCRATCH: usize = tile_scratch(
+    Encoding::SparseContext,
+    W,
+    tile_rows(W, H, false, Lossy::DEFAULT.block),
+    Lossy::DEFAULT.block,
+);
 
 static CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
 
@@ -203,6 +215,14 @@ markers!(
     spiv_mark_mc_send_end = 14,
     spiv_mark_hear_begin = 15,
     spiv_mark_hear_end = 16,
+    spiv_mark_rice_begin = 17,
+    spiv_mark_rice_end = 18,
+    spiv_mark_context_begin = 19,
+    spiv_mark_context_end = 20,
+    spiv_mark_sparse_begin = 21,
+    spiv_mark_sparse_end = 22,
+    spiv_mark_sparse_context_begin = 23,
+    spiv_mark_sparse_context_end = 24,
 );
 
 #[entry]
@@ -278,6 +298,7 @@ fn run() -> Result<(), Failure> {
         caps: [[0; CAP_BANDS]; 2],
         refined: [[0; ROWS]; 2],
         refine_scratch: [0; REFINE_BAND * W as usize],
+        codec_scratch: [0; CODEC_SCRATCH],
     })
     .ok_or(Failure::Memory("RAM taken twice"))?;
     report_memory(ram)?;
@@ -298,7 +319,58 @@ fn run() -> Result<(), Failure> {
     if mc.refine.map(|r| usize::from(r.band)) != Some(REFINE_BAND) {
         return Err(Failure::Memory("refine band differs from REFINE_BAND"));
     }
-    strip(ram, mc, true)
+    strip(ram, mc, true)?;
+    codecs(ram)
+}
+
+/// Codes the last frame (the motion-compensated pair's second) with each
+/// tile codec, between cost markers, and prints the bytes of each.
+fn codecs(ram: &mut Ram) -> Result<(), Failure> {
+    let rows = tile_rows(W, H, false, Lossy::DEFAULT.block);
+    let mut bytes = [0usize; 4];
+    let codecs = [
+        Encoding::Rice,
+        Encoding::Context,
+        Encoding::Sparse,
+        Encoding::SparseContext,
+    ];
+    for (k, enc) in codecs.into_iter().enumerate() {
+        codec_mark(k, true);
+        for tile in ram.frame.chunks(usize::from(rows) * usize::from(W)) {
+            let (_, len) = encode_tile(
+                enc,
+                tile,
+                W,
+                (tile.len() / usize::from(W)) as u16,
+                &Lossy::DEFAULT,
+                &mut ram.codec_scratch,
+                &mut ram.payload,
+            )?;
+            bytes[k] += len;
+        }
+        codec_mark(k, false);
+    }
+    hprintln!(
+        "codecs rice={} context={} sparse={} sparse_context={}",
+        bytes[0],
+        bytes[1],
+        bytes[2],
+        bytes[3]
+    );
+    Ok(())
+}
+
+fn codec_mark(k: usize, begin: bool) {
+    match (k, begin) {
+        (0, true) => spiv_mark_rice_begin(),
+        (0, false) => spiv_mark_rice_end(),
+        (1, true) => spiv_mark_context_begin(),
+        (1, false) => spiv_mark_context_end(),
+        (2, true) => spiv_mark_sparse_begin(),
+        (2, false) => spiv_mark_sparse_end(),
+        (3, true) => spiv_mark_sparse_context_begin(),
+        _ => spiv_mark_sparse_context_end(),
+    }
 }
 
 /// The sidecar loop over the committed strip with `cfg`; motion-compensated
@@ -415,7 +487,7 @@ fn report_memory(ram: &Ram) -> Result<(), Failure> {
         + size_of_val(&ram.refined)
         + size_of_val(&ram.refine_scratch);
     hprintln!(
-        "memory: {}x{} px, history {} B ({} planes, {} milli-B/px), state {} B ({} milli-B/px), tables {} B (motion-compensated sizes), frame+payload+wire {} B, motion (counts, downlink, refine) {} B, total {} B",
+        "memory: {}x{} px, history {} B ({} planes, {} milli-B/px), state {} B ({} milli-B/px), tables {} B (motion-compensated sizes), frame+payload+wire {} B, motion (counts, downlink, refine) {} B, codec scratch {} B, total {} B",
         W,
         H,
         history,
@@ -426,6 +498,7 @@ fn report_memory(ram: &Ram) -> Result<(), Failure> {
         tables,
         io,
         motion,
+        size_of_val(&ram.codec_scratch),
         core::mem::size_of::<Ram>()
     );
     if state * 1000 != STATE_MILLIBYTES_PER_PIXEL * PX || state != SIZES.per_pixel_bytes() {

@@ -1,7 +1,10 @@
 //! `spiv bench link`: what the sidecar link costs and saves. On the paper's
 //! scenes, the firmware loop sends pairs every M ticks in the lossless and
-//! the lossy mode; the host receives them through its decoder, checks the
-//! lossless frames bit-exact against what the firmware made, and runs PIV.
+//! the lossy mode, each with both entropy coders (Rice and the
+//! context-modelled range coder); the host receives them through its
+//! decoder, checks the lossless frames bit-exact against what the firmware
+//! made and the two lossy codecs' frames equal to each other, and runs PIV
+//! on the context-coded ones.
 //! Reported per scene and M: bytes per pair, the bandwidth reduction against
 //! the raw spike stream over the same ticks (M·W·H/8 bytes per pair), PIV
 //! RMSE of the u(y) profile against the truth (the paper's Tables 1–2
@@ -71,10 +74,11 @@ impl LinkFrames {
     }
 }
 
-/// Sums over seeds for one M: [lossless, lossy].
+/// Sums over seeds for one M: [lossless, lossy]; `bytes` per codec:
+/// Rice, Context, Sparse, SparseContext.
 #[derive(Debug, Clone, Default)]
 struct Acc {
-    bytes: [u64; 2],
+    bytes: [u64; 4],
     sq: [f64; 2],
     n: [usize; 2],
     lost: [usize; 2],
@@ -100,14 +104,17 @@ pub struct LinkRow {
     pub pairs: usize,
     /// Raw spike bytes over M ticks.
     pub raw_bytes_per_pair: f64,
-    /// Lossless (Rice) bytes per pair.
+    /// Lossless (Context) bytes per pair.
     pub lossless_bytes_per_pair: f64,
     /// Raw over lossless.
     pub lossless_reduction: f64,
-    /// Lossy (sparse) bytes per pair.
+    /// Lossy (SparseContext) bytes per pair.
     pub lossy_bytes_per_pair: f64,
     /// Raw over lossy.
     pub lossy_reduction: f64,
+    /// Bits per frame sample on the wire (headers and framing included) of
+    /// each codec: Rice, Context, Sparse, SparseContext.
+    pub bits_per_sample: [f64; 4],
     /// u(y) RMSE through the lossless link, px per pair.
     pub rmse_lossless: f64,
     /// u(y) RMSE through the lossy link, px per pair.
@@ -118,7 +125,8 @@ pub struct LinkRow {
     pub lost_rows_lossy: usize,
     /// RMSE(lossy)/RMSE(lossless) − 1.
     pub added_error: f64,
-    /// Every lossless frame arrived as the firmware made it.
+    /// Every lossless frame arrived as the firmware made it (both coders),
+    /// and both lossy coders delivered the same frames.
     pub lossless_bit_exact: bool,
 }
 
@@ -219,19 +227,31 @@ pub fn link_bench(b: &LinkBench, mut progress: impl FnMut()) -> Result<Vec<LinkR
                         let cfg = Config { encoding, ..cfg };
                         transfer_with(&planes, w, h, cfg, control.clone())
                     };
-                    let lossless = send(Encoding::Rice)?;
-                    let lossy = send(Encoding::Sparse)?;
-                    let exact = lossless.pairs.len() == b.pairs as usize
-                        && lossless.pairs.iter().flatten().all(|r| {
-                            lossless
-                                .sent
+                    let rice = send(Encoding::Rice)?;
+                    let lossless = send(Encoding::Context)?;
+                    let sparse = send(Encoding::Sparse)?;
+                    let lossy = send(Encoding::SparseContext)?;
+                    let exact = |t: &crate::link::Transfer| {
+                        t.pairs.len() == b.pairs as usize
+                            && t.pairs.iter().flatten().all(|r| {
+                                t.sent
+                                    .iter()
+                                    .any(|s| s.frame_id == r.frame_id && s.data == r.data)
+                            })
+                    };
+                    // The two lossy codecs make the same decisions.
+                    let same = |a: &crate::link::Transfer, b: &crate::link::Transfer| {
+                        a.pairs.len() == b.pairs.len()
+                            && a.pairs
                                 .iter()
-                                .any(|s| s.frame_id == r.frame_id && s.data == r.data)
-                        });
+                                .zip(&b.pairs)
+                                .all(|(x, y)| x.iter().zip(y).all(|(x, y)| x.data == y.data))
+                    };
                     let e = &mut acc[j * b.every.len() + i];
-                    e.bytes[0] += lossless.bytes;
-                    e.bytes[1] += lossy.bytes;
-                    e.inexact |= !exact;
+                    for (k, t) in [&rice, &lossless, &sparse, &lossy].into_iter().enumerate() {
+                        e.bytes[k] += t.bytes;
+                    }
+                    e.inexact |= !exact(&rice) || !exact(&lossless) || !same(&sparse, &lossy);
                     e.pairs += lossless.pairs.len().min(lossy.pairs.len());
                     for (mode, t) in [&lossless, &lossy].into_iter().enumerate() {
                         for field in piv_pairs(&t.pairs, settings)? {
@@ -255,7 +275,8 @@ pub fn link_bench(b: &LinkBench, mut progress: impl FnMut()) -> Result<Vec<LinkR
                 let npairs = (b.seeds * u64::from(b.pairs)) as f64;
                 let m = f * dt;
                 let raw = f64::from(m) * f64::from(w) * f64::from(h) / 8.0;
-                let (bl, by) = (e.bytes[0] as f64 / npairs, e.bytes[1] as f64 / npairs);
+                let (bl, by) = (e.bytes[1] as f64 / npairs, e.bytes[3] as f64 / npairs);
+                let samples = 2.0 * f64::from(w) * f64::from(h) * npairs;
                 let (rl, ry) = (
                     (e.sq[0] / e.n[0] as f64).sqrt(),
                     (e.sq[1] / e.n[1] as f64).sqrt(),
@@ -272,6 +293,7 @@ pub fn link_bench(b: &LinkBench, mut progress: impl FnMut()) -> Result<Vec<LinkR
                     lossless_reduction: raw / bl,
                     lossy_bytes_per_pair: by,
                     lossy_reduction: raw / by,
+                    bits_per_sample: e.bytes.map(|b| 8.0 * b as f64 / samples),
                     rmse_lossless: rl,
                     rmse_lossy: ry,
                     lost_rows_lossless: e.lost[0],

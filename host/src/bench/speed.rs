@@ -144,7 +144,12 @@ pub fn speed_against_error(mut progress: impl FnMut()) -> Result<Vec<SpeedRow>, 
     // receiver for both pairs (TFP and adaptive) + PIV on the adaptive pair.
     for (enc, label) in [
         (spiv_core::wire::Encoding::Rice, "lossless Rice"),
+        (spiv_core::wire::Encoding::Context, "lossless Context"),
         (spiv_core::wire::Encoding::Sparse, "lossy Sparse"),
+        (
+            spiv_core::wire::Encoding::SparseContext,
+            "lossy SparseContext",
+        ),
     ] {
         let t = Instant::now();
         let mut base = Config::new(ka as u32, (kb - ka) as u32);

@@ -82,15 +82,15 @@ pub fn run(a: &LinkArgs) -> Result<(), CliError> {
         "sidecar link, {} seeds x {} pairs per scene, lossy tolerance {} gray levels (bytes per pair; reduction against the raw spike stream over M ticks)",
         a.seeds, a.pairs, a.tolerance
     );
-    println!("| scene | frames | M (ticks) | raw | lossless | × | lossy | × | u(y) RMSE lossless (px) | u(y) RMSE lossy (px) | added error | rows lost (lossless/lossy) | lossless bit-exact |");
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("| scene | frames | M (ticks) | raw | lossless | × | lossy | × | bits/sample Rice · Context · Sparse · SparseContext | u(y) RMSE lossless (px) | u(y) RMSE lossy (px) | added error | rows lost (lossless/lossy) | exact |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for r in &rows {
         let frames = match r.fallbacks {
             0 => r.frames.name().to_string(),
             n => format!("{} ({n} seeds adaptive: no prediction)", r.frames.name()),
         };
         println!(
-            "| {} | {} | {}·dt = {} | {:.0} | {:.0} | {:.1} | {:.0} | {:.1} | {:.4} | {:.4} | {:+.1} % | {}/{} | {} |",
+            "| {} | {} | {}·dt = {} | {:.0} | {:.0} | {:.1} | {:.0} | {:.1} | {:.2} · {:.2} · {:.2} · {:.2} | {:.4} | {:.4} | {:+.1} % | {}/{} | {} |",
             r.scene,
             frames,
             r.every_dt,
@@ -100,6 +100,10 @@ pub fn run(a: &LinkArgs) -> Result<(), CliError> {
             r.lossless_reduction,
             r.lossy_bytes_per_pair,
             r.lossy_reduction,
+            r.bits_per_sample[0],
+            r.bits_per_sample[1],
+            r.bits_per_sample[2],
+            r.bits_per_sample[3],
             r.rmse_lossless,
             r.rmse_lossy,
             100.0 * r.added_error,
@@ -115,7 +119,8 @@ pub fn run(a: &LinkArgs) -> Result<(), CliError> {
     }
     if rows.iter().any(|r| !r.lossless_bit_exact) {
         return Err(CliError::Usage(
-            "lossless frames were not bit-exact after the link".into(),
+            "lossless frames were not bit-exact after the link, or the lossy codecs disagreed"
+                .into(),
         ));
     }
     Ok(())

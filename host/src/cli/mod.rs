@@ -40,15 +40,11 @@ pub enum CliError {
 
 /// Parses `--encoding`.
 pub fn parse_encoding(v: &str) -> Result<spiv_core::wire::Encoding, CliError> {
-    use spiv_core::wire::Encoding;
-    match v {
-        "rice" => Ok(Encoding::Rice),
-        "sparse" => Ok(Encoding::Sparse),
-        "raw" => Ok(Encoding::Raw8),
-        _ => Err(CliError::Usage(format!(
-            "--encoding {v}: expected rice, sparse or raw"
-        ))),
-    }
+    spiv_core::wire::Encoding::from_name(v).ok_or_else(|| {
+        CliError::Usage(format!(
+            "--encoding {v}: expected rice, context, sparse, sparse-context or raw"
+        ))
+    })
 }
 
 /// Parses `--dwell-cap`: px, or "off".

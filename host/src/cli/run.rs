@@ -34,7 +34,9 @@ pub struct RunArgs {
     #[arg(long, default_value = "8")]
     dwell_cap: String,
     /// How the sidecar codes frames on the wire: rice (lossless, default),
-    /// sparse (lossy: particles exact, background at low resolution) or raw.
+    /// context (lossless, context-modelled range coder), sparse (lossy:
+    /// particles exact, background at low resolution), sparse-context
+    /// (sparse's frames, range-coded) or raw.
     #[arg(long, default_value = "rice")]
     encoding: String,
 }

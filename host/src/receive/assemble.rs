@@ -12,7 +12,7 @@
 
 use std::collections::BTreeMap;
 
-use spiv_core::wire::codec::{decode_tile, sparse_scratch};
+use spiv_core::wire::codec::{decode_tile, tile_scratch};
 use spiv_core::wire::{frame_crc, FrameEnd, Kind, Message, Status};
 
 /// A frame as received (stored row order: the camera's rows bottom-up).
@@ -204,7 +204,7 @@ impl Assembler {
                 if rows == 0 || r0 + rows > usize::from(h.height) {
                     return self.reject(id);
                 }
-                let need = sparse_scratch(h.width, h.rows, 2);
+                let need = tile_scratch(h.encoding, h.width, h.rows, 2);
                 if self.scratch.len() < need {
                     self.scratch.resize(need, 0);
                 }

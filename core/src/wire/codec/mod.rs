@@ -8,6 +8,8 @@
 //! | `Raw16` | lossless | two bytes per sample, little-endian |
 //! | `Rice` | lossless | bitstream: per sample the zigzag residual of the LOCO-I median predictor, adaptive Rice code |
 //! | `Sparse` | lossy | `block u8, 0u8`, bitstream: background grid (block means of the darker half, Rice-coded deltas), then per row alternating runs: background (decoded as the bilinear upsampling of the grid) and exact samples (Rice-coded left-neighbour residuals) |
+//! | `Context` | lossless | range-coded median-predictor residuals, a model set per neighbourhood |
+//! | `SparseContext` | lossy | `block u8, 0u8`, range-coded: `Sparse`'s grid, then per sample an exact flag and the exact samples' residuals |
 //!
 //! `Sparse` sends a sample exactly when it differs from the upsampled
 //! background by more than its block's tolerance, so every decoded sample is
@@ -26,13 +28,23 @@
 //! The encoder falls back to a lossless mode when a compressed payload would
 //! not fit the buffer or would be larger than raw.
 //!
+//! `Context` and `SparseContext` code the same residuals and decisions with
+//! a binary range coder and adaptive models chosen by each sample's
+//! decoded neighbourhood (`range`, `context`): about half of the Rice
+//! modes' bytes on the paper's frames. Their models live on the stack,
+//! reset per tile: 2,808 bytes for `Context`, 8,566 for `SparseContext`.
+//!
 //! | module | owns |
 //! |---|---|
 //! | `bits` | MSB-first bit writer and reader, the Rice code and its escape |
 //! | `rice` | the lossless `Rice` mode, the adaptive parameter, zigzag residuals |
-//! | `sparse` | the lossy `Sparse` mode: background grid and exact runs |
+//! | `sparse` | the lossy `Sparse` and `SparseContext` modes: background grid, exact runs or flags |
+//! | `range` | the binary range coder and its adaptive models |
+//! | `context` | the lossless `Context` mode: neighbourhood contexts, median predictor |
 
 mod bits;
+mod context;
+mod range;
 mod rice;
 mod sparse;
 
@@ -54,28 +66,41 @@ pub struct Lossy {
     pub contrast: u16,
 }
 
+impl Lossy {
+    /// The defaults: 8-px blocks, tolerance 12, contrast rule 4.
+    pub const DEFAULT: Lossy = Lossy {
+        block: 8,
+        tolerance: 12,
+        contrast: 4,
+    };
+}
+
 impl Default for Lossy {
     fn default() -> Self {
-        Lossy {
-            block: 8,
-            tolerance: 12,
-            contrast: 4,
-        }
+        Lossy::DEFAULT
     }
 }
 
-/// Scratch samples the sparse codec needs for a tile: its background grid
-/// and, when encoding, a tolerance per block.
-pub fn sparse_scratch(width: u16, rows: u16, block: u8) -> usize {
-    let b = usize::from(block.max(1));
-    2 * usize::from(width).div_ceil(b) * usize::from(rows).div_ceil(b)
+/// Scratch samples (`u16`) a `width × rows` tile needs to be coded as
+/// `enc` or decoded from it with background blocks of `block` px (a
+/// receiver that does not know the block passes 2, the smallest): the
+/// sparse modes' background grid and tolerance per block, and for
+/// `SparseContext` four rows more. Zero for the other modes.
+pub const fn tile_scratch(enc: Encoding, width: u16, rows: u16, block: u8) -> usize {
+    let b = if block == 0 { 1 } else { block as usize };
+    let grid = 2 * (width as usize).div_ceil(b) * (rows as usize).div_ceil(b);
+    match enc {
+        Encoding::Sparse => grid,
+        Encoding::SparseContext => grid + sparse::context_rows(width),
+        _ => 0,
+    }
 }
 
 /// Codes the band `samples` (`rows × width`, row by row) as `want` into
 /// `out`; returns the encoding actually used (a lossless fallback when the
 /// wanted one does not fit or is larger than raw, `Raw16` when levels
-/// exceed 255) and the payload bytes. `scratch` holds
-/// [`sparse_scratch`] samples for `Sparse` (otherwise unused).
+/// exceed 255) and the payload bytes. `scratch` holds [`tile_scratch`]
+/// samples (unused by the modes that need none).
 pub fn encode_tile<G: Gray>(
     want: Encoding,
     samples: &[G],
@@ -97,13 +122,26 @@ pub fn encode_tile<G: Gray>(
     let tried = match want {
         Encoding::Rice => rice::encode(samples, usize::from(width), out),
         Encoding::Sparse => sparse::encode(samples, width, rows, lossy, scratch, out),
+        Encoding::Context => context::encode(samples, usize::from(width), out),
+        Encoding::SparseContext => {
+            sparse::encode_context(samples, width, rows, lossy, scratch, out)
+        }
         _ => Err(WireError::TooLarge),
     };
-    match tried {
-        Ok(len) if len < raw_len => Ok((want, len)),
-        // Sparse that does not pay: try lossless compression.
-        _ if want == Encoding::Sparse => match rice::encode(samples, usize::from(width), out) {
+    // A lossy mode that does not pay falls back to its lossless sibling.
+    let lossless = match want {
+        Encoding::Sparse => Some(Encoding::Rice),
+        Encoding::SparseContext => Some(Encoding::Context),
+        _ => None,
+    };
+    match (tried, lossless) {
+        (Ok(len), _) if len < raw_len => Ok((want, len)),
+        (_, Some(Encoding::Rice)) => match rice::encode(samples, usize::from(width), out) {
             Ok(len) if len < raw_len => Ok((Encoding::Rice, len)),
+            _ => encode_raw(samples, wide, out).map(|l| (raw, l)),
+        },
+        (_, Some(_)) => match context::encode(samples, usize::from(width), out) {
+            Ok(len) if len < raw_len => Ok((Encoding::Context, len)),
             _ => encode_raw(samples, wide, out).map(|l| (raw, l)),
         },
         _ => encode_raw(samples, wide, out).map(|l| (raw, l)),
@@ -129,7 +167,7 @@ fn encode_raw<G: Gray>(samples: &[G], wide: bool, out: &mut [u8]) -> Result<usiz
 }
 
 /// Decodes a tile payload into `out` (`rows × width` samples). `scratch`
-/// holds [`sparse_scratch`] samples for `Sparse`. Malformed payloads (too
+/// holds [`tile_scratch`] samples. Malformed payloads (too
 /// short, trailing garbage that does not fit, levels above `G::MAX`) are
 /// [`WireError::Payload`]; nothing panics.
 pub fn decode_tile<G: Gray>(
@@ -164,6 +202,8 @@ pub fn decode_tile<G: Gray>(
         }
         Encoding::Rice => rice::decode(payload, width, out),
         Encoding::Sparse => sparse::decode(payload, width, rows, scratch, out),
+        Encoding::Context => context::decode(payload, width, out),
+        Encoding::SparseContext => sparse::decode_context(payload, width, rows, scratch, out),
     }
 }
 
@@ -311,6 +351,103 @@ mod tests {
             s.iter().zip(flat.iter()).any(|(a, b)| *a == 4 && *b < 2),
             "a fixed tolerance of 12 erases 4-level particles"
         );
+    }
+
+    /// A frame as an adaptive sidecar makes it: a suppressed background
+    /// (mostly 0, some 1–3) and bright particles a few pixels wide.
+    fn particle_frame() -> [u8; 96 * 40] {
+        let mut s = [0u8; 96 * 40];
+        let mut r = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = move || {
+            r ^= r << 13;
+            r ^= r >> 7;
+            r ^= r << 17;
+            r
+        };
+        for v in s.iter_mut() {
+            if next() % 8 == 0 {
+                *v = 1 + (next() % 3) as u8;
+            }
+        }
+        for _ in 0..40 {
+            let (px, py) = ((next() % 96) as i32, (next() % 40) as i32);
+            let peak = 120 + (next() % 130) as i32;
+            for y in (py - 2).max(0)..(py + 3).min(40) {
+                for x in (px - 2).max(0)..(px + 3).min(96) {
+                    let d2 = (x - px).pow(2) + (y - py).pow(2);
+                    let v = &mut s[(y * 96 + x) as usize];
+                    *v = (*v as i32 + peak / (1 + d2)).min(255) as u8;
+                }
+            }
+        }
+        s
+    }
+
+    fn code(want: Encoding, s: &[u8], w: u16, h: u16) -> (Encoding, [u8; 96 * 40], usize) {
+        let mut scratch = [0u16; 2 * 12 * 5 + 4 * 96];
+        let mut buf = [0u8; 8192];
+        let lossy = Lossy::DEFAULT;
+        let (enc, len) = encode_tile(want, s, w, h, &lossy, &mut scratch, &mut buf).unwrap();
+        let mut back = [0u8; 96 * 40];
+        decode_tile(enc, &buf[..len], w, h, &mut scratch, &mut back[..s.len()]).unwrap();
+        // A byte less or more is refused, never decoded as something else.
+        assert_eq!(
+            decode_tile(
+                enc,
+                &buf[..len - 1],
+                w,
+                h,
+                &mut scratch,
+                &mut [0u8; 96 * 40][..s.len()]
+            ),
+            Err(WireError::Payload)
+        );
+        if matches!(enc, Encoding::Context | Encoding::SparseContext) {
+            assert_eq!(
+                decode_tile(
+                    enc,
+                    &buf[..len + 1],
+                    w,
+                    h,
+                    &mut scratch,
+                    &mut [0u8; 96 * 40][..s.len()]
+                ),
+                Err(WireError::Payload)
+            );
+        }
+        (enc, back, len)
+    }
+
+    /// The context-modelled modes: lossless exact, lossy identical to
+    /// sparse, and both far smaller than their Rice siblings on a frame of
+    /// particles over a suppressed background (measured: context 56 % of
+    /// rice, sparse-context 75 % of sparse; bounds 60 % and 80 %).
+    #[test]
+    fn context_modes_are_exact_and_smaller() {
+        let s = particle_frame();
+        let (w, h) = (96u16, 40u16);
+        let (enc, rice, rice_len) = code(Encoding::Rice, &s, w, h);
+        assert_eq!((enc, rice), (Encoding::Rice, s));
+        let (enc, ctx, ctx_len) = code(Encoding::Context, &s, w, h);
+        assert_eq!((enc, ctx), (Encoding::Context, s));
+        let (enc, sparse, sparse_len) = code(Encoding::Sparse, &s, w, h);
+        assert_eq!(enc, Encoding::Sparse);
+        let (enc, sctx, sctx_len) = code(Encoding::SparseContext, &s, w, h);
+        assert_eq!((enc, sctx), (Encoding::SparseContext, sparse));
+        assert!(
+            10 * ctx_len < 6 * rice_len,
+            "context {ctx_len} B, rice {rice_len} B"
+        );
+        assert!(
+            10 * sctx_len < 8 * sparse_len,
+            "sparse-context {sctx_len} B, sparse {sparse_len} B"
+        );
+        // Edge geometries: one row, one column, one sample.
+        for (w, h) in [(96u16, 1u16), (1, 40), (1, 1)] {
+            let n = usize::from(w) * usize::from(h);
+            let (_, back, _) = code(Encoding::Context, &s[..n], w, h);
+            assert_eq!(&back[..n], &s[..n]);
+        }
     }
 
     #[test]

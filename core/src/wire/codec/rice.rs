@@ -5,6 +5,7 @@
 //! adaptive parameter and the zigzag map.
 
 use super::bits::{BitReader, BitWriter};
+use super::context::med;
 use super::level;
 use crate::gray::Gray;
 use crate::wire::WireError;
@@ -63,18 +64,6 @@ pub(super) fn zigzag(d: i32) -> u32 {
 #[inline]
 pub(super) fn unzigzag(z: u32) -> i32 {
     ((z >> 1) as i32) ^ -((z & 1) as i32)
-}
-
-/// LOCO-I median edge predictor from left `a`, above `b`, upper-left `c`.
-#[inline]
-fn med(a: i32, b: i32, c: i32) -> i32 {
-    if c >= a.max(b) {
-        a.min(b)
-    } else if c <= a.min(b) {
-        a.max(b)
-    } else {
-        a + b - c
-    }
 }
 
 #[inline]

@@ -3,8 +3,16 @@
 //! per row, alternating runs of background (decoded as the bilinear
 //! upsampling of the grid) and exact samples (Rice-coded left-neighbour
 //! residuals). See the [module above](super) for the tolerance rule.
+//!
+//! `SparseContext` makes the same decisions and decodes to the same
+//! samples, and codes them with the range coder instead: the grid's
+//! deltas, then per sample whether it is exact (a model per pattern of its
+//! five causal neighbours' flags) and, if it is, its residual against the median predictor of the
+//! decoded neighbours (the `Context` mode's models).
 
 use super::bits::{BitReader, BitWriter};
+use super::context::{causal, neighbourhood, CONTEXTS};
+use super::range::{Bit, Decoder, Encoder, Signed};
 use super::rice::{unzigzag, zigzag, Adapt};
 use super::{level, Lossy};
 use crate::gray::Gray;
@@ -74,15 +82,17 @@ fn background(g: &[u16], gw: usize, gh: usize, block: usize, x: usize, y: usize)
     ((v + den * den / 2) / (den * den)) as i32
 }
 
-/// Codes `samples` in the sparse mode; returns the bytes.
-pub(super) fn encode<G: Gray>(
+/// The background grid (block means of the darker half) and each block's
+/// tolerance, into the first `2 × cells` samples of `scratch`; returns
+/// `(grid, tolerances, rest of scratch, (gw, gh))`.
+#[allow(clippy::type_complexity)]
+fn plan<'s, G: Gray>(
     samples: &[G],
     width: u16,
     rows: u16,
     lossy: &Lossy,
-    scratch: &mut [u16],
-    out: &mut [u8],
-) -> Result<usize, WireError> {
+    scratch: &'s mut [u16],
+) -> Result<(&'s mut [u16], &'s mut [u16], &'s mut [u16], (usize, usize)), WireError> {
     let block = lossy.block;
     if !(2..=64).contains(&block) {
         return Err(WireError::Field);
@@ -90,10 +100,11 @@ pub(super) fn encode<G: Gray>(
     let (w, h, b) = (usize::from(width), usize::from(rows), usize::from(block));
     let (gw, gh) = (w.div_ceil(b), h.div_ceil(b));
     let cells = gw * gh;
-    let (g, tols) = scratch
-        .get_mut(..2 * cells)
-        .ok_or(WireError::TooLarge)?
-        .split_at_mut(cells);
+    if scratch.len() < 2 * cells {
+        return Err(WireError::TooLarge);
+    }
+    let (g, rest) = scratch.split_at_mut(cells);
+    let (tols, rest) = rest.split_at_mut(cells);
     for (j, (cell, tol)) in g.iter_mut().zip(tols.iter_mut()).enumerate() {
         let (y0, x0) = ((j / gw) * b, (j % gw) * b);
         let (level, max) = block_level(samples, w, x0, (x0 + b).min(w), y0, (y0 + b).min(h));
@@ -103,6 +114,21 @@ pub(super) fn encode<G: Gray>(
             c => lossy.tolerance.min(max.saturating_sub(level) / c),
         };
     }
+    Ok((g, tols, rest, (gw, gh)))
+}
+
+/// Codes `samples` in the sparse mode; returns the bytes.
+pub(super) fn encode<G: Gray>(
+    samples: &[G],
+    width: u16,
+    rows: u16,
+    lossy: &Lossy,
+    scratch: &mut [u16],
+    out: &mut [u8],
+) -> Result<usize, WireError> {
+    let (g, tols, _, (gw, gh)) = plan(samples, width, rows, lossy, scratch)?;
+    let block = lossy.block;
+    let (w, h, b) = (usize::from(width), usize::from(rows), usize::from(block));
     let (head, body) = out.split_at_mut_checked(2).ok_or(WireError::TooLarge)?;
     head[0] = block;
     head[1] = 0;
@@ -211,4 +237,162 @@ pub(super) fn decode<G: Gray>(
         }
     }
     br.finished()
+}
+
+/// Context of a sample's exact flag: the flags of its left, left-left,
+/// upper-left, above and upper-right neighbours (`cur`: this row's flags so
+/// far, `up`: the row above, `None` on the first row).
+#[inline]
+fn flag_context(cur: &[u16], up: Option<&[u16]>, x: usize) -> usize {
+    let at =
+        |r: &[u16], j: Option<usize>| j.and_then(|j| r.get(j)).map_or(0, |&f| usize::from(f != 0));
+    let mut c = at(cur, x.checked_sub(1)) | at(cur, x.checked_sub(2)) << 1;
+    if let Some(up) = up {
+        c |= at(up, x.checked_sub(1)) << 2 | at(up, Some(x)) << 3 | at(up, Some(x + 1)) << 4;
+    }
+    c
+}
+
+/// Context of an exact sample's residual: the `Context` mode's `ctx`
+/// times how many of its four nearest causal neighbours (left, upper-left,
+/// above, upper-right) were exact — none (a sample leaving the flattened
+/// background: a large step from its background neighbours), one or two
+/// (a particle's edge), three or four (inside a particle or a dim block).
+#[inline]
+fn value_context(ctx: usize, flags: usize) -> usize {
+    let exact = (flags & 0b11101).count_ones();
+    ctx * 3 + (exact as usize).div_ceil(2)
+}
+
+/// The models of the `SparseContext` stream.
+struct Models {
+    grid: Signed,
+    flag: [Bit; 32],
+    value: [Signed; 3 * CONTEXTS],
+}
+
+impl Models {
+    const NEW: Models = Models {
+        grid: Signed::NEW,
+        flag: [Bit::NEW; 32],
+        value: [Signed::NEW; 3 * CONTEXTS],
+    };
+}
+
+/// Scratch samples of the `SparseContext` encoder besides the grid and
+/// tolerances: two rows of decoded samples, two of flags.
+pub(super) const fn context_rows(width: u16) -> usize {
+    4 * width as usize
+}
+
+/// Codes `samples` in the `SparseContext` mode; returns the bytes.
+pub(super) fn encode_context<G: Gray>(
+    samples: &[G],
+    width: u16,
+    rows: u16,
+    lossy: &Lossy,
+    scratch: &mut [u16],
+    out: &mut [u8],
+) -> Result<usize, WireError> {
+    let (g, tols, rest, (gw, gh)) = plan(samples, width, rows, lossy, scratch)?;
+    let (w, h, b) = (
+        usize::from(width),
+        usize::from(rows),
+        usize::from(lossy.block),
+    );
+    let rest = rest.get_mut(..4 * w).ok_or(WireError::TooLarge)?;
+    let (mut dec_up, rest) = rest.split_at_mut(w);
+    let (mut dec, rest) = rest.split_at_mut(w);
+    let (mut flag_up, mut flag) = rest.split_at_mut(w);
+    let (head, body) = out.split_at_mut_checked(2).ok_or(WireError::TooLarge)?;
+    head[0] = lossy.block;
+    head[1] = 0;
+    let mut e = Encoder::new(body);
+    let mut m = Models::NEW;
+    let mut prev = 0i32;
+    for &v in g.iter() {
+        m.grid.put(&mut e, i32::from(v) - prev)?;
+        prev = i32::from(v);
+    }
+    let (g, tols) = (&*g, &*tols);
+    for y in 0..h {
+        let row = &samples[y * w..(y + 1) * w];
+        let tol_row = &tols[(y / b) * gw..(y / b + 1) * gw];
+        for x in 0..w {
+            let bg = background(g, gw, gh, b, x, y);
+            let v = i32::from(row[x].level());
+            let tol = tol_row[x / b];
+            let exact = (v - bg).abs() > i32::from(tol);
+            let up = (y > 0).then_some(&*flag_up);
+            let fc = flag_context(flag, up, x);
+            e.bit(&mut m.flag[fc], exact)?;
+            if exact {
+                let up = (y > 0).then_some(|j: usize| i32::from(dec_up[j]));
+                let (pred, ctx) = neighbourhood(causal(|j| i32::from(dec[j]), up, x, w));
+                m.value[value_context(ctx, fc)].put(&mut e, v - pred)?;
+            }
+            // Levels of `bg` are those of the grid: within u16.
+            dec[x] = if exact { v as u16 } else { bg as u16 };
+            flag[x] = u16::from(exact);
+        }
+        core::mem::swap(&mut dec, &mut dec_up);
+        core::mem::swap(&mut flag, &mut flag_up);
+    }
+    Ok(2 + e.finish()?)
+}
+
+/// Decodes a `SparseContext` payload into `out` (`rows × width` samples);
+/// `scratch` holds the grid and two rows of flags.
+pub(super) fn decode_context<G: Gray>(
+    payload: &[u8],
+    width: u16,
+    rows: u16,
+    scratch: &mut [u16],
+    out: &mut [G],
+) -> Result<(), WireError> {
+    let (&block, body) = payload.split_first().ok_or(WireError::Payload)?;
+    let body = body.get(1..).ok_or(WireError::Payload)?;
+    if !(2..=64).contains(&block) {
+        return Err(WireError::Payload);
+    }
+    let (w, h, b) = (usize::from(width), usize::from(rows), usize::from(block));
+    let (gw, gh) = (w.div_ceil(b), h.div_ceil(b));
+    let scratch = scratch
+        .get_mut(..gw * gh + 2 * w)
+        .ok_or(WireError::TooLarge)?;
+    let (g, rest) = scratch.split_at_mut(gw * gh);
+    let (mut flag_up, mut flag) = rest.split_at_mut(w);
+    let mut d = Decoder::new(body)?;
+    let mut m = Models::NEW;
+    let mut prev = 0i32;
+    for cell in g.iter_mut() {
+        let v = prev.saturating_add(m.grid.get(&mut d)?);
+        if !(0..=i32::from(u16::MAX)).contains(&v) {
+            return Err(WireError::Payload);
+        }
+        *cell = v as u16;
+        prev = v;
+    }
+    let g = &*g;
+    for y in 0..h {
+        let (done, rest) = out.split_at_mut(y * w);
+        let row = &mut rest[..w];
+        let above = y.checked_sub(1).map(|u| &done[u * w..(u + 1) * w]);
+        for x in 0..w {
+            let up = (y > 0).then_some(&*flag_up);
+            let fc = flag_context(flag, up, x);
+            let exact = d.bit(&mut m.flag[fc])?;
+            row[x] = if exact {
+                let up = above.map(|r| |j: usize| i32::from(r[j].level()));
+                let (pred, ctx) = neighbourhood(causal(|j| i32::from(row[j].level()), up, x, w));
+                let model = &mut m.value[value_context(ctx, fc)];
+                level(pred.saturating_add(model.get(&mut d)?))?
+            } else {
+                level(background(g, gw, gh, b, x, y))?
+            };
+            flag[x] = u16::from(exact);
+        }
+        core::mem::swap(&mut flag, &mut flag_up);
+    }
+    d.finished()
 }
