@@ -128,7 +128,7 @@ proptest! {
             // Mostly a flat noisy background, some bright spots.
             if s % 11 == 0 { (s >> 20) as u16 % (peak.max(1)) } else { 20 + (s >> 40) as u16 % 6 }
         }).collect();
-        let lossy = Lossy { block, tolerance, contrast };
+        let lossy = Lossy { block, tolerance, contrast, contrast_mc: contrast };
         let mut scratch = vec![0u16; tile_scratch(Encoding::SparseContext, w, h, block)];
         let mut buf = vec![0u8; 4 * n + 64];
         let mut sparse = Vec::new();

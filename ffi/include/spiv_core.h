@@ -114,6 +114,8 @@ typedef struct SpivConfig {
   uint16_t lossy_tolerance;
   // Lossy coding: contrast rule (0: the tolerance everywhere).
   uint16_t lossy_contrast;
+  // Lossy coding: contrast rule of motion-compensated frames.
+  uint16_t lossy_contrast_mc;
 } SpivConfig;
 
 // Description of a frame, for [`SpivLink::frame`] and [`spiv_make_frame`].

@@ -178,6 +178,8 @@ pub struct SpivConfig {
     pub lossy_tolerance: u16,
     /// Lossy coding: contrast rule (0: the tolerance everywhere).
     pub lossy_contrast: u16,
+    /// Lossy coding: contrast rule of motion-compensated frames.
+    pub lossy_contrast_mc: u16,
 }
 
 /// Fills `out` with the defaults of `spiv-firmware-sim` for a
@@ -217,6 +219,7 @@ pub unsafe extern "C" fn spiv_config_default(
         lossy_block: c.lossy.block,
         lossy_tolerance: c.lossy.tolerance,
         lossy_contrast: c.lossy.contrast,
+        lossy_contrast_mc: c.lossy.contrast_mc,
     };
     SpivStatus::SpivOk
 }
@@ -251,6 +254,7 @@ fn config(c: &SpivConfig) -> Result<Config, SpivStatus> {
         block: c.lossy_block,
         tolerance: c.lossy_tolerance,
         contrast: c.lossy_contrast,
+        contrast_mc: c.lossy_contrast_mc,
     };
     if !(2..=64).contains(&c.lossy_block) {
         return Err(bad);
@@ -1209,6 +1213,7 @@ mod tests {
             lossy_block: 0,
             lossy_tolerance: 0,
             lossy_contrast: 0,
+            lossy_contrast_mc: 0,
         };
         // SAFETY: a writable config.
         let s = unsafe { spiv_config_default(u16::MAX, u16::MAX, 13, &mut c) };

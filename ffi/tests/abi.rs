@@ -461,6 +461,7 @@ fn arb_config() -> impl Strategy<Value = SpivConfig> {
                     lossy_block,
                     lossy_tolerance,
                     lossy_contrast,
+                    lossy_contrast_mc: lossy_contrast / 2,
                 };
                 // One field out of its range now and then.
                 match broken {

@@ -80,6 +80,10 @@ struct Args {
     /// sample above background) over this, so dim particles stay exact; 0: off.
     #[arg(long, default_value_t = 4)]
     contrast: u16,
+    /// Sparse mode: the contrast rule on motion-compensated frames (their
+    /// particles are at full scale, so more noise may go).
+    #[arg(long, default_value_t = 2)]
+    contrast_mc: u16,
     /// Frame method: adaptive, tfp, tfi or mc (motion-compensated: needs
     /// the host's predicted motion over the downlink — `--tcp` or
     /// `--control` — and sends the paper's adaptive frames until it has one).
@@ -197,6 +201,7 @@ fn config(a: &Args, dt: u32) -> Result<Config, Error> {
     })?;
     cfg.lossy.tolerance = a.tolerance;
     cfg.lossy.contrast = a.contrast;
+    cfg.lossy.contrast_mc = a.contrast_mc;
     let window = cfg.window();
     if !(1..=255).contains(&window) {
         return Err(Error::Usage(format!("--window {window}: expected 1..=255")));

@@ -198,7 +198,8 @@ impl Sender {
     }
 
     /// Sends `frame` (stored row order, `width × height` samples) as tiles
-    /// coded `encoding` and a frame end. Lossy tiles are decoded back into
+    /// coded `encoding` (lossy: with [`Lossy::for_method`] of the frame's
+    /// method) and a frame end. Lossy tiles are decoded back into
     /// `frame`, so after the call it holds exactly what a receiver gets and
     /// the frame CRC covers that.
     pub fn send_frame<G: Gray, L: Link>(
@@ -215,6 +216,7 @@ impl Sender {
         let frame = frame.get_mut(..n).ok_or(WireError::Payload)?;
         let frame_id = self.sent.frames;
         let (mut tiles, mut any_lossy, mut row0) = (0u16, 0u8, 0u16);
+        let lossy = &lossy.for_method(info.method);
         while row0 < self.height {
             let rows = self.tile_rows.min(self.height - row0);
             let span = usize::from(row0) * w..(usize::from(row0) + usize::from(rows)) * w;

@@ -41,6 +41,8 @@ pub struct LinkBench {
     pub tolerance: u16,
     /// Lossy mode: contrast rule (0: off).
     pub contrast: u16,
+    /// Lossy mode: contrast rule of motion-compensated frames.
+    pub contrast_mc: u16,
     /// Dwell cap of the adaptive frames, px of blur (`None`: one n_max
     /// everywhere).
     pub dwell_cap: Option<f64>,
@@ -152,6 +154,7 @@ pub fn link_bench(b: &LinkBench, mut progress: impl FnMut()) -> Result<Vec<LinkR
             base.schedule.pairs = Some(b.pairs);
             base.lossy.tolerance = b.tolerance;
             base.lossy.contrast = b.contrast;
+            base.lossy.contrast_mc = b.contrast_mc;
             let max_every = b.every.iter().max().copied().unwrap_or(4) * dt;
             let mut req = Request::new(p.clone(), seed);
             let mut longest = base;
@@ -334,6 +337,7 @@ mod tests {
             every: vec![4],
             tolerance: 12,
             contrast: 4,
+            contrast_mc: 2,
             dwell_cap: Some(8.0),
             frames: vec![LinkFrames::Adaptive, LinkFrames::Mc],
         };

@@ -27,6 +27,9 @@ pub struct LinkArgs {
     /// brightest sample above its background) over this; 0: off.
     #[arg(long, default_value_t = 4)]
     contrast: u16,
+    /// Lossy mode: the contrast rule on motion-compensated frames.
+    #[arg(long, default_value_t = 2)]
+    contrast_mc: u16,
     /// Adaptive window cap against streaks (as `spiv run --dwell-cap`), px
     /// of blur, or "off" for the paper's one n_max everywhere.
     #[arg(long, default_value = "8")]
@@ -72,6 +75,7 @@ pub fn run(a: &LinkArgs) -> Result<(), CliError> {
         every: a.every.clone(),
         tolerance: a.tolerance,
         contrast: a.contrast,
+        contrast_mc: a.contrast_mc,
         dwell_cap,
         frames,
     };

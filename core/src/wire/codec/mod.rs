@@ -49,6 +49,7 @@ mod rice;
 mod sparse;
 
 use crate::gray::Gray;
+use crate::method::Method;
 use crate::wire::{Encoding, WireError};
 
 /// Settings of the lossy [`Encoding::Sparse`] mode.
@@ -64,15 +65,33 @@ pub struct Lossy {
     /// `tolerance` everywhere). Dim blocks — particles a few levels above a
     /// suppressed background — then go exact, bright ones are flattened.
     pub contrast: u16,
+    /// The contrast rule on motion-compensated frames ([`Lossy::for_method`]).
+    /// Their particles are segmented and mapped to full scale (no band is
+    /// cut to short windows that leave dim particles), so the rule can
+    /// flatten more of the noise: `spiv bench link` measured 22–23× at
+    /// M = 4Δt with 2 (19× with 4), added error within ±4 %.
+    pub contrast_mc: u16,
 }
 
 impl Lossy {
-    /// The defaults: 8-px blocks, tolerance 12, contrast rule 4.
+    /// The defaults: 8-px blocks, tolerance 12, contrast rule 4 (2 on
+    /// motion-compensated frames).
     pub const DEFAULT: Lossy = Lossy {
         block: 8,
         tolerance: 12,
         contrast: 4,
+        contrast_mc: 2,
     };
+
+    /// The settings a frame made by `method` is coded with: `contrast_mc`
+    /// as the contrast rule of [`Method::Mc`] frames.
+    pub const fn for_method(&self, method: Method) -> Lossy {
+        let mut l = *self;
+        if matches!(method, Method::Mc) {
+            l.contrast = self.contrast_mc;
+        }
+        l
+    }
 }
 
 impl Default for Lossy {
@@ -448,6 +467,23 @@ mod tests {
             let (_, back, _) = code(Encoding::Context, &s[..n], w, h);
             assert_eq!(&back[..n], &s[..n]);
         }
+    }
+
+    /// Compensated frames are coded with their own contrast rule, every
+    /// other method with the general one; the rest of the settings stay.
+    #[test]
+    fn the_contrast_rule_follows_the_frame_method() {
+        let l = Lossy {
+            block: 16,
+            tolerance: 9,
+            contrast: 5,
+            contrast_mc: 3,
+        };
+        for m in [Method::Tfp, Method::Tfi, Method::Adaptive] {
+            assert_eq!(l.for_method(m), l);
+        }
+        assert_eq!(l.for_method(Method::Mc), Lossy { contrast: 3, ..l });
+        assert_eq!(Lossy::DEFAULT.for_method(Method::Mc).contrast, 2);
     }
 
     #[test]
