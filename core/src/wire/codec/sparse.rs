@@ -50,32 +50,34 @@ fn block_level<G: Gray>(
 }
 
 /// Bilinear weights along one axis: the lower grid index and the weight
-/// of the upper one, out of `2·block`.
+/// of the upper one, out of `2·block`. 32-bit arithmetic (positions are
+/// below 2¹⁶, blocks at most 64): a 64-bit division is a library call of
+/// dozens of instructions on a Cortex-M4, a 32-bit one is `udiv`.
 #[inline]
 fn axis(x: usize, block: usize, cells: usize) -> (usize, u32) {
-    let den = 2 * block as i64;
-    let num = 2 * x as i64 + 1 - block as i64;
-    if num <= 0 || cells < 2 {
+    let (twice, b) = (2 * x as u32 + 1, block as u32);
+    if twice <= b || cells < 2 {
         return (0, 0);
     }
+    let (num, den) = (twice - b, 2 * b);
     let j = (num / den) as usize;
     if j >= cells - 1 {
         (cells - 1, 0)
     } else {
-        (j, (num - j as i64 * den) as u32)
+        (j, num - j as u32 * den)
     }
 }
 
 /// The upsampled background at (x, y) of a tile, from its grid `g`
-/// (`gw` cells per row).
+/// (`gw` cells per row). In `u32`: levels below 2¹⁶ times weights of at
+/// most 128 per axis stay below 2³¹.
 #[inline]
 fn background(g: &[u16], gw: usize, gh: usize, block: usize, x: usize, y: usize) -> i32 {
     let (jx, fx) = axis(x, block, gw);
     let (jy, fy) = axis(y, block, gh);
-    let den = 2 * block as u64;
-    let at = |r: usize, c: usize| u64::from(g.get(r * gw + c).copied().unwrap_or(0));
+    let den = 2 * block as u32;
+    let at = |r: usize, c: usize| u32::from(g.get(r * gw + c).copied().unwrap_or(0));
     let (jx1, jy1) = ((jx + 1).min(gw - 1), (jy + 1).min(gh - 1));
-    let (fx, fy) = (u64::from(fx), u64::from(fy));
     let top = at(jy, jx) * (den - fx) + at(jy, jx1) * fx;
     let bot = at(jy1, jx) * (den - fx) + at(jy1, jx1) * fx;
     let v = top * (den - fy) + bot * fy;
@@ -395,4 +397,59 @@ pub(super) fn decode_context<G: Gray>(
         core::mem::swap(&mut flag, &mut flag_up);
     }
     d.finished()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The 32-bit upsampling equals the formula of docs/protocol.md §2
+    /// evaluated in 128-bit integers, at the largest levels and blocks
+    /// (where 32 bits would overflow if the bound were wrong) and at the
+    /// tile's edges.
+    #[test]
+    fn background_is_exact_at_the_extremes() {
+        for block in [2usize, 3, 7, 8, 31, 64] {
+            let (w, h) = (5 * block + 3, 3 * block + 1);
+            let (gw, gh) = (w.div_ceil(block), h.div_ceil(block));
+            let g: [u16; 64] = core::array::from_fn(|i| {
+                if i % 3 == 0 {
+                    u16::MAX
+                } else {
+                    (i * 977 % 65536) as u16
+                }
+            });
+            let reference = |x: usize, y: usize| -> i32 {
+                let weights = |p: usize, cells: usize| -> (usize, u128) {
+                    let (num, den) = (2 * p as i128 + 1 - block as i128, 2 * block as i128);
+                    if num <= 0 || cells < 2 {
+                        return (0, 0);
+                    }
+                    let j = (num / den) as usize;
+                    if j >= cells - 1 {
+                        (cells - 1, 0)
+                    } else {
+                        (j, (num - j as i128 * den) as u128)
+                    }
+                };
+                let ((jx, fx), (jy, fy)) = (weights(x, gw), weights(y, gh));
+                let den = 2 * block as u128;
+                let at = |r: usize, c: usize| u128::from(g[r * gw + c]);
+                let (jx1, jy1) = ((jx + 1).min(gw - 1), (jy + 1).min(gh - 1));
+                let top = at(jy, jx) * (den - fx) + at(jy, jx1) * fx;
+                let bot = at(jy1, jx) * (den - fx) + at(jy1, jx1) * fx;
+                ((top * (den - fy) + bot * fy + den * den / 2) / (den * den)) as i32
+            };
+            assert!(gw * gh <= g.len());
+            for y in 0..h {
+                for x in 0..w {
+                    assert_eq!(
+                        background(&g, gw, gh, block, x, y),
+                        reference(x, y),
+                        "block {block} at ({x}, {y})"
+                    );
+                }
+            }
+        }
+    }
 }
