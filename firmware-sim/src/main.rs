@@ -16,7 +16,7 @@ use spiv_firmware_sim::downlink::ControlStream;
 use spiv_firmware_sim::firmware::{
     run_on_dat, run_on_scene, Config, Counters, DriveError, Faults, Faulty, Plain,
 };
-use spiv_firmware_sim::scene::{SceneKind, SceneParams};
+use spiv_firmware_sim::scene::{SceneKind, SceneParams, TICK_HZ};
 use spiv_firmware_sim::simulation::Request;
 use spiv_formats::capture::Capture;
 use spiv_formats::dat::DatOptions;
@@ -328,7 +328,7 @@ fn run(a: &Args) -> Result<(), Error> {
             "spiv-firmware-sim: --method mc without a downlink (--tcp or --control): the paper's adaptive frames"
         );
     }
-    let (counters, width, height, fault_counts) = if let Some(name) = &a.scene {
+    let (counters, width, height, tick_hz, fault_counts) = if let Some(name) = &a.scene {
         let kind = SceneKind::parse(name).map_err(|e| Error::Usage(e.to_string()))?;
         let mut p = SceneParams::new(kind);
         if let Some(dt) = a.dt {
@@ -356,7 +356,7 @@ fn run(a: &Args) -> Result<(), Error> {
         let c = fw.counters();
         heard = (fw.downlink(), control);
         let fc = fw.into_link().counts;
-        (c, w, h, fc)
+        (c, w, h, None, fc)
     } else {
         let path = a
             .input
@@ -387,7 +387,7 @@ fn run(a: &Args) -> Result<(), Error> {
         let c = fw.counters();
         heard = (fw.downlink(), control);
         let fc = fw.into_link().counts;
-        (c, w, h, fc)
+        (c, w, h, Some(meta.map_or(TICK_HZ, |m| m.tick_hz)), fc)
     };
     if a.checksum {
         let stream = shared.0.borrow();
@@ -399,7 +399,13 @@ fn run(a: &Args) -> Result<(), Error> {
         return Ok(());
     }
     if !a.quiet {
-        report(&counters, width, height, t0.elapsed().as_secs_f64());
+        report(
+            &counters,
+            width,
+            height,
+            tick_hz,
+            t0.elapsed().as_secs_f64(),
+        );
         if faults != Faults::default() {
             eprintln!(
                 "spiv-firmware-sim: faults: {} dropped, {} corrupted, {} truncated, {} stalled, {} reordered",
@@ -445,11 +451,17 @@ fn checksum_line(c: &Counters, stream_crc: u32, frames: &[u32]) -> String {
     )
 }
 
-fn report(c: &Counters, w: u16, h: u16, secs: f64) {
+/// The summary line. `tick_hz`: the recording's tick rate, for the
+/// real-time factor (`None`: a simulated scene, whose time includes
+/// simulating the sensor; the factor is then against the scene's 20 kHz
+/// and said to include it).
+fn report(c: &Counters, w: u16, h: u16, tick_hz: Option<f64>, secs: f64) {
     let px_ticks = f64::from(c.planes) * f64::from(w) * f64::from(h);
     let raw = px_ticks / 8.0;
+    let secs = secs.max(1e-9);
+    let rate = tick_hz.unwrap_or(TICK_HZ);
     eprintln!(
-        "spiv-firmware-sim: {} planes, {} frames, {} messages, {} bytes ({:.1}x less than the {:.0} raw spike bytes) in {:.2} s: {:.2e} pixel-ticks/s",
+        "spiv-firmware-sim: {} planes, {} frames, {} messages, {} bytes ({:.1}x less than the {:.0} raw spike bytes) in {:.2} s: {:.2e} pixel-ticks/s, {:.3}x real time at {:.0} kHz{}",
         c.planes,
         c.frames,
         c.messages,
@@ -457,6 +469,9 @@ fn report(c: &Counters, w: u16, h: u16, secs: f64) {
         raw / c.bytes.max(1) as f64,
         raw,
         secs,
-        px_ticks / secs.max(1e-9)
+        px_ticks / secs,
+        f64::from(c.planes) / rate / secs,
+        rate / 1e3,
+        if tick_hz.is_none() { " (sensor simulation included)" } else { "" }
     );
 }

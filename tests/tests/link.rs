@@ -410,3 +410,43 @@ fn bad_links_and_arguments_fail_with_one_line() {
     );
     one_line_failure("spiv-firmware-sim", &["--input", "/nonexistent.dat"]);
 }
+
+/// The summary line of a run from a recording states the real-time factor:
+/// simulated ticks over wall time against the recording's tick rate
+/// (20 kHz in the strip's scene.json), the same rate the pixel-tick figure
+/// implies for its size.
+#[test]
+fn the_summary_states_the_real_time_factor() {
+    let strip =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../firmware-sim/cortex-m4/data/strip.dat");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("strip.bin");
+    let r = run(
+        "spiv-firmware-sim",
+        &[
+            "--input",
+            strip.to_str().expect("utf-8"),
+            "--pairs",
+            "1",
+            "--out",
+            out.to_str().expect("utf-8"),
+        ],
+    );
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let line = String::from_utf8_lossy(&r.stderr).to_string();
+    let field = |before: &str| -> f64 {
+        let end = line
+            .find(before)
+            .unwrap_or_else(|| panic!("no {before:?} in {line}"));
+        let start = line[..end].rfind(' ').map_or(0, |i| i + 1);
+        line[start..end].parse().expect("a number")
+    };
+    let (rate, factor) = (field(" pixel-ticks/s"), field("x real time at 20 kHz"));
+    assert!(line.trim_end().ends_with("real time at 20 kHz"), "{line}");
+    // 128 x 64 px at 20 kHz: 1.6384e8 pixel-ticks per second of sensor.
+    let implied = rate / (128.0 * 64.0 * 20_000.0);
+    assert!(
+        factor > 0.0 && (factor / implied - 1.0).abs() < 0.02,
+        "{line}"
+    );
+}
