@@ -155,14 +155,7 @@ pub fn encode_tile<G: Gray>(
     };
     match (tried, lossless) {
         (Ok(len), _) if len < raw_len => Ok((want, len)),
-        (_, Some(Encoding::Rice)) => match rice::encode(samples, usize::from(width), out) {
-            Ok(len) if len < raw_len => Ok((Encoding::Rice, len)),
-            _ => encode_raw(samples, wide, out).map(|l| (raw, l)),
-        },
-        (_, Some(_)) => match context::encode(samples, usize::from(width), out) {
-            Ok(len) if len < raw_len => Ok((Encoding::Context, len)),
-            _ => encode_raw(samples, wide, out).map(|l| (raw, l)),
-        },
+        (_, Some(l)) => encode_tile(l, samples, width, rows, lossy, scratch, out),
         _ => encode_raw(samples, wide, out).map(|l| (raw, l)),
     }
 }

@@ -119,6 +119,29 @@ fn plan<'s, G: Gray>(
     Ok((g, tols, rest, (gw, gh)))
 }
 
+/// The sparse modes' payload head, `block u8, 0u8`, before `body`.
+fn write_head(out: &mut [u8], block: u8) -> Result<&mut [u8], WireError> {
+    let (head, body) = out.split_at_mut_checked(2).ok_or(WireError::TooLarge)?;
+    head.copy_from_slice(&[block, 0]);
+    Ok(body)
+}
+
+/// Reads the sparse modes' payload head: the block edge (`2..=64`), the
+/// grid's cells per row and rows, and the coded body.
+fn read_head(
+    payload: &[u8],
+    w: usize,
+    h: usize,
+) -> Result<(usize, usize, usize, &[u8]), WireError> {
+    let (&block, body) = payload.split_first().ok_or(WireError::Payload)?;
+    let body = body.get(1..).ok_or(WireError::Payload)?;
+    if !(2..=64).contains(&block) {
+        return Err(WireError::Payload);
+    }
+    let b = usize::from(block);
+    Ok((b, w.div_ceil(b), h.div_ceil(b), body))
+}
+
 /// Codes `samples` in the sparse mode; returns the bytes.
 pub(super) fn encode<G: Gray>(
     samples: &[G],
@@ -131,10 +154,7 @@ pub(super) fn encode<G: Gray>(
     let (g, tols, _, (gw, gh)) = plan(samples, width, rows, lossy, scratch)?;
     let block = lossy.block;
     let (w, h, b) = (usize::from(width), usize::from(rows), usize::from(block));
-    let (head, body) = out.split_at_mut_checked(2).ok_or(WireError::TooLarge)?;
-    head[0] = block;
-    head[1] = 0;
-    let mut bw = BitWriter::new(body);
+    let mut bw = BitWriter::new(write_head(out, block)?);
     let mut ad_grid = Adapt::new();
     let mut prev = 0i32;
     for &v in g.iter() {
@@ -184,13 +204,8 @@ pub(super) fn decode<G: Gray>(
     scratch: &mut [u16],
     out: &mut [G],
 ) -> Result<(), WireError> {
-    let (&block, body) = payload.split_first().ok_or(WireError::Payload)?;
-    let body = body.get(1..).ok_or(WireError::Payload)?;
-    if !(2..=64).contains(&block) {
-        return Err(WireError::Payload);
-    }
-    let (w, h, b) = (usize::from(width), usize::from(rows), usize::from(block));
-    let (gw, gh) = (w.div_ceil(b), h.div_ceil(b));
+    let (w, h) = (usize::from(width), usize::from(rows));
+    let (b, gw, gh, body) = read_head(payload, w, h)?;
     let g = scratch.get_mut(..gw * gh).ok_or(WireError::TooLarge)?;
     let mut br = BitReader::new(body);
     let mut ad_grid = Adapt::new();
@@ -306,10 +321,7 @@ pub(super) fn encode_context<G: Gray>(
     let (mut dec_up, rest) = rest.split_at_mut(w);
     let (mut dec, rest) = rest.split_at_mut(w);
     let (mut flag_up, mut flag) = rest.split_at_mut(w);
-    let (head, body) = out.split_at_mut_checked(2).ok_or(WireError::TooLarge)?;
-    head[0] = lossy.block;
-    head[1] = 0;
-    let mut e = Encoder::new(body);
+    let mut e = Encoder::new(write_head(out, lossy.block)?);
     let mut m = Models::NEW;
     let mut prev = 0i32;
     for &v in g.iter() {
@@ -352,13 +364,8 @@ pub(super) fn decode_context<G: Gray>(
     scratch: &mut [u16],
     out: &mut [G],
 ) -> Result<(), WireError> {
-    let (&block, body) = payload.split_first().ok_or(WireError::Payload)?;
-    let body = body.get(1..).ok_or(WireError::Payload)?;
-    if !(2..=64).contains(&block) {
-        return Err(WireError::Payload);
-    }
-    let (w, h, b) = (usize::from(width), usize::from(rows), usize::from(block));
-    let (gw, gh) = (w.div_ceil(b), h.div_ceil(b));
+    let (w, h) = (usize::from(width), usize::from(rows));
+    let (b, gw, gh, body) = read_head(payload, w, h)?;
     let scratch = scratch
         .get_mut(..gw * gh + 2 * w)
         .ok_or(WireError::TooLarge)?;
