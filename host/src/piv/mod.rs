@@ -5,7 +5,9 @@
 //! Pass 1 correlates the images as they are; every later pass deforms both
 //! images by the (validated, replaced) field of the pass before — A moved
 //! back and B forward by half of it — and adds the residual it finds. A
-//! window list `64,32,32` means three passes.
+//! window list `64,32,32` means three passes. Every pass but the last
+//! deforms by that field filtered ([`smooth`]), which makes repeated passes
+//! converge in a shear; the last one deforms by the field as it stands.
 //!
 //! A pass on the undeformed images that fails (fewer than a quarter of
 //! its windows validate) is a signal, not a verdict: rescue rungs measure
@@ -24,6 +26,7 @@ pub mod filter;
 pub mod options;
 pub mod peak;
 pub mod resample;
+pub mod smooth;
 pub mod validate;
 
 use std::path::Path;
@@ -421,12 +424,20 @@ pub fn piv(
     // Whether the reported pass judged its peaks by the neighbours (then
     // none of its vectors is valid).
     let mut weak = false;
-    for &size in &s.windows {
+    let npass = s.windows.len();
+    for (pi, &size) in s.windows.iter().enumerate() {
         let rung = Rung {
             relaxed,
             ..Rung::plain(size)
         };
-        let (mut field, mut support) = run(predictor.as_ref(), rung)?;
+        // Every pass but the last deforms by the filtered predictor
+        // (`smooth`); the last one measures the residual of the field as
+        // it stands, so that what it reports is not smoothed.
+        let filtered = match &predictor {
+            Some(f) if pi + 1 < npass => Some(smooth::filtered(f)),
+            _ => None,
+        };
+        let (mut field, mut support) = run(filtered.as_ref().or(predictor.as_ref()), rung)?;
         let good_same_grid = prev
             .as_ref()
             .is_some_and(|(f, sup)| *sup >= MIN_SUPPORT && f.grid == field.grid);
