@@ -58,7 +58,7 @@ impl HistoryBuf {
 #[derive(Debug, Clone)]
 pub struct WorkspaceBuf {
     sizes: WorkspaceSizes,
-    counts: Vec<u8>,
+    counts: Vec<u64>,
     c_t: Vec<u8>,
     class: Vec<u8>,
     labels: Vec<u16>,
@@ -75,7 +75,7 @@ impl WorkspaceBuf {
         let px = sizes.pixels();
         WorkspaceBuf {
             sizes,
-            counts: vec![0; px],
+            counts: vec![0; sizes.count_words()],
             c_t: vec![0; px],
             class: vec![0; px],
             labels: vec![0; px],

@@ -244,7 +244,7 @@ fn strip<G: Gray>(
             for c in usize::from(reg.col0)..usize::from(reg.col1) {
                 let i = usize::from(r) * width + c;
                 if ws.labels[i] == id {
-                    let g = region_gray(ws.counts[i], &reg, p, fs);
+                    let g = region_gray(ws.c_t[i], &reg, p, fs);
                     if let Some(o) = out.get_mut(usize::from(s0) * width + i) {
                         *o = G::from_level(g);
                     }

@@ -95,7 +95,7 @@ struct Bounds {
 }
 
 /// Finds n* of region `idx` of the strip whose row 0 is band row `s0`,
-/// fills the region's window fields and leaves `c_{n*}` in `ws.counts` for
+/// fills the region's window fields and leaves `c_{n*}` in `ws.c_t` for
 /// each of its pixels. `ws.masks` plane 0 must hold "any region" bits.
 pub(crate) fn adapt_region(
     ctx: &crate::context::Ctx<'_, '_>,
@@ -248,7 +248,7 @@ fn adapt_with(
     for r in rr0..rr1 {
         for c in usize::from(reg.col0)..usize::from(reg.col1) {
             if ws.labels[r * width + c] == id {
-                ws.counts[r * width + c] = 0;
+                ws.c_t[r * width + c] = 0;
             }
         }
     }
@@ -259,7 +259,7 @@ fn adapt_with(
                 let mut w = word(plane, t, r, j) & regm[r * wpr + j];
                 while w != 0 {
                     let c = j * 64 + w.trailing_zeros() as usize;
-                    if let Some(x) = ws.counts.get_mut(r * width + c) {
+                    if let Some(x) = ws.c_t.get_mut(r * width + c) {
                         *x = x.saturating_add(1);
                     }
                     w &= w - 1;
@@ -271,7 +271,7 @@ fn adapt_with(
     for r in rr0..rr1 {
         for c in usize::from(reg.col0)..usize::from(reg.col1) {
             if ws.labels[r * width + c] == id {
-                max_count = max_count.max(ws.counts[r * width + c]);
+                max_count = max_count.max(ws.c_t[r * width + c]);
             }
         }
     }

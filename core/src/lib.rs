@@ -12,6 +12,7 @@
 //! | [`method`] | how a frame is made: adaptive, TFP, TFI, and its wire code |
 //! | [`motion`] | motion compensation: counting along a predicted path, refining the prediction by contrast maximisation |
 //! | [`particle`] | the particle test against the local background, exact, with per-frame tables |
+//! | [`slices`] | bit-sliced window counts: 64 pixels' counters as eight bit planes |
 //! | [`segment`] | saturation time `t_bgmax` and particle/background segmentation |
 //! | [`label`] | 8-connected region labelling with a bounded region table |
 //! | [`region`] | one particle region: size, bounding box, ring, adaptive window |
@@ -58,6 +59,7 @@ pub mod q;
 pub mod region;
 pub mod segment;
 pub mod sidecar;
+pub mod slices;
 pub mod state;
 pub mod suppress;
 pub mod window;

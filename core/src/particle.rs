@@ -122,6 +122,14 @@ impl Thresholds {
         t
     }
 
+    /// The smallest count that can be particle against any background of
+    /// at least `b_q10` (1/1024 count; 256: none): the test is harder as
+    /// the background grows.
+    #[inline]
+    pub fn min_count(&self, b_q10: u32) -> u16 {
+        self.lo[((b_q10 >> B_FRAC_BITS) as usize).min(255)]
+    }
+
     /// Same answer as [`is_particle`].
     #[inline]
     pub fn is_particle(&self, c: u8, b_q10: u32, p: &Params) -> bool {

@@ -21,8 +21,9 @@ use crate::motion::{add_compensated, positions, travel, MIN_TRAVEL};
 use crate::params::Params;
 use crate::particle::is_particle_compensated;
 use crate::q::B_FRAC_BITS;
+use crate::slices::{self, low_bits, Counter};
 use crate::state::Workspace;
-use crate::window::{add_counts, add_plane_counts, Window};
+use crate::window::{add_counts, Window};
 
 /// What a pixel is, stored in the high bits of its class byte; the low 4 bits
 /// hold the index of the level (window) at which it was decided.
@@ -147,59 +148,133 @@ impl Tiles {
     }
 }
 
-/// Lower median of the non-particle counts of each tile (of all counts where
-/// a tile has only particle pixels): of the motion-compensated counts when
-/// `compensated`, else of the plain ones.
-pub(crate) fn tile_medians(
-    ws: &mut Workspace<'_>,
+/// Lower median of the non-particle counts (`part` clear) of each tile of
+/// tile row `ty` (of all counts where a tile has only particle pixels),
+/// from byte counts: the motion-compensated ones.
+fn tile_medians_bytes(
+    counts: &[u8],
+    part: &[u64],
+    tiles_out: &mut [u8],
+    (width, wpr): (usize, usize),
     s0: u16,
-    s1: u16,
-    tiles: &Tiles,
-    compensated: bool,
+    (r_lo, r_hi): (usize, usize),
 ) {
-    let width = usize::from(ws.sizes.width);
-    let counts: &[u8] = if compensated { ws.mc } else { ws.counts };
-    for ty in tiles.y0..=tiles.y1 {
-        let r_lo = (ty * 16).max(usize::from(s0));
-        let r_hi = (ty * 16 + 16).min(usize::from(s1));
-        for tx in 0..tiles.x {
-            let c_lo = tx * 16;
-            let c_hi = (tx * 16 + 16).min(width);
-            let mut hist = [0u16; 256];
-            let mut n = 0u32;
+    for (tx, out) in tiles_out.iter_mut().enumerate() {
+        let c_lo = tx * 16;
+        let c_hi = (tx * 16 + 16).min(width);
+        let mut hist = [0u16; 256];
+        let mut n = 0u32;
+        for r in r_lo..r_hi {
+            let sr = r - usize::from(s0);
+            let base = sr * width;
+            for c in c_lo..c_hi {
+                if (part[sr * wpr + c / 64] >> (c % 64)) & 1 == 0 {
+                    hist[usize::from(counts[base + c])] += 1;
+                    n += 1;
+                }
+            }
+        }
+        if n == 0 {
+            // A tile of particle pixels only: the median of all its counts.
             for r in r_lo..r_hi {
                 let base = (r - usize::from(s0)) * width;
-                let row = base + c_lo..base + c_hi;
-                for (&c, &cl) in counts[row.clone()].iter().zip(&ws.class[row]) {
-                    if decode(cl).0 != Class::Particle {
-                        hist[usize::from(c)] += 1;
-                        n += 1;
-                    }
+                for &c in &counts[base + c_lo..base + c_hi] {
+                    hist[usize::from(c)] += 1;
+                    n += 1;
                 }
             }
-            if n == 0 {
-                // A tile of particle pixels only: the median of all its counts.
-                for r in r_lo..r_hi {
-                    let base = (r - usize::from(s0)) * width;
-                    for &c in &counts[base + c_lo..base + c_hi] {
-                        hist[usize::from(c)] += 1;
-                        n += 1;
-                    }
+        }
+        let rank = n.saturating_sub(1) / 2;
+        let mut seen = 0u32;
+        for (v, &cnt) in hist.iter().enumerate() {
+            seen += u32::from(cnt);
+            if seen > rank {
+                *out = v as u8;
+                break;
+            }
+        }
+    }
+}
+
+/// The same medians from the bit-sliced plain counts: four tiles (the
+/// 16-bit lanes of a 64-px word) at once, by radix selection from the top
+/// bit down — per bit, the lanes' candidates with that bit set are
+/// counted and each lane keeps the half that holds its rank.
+fn tile_medians_sliced(
+    counts: &[u64],
+    part: &[u64],
+    tiles_out: &mut [u8],
+    (width, wpr): (usize, usize),
+    s0: u16,
+    (r_lo, r_hi): (usize, usize),
+) {
+    let lane = |x: u64, q: usize| ((x >> (16 * q)) & 0xffff).count_ones();
+    let nr = r_hi - r_lo;
+    for j in 0..wpr {
+        let valid = low_bits(width - 64 * j);
+        let mut cand = [0u64; 16];
+        let mut n = [0u32; 4];
+        for (k, cw) in cand.iter_mut().enumerate().take(nr) {
+            let sr = r_lo + k - usize::from(s0);
+            *cw = !part[sr * wpr + j] & valid;
+            for (q, nq) in n.iter_mut().enumerate() {
+                *nq += lane(*cw, q);
+            }
+        }
+        // A lane of particle pixels only: all its pixels.
+        let mut refill = 0u64;
+        for (q, nq) in n.iter_mut().enumerate() {
+            if *nq == 0 {
+                refill |= 0xffff << (16 * q);
+                *nq = lane(valid, q) * nr as u32;
+            }
+        }
+        if refill != 0 {
+            for cw in cand.iter_mut().take(nr) {
+                *cw |= valid & refill;
+            }
+        }
+        let mut rank = n.map(|x| x.saturating_sub(1) / 2);
+        let mut left = n;
+        let mut med = [0u8; 4];
+        for b in (0..8).rev() {
+            let mut x = [0u64; 16];
+            let mut any = 0u64;
+            for (k, xk) in x.iter_mut().enumerate().take(nr) {
+                let sr = r_lo + k - usize::from(s0);
+                *xk = cand[k] & counts[(sr * wpr + j) * 8 + b];
+                any |= *xk;
+            }
+            if any == 0 {
+                // No candidate has this bit: every lane's median has 0.
+                continue;
+            }
+            let mut ones = [0u32; 4];
+            for &xk in x.iter().take(nr) {
+                for (q, o) in ones.iter_mut().enumerate() {
+                    *o += lane(xk, q);
                 }
             }
-            let (h, m) = (&hist, n);
-            let rank = m.saturating_sub(1) / 2;
-            let mut seen = 0u32;
-            let mut med = 0u8;
-            for (v, &cnt) in h.iter().enumerate() {
-                seen += u32::from(cnt);
-                if seen > rank {
-                    med = v as u8;
-                    break;
+            let mut take1 = 0u64;
+            for q in 0..4 {
+                let zeros = left[q] - ones[q];
+                if rank[q] < zeros {
+                    left[q] = zeros;
+                } else {
+                    rank[q] -= zeros;
+                    left[q] = ones[q];
+                    med[q] |= 1 << b;
+                    take1 |= 0xffff << (16 * q);
                 }
             }
-            if let Some(t) = ws.tiles.get_mut((ty - tiles.y0) * tiles.x + tx) {
-                *t = med;
+            for (cw, &xk) in cand.iter_mut().zip(&x).take(nr) {
+                // Lanes that took 1 keep the set ones, the others the clear.
+                *cw = (xk & take1) | ((*cw ^ xk) & !take1);
+            }
+        }
+        for (q, &m) in med.iter().enumerate() {
+            if let Some(t) = tiles_out.get_mut(4 * j + q) {
+                *t = m;
             }
         }
     }
@@ -217,16 +292,61 @@ pub(crate) fn tile_pos(i: usize, lo: usize, hi: usize) -> (usize, usize, u32) {
     (clamp(t0), clamp(t0 + 1), f)
 }
 
-/// One band row of one segmentation level: what its undecided pixels are
-/// tested against.
-struct Row<'a, B> {
-    /// Background of tile column `tx` at this row, in 1/32 of 1/1024
-    /// counts (bilinear between the two tile rows).
-    bg: B,
+/// Adds the spikes of `planes` (each the band, `wpr` words per row) of
+/// band rows `s0..s0 + rows` to the bit-sliced counters `counts`: per row,
+/// blocks of eight words, each tick's words read as one slice, summed
+/// into carry-save nibbles 15 ticks at a time (`crate::slices`).
+fn add_sliced(planes: &[&[u64]], wpr: usize, s0: u16, rows: usize, counts: &mut [u64]) {
+    // Four words side by side, each partial bit a lane array: the loop
+    // over a tick's four words vectorises and the partials stay in
+    // registers.
+    const BLOCK: usize = 4;
+    for r in 0..rows {
+        let off = (usize::from(s0) + r) * wpr;
+        let mut j0 = 0;
+        while j0 < wpr {
+            let nb = BLOCK.min(wpr - j0);
+            for chunk in planes.chunks(15) {
+                let (mut s0, mut s1, mut s2, mut s3) =
+                    ([0u64; BLOCK], [0u64; BLOCK], [0u64; BLOCK], [0u64; BLOCK]);
+                for pl in chunk {
+                    let mut x = [0u64; BLOCK];
+                    if let Some(words) = pl.get(off + j0..off + j0 + nb) {
+                        x[..nb].copy_from_slice(words);
+                    }
+                    for q in 0..BLOCK {
+                        let c0 = s0[q] & x[q];
+                        s0[q] ^= x[q];
+                        let c1 = s1[q] & c0;
+                        s1[q] ^= c0;
+                        let c2 = s2[q] & c1;
+                        s2[q] ^= c1;
+                        s3[q] ^= c2;
+                    }
+                }
+                for q in 0..nb {
+                    let at = (r * wpr + j0 + q) * 8;
+                    if let Some(c) = counts
+                        .get_mut(at..at + 8)
+                        .and_then(|c| <&mut Counter>::try_from(c).ok())
+                    {
+                        slices::add_nibble(c, [s0[q], s1[q], s2[q], s3[q]]);
+                    }
+                }
+            }
+            j0 += nb;
+        }
+    }
+}
+
+/// One level's test of one strip row: what its pixels are tested against.
+struct Level<'a> {
+    /// Row background of each tile column, 1/32 count (bilinear between
+    /// the row's two tile rows).
+    bg: &'a [u32],
     tiles_x: usize,
-    counts: &'a [u8],
-    tested: &'a [u8],
-    /// All ones where the plain count floors the background, else 0.
+    /// Where the row moves, the pixel's own plain count floors its
+    /// background (all ones), else 0.
     floor: u32,
     sat_c: u32,
     last: bool,
@@ -234,51 +354,23 @@ struct Row<'a, B> {
     decided: (u8, u8),
 }
 
-impl<B: Fn(usize) -> u32> Row<'_, B> {
-    /// Decides the row's active pixels with `is_particle(count, b_q10)`.
-    #[inline(always)]
-    fn decide(
-        &self,
-        class: &mut [u8],
-        c_t: &mut [u8],
-        stats: &mut SegmentStats,
-        is_particle: impl Fn(u8, u32) -> bool,
-    ) {
-        let active = encode(Class::Active, 0);
-        let (decided_particle, decided_bg) = self.decided;
-        let width = class.len();
-        // Runs of pixels between the same two tile centres: x in [0, 8),
-        // then [8 + 16t, 24 + 16t). Along a run the background is linear
-        // in x, so it advances by a constant step (exact, in 1/1024).
-        let mut x = 0usize;
-        while x < width {
-            let run_end = if x < 8 { 8 } else { x + 16 - (x - 8) % 16 }.min(width);
-            let (tx0, tx1, fx) = tile_pos(x, 0, self.tiles_x - 1);
-            let (r0, r1) = ((self.bg)(tx0), (self.bg)(tx1));
-            let mut b = i64::from((32 - fx) * r0 + fx * r1);
-            let step = 2 * (i64::from(r1) - i64::from(r0));
-            for i in x..run_end {
-                if class[i] == active {
-                    let c = self.counts[i];
-                    // Branch-free: the floor is 0 where it does not apply.
-                    let b_q10 = (b as u32).max((u32::from(c) << B_FRAC_BITS) & self.floor);
-                    if is_particle(self.tested[i], b_q10) {
-                        class[i] = decided_particle;
-                        c_t[i] = self.tested[i];
-                        stats.particle_pixels += 1;
-                    } else if u32::from(c) >= self.sat_c {
-                        class[i] = decided_bg;
-                        c_t[i] = c;
-                        stats.saturated_pixels += 1;
-                    } else if self.last {
-                        class[i] = decided_bg;
-                        c_t[i] = c;
-                    }
-                }
-                b += step;
-            }
-            x = run_end;
-        }
+impl Level<'_> {
+    /// The background at column `x`, 1/1024 count: linear between the two
+    /// nearest tile centres of the row.
+    #[inline]
+    fn b_at(&self, x: usize) -> u32 {
+        let (t0, t1, f) = tile_pos(x, 0, self.tiles_x - 1);
+        (32 - f) * self.bg[t0] + f * self.bg[t1]
+    }
+
+    /// The lowest background of the columns of word `j` (`width` px in
+    /// all), 1/1024 count: the background is piecewise linear between the
+    /// tile centres, so its least value is that of a tile it blends.
+    #[inline]
+    fn b_low(&self, j: usize, width: usize) -> u32 {
+        let (a, _, _) = tile_pos(64 * j, 0, self.tiles_x - 1);
+        let (_, e, _) = tile_pos((64 * j + 63).min(width - 1), 0, self.tiles_x - 1);
+        32 * self.bg[a..=e].iter().copied().min().unwrap_or(0)
     }
 }
 
@@ -295,6 +387,17 @@ impl<B: Fn(usize) -> u32> Row<'_, B> {
 /// compensation, while a particle piles its spikes up only along its path
 /// (on the paper's scenes this took the glare-row RMAE of `spiv bench
 /// paper` from 0.280 to 0.063 on the linear profile).
+///
+/// Plain counts are bit-sliced ([`crate::slices`]) and undecided pixels
+/// are bits of a mask (`ws.masks` plane 0; plane 1 marks particles). A
+/// plain frame asks each 64-px word which undecided pixels could be
+/// particle or saturated at all — a count of at least the particle
+/// test's threshold at the word's lowest background, or of the
+/// saturation count — and reads counts and tests exactly only those; a
+/// word's pixels that cannot change stay undecided without a byte read,
+/// and tile medians are computed only for the rows that have such
+/// pixels. The result is the exact test's for every pixel (`segment_old`
+/// in the tests holds it to the byte-by-byte evaluation).
 pub(crate) fn segment(
     ctx: &crate::context::Ctx<'_, '_>,
     ws: &mut Workspace<'_>,
@@ -311,29 +414,38 @@ pub(crate) fn segment(
         ..
     } = *ctx;
     let width = usize::from(ws.sizes.width);
-    let px = width * usize::from(s1 - s0);
+    let wpr = crate::plane::words_per_row(ws.sizes.width);
+    let rows = usize::from(s1 - s0);
+    let px = width * rows;
+    let words = rows * wpr;
     let mc = motion.is_some() && ws.mc.len() >= px;
     let (levels, nlev) = p.levels();
     let tiles = Tiles::for_strip(ws.sizes.width, s0, s1);
     let mut stats = SegmentStats::default();
-    let active = encode(Class::Active, 0);
-    ws.counts[..px].fill(0);
-    ws.class[..px].fill(active);
-    ws.c_t[..px].fill(0);
+    ws.counts[..8 * words].fill(0);
+    let (act, rest) = ws.masks.split_at_mut(words);
+    let part = &mut rest[..words];
+    for (i, a) in act.iter_mut().enumerate() {
+        *a = low_bits(width - 64 * (i % wpr));
+    }
+    part.fill(0);
     if mc {
         ws.mc[..px].fill(0);
     }
+    // Row backgrounds per tile column (1/32 count), on the stack in blocks:
+    // a row is at most 4096 tile columns (65535 px).
+    let mut bg_row = [0u32; 4096];
+    let bg_row = &mut bg_row[..tiles.x.min(4096)];
     let mut prev: Option<Window> = None;
     for (j, &n) in levels.iter().enumerate().take(nlev) {
         let win = Window::in_history(hist, k, n);
         // Windows are nested: add only the ticks the previous one lacked.
-        let rows = (s0, s1);
         let added = match prev {
             None => [(win.start, win.end()), (win.end(), win.end())],
             Some(pw) => [(win.start, pw.start), (pw.end(), win.end())],
         };
         for (a, e) in added {
-            add_plane_counts(span.range(a, e), hist.width(), rows, &mut ws.counts[..px]);
+            add_sliced(span.range(a, e), wpr, s0, rows, &mut ws.counts[..8 * words]);
             if let (true, Some(m)) = (mc, &motion) {
                 let planes = span.range(a, e);
                 let start = a.max(span.start);
@@ -343,39 +455,105 @@ pub(crate) fn segment(
                     k,
                     hist.width(),
                     hist.rows(),
-                    rows,
+                    (s0, s1),
                     m,
                     &mut ws.mc[..px],
                 );
             }
         }
         prev = Some(win);
-        tile_medians(ws, s0, s1, &tiles, mc);
         // c ≥ sat_c ⟺ c·n ≥ N_fs·len (the rate reaches N_fs/n).
         let sat_c = if win.len == 0 {
             u32::MAX
         } else {
             (u32::from(p.n_fs) * u32::from(win.len)).div_ceil(u32::from(n))
         };
-        let decided_bg = encode(Class::Background, j as u8);
-        let decided_particle = encode(Class::Particle, j as u8);
         let last = j + 1 == nlev;
-        for r in s0..s1 {
-            let (ty0, ty1, fy) = tile_pos(usize::from(r), tiles.y0, tiles.y1);
+        let decided = (
+            encode(Class::Particle, j as u8),
+            encode(Class::Background, j as u8),
+        );
+        // Tile rows whose medians this level has computed (rows ask for at
+        // most two, in order).
+        let mut have: [Option<usize>; 2] = [None, None];
+        let tile_rows = |ty: usize| {
+            let r = (
+                (ty * 16).max(usize::from(s0)),
+                (ty * 16 + 16).min(usize::from(s1)),
+            );
+            ((ty - tiles.y0) * tiles.x, r)
+        };
+        if mc {
+            for ty in tiles.y0..=tiles.y1 {
+                let (row0, rr) = tile_rows(ty);
+                tile_medians_bytes(
+                    &ws.mc[..px],
+                    &ws.masks[words..2 * words],
+                    &mut ws.tiles[row0..row0 + tiles.x],
+                    (width, wpr),
+                    s0,
+                    rr,
+                );
+            }
+        }
+        // No particle counts below this, whatever the background.
+        let t_any = sat_c.min(u32::from(th.min_count(0)));
+        for r in 0..rows {
+            let br = s0 + r as u16;
+            let row_words = r * wpr..(r + 1) * wpr;
+            // Plain: which active pixels could change at all (a count of at
+            // least `t_any`), kept in mask plane 2; rows without any skip
+            // the tile medians. On the last level the others are decided
+            // here: background, at their count.
+            if !mc {
+                let mut any = 0u64;
+                for w in row_words.clone() {
+                    let a = ws.masks[w];
+                    if a == 0 {
+                        ws.masks[2 * words + w] = 0;
+                        continue;
+                    }
+                    let c = counter(ws.counts, w);
+                    let a0 = a & slices::at_least(c, t_any);
+                    ws.masks[2 * words + w] = a0;
+                    any |= a0;
+                    if last && a0 != a {
+                        let base = r * width + 64 * (w - r * wpr);
+                        background_rest(c, a & !a0, base, decided.1, ws.class, ws.c_t);
+                        ws.masks[w] = a0;
+                    }
+                }
+                if any == 0 {
+                    continue;
+                }
+            }
+            let (ty0, ty1, fy) = tile_pos(usize::from(br), tiles.y0, tiles.y1);
+            if !mc {
+                for ty in [ty0, ty1] {
+                    if !have.contains(&Some(ty)) {
+                        let (row0, rr) = tile_rows(ty);
+                        tile_medians_sliced(
+                            &ws.counts[..8 * words],
+                            &ws.masks[words..2 * words],
+                            &mut ws.tiles[row0..row0 + tiles.x],
+                            (width, wpr),
+                            s0,
+                            rr,
+                        );
+                        have = [have[1], Some(ty)];
+                    }
+                }
+            }
             let (wy0, wy1) = (32 - fy, fy);
-            let row_t0 = (ty0 - tiles.y0) * tiles.x;
-            let row_t1 = (ty1 - tiles.y0) * tiles.x;
-            let base = usize::from(r - s0) * width;
-            let counts = &ws.counts[base..base + width];
-            let tested: &[u8] = if mc {
-                &ws.mc[base..base + width]
-            } else {
-                counts
-            };
+            let (row_t0, row_t1) = ((ty0 - tiles.y0) * tiles.x, (ty1 - tiles.y0) * tiles.x);
+            for (tx, b) in bg_row.iter_mut().enumerate() {
+                let tile = |t: usize| u32::from(ws.tiles.get(t).copied().unwrap_or(0));
+                *b = wy0 * tile(row_t0 + tx) + wy1 * tile(row_t1 + tx);
+            }
             // Where the row moves, the pixel's own plain count is a floor
             // of its background (docs above): all ones to keep it, else 0.
             let floor: u32 = match (mc, &motion) {
-                (true, Some(m)) if travel(m.at(r), win.start, win.end(), k) >= MIN_TRAVEL => {
+                (true, Some(m)) if travel(m.at(br), win.start, win.end(), k) >= MIN_TRAVEL => {
                     u32::MAX
                 }
                 _ => 0,
@@ -383,34 +561,129 @@ pub(crate) fn segment(
             // A compensated count sums this many pixels' spikes: its own
             // noise model (1: the plain test, by the tables).
             let segs = match (mc, &motion) {
-                (true, Some(m)) => positions(m.at(r), win.start, win.end(), k),
+                (true, Some(m)) => positions(m.at(br), win.start, win.end(), k),
                 _ => 1,
             };
-            let class = &mut ws.class[base..base + width];
-            let c_t = &mut ws.c_t[base..base + width];
-            // Tile medians of this row's two tile rows, weighted in 1/32.
-            let tile = |t: usize| u32::from(ws.tiles.get(t).copied().unwrap_or(0));
-            let row = Row {
-                bg: |tx: usize| wy0 * tile(row_t0 + tx) + wy1 * tile(row_t1 + tx),
+            let lv = Level {
+                bg: bg_row,
                 tiles_x: tiles.x,
-                counts,
-                tested,
                 floor,
                 sat_c,
                 last,
-                decided: (decided_particle, decided_bg),
+                decided,
             };
-            // One loop per test, so the plain frame's loop stays as it was.
-            if segs > 1 {
-                row.decide(class, c_t, &mut stats, |c, b| {
-                    is_particle_compensated(c, b, p, segs)
-                });
-            } else {
-                row.decide(class, c_t, &mut stats, |c, b| th.is_particle(c, b, p));
+            for w in row_words {
+                let a = ws.masks[w];
+                // Plain: only the pixels that could change.
+                let a0 = if mc { a } else { ws.masks[2 * words + w] };
+                if a0 == 0 {
+                    continue;
+                }
+                let c = counter(ws.counts, w);
+                let jw = w - r * wpr;
+                // Which active pixels need the exact particle test: plain,
+                // a count that passes at the word's lowest background (the
+                // others that reach the saturation count are saturated
+                // background outright); compensated, all (their tested
+                // count is another).
+                let base = r * width + 64 * jw;
+                let mut done = 0u64;
+                let cand = if mc {
+                    a
+                } else {
+                    let tp = u32::from(th.min_count(lv.b_low(jw, width)));
+                    let maybe = a0 & slices::at_least(c, tp);
+                    let sat = a0 & !maybe & slices::at_least(c, sat_c);
+                    if sat != 0 {
+                        background_rest(c, sat, base, lv.decided.1, ws.class, ws.c_t);
+                        stats.saturated_pixels += sat.count_ones();
+                        done = sat;
+                    }
+                    maybe
+                };
+                let mut m = cand;
+                while m != 0 {
+                    let i = m.trailing_zeros();
+                    m &= m - 1;
+                    let x = 64 * jw + i as usize;
+                    let cp = slices::count(c, i);
+                    let tested = if mc { ws.mc[r * width + x] } else { cp };
+                    let b_q10 = lv.b_at(x).max((u32::from(cp) << B_FRAC_BITS) & lv.floor);
+                    let particle = if segs > 1 {
+                        is_particle_compensated(tested, b_q10, p, segs)
+                    } else {
+                        th.is_particle(tested, b_q10, p)
+                    };
+                    let at = base + i as usize;
+                    if particle {
+                        ws.class[at] = lv.decided.0;
+                        ws.c_t[at] = tested;
+                        stats.particle_pixels += 1;
+                        ws.masks[words + w] |= 1 << i;
+                        done |= 1 << i;
+                    } else if u32::from(cp) >= lv.sat_c {
+                        ws.class[at] = lv.decided.1;
+                        ws.c_t[at] = cp;
+                        stats.saturated_pixels += 1;
+                        done |= 1 << i;
+                    }
+                }
+                if lv.last {
+                    // The last level decides the rest: background, at their
+                    // count over n_max.
+                    background_rest(c, a & !done, base, lv.decided.1, ws.class, ws.c_t);
+                    done = a;
+                }
+                ws.masks[w] = a & !done;
             }
         }
     }
     stats
+}
+
+/// Pixels `left` of a word (its first pixel at `base`) decided background
+/// at the last level, at their count.
+fn background_rest(
+    c: &Counter,
+    mut left: u64,
+    base: usize,
+    class_bg: u8,
+    class: &mut [u8],
+    c_t: &mut [u8],
+) {
+    while left != 0 {
+        let g = left.trailing_zeros() / 8;
+        let bytes = slices::bytes8(c, g);
+        let grp = (left >> (8 * g)) & 0xff;
+        let at = base + 8 * g as usize;
+        if grp == 0xff {
+            if let (Some(cl), Some(ct)) = (class.get_mut(at..at + 8), c_t.get_mut(at..at + 8)) {
+                cl.fill(class_bg);
+                ct.copy_from_slice(&bytes);
+            }
+        } else {
+            let mut m = grp;
+            while m != 0 {
+                let q = m.trailing_zeros() as usize;
+                m &= m - 1;
+                if let (Some(cl), Some(ct)) = (class.get_mut(at + q), c_t.get_mut(at + q)) {
+                    *cl = class_bg;
+                    *ct = bytes[q];
+                }
+            }
+        }
+        left &= !(0xffu64 << (8 * g));
+    }
+}
+
+/// The bit-sliced counter of word `w` (zero past the buffer).
+#[inline]
+fn counter(counts: &[u64], w: usize) -> &Counter {
+    const ZERO: Counter = [0; 8];
+    counts
+        .get(8 * w..8 * w + 8)
+        .and_then(|s| <&Counter>::try_from(s).ok())
+        .unwrap_or(&ZERO)
 }
 
 /// Saturation time alone: for every pixel of the band, `t_bgmax` = the

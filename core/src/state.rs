@@ -4,13 +4,13 @@
 //!
 //! | buffer | type | bytes/px | holds |
 //! |---|---|---|---|
-//! | `counts` | `u8` | 1 | the current window count c_n |
-//! | `c_t` | `u8` | 1 | the count at the window where the pixel was decided |
+//! | `counts` | `u64` | 1 | the current window count c_n, bit-sliced (`crate::slices`: eight planes per 64 px) |
+//! | `c_t` | `u8` | 1 | the count at the window where the pixel was decided (a region pixel: its count over n*) |
 //! | `class` | `u8` | 1 | class (active, particle, background) and level index |
 //! | `labels` | `u16` | 2 | region label (0: none) |
 //! | `masks` | `u64` | 3/8 | region-membership bit planes (any region, one region, its ring) |
 //!
-//! That is 5.375 bytes per pixel (plus row padding of the masks to 64 px),
+//! That is 5.375 bytes per pixel (plus row padding of counts and masks to 64 px),
 //! within the 8 bytes per pixel the design allows besides the spike history.
 //! Fixed overhead: the tile medians (one byte per 16×16 tile), the
 //! union-find table (2 bytes per provisional label) and the region table
@@ -92,6 +92,10 @@ impl WorkspaceSizes {
     pub const fn mask_words(&self) -> usize {
         3 * words_per_row(self.width) * self.rows as usize
     }
+    /// Words of the bit-sliced counts (eight per 64 px of a row).
+    pub const fn count_words(&self) -> usize {
+        8 * words_per_row(self.width) * self.rows as usize
+    }
     /// Bytes of the tile-median table.
     pub const fn tiles(&self) -> usize {
         (self.width as usize).div_ceil(16) * ((self.rows as usize).div_ceil(16) + 1)
@@ -106,9 +110,9 @@ impl WorkspaceSizes {
     }
     /// Bytes of the per-pixel buffers (`counts`, `c_t`, `class`, `labels`,
     /// `masks`): [`STATE_MILLIBYTES_PER_PIXEL`] / 1000 per pixel when the
-    /// width is a multiple of 64, more with the masks' row padding.
+    /// width is a multiple of 64, more with the row padding of counts and masks.
     pub const fn per_pixel_bytes(&self) -> usize {
-        self.pixels() * 5 + self.mask_words() * 8
+        self.pixels() * 4 + (self.count_words() + self.mask_words()) * 8
     }
     /// Total bytes of all buffers.
     pub const fn total_bytes(&self) -> usize {
@@ -123,7 +127,7 @@ impl WorkspaceSizes {
 #[derive(Debug)]
 pub struct Workspace<'a> {
     pub(crate) sizes: WorkspaceSizes,
-    pub(crate) counts: &'a mut [u8],
+    pub(crate) counts: &'a mut [u64],
     pub(crate) c_t: &'a mut [u8],
     pub(crate) class: &'a mut [u8],
     pub(crate) labels: &'a mut [u16],
@@ -139,8 +143,8 @@ pub struct Workspace<'a> {
 /// The buffers of a [`Workspace`], each at least as long as [`WorkspaceSizes`] says.
 #[derive(Debug)]
 pub struct Buffers<'a> {
-    /// `pixels()` bytes.
-    pub counts: &'a mut [u8],
+    /// `count_words()` words.
+    pub counts: &'a mut [u64],
     /// `pixels()` bytes.
     pub c_t: &'a mut [u8],
     /// `pixels()` bytes.
@@ -164,7 +168,7 @@ impl<'a> Workspace<'a> {
             return Err(Error::BadDimensions);
         }
         let px = sizes.pixels();
-        check_len(b.counts.len(), px)?;
+        check_len(b.counts.len(), sizes.count_words())?;
         check_len(b.c_t.len(), px)?;
         check_len(b.class.len(), px)?;
         check_len(b.labels.len(), px)?;
@@ -232,7 +236,7 @@ mod tests {
                 "{w}x{h}"
             );
         }
-        // Row padding of the masks only adds.
+        // Row padding of counts and masks only adds.
         let s = WorkspaceSizes::for_strip(400, 250);
         assert!(s.per_pixel_bytes() * 1000 >= STATE_MILLIBYTES_PER_PIXEL * s.pixels());
         const SIZES: WorkspaceSizes = WorkspaceSizes::for_strip(128, 32);

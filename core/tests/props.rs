@@ -162,7 +162,7 @@ fn documented(p: &Params, depth: u16) -> bool {
 }
 
 struct Owned {
-    counts: Vec<u8>,
+    counts: Vec<u64>,
     c_t: Vec<u8>,
     class: Vec<u8>,
     labels: Vec<u16>,
@@ -177,7 +177,7 @@ impl Owned {
     fn new(sizes: WorkspaceSizes) -> Owned {
         let px = sizes.pixels();
         Owned {
-            counts: vec![0; px],
+            counts: vec![0; sizes.count_words()],
             c_t: vec![0; px],
             class: vec![0; px],
             labels: vec![0; px],

@@ -327,6 +327,7 @@ impl Layout {
             wide: m.wide,
             history: c.take::<u64>(m.history_words)?,
             masks: c.take::<u64>(sizes.mask_words())?,
+            counts: c.take::<u64>(sizes.count_words())?,
             regions: c.take::<Region>(sizes.regions())?,
             labels: c.take::<u16>(sp)?,
             parents: c.take::<u16>(sizes.parents())?,
@@ -344,7 +345,6 @@ impl Layout {
             ],
             caps: [c.take::<u16>(m.cap_bands)?, c.take::<u16>(m.cap_bands)?],
             refined: [c.take::<i16>(m.refined)?, c.take::<i16>(m.refined)?],
-            counts: c.take::<u8>(sp)?,
             c_t: c.take::<u8>(sp)?,
             class: c.take::<u8>(sp)?,
             tiles: c.take::<u8>(sizes.tiles())?,
@@ -550,7 +550,7 @@ unsafe fn parts<'b, G: Gray + Plain>(
     let ws = Workspace::new(
         l.sizes,
         Buffers {
-            counts: s(l.counts),
+            counts: unsafe { slice(base, l.counts) },
             c_t: s(l.c_t),
             class: s(l.class),
             labels: unsafe { slice(base, l.labels) },
@@ -1178,7 +1178,7 @@ mod tests {
             (l.masks, 8, 8),
             (l.regions, size_of::<Region>(), align_of::<Region>()),
             (l.labels, 2, 2),
-            (l.counts, 1, 1),
+            (l.counts, 8, 8),
             (l.frame, 1, 1),
             (l.payload, 1, 1),
             (l.rx, 1, 1),

@@ -53,7 +53,7 @@ fn bench(c: &mut Criterion) {
     for strip in [H, 64] {
         let sizes = WorkspaceSizes::for_strip(W, strip);
         let n = sizes.pixels();
-        let (mut a, mut b2, mut cl) = (vec![0u8; n], vec![0u8; n], vec![0u8; n]);
+        let (mut a, mut b2, mut cl) = (vec![0u64; sizes.count_words()], vec![0u8; n], vec![0u8; n]);
         let mut labels = vec![0u16; n];
         let mut masks = vec![0u64; sizes.mask_words()];
         let mut tiles = vec![0u8; sizes.tiles()];
@@ -99,7 +99,7 @@ fn bench(c: &mut Criterion) {
     // Error of the fixed-point core against the reference, printed beside the times.
     let sizes = WorkspaceSizes::for_strip(W, H);
     let n = sizes.pixels();
-    let (mut a, mut b2, mut cl) = (vec![0u8; n], vec![0u8; n], vec![0u8; n]);
+    let (mut a, mut b2, mut cl) = (vec![0u64; sizes.count_words()], vec![0u8; n], vec![0u8; n]);
     let mut labels = vec![0u16; n];
     let mut masks = vec![0u64; sizes.mask_words()];
     let mut tiles = vec![0u8; sizes.tiles()];

@@ -47,7 +47,7 @@ fn main() {
     let last = ingest_all(&mut hist, &packed);
     let sizes = WorkspaceSizes::for_strip(W, H);
     let n = sizes.pixels();
-    let (mut a, mut b, mut c) = (vec![0u8; n], vec![0u8; n], vec![0u8; n]);
+    let (mut a, mut b, mut c) = (vec![0u64; sizes.count_words()], vec![0u8; n], vec![0u8; n]);
     let mut labels = vec![0u16; n];
     let mut masks = vec![0u64; sizes.mask_words()];
     let mut tiles = vec![0u8; sizes.tiles()];

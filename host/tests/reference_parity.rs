@@ -63,7 +63,11 @@ fn run_core_with<G: Gray>(
     sizes.max_regions = (sizes.pixels() / 3).min(30000) as u16;
     sizes.max_provisional = (sizes.pixels() / 2).min(32766) as u16;
     let px = sizes.pixels();
-    let (mut counts, mut c_t, mut class) = (vec![0u8; px], vec![0u8; px], vec![0u8; px]);
+    let (mut counts, mut c_t, mut class) = (
+        vec![0u64; sizes.count_words()],
+        vec![0u8; px],
+        vec![0u8; px],
+    );
     let mut labels = vec![0u16; px];
     let mut masks = vec![0u64; sizes.mask_words()];
     let mut tiles = vec![0u8; sizes.tiles()];

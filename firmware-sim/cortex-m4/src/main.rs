@@ -94,7 +94,7 @@ const EMPTY_REGION: Region = Region {
 /// Every byte of RAM the pipeline uses besides the stack.
 struct Ram {
     history: [u64; HIST_WORDS],
-    counts: [u8; PX],
+    counts: [u64; SIZES.count_words()],
     c_t: [u8; PX],
     class: [u8; PX],
     labels: [u16; PX],
@@ -281,7 +281,7 @@ impl From<spiv_core::wire::WireError> for Failure {
 fn run() -> Result<(), Failure> {
     let ram: &'static mut Ram = cortex_m::singleton!(: Ram = Ram {
         history: [0; HIST_WORDS],
-        counts: [0; PX],
+        counts: [0; SIZES.count_words()],
         c_t: [0; PX],
         class: [0; PX],
         labels: [0; PX],

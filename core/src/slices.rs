@@ -1,0 +1,166 @@
+//! Window counts of 64 pixels at once, as eight bit planes (vertical
+//! counters): bit `i` of plane `b` is bit `b` of pixel `i`'s count. Adding
+//! a spike plane is a handful of logic operations for 64 pixels, and so is
+//! asking which pixels count at least `t` — the segmentation asks that of
+//! every pixel at every level and reads bytes only for the few that
+//! answer yes (issue 18). An FPGA keeps its counters the same way.
+//!
+//! Hand-written (no crate does bit-sliced counters in `no_std`), exact,
+//! with counts below 256 (a window holds at most 255 ticks).
+
+/// The counts of 64 pixels, plane `b` holding bit `b` of each.
+pub type Counter = [u64; 8];
+
+/// `SPREAD[b]` has byte `i` equal to bit `i` of `b`.
+const SPREAD: [u64; 256] = {
+    let mut t = [0u64; 256];
+    let mut b = 0;
+    while b < 256 {
+        let mut i = 0;
+        while i < 8 {
+            if (b >> i) & 1 == 1 {
+                t[b] |= 1 << (8 * i);
+            }
+            i += 1;
+        }
+        b += 1;
+    }
+    t
+};
+
+/// Adds one spike word per item of `items` (`word(item)`, bit `i` a spike
+/// of pixel `i`) to `c`: 15 words at a time are summed into 4-bit
+/// carry-save counters (7 logic operations per word), then added to the
+/// 8-bit counters with a ripple of full adders that stops where the carry
+/// dies. The caller keeps every count below 256.
+#[inline(always)]
+pub fn add<T: Copy>(c: &mut Counter, items: &[T], word: impl Fn(T) -> u64) {
+    for chunk in items.chunks(15) {
+        let (mut s0, mut s1, mut s2, mut s3) = (0u64, 0u64, 0u64, 0u64);
+        for &item in chunk {
+            let x = word(item);
+            let c0 = s0 & x;
+            s0 ^= x;
+            let c1 = s1 & c0;
+            s1 ^= c0;
+            let c2 = s2 & c1;
+            s2 ^= c1;
+            s3 ^= c2;
+        }
+        add_nibble(c, [s0, s1, s2, s3]);
+    }
+}
+
+/// Adds a 4-bit bit-sliced number to `c`.
+#[inline(always)]
+pub(crate) fn add_nibble(c: &mut Counter, p: [u64; 4]) {
+    if p[0] | p[1] | p[2] | p[3] == 0 {
+        return;
+    }
+    let mut carry = 0u64;
+    for (cb, &pb) in c.iter_mut().zip(&p) {
+        let x = *cb ^ pb;
+        let s = x ^ carry;
+        carry = (*cb & pb) | (carry & x);
+        *cb = s;
+    }
+    for cb in c.iter_mut().skip(4) {
+        if carry == 0 {
+            break;
+        }
+        let s = *cb ^ carry;
+        carry &= *cb;
+        *cb = s;
+    }
+}
+
+/// The pixels whose count is at least `t` (all for 0, none above 255).
+#[inline]
+pub fn at_least(c: &Counter, t: u32) -> u64 {
+    if t == 0 {
+        return u64::MAX;
+    }
+    if t > 255 {
+        return 0;
+    }
+    // From the top bit down: `gt` already greater, `eq` equal so far.
+    let (mut gt, mut eq) = (0u64, u64::MAX);
+    for b in (0..8).rev() {
+        if (t >> b) & 1 == 1 {
+            eq &= c[b];
+        } else {
+            gt |= eq & c[b];
+            eq &= !c[b];
+        }
+        if eq == 0 {
+            break;
+        }
+    }
+    gt | eq
+}
+
+/// The count of pixel `i` (0..64).
+#[inline]
+pub fn count(c: &Counter, i: u32) -> u8 {
+    let mut v = 0u8;
+    for (b, &p) in c.iter().enumerate() {
+        v |= (((p >> i) & 1) as u8) << b;
+    }
+    v
+}
+
+/// The counts of pixels `8g..8g + 8`, one per byte (byte `i` is pixel
+/// `8g + i`).
+#[inline]
+pub fn bytes8(c: &Counter, g: u32) -> [u8; 8] {
+    let sh = 8 * g;
+    let mut v = 0u64;
+    for (b, &p) in c.iter().enumerate() {
+        v |= SPREAD[((p >> sh) & 0xff) as usize] << b;
+    }
+    v.to_le_bytes()
+}
+
+/// Bit `i` set where `i < n` (0..=64).
+#[inline]
+pub fn low_bits(n: usize) -> u64 {
+    if n >= 64 {
+        u64::MAX
+    } else {
+        (1u64 << n) - 1
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn counts_compare_and_read_back() {
+        // Pixel i fires at ticks t where (t * (i + 1)) % 7 < 3, 200 ticks.
+        let words: [u64; 200] = core::array::from_fn(|t| {
+            let mut w = 0u64;
+            for i in 0..64u64 {
+                if (t as u64 * (i + 1)) % 7 < 3 {
+                    w |= 1 << i;
+                }
+            }
+            w
+        });
+        let mut c = Counter::default();
+        add(&mut c, &words[..37], |w| w);
+        add(&mut c, &words[37..], |w| w);
+        for i in 0..64u32 {
+            let want = words.iter().filter(|&&w| (w >> i) & 1 == 1).count() as u8;
+            assert_eq!(count(&c, i), want);
+            assert_eq!(bytes8(&c, i / 8)[(i % 8) as usize], want);
+            for t in [0u32, 1, 2, 85, 86, 87, 199, 200, 255, 256] {
+                assert_eq!(
+                    (at_least(&c, t) >> i) & 1 == 1,
+                    u32::from(want) >= t,
+                    "{i} {t}"
+                );
+            }
+        }
+    }
+}
