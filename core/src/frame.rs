@@ -25,7 +25,7 @@ use crate::params::{Params, MAX_LEVELS};
 use crate::particle::Thresholds;
 use crate::segment::{decode, pixel_saturation, segment, Class, SegmentStats};
 use crate::state::Workspace;
-use crate::suppress::background_gray;
+use crate::suppress::{background_gray, background_table};
 use crate::window::{check_len, Span, Window};
 
 /// What one frame found.
@@ -204,31 +204,44 @@ fn strip<G: Gray>(
     let last = usize::from(e1 - s0) * width;
     let out_base = usize::from(e0) * width;
     let nlev = levels.iter().take_while(|&&n| n != 0).count();
+    // Each level's background gray per count (`background_gray` for its
+    // window), built by exact steps instead of a division per pixel.
+    let mut gray = [[0u16; 256]; MAX_LEVELS];
+    for (l, tbl) in gray.iter_mut().enumerate().take(nlev) {
+        background_table(levels[l], lens[l], p, fs, tbl);
+    }
     for i in first..last {
         let (class, lev) = decode(ws.class[i]);
-        let (c, t, len) = if class == Class::Particle && ws.labels[i] == 0 {
+        let g = if class == Class::Particle && ws.labels[i] == 0 {
             let (r, col) = (s0 + (i / width) as u16, (i % width) as u16);
-            pixel_saturation(ctx, &levels[..nlev], r, col)
+            let (c, t, len) = pixel_saturation(ctx, &levels[..nlev], r, col);
+            background_gray(c, t, len, p, fs)
         } else {
-            let lev = usize::from(lev);
-            (
-                ws.c_t[i],
-                levels.get(lev).copied().unwrap_or(p.n_max),
-                lens.get(lev).copied().unwrap_or(0),
-            )
+            gray.get(usize::from(lev))
+                .map_or(0, |tbl| tbl[usize::from(ws.c_t[i])])
         };
         if let Some(o) = out.get_mut(out_base + i - first) {
-            *o = G::from_level(background_gray(c, t, len, p, fs));
+            *o = G::from_level(g);
         }
     }
-    // "Any region" bits, for the rings.
+    // "Any region" bits, for the rings: the particle pixels (mask plane 1,
+    // as the segmentation left it) that a region took. Written to plane
+    // 0 in increasing order, which only overwrites particle words already
+    // read.
     let wpr = crate::plane::words_per_row(hist.width());
-    let any = &mut ws.masks[..usize::from(rows) * wpr];
-    any.fill(0);
-    for (i, &l) in ws.labels[..usize::from(rows) * width].iter().enumerate() {
-        if l != 0 {
-            any[(i / width) * wpr + (i % width) / 64] |= 1u64 << ((i % width) % 64);
+    let words = usize::from(rows) * wpr;
+    for w in 0..words {
+        let mut m = ws.masks[words + w];
+        let base = (w / wpr) * width + 64 * (w % wpr);
+        let mut any = 0u64;
+        while m != 0 {
+            let b = m.trailing_zeros();
+            m &= m - 1;
+            if ws.labels[base + b as usize] != 0 {
+                any |= 1 << b;
+            }
         }
+        ws.masks[w] = any;
     }
     let (r_lo, r_hi) = (e0 - s0, e1 - s0);
     for idx in 0..lab.regions as usize {

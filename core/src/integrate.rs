@@ -17,6 +17,7 @@ use core::cmp::Ordering;
 use crate::motion::{shift, shifted_word};
 use crate::params::Params;
 use crate::region::Region;
+use crate::slices::{self, Counter};
 use crate::state::Workspace;
 use crate::window::Window;
 
@@ -82,6 +83,74 @@ pub fn cmp_snr(a: &SnrTerms, b: &SnrTerms) -> Ordering {
         mag
     } else {
         mag.reverse()
+    }
+}
+
+/// Cells (row, word) of a region's neighbourhood summed per tick at once.
+const CELLS: usize = 32;
+
+/// One word of a region's neighbourhood: strip row, word index, and the
+/// ring's and the region's pixels in it.
+#[derive(Debug, Clone, Copy, Default)]
+struct Cell {
+    r: usize,
+    j: usize,
+    ring: u64,
+    reg: u64,
+}
+
+/// A window's SNR, ready to compare: its spike sums, and the SNR's square
+/// with its sign in `f32` (`d·|d|/v` of [`snr_terms`], from the same
+/// integers). Two windows whose approximations differ by more than
+/// 10⁻⁵ of the larger are ordered by them — the `f32` error of a handful
+/// of roundings is below 10⁻⁶, so the order is the exact one — and all
+/// others by [`cmp_snr`], so the choice of n* is exact and the 256-bit
+/// products run only for near ties (issue 18: they were 40 instructions
+/// per pixel of every frame).
+#[derive(Debug, Clone, Copy)]
+struct Scored {
+    s: u64,
+    b: u64,
+    approx: Option<f32>,
+}
+
+impl Scored {
+    fn new(s: u64, b: u64, np: u32, nr: u32, p: &Params) -> Scored {
+        let nrf = nr.max(1) as f32;
+        // The contrast exactly (it cancels), then rounded once.
+        // In i64 where it fits (a 128-bit conversion is a library call).
+        let narrow = || {
+            let a = i64::try_from(s).ok()?.checked_mul(i64::from(nr.max(1)))?;
+            a.checked_sub(i64::try_from(b).ok()?.checked_mul(i64::from(np))?)
+        };
+        let d = match narrow() {
+            Some(x) => x as f32,
+            None => (i128::from(s) * i128::from(nr.max(1)) - i128::from(b) * i128::from(np)) as f32,
+        };
+        let g = f32::from(p.electrons_per_spike.max(1));
+        let sig = f32::from(p.sigma_fpn.to_bits());
+        let bf = b as f32;
+        // v of `snr_terms`: g·2^32·nr² + 4g·σ²·b² + b·2^34·nr (σ in bits).
+        let v = g * 4_294_967_296.0 * nrf * nrf
+            + 4.0 * g * sig * sig * bf * bf
+            + bf * 17_179_869_184.0 * nrf;
+        // Past 10^37 the exact terms may saturate: no approximation.
+        let approx = (v.is_finite() && v < 1e37 && d.is_finite()).then(|| d * d.abs() / v);
+        Scored { s, b, approx }
+    }
+
+    /// Whether this window's SNR beats `o`'s (exactly).
+    fn greater(&self, o: &Scored, np: u32, nr: u32, p: &Params) -> bool {
+        if let (Some(x), Some(y)) = (self.approx, o.approx) {
+            if (x - y).abs() > 1e-5 * x.abs().max(y.abs()) {
+                return x > y;
+            }
+        }
+        let (a, b) = (
+            snr_terms(self.s, self.b, np, nr, p),
+            snr_terms(o.s, o.b, np, nr, p),
+        );
+        cmp_snr(&a, &b) == Ordering::Greater
     }
 }
 
@@ -186,28 +255,58 @@ fn adapt_with(
             nr += v.count_ones();
         }
     }
-    // Per-tick spike sums of region and ring over the n_max span.
+    // Per-tick spike sums of region and ring over the n_max span, over the
+    // (row, word) cells where either has a pixel: a bounded batch of cells
+    // at a time on the stack, every tick of the span per batch.
     let mut ps = [0u32; 256];
     let mut pb = [0u32; 256];
-    for (i, plane) in span.planes().iter().enumerate() {
-        let t = span.start + i as u32;
-        let (mut hs, mut hb) = (0u32, 0u32);
-        for r in b.r0..b.r1 {
-            for j in b.j0..=b.j1 {
-                let w = word(plane, t, r, j);
-                hb += (w & ring[r * wpr + j]).count_ones();
-                if (rr0..rr1).contains(&r) {
-                    hs += (w & regm[r * wpr + j]).count_ones();
-                }
+    let mut cells = [Cell::default(); CELLS];
+    let mut nc = 0usize;
+    let planes = span.planes();
+    let flush = |cells: &[Cell], ps: &mut [u32; 256], pb: &mut [u32; 256]| {
+        for (i, plane) in planes.iter().enumerate() {
+            let t = span.start + i as u32;
+            let (mut hs, mut hb) = (0u32, 0u32);
+            for c in cells {
+                let w = word(plane, t, c.r, c.j);
+                hb += (w & c.ring).count_ones();
+                hs += (w & c.reg).count_ones();
             }
-        }
-        // ps[i + 1] = spikes of ticks span.start .. span.start + i + 1
-        if let (Some(&a), Some(&bb)) = (ps.get(i), pb.get(i)) {
             if let (Some(x), Some(y)) = (ps.get_mut(i + 1), pb.get_mut(i + 1)) {
-                *x = a + hs;
-                *y = bb + hb;
+                *x += hs;
+                *y += hb;
             }
         }
+    };
+    for r in b.r0..b.r1 {
+        for j in b.j0..=b.j1 {
+            let rg = if (rr0..rr1).contains(&r) {
+                regm[r * wpr + j]
+            } else {
+                0
+            };
+            let rn = ring[r * wpr + j];
+            if rg | rn == 0 {
+                continue;
+            }
+            cells[nc] = Cell {
+                r,
+                j,
+                ring: rn,
+                reg: rg,
+            };
+            nc += 1;
+            if nc == CELLS {
+                flush(&cells, &mut ps, &mut pb);
+                nc = 0;
+            }
+        }
+    }
+    flush(&cells[..nc], &mut ps, &mut pb);
+    // ps[i + 1] = spikes of ticks span.start .. span.start + i + 1
+    for i in 1..=planes.len().min(255) {
+        ps[i] += ps[i - 1];
+        pb[i] += pb[i - 1];
     }
     let sums = |n: u16| -> (u64, u64, Window) {
         let w = Window::in_history(hist, k, n);
@@ -216,18 +315,19 @@ fn adapt_with(
         let a = a.min(e);
         (u64::from(ps[e] - ps[a]), u64::from(pb[e] - pb[a]), w)
     };
-    let terms = |n: u16| {
+    let scored = |n: u16| {
         let (s, bsum, _) = sums(n);
-        snr_terms(s, bsum, reg.pixels, nr, p)
+        Scored::new(s, bsum, reg.pixels, nr, p)
     };
+    let better = |a: &Scored, b: &Scored| a.greater(b, reg.pixels, nr, p);
     // Coarse search over doubling windows, then every integer around the best.
     let mut best_n = 1u16;
-    let mut best = terms(1);
+    let mut best = scored(1);
     let mut n = 1u16;
     while n < p.n_max {
         n = n.saturating_mul(2).min(p.n_max);
-        let t = terms(n);
-        if cmp_snr(&t, &best) == Ordering::Greater {
+        let t = scored(n);
+        if better(&t, &best) {
             best = t;
             best_n = n;
         }
@@ -235,43 +335,40 @@ fn adapt_with(
     let lo = (best_n / 2).max(1);
     let hi = best_n.saturating_mul(2).min(p.n_max);
     let mut star = lo;
-    let mut star_t = terms(lo);
+    let mut star_t = scored(lo);
     for m in lo + 1..=hi {
-        let t = terms(m);
-        if cmp_snr(&t, &star_t) == Ordering::Greater {
+        let t = scored(m);
+        if better(&t, &star_t) {
             star_t = t;
             star = m;
         }
     }
-    // Per-pixel counts over n*.
+    // Per-pixel counts over n*: bit-sliced counters per word of the
+    // region, read back for its pixels.
     let (_, ring_sum, win) = sums(star);
-    for r in rr0..rr1 {
-        for c in usize::from(reg.col0)..usize::from(reg.col1) {
-            if ws.labels[r * width + c] == id {
-                ws.c_t[r * width + c] = 0;
-            }
-        }
-    }
-    for (i, plane) in span.range(win.start, win.end()).iter().enumerate() {
-        let t = win.start.max(span.start) + i as u32;
-        for r in rr0..rr1 {
-            for j in b.j0..=b.j1 {
-                let mut w = word(plane, t, r, j) & regm[r * wpr + j];
-                while w != 0 {
-                    let c = j * 64 + w.trailing_zeros() as usize;
-                    if let Some(x) = ws.c_t.get_mut(r * width + c) {
-                        *x = x.saturating_add(1);
-                    }
-                    w &= w - 1;
-                }
-            }
-        }
-    }
+    let wplanes = span.range(win.start, win.end());
+    let t0 = win.start.max(span.start);
     let mut max_count = 0u8;
     for r in rr0..rr1 {
-        for c in usize::from(reg.col0)..usize::from(reg.col1) {
-            if ws.labels[r * width + c] == id {
-                max_count = max_count.max(ws.c_t[r * width + c]);
+        for j in b.j0..=b.j1 {
+            let mut m = regm[r * wpr + j];
+            if m == 0 {
+                continue;
+            }
+            let mut cnt = Counter::default();
+            slices::add_fn(&mut cnt, wplanes.len(), |i| {
+                wplanes
+                    .get(i)
+                    .map_or(0, |plane| word(plane, t0 + i as u32, r, j))
+            });
+            while m != 0 {
+                let bit = m.trailing_zeros();
+                m &= m - 1;
+                let v = slices::count(&cnt, bit);
+                if let Some(x) = ws.c_t.get_mut(r * width + j * 64 + bit as usize) {
+                    *x = v;
+                }
+                max_count = max_count.max(v);
             }
         }
     }
@@ -346,6 +443,53 @@ mod tests {
                     "{a:?} {b:?}"
                 );
             }
+        }
+    }
+
+    /// The f32 shortcut orders windows exactly as the 256-bit comparison:
+    /// random sums over the whole ranges, near ties (sums one apart) and
+    /// extreme parameters.
+    #[test]
+    fn scored_windows_order_exactly() {
+        let mut x = 0x9e37_79b9_7f4a_7c15u64;
+        let mut rnd = |m: u64| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x % m.max(1)
+        };
+        let params = [
+            Params::default(),
+            Params {
+                sigma_fpn: crate::q::Sigma::from_bits(u16::MAX),
+                electrons_per_spike: u16::MAX,
+                ..Params::default()
+            },
+            Params {
+                sigma_fpn: crate::q::Sigma::from_bits(0),
+                electrons_per_spike: 1,
+                ..Params::default()
+            },
+        ];
+        for i in 0..200_000u32 {
+            let p = &params[(i % 3) as usize];
+            let scale = [30u64, 3_000, 300_000, 1 << 40][(i / 3 % 4) as usize];
+            let np = 1 + rnd(if scale > 1000 { 65_535 } else { 60 }) as u32;
+            let nr = rnd(if scale > 1000 { 1 << 20 } else { 200 }) as u32;
+            let (s1, b1) = (rnd(scale), rnd(scale));
+            let (s2, b2) = if i % 2 == 0 {
+                (s1 + rnd(3), b1 + rnd(3))
+            } else {
+                (rnd(scale), rnd(scale))
+            };
+            let a = Scored::new(s1, b1, np, nr, p);
+            let b = Scored::new(s2, b2, np, nr, p);
+            let exact = cmp_snr(&snr_terms(s1, b1, np, nr, p), &snr_terms(s2, b2, np, nr, p));
+            assert_eq!(
+                a.greater(&b, np, nr, p),
+                exact == Ordering::Greater,
+                "{s1} {b1} vs {s2} {b2}, np {np} nr {nr}"
+            );
         }
     }
 

@@ -4,7 +4,6 @@
 //! full, further pixels or regions stay background, and are counted.
 
 use crate::region::Region;
-use crate::segment::{decode, Class};
 use crate::state::Workspace;
 
 /// Regions smaller than this many pixels are noise.
@@ -39,12 +38,31 @@ fn find(parents: &[u16], mut x: u16) -> u16 {
     x
 }
 
-/// Labels the particle pixels of the first `rows` rows of the workspace.
-/// Writes `labels` (region index + 1, 0 for none) and the region table;
-/// returns the counts.
+/// Calls `f` with the pixel index of every set bit of `mask` (`wpr` words
+/// per row of `width` px), in raster order.
+#[inline(always)]
+fn for_each_bit(mask: &[u64], wpr: usize, width: usize, mut f: impl FnMut(usize)) {
+    for (w, &m) in mask.iter().enumerate() {
+        let mut m = m;
+        let base = (w / wpr) * width + 64 * (w % wpr);
+        while m != 0 {
+            f(base + m.trailing_zeros() as usize);
+            m &= m - 1;
+        }
+    }
+}
+
+/// Labels the particle pixels of the first `rows` rows of the workspace:
+/// the set bits of `ws.masks[words..2·words]` (`words` = `rows` × words
+/// per row), as the segmentation leaves them. Writes `labels` (region
+/// index + 1, 0 for none) and the region table; returns the counts. Only
+/// particle pixels are visited (raster order), so the cost follows them,
+/// not the frame.
 pub(crate) fn label(ws: &mut Workspace<'_>, rows: u16) -> LabelStats {
     let width = usize::from(ws.sizes.width);
+    let wpr = crate::plane::words_per_row(ws.sizes.width);
     let px = width * usize::from(rows);
+    let words = usize::from(rows) * wpr;
     let cap_prov = ws
         .parents
         .len()
@@ -53,14 +71,12 @@ pub(crate) fn label(ws: &mut Workspace<'_>, rows: u16) -> LabelStats {
     let cap_regions = ws.regions.len().min(usize::from(NONE) - 1);
     let mut stats = LabelStats::default();
     let labels = &mut ws.labels[..px];
+    labels.fill(0);
+    let part = &ws.masks[words..2 * words];
     let parents = &mut *ws.parents;
     let mut next: u16 = 0;
     // Pass 1: provisional labels and unions with the W, NW, N, NE neighbours.
-    for i in 0..px {
-        if decode(ws.class[i]).0 != Class::Particle {
-            labels[i] = 0;
-            continue;
-        }
+    for_each_bit(part, wpr, width, |i| {
         let (r, c) = (i / width, i % width);
         let mut root = 0u16;
         let mut neighbours = [0u16; 4];
@@ -98,7 +114,7 @@ pub(crate) fn label(ws: &mut Workspace<'_>, rows: u16) -> LabelStats {
             }
         }
         labels[i] = root;
-    }
+    });
     // Flatten: every label points at its root (roots are smaller, done first).
     for l in 1..=next {
         let p = parents[usize::from(l)];
@@ -106,9 +122,11 @@ pub(crate) fn label(ws: &mut Workspace<'_>, rows: u16) -> LabelStats {
     }
     // Pass 2: one region per root, with size and bounding box.
     let mut n = 0usize;
-    for (i, &l) in labels.iter().enumerate() {
+    let regions = &mut *ws.regions;
+    for_each_bit(part, wpr, width, |i| {
+        let l = labels[i];
         if l == 0 {
-            continue;
+            return;
         }
         let root = parents[usize::from(l)];
         let root = if root & ASSIGNED != 0 { l } else { root };
@@ -116,7 +134,7 @@ pub(crate) fn label(ws: &mut Workspace<'_>, rows: u16) -> LabelStats {
         let id = if e & ASSIGNED != 0 {
             e & !ASSIGNED
         } else if n < cap_regions {
-            ws.regions[n] = Region {
+            regions[n] = Region {
                 root,
                 row0: u16::MAX,
                 col0: u16::MAX,
@@ -130,7 +148,7 @@ pub(crate) fn label(ws: &mut Workspace<'_>, rows: u16) -> LabelStats {
             stats.overflow_regions += 1;
             NONE
         };
-        if let Some(reg) = ws.regions.get_mut(usize::from(id)).filter(|_| id != NONE) {
+        if let Some(reg) = regions.get_mut(usize::from(id)).filter(|_| id != NONE) {
             let (r, c) = ((i / width) as u16, (i % width) as u16);
             reg.pixels += 1;
             reg.row0 = reg.row0.min(r);
@@ -138,13 +156,13 @@ pub(crate) fn label(ws: &mut Workspace<'_>, rows: u16) -> LabelStats {
             reg.col0 = reg.col0.min(c);
             reg.col1 = reg.col1.max(c + 1);
         }
-    }
+    });
     // Drop noise regions, compact the table, point roots at the new index.
     let mut kept = 0usize;
     for j in 0..n {
-        let reg = ws.regions[j];
+        let reg = regions[j];
         if reg.pixels >= MIN_REGION_PIXELS {
-            ws.regions[kept] = reg;
+            regions[kept] = reg;
             parents[usize::from(reg.root)] = ASSIGNED | kept as u16;
             kept += 1;
         } else {
@@ -153,12 +171,16 @@ pub(crate) fn label(ws: &mut Workspace<'_>, rows: u16) -> LabelStats {
         }
     }
     // Pass 3: final labels.
-    for l in labels.iter_mut().filter(|l| **l != 0) {
-        let root = parents[usize::from(*l)];
-        let root = if root & ASSIGNED != 0 { *l } else { root };
+    for_each_bit(part, wpr, width, |i| {
+        let l = labels[i];
+        if l == 0 {
+            return;
+        }
+        let root = parents[usize::from(l)];
+        let root = if root & ASSIGNED != 0 { l } else { root };
         let id = parents[usize::from(root)] & !ASSIGNED;
-        *l = if id == NONE { 0 } else { id + 1 };
-    }
+        labels[i] = if id == NONE { 0 } else { id + 1 };
+    });
     stats.regions = kept as u32;
     stats
 }

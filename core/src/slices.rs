@@ -51,6 +51,28 @@ pub fn add<T: Copy>(c: &mut Counter, items: &[T], word: impl Fn(T) -> u64) {
     }
 }
 
+/// [`add`] over the words `word(0..n)`.
+#[inline(always)]
+pub fn add_fn(c: &mut Counter, n: usize, word: impl Fn(usize) -> u64) {
+    let mut i = 0;
+    while i < n {
+        let e = (i + 15).min(n);
+        let (mut s0, mut s1, mut s2, mut s3) = (0u64, 0u64, 0u64, 0u64);
+        for q in i..e {
+            let x = word(q);
+            let c0 = s0 & x;
+            s0 ^= x;
+            let c1 = s1 & c0;
+            s1 ^= c0;
+            let c2 = s2 & c1;
+            s2 ^= c1;
+            s3 ^= c2;
+        }
+        add_nibble(c, [s0, s1, s2, s3]);
+        i = e;
+    }
+}
+
 /// Adds a 4-bit bit-sliced number to `c`.
 #[inline(always)]
 pub(crate) fn add_nibble(c: &mut Counter, p: [u64; 4]) {
