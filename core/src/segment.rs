@@ -297,44 +297,74 @@ pub(crate) fn tile_pos(i: usize, lo: usize, hi: usize) -> (usize, usize, u32) {
 /// blocks of eight words, each tick's words read as one slice, summed
 /// into carry-save nibbles 15 ticks at a time (`crate::slices`).
 fn add_sliced(planes: &[&[u64]], wpr: usize, s0: u16, rows: usize, counts: &mut [u64]) {
-    // Four words side by side, each partial bit a lane array: the loop
-    // over a tick's four words vectorises and the partials stay in
-    // registers.
-    const BLOCK: usize = 4;
     for r in 0..rows {
         let off = (usize::from(s0) + r) * wpr;
         let mut j0 = 0;
         while j0 < wpr {
             let nb = BLOCK.min(wpr - j0);
-            for chunk in planes.chunks(15) {
-                let (mut s0, mut s1, mut s2, mut s3) =
-                    ([0u64; BLOCK], [0u64; BLOCK], [0u64; BLOCK], [0u64; BLOCK]);
-                for pl in chunk {
-                    let mut x = [0u64; BLOCK];
-                    if let Some(words) = pl.get(off + j0..off + j0 + nb) {
-                        x[..nb].copy_from_slice(words);
-                    }
-                    for q in 0..BLOCK {
-                        let c0 = s0[q] & x[q];
-                        s0[q] ^= x[q];
-                        let c1 = s1[q] & c0;
-                        s1[q] ^= c0;
-                        let c2 = s2[q] & c1;
-                        s2[q] ^= c1;
-                        s3[q] ^= c2;
-                    }
-                }
-                for q in 0..nb {
-                    let at = (r * wpr + j0 + q) * 8;
-                    if let Some(c) = counts
-                        .get_mut(at..at + 8)
-                        .and_then(|c| <&mut Counter>::try_from(c).ok())
-                    {
-                        slices::add_nibble(c, [s0[q], s1[q], s2[q], s3[q]]);
-                    }
-                }
-            }
+            let cell = (r * wpr + j0) * 8..(r * wpr + j0 + nb) * 8;
+            let Some(out) = counts.get_mut(cell) else {
+                return;
+            };
+            add_block(planes, off + j0, nb, out);
             j0 += nb;
+        }
+    }
+}
+
+/// Words side by side in [`add_block`].
+const BLOCK: usize = 4;
+
+/// [`add_sliced`] for the `nb` (≤ [`BLOCK`]) words from `off` of every
+/// plane into their counters `out` (`8·nb` words): two words per vector lane
+/// pair, so a tick costs one load and seven vector operations per two
+/// words, the partials in registers.
+#[inline(always)]
+fn add_block(planes: &[&[u64]], off: usize, nb: usize, out: &mut [u64]) {
+    use wide::u64x2;
+    for chunk in planes.chunks(15) {
+        let z = u64x2::ZERO;
+        let (mut a0, mut a1, mut a2, mut a3) = (z, z, z, z);
+        let (mut b0, mut b1, mut b2, mut b3) = (z, z, z, z);
+        for pl in chunk {
+            let [w0, w1, w2, w3] = match pl.get(off..off + BLOCK) {
+                Some(&[a, b, c, d]) => [a, b, c, d],
+                // The row's last words (or a plane not held): missing
+                // words count nothing.
+                _ => core::array::from_fn(|q| {
+                    if q < nb {
+                        pl.get(off + q).copied().unwrap_or(0)
+                    } else {
+                        0
+                    }
+                }),
+            };
+            let (x, y) = (u64x2::new([w0, w1]), u64x2::new([w2, w3]));
+            let c0 = a0 & x;
+            a0 ^= x;
+            let c1 = a1 & c0;
+            a1 ^= c0;
+            let c2 = a2 & c1;
+            a2 ^= c1;
+            a3 ^= c2;
+            let d0 = b0 & y;
+            b0 ^= y;
+            let d1 = b1 & d0;
+            b1 ^= d0;
+            let d2 = b2 & d1;
+            b2 ^= d1;
+            b3 ^= d2;
+        }
+        let (a, b) = (
+            [a0.to_array(), a1.to_array(), a2.to_array(), a3.to_array()],
+            [b0.to_array(), b1.to_array(), b2.to_array(), b3.to_array()],
+        );
+        for (q, c) in out.chunks_exact_mut(8).enumerate() {
+            let s = if q < 2 { &a } else { &b };
+            let l = q % 2;
+            if let Ok(c) = <&mut Counter>::try_from(c) {
+                slices::add_nibble(c, [s[0][l], s[1][l], s[2][l], s[3][l]]);
+            }
         }
     }
 }
