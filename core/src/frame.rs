@@ -18,7 +18,7 @@ use crate::context::Ctx;
 use crate::error::Error;
 use crate::gray::Gray;
 use crate::history::History;
-use crate::integrate::{adapt_region, region_gray};
+use crate::integrate::{adapt_region, region_table};
 use crate::label::{label, LabelStats};
 use crate::motion::Motion;
 use crate::params::{Params, MAX_LEVELS};
@@ -253,11 +253,12 @@ fn strip<G: Gray>(
         stats.regions_out += 1;
         stats.n_star_sum += u64::from(reg.n_star);
         let id = idx as u16 + 1;
+        region_table(&reg, p, fs, &mut gray[0]);
         for r in reg.row0.max(r_lo)..reg.row1.min(r_hi) {
             for c in usize::from(reg.col0)..usize::from(reg.col1) {
                 let i = usize::from(r) * width + c;
                 if ws.labels[i] == id {
-                    let g = region_gray(ws.c_t[i], &reg, p, fs);
+                    let g = gray[0][usize::from(ws.c_t[i])];
                     if let Some(o) = out.get_mut(usize::from(s0) * width + i) {
                         *o = G::from_level(g);
                     }

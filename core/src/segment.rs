@@ -319,6 +319,7 @@ const BLOCK: usize = 4;
 /// plane into their counters `out` (`8·nb` words): two words per vector lane
 /// pair, so a tick costs one load and seven vector operations per two
 /// words, the partials in registers.
+#[cfg(target_arch = "x86_64")]
 #[inline(always)]
 fn add_block(planes: &[&[u64]], off: usize, nb: usize, out: &mut [u64]) {
     use wide::u64x2;
@@ -365,6 +366,21 @@ fn add_block(planes: &[&[u64]], off: usize, nb: usize, out: &mut [u64]) {
             if let Ok(c) = <&mut Counter>::try_from(c) {
                 slices::add_nibble(c, [s[0][l], s[1][l], s[2][l], s[3][l]]);
             }
+        }
+    }
+}
+
+/// [`add_block`] in plain `u64`s, one word at a time: without a 128-bit
+/// vector unit (a Cortex-M4 splits every `u64` operation in two) the
+/// partials of more words than one do not stay in registers.
+#[cfg(not(target_arch = "x86_64"))]
+#[inline(always)]
+fn add_block(planes: &[&[u64]], off: usize, nb: usize, out: &mut [u64]) {
+    for (q, c) in out.chunks_exact_mut(8).enumerate().take(nb) {
+        if let Ok(c) = <&mut Counter>::try_from(c) {
+            slices::add(c, planes, |pl: &[u64]| {
+                pl.get(off + q).copied().unwrap_or(0)
+            });
         }
     }
 }
