@@ -635,7 +635,17 @@ pub(crate) fn segment(
                 let base = r * width + 64 * jw;
                 let mut done = 0u64;
                 let cand = if mc {
-                    a
+                    // Compensated: a particle needs a tested count above
+                    // the background (so above the word's lowest, the
+                    // floor only raises it); saturation reads the plain
+                    // counts. Only those pixels are read and tested.
+                    let t = lv.b_low(jw, width) >> B_FRAC_BITS;
+                    let row = &ws.mc[base..(base + 64).min(r * width + width)];
+                    let mut above = 0u64;
+                    for (q, &v) in row.iter().enumerate() {
+                        above |= u64::from(u32::from(v) > t) << q;
+                    }
+                    a & (above | slices::at_least(c, sat_c))
                 } else {
                     let tp = u32::from(th.min_count(lv.b_low(jw, width)));
                     let maybe = a0 & slices::at_least(c, tp);
