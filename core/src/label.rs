@@ -38,6 +38,17 @@ fn find(parents: &[u16], mut x: u16) -> u16 {
     x
 }
 
+/// The root of provisional label `l` after flattening (`None` for 0: no
+/// label): its parent, or itself where a region already took it.
+#[inline(always)]
+fn root_of(parents: &[u16], l: u16) -> Option<u16> {
+    if l == 0 {
+        return None;
+    }
+    let root = parents.get(usize::from(l)).copied().unwrap_or(l);
+    Some(if root & ASSIGNED != 0 { l } else { root })
+}
+
 /// Calls `f` with the pixel index of every set bit of `mask` (`wpr` words
 /// per row of `width` px), in raster order.
 #[inline(always)]
@@ -124,12 +135,9 @@ pub(crate) fn label(ws: &mut Workspace<'_>, rows: u16) -> LabelStats {
     let mut n = 0usize;
     let regions = &mut *ws.regions;
     for_each_bit(part, wpr, width, |i| {
-        let l = labels[i];
-        if l == 0 {
+        let Some(root) = root_of(parents, labels[i]) else {
             return;
-        }
-        let root = parents[usize::from(l)];
-        let root = if root & ASSIGNED != 0 { l } else { root };
+        };
         let e = parents[usize::from(root)];
         let id = if e & ASSIGNED != 0 {
             e & !ASSIGNED
@@ -172,12 +180,9 @@ pub(crate) fn label(ws: &mut Workspace<'_>, rows: u16) -> LabelStats {
     }
     // Pass 3: final labels.
     for_each_bit(part, wpr, width, |i| {
-        let l = labels[i];
-        if l == 0 {
+        let Some(root) = root_of(parents, labels[i]) else {
             return;
-        }
-        let root = parents[usize::from(l)];
-        let root = if root & ASSIGNED != 0 { l } else { root };
+        };
         let id = parents[usize::from(root)] & !ASSIGNED;
         labels[i] = if id == NONE { 0 } else { id + 1 };
     });

@@ -324,9 +324,7 @@ const BLOCK: usize = 4;
 fn add_block(planes: &[&[u64]], off: usize, nb: usize, out: &mut [u64]) {
     use wide::u64x2;
     for chunk in planes.chunks(15) {
-        let z = u64x2::ZERO;
-        let (mut a0, mut a1, mut a2, mut a3) = (z, z, z, z);
-        let (mut b0, mut b1, mut b2, mut b3) = (z, z, z, z);
+        let (mut a, mut b) = ([u64x2::ZERO; 4], [u64x2::ZERO; 4]);
         for pl in chunk {
             let [w0, w1, w2, w3] = match pl.get(off..off + BLOCK) {
                 Some(&[a, b, c, d]) => [a, b, c, d],
@@ -340,26 +338,10 @@ fn add_block(planes: &[&[u64]], off: usize, nb: usize, out: &mut [u64]) {
                     }
                 }),
             };
-            let (x, y) = (u64x2::new([w0, w1]), u64x2::new([w2, w3]));
-            let c0 = a0 & x;
-            a0 ^= x;
-            let c1 = a1 & c0;
-            a1 ^= c0;
-            let c2 = a2 & c1;
-            a2 ^= c1;
-            a3 ^= c2;
-            let d0 = b0 & y;
-            b0 ^= y;
-            let d1 = b1 & d0;
-            b1 ^= d0;
-            let d2 = b2 & d1;
-            b2 ^= d1;
-            b3 ^= d2;
+            slices::csa(&mut a, u64x2::new([w0, w1]));
+            slices::csa(&mut b, u64x2::new([w2, w3]));
         }
-        let (a, b) = (
-            [a0.to_array(), a1.to_array(), a2.to_array(), a3.to_array()],
-            [b0.to_array(), b1.to_array(), b2.to_array(), b3.to_array()],
-        );
+        let (a, b) = (a.map(|v| v.to_array()), b.map(|v| v.to_array()));
         for (q, c) in out.chunks_exact_mut(8).enumerate() {
             let s = if q < 2 { &a } else { &b };
             let l = q % 2;

@@ -12,7 +12,7 @@
 pub type Counter = [u64; 8];
 
 /// `SPREAD[b]` has byte `i` equal to bit `i` of `b`.
-const SPREAD: [u64; 256] = {
+pub(crate) const SPREAD: [u64; 256] = {
     let mut t = [0u64; 256];
     let mut b = 0;
     while b < 256 {
@@ -29,48 +29,51 @@ const SPREAD: [u64; 256] = {
 };
 
 /// Adds one spike word per item of `items` (`word(item)`, bit `i` a spike
-/// of pixel `i`) to `c`: 15 words at a time are summed into 4-bit
-/// carry-save counters (7 logic operations per word), then added to the
-/// 8-bit counters with a ripple of full adders that stops where the carry
-/// dies. The caller keeps every count below 256.
+/// of pixel `i`) to `c`, as [`add_fn`] does. The caller keeps every count
+/// below 256.
 #[inline(always)]
 pub fn add<T: Copy>(c: &mut Counter, items: &[T], word: impl Fn(T) -> u64) {
     for chunk in items.chunks(15) {
-        let (mut s0, mut s1, mut s2, mut s3) = (0u64, 0u64, 0u64, 0u64);
+        let mut s = [0u64; 4];
         for &item in chunk {
-            let x = word(item);
-            let c0 = s0 & x;
-            s0 ^= x;
-            let c1 = s1 & c0;
-            s1 ^= c0;
-            let c2 = s2 & c1;
-            s2 ^= c1;
-            s3 ^= c2;
+            csa(&mut s, word(item));
         }
-        add_nibble(c, [s0, s1, s2, s3]);
+        add_nibble(c, s);
     }
 }
 
-/// [`add`] over the words `word(0..n)`.
+/// Adds the words `word(0..n)` to `c`: 15 words at a time are summed into
+/// 4-bit carry-save counters ([`csa`]: 7 logic operations per word), then
+/// added to the 8-bit counters with a ripple of full adders that stops
+/// where the carry dies. The caller keeps every count below 256.
 #[inline(always)]
 pub fn add_fn(c: &mut Counter, n: usize, word: impl Fn(usize) -> u64) {
     let mut i = 0;
     while i < n {
         let e = (i + 15).min(n);
-        let (mut s0, mut s1, mut s2, mut s3) = (0u64, 0u64, 0u64, 0u64);
+        let mut s = [0u64; 4];
         for q in i..e {
-            let x = word(q);
-            let c0 = s0 & x;
-            s0 ^= x;
-            let c1 = s1 & c0;
-            s1 ^= c0;
-            let c2 = s2 & c1;
-            s2 ^= c1;
-            s3 ^= c2;
+            csa(&mut s, word(q));
         }
-        add_nibble(c, [s0, s1, s2, s3]);
+        add_nibble(c, s);
         i = e;
     }
+}
+
+/// Adds one word to a 4-bit carry-save counter `s` (bit planes 0..4), for
+/// any type with the bit operations: `u64`, or two words in a vector.
+#[inline(always)]
+pub fn csa<T>(s: &mut [T; 4], x: T)
+where
+    T: Copy + core::ops::BitAnd<Output = T> + core::ops::BitXorAssign,
+{
+    let c0 = s[0] & x;
+    s[0] ^= x;
+    let c1 = s[1] & c0;
+    s[1] ^= c0;
+    let c2 = s[2] & c1;
+    s[2] ^= c1;
+    s[3] ^= c2;
 }
 
 /// Adds a 4-bit bit-sliced number to `c`.

@@ -6,12 +6,13 @@
 //! of the history a window is clipped to the ticks held, and rates use its
 //! real length ([`Window::len`]).
 //!
-//! Counting is SWAR: a 256-entry table spreads 8 spike bits into 8 byte
-//! lanes of a `u64`, so one add counts 8 pixels and a 64-pixel word costs 8
-//! adds per tick; counts are bytes, so a window is at most 255 ticks.
+//! Counting is bit-sliced ([`crate::slices`]): 64 pixels' counters as eight
+//! bit planes, read back into bytes once; counts are bytes, so a window is
+//! at most 255 ticks.
 
 use crate::error::{Error, ParamError};
 use crate::history::History;
+use crate::slices::{self, SPREAD};
 
 /// A window of ticks after clipping to the history.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -58,23 +59,6 @@ impl Window {
         self.start.saturating_add(u32::from(self.len))
     }
 }
-
-/// `SPREAD[b]` has byte `i` equal to bit `i` of `b`.
-const SPREAD: [u64; 256] = {
-    let mut t = [0u64; 256];
-    let mut b = 0;
-    while b < 256 {
-        let mut i = 0;
-        while i < 8 {
-            if (b >> i) & 1 == 1 {
-                t[b] |= 1 << (8 * i);
-            }
-            i += 1;
-        }
-        b += 1;
-    }
-    t
-};
 
 /// The planes of a window, gathered once: slice `i` is the band at tick
 /// `start + i` (an empty slice for a tick not held). At most 256 planes.
@@ -153,32 +137,26 @@ pub fn add_plane_counts(planes: &[&[u64]], width: u16, rows: (u16, u16), counts:
 }
 
 /// Adds the words of spikes `word(item)` of every item (bit `b` of a word
-/// the pixel `b`) to the byte counters `out` (at most 64 pixels). Bit-sliced: 15 words at a time are
-/// summed into 4-bit vertical counters (7 logic ops per word), then flushed
-/// into the byte counters through the `SPREAD` table. Hand-written because
-/// this is the hot loop of every frame, plain or motion-compensated.
+/// the pixel `b`) to the byte counters `out` (at most 64 pixels).
+/// Bit-sliced: 15 words at a time are summed into 4-bit carry-save
+/// counters ([`slices::csa`]), then flushed into the byte counters through
+/// the `SPREAD` table. Hand-written because this is the hot loop of every
+/// TFP and compensated frame.
 #[inline(always)]
 pub(crate) fn add_words<T: Copy>(items: &[T], word: impl Fn(T) -> u64, out: &mut [u8]) {
     let mut acc = [0u64; 8];
     for chunk in items.chunks(15) {
-        let (mut s0, mut s1, mut s2, mut s3) = (0u64, 0u64, 0u64, 0u64);
+        let mut s = [0u64; 4];
         for &item in chunk {
-            let x = word(item);
-            let c0 = s0 & x;
-            s0 ^= x;
-            let c1 = s1 & c0;
-            s1 ^= c0;
-            let c2 = s2 & c1;
-            s2 ^= c1;
-            s3 ^= c2;
+            slices::csa(&mut s, word(item));
         }
-        if s0 | s1 | s2 | s3 == 0 {
+        if s[0] | s[1] | s[2] | s[3] == 0 {
             continue;
         }
         for (g, a) in acc.iter_mut().enumerate() {
             let sh = 8 * g;
             let b = |s: u64| SPREAD[((s >> sh) & 0xff) as usize];
-            *a = a.wrapping_add(b(s0) + (b(s1) << 1) + (b(s2) << 2) + (b(s3) << 3));
+            *a = a.wrapping_add(b(s[0]) + (b(s[1]) << 1) + (b(s[2]) << 2) + (b(s[3]) << 3));
         }
     }
     for (g, c8) in out.chunks_mut(8).enumerate() {
