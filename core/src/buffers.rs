@@ -133,7 +133,6 @@ pub struct SidecarBuf<G> {
     /// Applied and waiting caps.
     caps: [Vec<u16>; 2],
     refined: (Vec<i16>, Vec<i16>),
-    refine_scratch: Vec<u8>,
 }
 
 impl<G: Gray> SidecarBuf<G> {
@@ -156,7 +155,6 @@ impl<G: Gray> SidecarBuf<G> {
             rows: core::array::from_fn(|_| vec![0; m.rows]),
             caps: core::array::from_fn(|_| vec![0; m.cap_bands]),
             refined: (vec![0; m.refined], vec![0; m.refined]),
-            refine_scratch: vec![0; m.refine_scratch],
         })
     }
 
@@ -177,7 +175,6 @@ impl<G: Gray> SidecarBuf<G> {
             refine: crate::sidecar::RefineBuffers {
                 vx: &mut self.refined.0,
                 vy: &mut self.refined.1,
-                scratch: &mut self.refine_scratch,
             },
         })
     }

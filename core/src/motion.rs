@@ -22,15 +22,19 @@
 //! refined velocity is within about 1–4 % on the paper's scenes
 //! (`host/examples/mc_probe.rs`).
 //!
-//! Memory: none beyond the caller's scratch and a 2 KiB table of band
-//! winners on the stack. Cost of [`refine`]: (1 + 2·rel + 4·abs) windows
-//! of compensated counts per band row.
+//! Memory: none beyond the caller's buffers; [`refine`] keeps a 2 KiB
+//! table of band winners and its per-tick tables (4 KiB on a 32-bit MCU,
+//! 10 KiB on a 64-bit host) on the stack. Cost of [`refine`]: at most
+//! (1 + 2·rel + 4·abs) windows of compensated counts per band row, summed
+//! as squares in the bit planes; candidates that shift every plane as an
+//! earlier one does are not counted again.
 //!
 //! Rounding rule, the one definition both this module and the host's `f64`
 //! reference use: `round(v·Δt/256) = ⌊(v·Δt + 128)/256⌋` (halves up).
 
 use crate::error::{Error, ParamError};
 use crate::history::History;
+use crate::slices::{self, Counter};
 use crate::window::{Span, Window};
 
 /// Velocities are in 1/`Q` px per tick.
@@ -252,8 +256,7 @@ pub fn candidate(cfg: &Refine, vx: i16, vy: i16, n: usize) -> Option<(i16, i16)>
 /// compensated counts over the band wins (the earliest on a tie, so the
 /// prediction when nothing is sharper). The winners are written to
 /// `out_vx`, `out_vy` (one per band row), piecewise linear between band
-/// centres (rounded down) and constant beyond the outer ones. `scratch`
-/// holds `cfg.band × width` bytes. Kept out of line (one call per frame)
+/// centres (rounded down) and constant beyond the outer ones. Kept out of line (one call per frame)
 /// so instruction counters can attribute its cost (`firmware-sim/cost.sh`).
 #[inline(never)]
 pub fn refine(
@@ -261,7 +264,6 @@ pub fn refine(
     kc: u32,
     motion: &Motion<'_>,
     cfg: &Refine,
-    scratch: &mut [u8],
     out_vx: &mut [i16],
     out_vy: &mut [i16],
 ) -> Result<(), Error> {
@@ -272,9 +274,6 @@ pub fn refine(
         return Err(Error::TickUnavailable);
     }
     let (width, rows) = (hist.width(), hist.rows());
-    let w = usize::from(width);
-    let need = usize::from(cfg.band) * w;
-    crate::window::check_len(scratch.len(), need)?;
     crate::window::check_len(out_vx.len(), usize::from(rows))?;
     crate::window::check_len(out_vy.len(), usize::from(rows))?;
     let bands = rows.div_ceil(cfg.band);
@@ -286,22 +285,34 @@ pub fn refine(
     }
     let span = Span::new(hist, Window::in_history(hist, kc, cfg.window));
     let mut win = [(0i16, 0i16); MAX_BANDS];
+    let mut sharp = SharpScratch {
+        shifts: [Shift::default(); 256],
+        items: [Source::EMPTY; 256],
+    };
     for (b, slot) in (0..bands).zip(win.iter_mut()) {
         let r0 = b * cfg.band;
         let r1 = r0.saturating_add(cfg.band).min(rows);
         let (px, py) = motion.at(r0 + (r1 - r0) / 2);
-        let counts = &mut scratch[..usize::from(r1 - r0) * w];
         let mut best: Option<(u64, i16, i16)> = None;
         let mut first = 0u64;
         let mut n = 0;
+        // Candidates measured so far in this band. One whose shifts equal
+        // a measured one's at every tick of the window has its counts, so
+        // its sum, and cannot beat it (a later one wins only when larger):
+        // it is skipped. Slow rows have many such (issue 18).
+        let mut seen: heapless::Vec<(i16, i16), 64> = heapless::Vec::new();
         while let Some((cx, cy)) = candidate(cfg, px, py, n) {
             n += 1;
-            counts.fill(0);
-            for (i, r) in (r0..r1).enumerate() {
-                let row = &mut counts[i * w..(i + 1) * w];
-                add_row(span.planes(), span.start, kc, width, rows, r, (cx, cy), row);
+            let dts = (
+                i64::from(span.start) - i64::from(kc),
+                i64::from(span.start) + span.planes().len() as i64 - 1 - i64::from(kc),
+            );
+            if seen.iter().any(|&o| same_path(o, (cx, cy), dts)) {
+                continue;
             }
-            let e: u64 = counts.iter().map(|&c| u64::from(c) * u64::from(c)).sum();
+            // A full table only stops the skipping.
+            let _ = seen.push((cx, cy));
+            let e = sharpness(&mut sharp, &span, kc, width, rows, (r0, r1), (cx, cy));
             if n == 1 {
                 first = e;
             }
@@ -345,6 +356,11 @@ pub fn refine(
 
 /// Adds the counts of band row `r` compensated for `(vx, vy)` to `row`,
 /// bit-sliced as the plain counts are (`window::add_words`).
+///
+/// Each tick's shift is resolved once per row (issue 18): its source row
+/// (empty when the shift leaves the band), the word offset and the bit
+/// offset, so a shifted word is two loads and a funnel shift — the same
+/// words as [`shifted_word`].
 #[allow(clippy::too_many_arguments)]
 fn add_row(
     planes: &[&[u64]],
@@ -357,18 +373,209 @@ fn add_row(
     row: &mut [u8],
 ) {
     let wpr = crate::plane::words_per_row(width);
-    // Each tick's plane with its shift.
-    let mut items: [(&[u64], i32, i32); 256] = [(&[], 0, 0); 256];
+    // Each tick's source row, word offset and bit offset.
+    let mut items: [Source<'_>; 256] = [Source::EMPTY; 256];
     let n = planes.len().min(items.len());
     for ((it, p), i) in items.iter_mut().zip(planes).zip(0i64..) {
         let dt = (i64::from(start) + i - i64::from(kc)) as i32;
-        *it = (p, shift(vx, dt), shift(vy, dt));
+        *it = Source::new(p, wpr, band_rows, r, shift(vx, dt), shift(vy, dt));
     }
     for (j, cw) in row.chunks_mut(64).enumerate() {
-        crate::window::add_words(
-            &items[..n],
-            |(p, sx, sy)| shifted_word(p, wpr, band_rows, r, j, sx, sy),
-            cw,
-        );
+        crate::window::add_words(&items[..n], |s| s.word(j), cw);
+    }
+}
+
+/// One tick's plane as [`shifted_word`] reads it for one band row: the
+/// shifted-to row's words (empty outside the band), the whole words and
+/// the bits of the x shift.
+#[derive(Debug, Clone, Copy)]
+struct Source<'p> {
+    row: &'p [u64],
+    q: isize,
+    b: u32,
+}
+
+impl<'p> Source<'p> {
+    const EMPTY: Source<'static> = Source {
+        row: &[],
+        q: 0,
+        b: 0,
+    };
+
+    fn new(plane: &'p [u64], wpr: usize, rows: u16, r: u16, sx: i32, sy: i32) -> Source<'p> {
+        Source::at(plane, wpr, rows, r, Shift::new(sx, sy))
+    }
+
+    fn at(plane: &'p [u64], wpr: usize, rows: u16, r: u16, s: Shift) -> Source<'p> {
+        let rs = i32::from(r) + s.y;
+        if rs < 0 || rs >= i32::from(rows) {
+            return Source::EMPTY;
+        }
+        let base = rs as usize * wpr;
+        let row = plane.get(base..).unwrap_or(&[]);
+        Source {
+            row: row.get(..wpr).unwrap_or(row),
+            q: s.q,
+            b: s.b,
+        }
+    }
+
+    /// Word `j` of the shifted row (0 beyond the row's ends).
+    #[inline(always)]
+    fn word(&self, j: usize) -> u64 {
+        let q = (j as isize).wrapping_add(self.q);
+        // A negative q wraps to a huge index: no word, as beyond the end.
+        let lo = self.row.get(q as usize).copied().unwrap_or(0);
+        let hi = self
+            .row
+            .get(q.wrapping_add(1) as usize)
+            .copied()
+            .unwrap_or(0);
+        // (hi << 1) << (63 − b) is hi << (64 − b) for b > 0 and 0 for b = 0.
+        (lo >> self.b) | ((hi << 1) << (63 - self.b))
+    }
+}
+
+/// Whether velocities `a` and `b` shift every plane `dt = dts.0..=dts.1`
+/// ticks from the centre by the same whole pixels (the window's two ends
+/// first: they differ most).
+fn same_path(a: (i16, i16), b: (i16, i16), dts: (i64, i64)) -> bool {
+    let at = |dt: i64| {
+        let dt = dt.clamp(-65_535, 65_535) as i32;
+        shift(a.0, dt) == shift(b.0, dt) && shift(a.1, dt) == shift(b.1, dt)
+    };
+    if dts.1 < dts.0 {
+        return true;
+    }
+    at(dts.0) && at(dts.1) && (dts.0..=dts.1).all(at)
+}
+
+/// A plane's shift `(sx, sy)` split for [`Source`]: rows `y`, whole words
+/// `q` and bits `b` of x.
+#[derive(Debug, Clone, Copy, Default)]
+struct Shift {
+    y: i32,
+    q: isize,
+    b: u32,
+}
+
+impl Shift {
+    fn new(sx: i32, sy: i32) -> Shift {
+        Shift {
+            y: sy,
+            q: sx.div_euclid(64) as isize,
+            b: sx.rem_euclid(64) as u32,
+        }
+    }
+}
+
+/// Per-tick tables of [`sharpness`], on the caller's stack once per
+/// [`refine`] (10 KB on a 64-bit host, 4 KB on a 32-bit MCU).
+struct SharpScratch<'p> {
+    shifts: [Shift; 256],
+    items: [Source<'p>; 256],
+}
+
+/// [`refine`]'s measure of a candidate: the sum over band rows
+/// `rows.0..rows.1` of the squared counts compensated for `(vx, vy)` —
+/// the counts [`add_row`] makes, summed as squares straight from the bit
+/// planes ([`slices::sum_squares`]) without reading them back into bytes
+/// (issue 18: refine was four fifths of a compensated frame). Each tick's
+/// shift is resolved once for all rows.
+fn sharpness<'p>(
+    scratch: &mut SharpScratch<'p>,
+    span: &Span<'p>,
+    kc: u32,
+    width: u16,
+    band_rows: u16,
+    rows: (u16, u16),
+    (vx, vy): (i16, i16),
+) -> u64 {
+    let (planes, start) = (span.planes(), span.start);
+    let wpr = crate::plane::words_per_row(width);
+    let n = planes.len().min(256);
+    let shifts = &mut scratch.shifts;
+    for (s, i) in shifts.iter_mut().take(n).zip(0i64..) {
+        let dt = (i64::from(start) + i - i64::from(kc)) as i32;
+        *s = Shift::new(shift(vx, dt), shift(vy, dt));
+    }
+    let items = &mut scratch.items;
+    let mut e = 0u64;
+    for r in rows.0..rows.1 {
+        for ((it, p), &s) in items.iter_mut().zip(planes).zip(&shifts[..n]) {
+            *it = Source::at(p, wpr, band_rows, r, s);
+        }
+        for j in 0..wpr {
+            // Pixels past the row's end are not pixels.
+            let mask = slices::low_bits(usize::from(width) - 64 * j);
+            let mut c = Counter::default();
+            slices::add(&mut c, &items[..n], |s| s.word(j) & mask);
+            e += slices::sum_squares(&c);
+        }
+    }
+    e
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plane::PlaneView;
+
+    /// `sharpness` is the sum of the squared counts `add_row` makes, for
+    /// shifts either way, widths that end mid-word and rows that leave
+    /// the band; `same_path` holds exactly when every plane's shift agrees.
+    #[test]
+    fn sharpness_is_the_sum_of_squared_compensated_counts() {
+        let mut s = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            s
+        };
+        for (w, h) in [(8u16, 9u16), (72, 12), (130, 4)] {
+            let (wu, hu) = (usize::from(w), usize::from(h));
+            let planes: Vec<Vec<u8>> = (0..70)
+                .map(|_| (0..wu * hu / 8).map(|_| (next() & 0x2a) as u8).collect())
+                .collect();
+            let mut words = vec![0u64; History::words_needed(w, h, 128).unwrap()];
+            let mut hist = History::new(&mut words, w, h, 0, h, 128).unwrap();
+            for p in &planes {
+                hist.push(&PlaneView::new(p, w, h).unwrap()).unwrap();
+            }
+            let kc = 33;
+            let span = Span::new(&hist, Window::in_history(&hist, kc, 64));
+            let mut sharp = SharpScratch {
+                shifts: [Shift::default(); 256],
+                items: [Source::EMPTY; 256],
+            };
+            for v in [(0i16, 0i16), (300, -40), (-700, 90), (5, 2), (-1300, -300)] {
+                for rows in [(0u16, h), (1, 3)] {
+                    let mut want = 0u64;
+                    for r in rows.0..rows.1 {
+                        let mut row = vec![0u8; wu];
+                        add_row(span.planes(), span.start, kc, w, h, r, v, &mut row);
+                        want += row.iter().map(|&c| u64::from(c).pow(2)).sum::<u64>();
+                    }
+                    let got = sharpness(&mut sharp, &span, kc, w, h, rows, v);
+                    assert_eq!(got, want, "{w}x{h} v {v:?} rows {rows:?}");
+                }
+            }
+        }
+        let dts = (-32, 31);
+        let shifts_of = |v: (i16, i16)| -> Vec<(i32, i32)> {
+            (dts.0..=dts.1)
+                .map(|dt| (shift(v.0, dt as i32), shift(v.1, dt as i32)))
+                .collect()
+        };
+        for a in [(25i16, 0i16), (320, 3), (-64, -9)] {
+            for d in -12i16..=12 {
+                for b in [(a.0 + d, a.1), (a.0, a.1 + d)] {
+                    assert_eq!(same_path(a, b, dts), shifts_of(a) == shifts_of(b), "{a:?} {b:?}");
+                }
+            }
+        }
+        assert!(same_path((25, 0), (25, 1), dts));
+        assert!(!same_path((25, 0), (40, 0), dts));
     }
 }

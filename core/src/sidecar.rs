@@ -146,8 +146,6 @@ pub struct MemorySizes {
     pub cap_bands: usize,
     /// Refined velocities (each of two; with [`Config::refine`]).
     pub refined: usize,
-    /// Refinement scratch, bytes.
-    pub refine_scratch: usize,
 }
 
 impl Config {
@@ -166,12 +164,9 @@ impl Config {
         let tfp = self.method == Method::Tfp || (mc && self.bootstrap == Method::Tfp);
         let rows = tile_rows(width, height, wide, self.lossy.block);
         let codec_scratch = tile_scratch(self.encoding, width, rows, self.lossy.block);
-        let (refined, refine_scratch) = match self.refine {
-            Some(r) => (
-                usize::from(height),
-                usize::from(r.band).checked_mul(usize::from(width))?,
-            ),
-            None => (0, 0),
+        let refined = match self.refine {
+            Some(_) => usize::from(height),
+            None => 0,
         };
         Some(MemorySizes {
             workspace,
@@ -185,7 +180,6 @@ impl Config {
             rows: usize::from(height),
             cap_bands: usize::from(height.div_ceil(CAP_BAND)),
             refined,
-            refine_scratch,
         })
     }
 }
@@ -290,7 +284,7 @@ pub struct Memory<'a, G: Gray> {
     /// paper's algorithm.
     pub downlink: DownlinkBuffers<'a>,
     /// With [`Config::refine`]: where the refined velocities go (one per
-    /// band row each) and the refinement's scratch (`band × width` bytes).
+    /// band row each).
     pub refine: RefineBuffers<'a>,
 }
 
@@ -301,8 +295,6 @@ pub struct RefineBuffers<'a> {
     pub vx: &'a mut [i16],
     /// Refined y velocities, one per band row.
     pub vy: &'a mut [i16],
-    /// Scratch counts, `band × width` bytes.
-    pub scratch: &'a mut [u8],
 }
 
 impl RefineBuffers<'_> {
@@ -311,7 +303,6 @@ impl RefineBuffers<'_> {
         RefineBuffers {
             vx: &mut [],
             vy: &mut [],
-            scratch: &mut [],
         }
     }
 }
@@ -586,7 +577,7 @@ pub struct FrameBuffers<'m, 'a, G> {
     pub workspace: &'m mut Workspace<'a>,
     /// TFP's window counts (`width × height`; empty unless TFP is used).
     pub counts: &'m mut [u8],
-    /// With [`Config::refine`]: the refined velocities and scratch.
+    /// With [`Config::refine`]: the refined velocities.
     pub refine: &'m mut RefineBuffers<'a>,
     /// The frame, `width × height` samples, stored row order.
     pub frame: &'m mut [G],
@@ -639,7 +630,7 @@ pub fn make_frame<G: Gray>(
                 None => motion,
                 Some(rc) => {
                     let r = mem.refine;
-                    refine(hist, k, &motion, rc, r.scratch, r.vx, r.vy)?;
+                    refine(hist, k, &motion, rc, r.vx, r.vy)?;
                     Motion { vx: r.vx, vy: r.vy }
                 }
             };

@@ -146,6 +146,27 @@ pub fn bytes8(c: &Counter, g: u32) -> [u8; 8] {
     v.to_le_bytes()
 }
 
+/// The sum over the 64 pixels of their squared counts, from the bit
+/// planes: `c² = Σ_a 4^a·c_a + Σ_{a<b} 2^(a+b+1)·c_a·c_b`, so the sum is
+/// popcounts of the planes and of their pairwise ANDs (planes above the
+/// highest non-zero one skipped). Exact: at most 64·255² < 2^22.
+#[inline]
+pub fn sum_squares(c: &Counter) -> u64 {
+    let top = c.iter().rposition(|&p| p != 0).map_or(0, |t| t + 1);
+    let mut sum = 0u64;
+    for a in 0..top {
+        let pa = c[a];
+        if pa == 0 {
+            continue;
+        }
+        sum += u64::from(pa.count_ones()) << (2 * a);
+        for (b, &pb) in c.iter().enumerate().take(top).skip(a + 1) {
+            sum += u64::from((pa & pb).count_ones()) << (a + b + 1);
+        }
+    }
+    sum
+}
+
 /// Bit `i` set where `i < n` (0..=64).
 #[inline]
 pub fn low_bits(n: usize) -> u64 {
@@ -187,5 +208,9 @@ mod tests {
                 );
             }
         }
+        let squares: u64 = (0..64).map(|i| u64::from(count(&c, i)).pow(2)).sum();
+        assert_eq!(sum_squares(&c), squares);
+        assert_eq!(sum_squares(&Counter::default()), 0);
+        assert_eq!(sum_squares(&[u64::MAX; 8]), 64 * 255 * 255);
     }
 }

@@ -153,9 +153,8 @@ fn refine_finds_the_velocity_of_moving_particles() {
         vy: &zero,
     };
     let cfg = Refine::default();
-    let mut scratch = vec![0u8; usize::from(cfg.band) * 256];
     let (mut vx, mut vy) = (vec![0i16; 48], vec![0i16; 48]);
-    refine(&hist, 50, &m, &cfg, &mut scratch, &mut vx, &mut vy).unwrap();
+    refine(&hist, 50, &m, &cfg, &mut vx, &mut vy).unwrap();
     for (b, r) in [(0, 7), (1, 24), (2, 40)] {
         // Rows at or next to the band's centre (rows 7.5, 23.5, 39.5).
         let got = f64::from(vx[r]) / 256.0;
@@ -184,17 +183,15 @@ fn refine_keeps_the_prediction_when_nothing_is_sharper_and_refuses_bad_input() {
         vy: &pred,
     };
     let cfg = Refine::default();
-    let mut scratch = vec![0u8; 16 * 64];
     let (mut vx, mut vy) = (vec![0i16; 16], vec![0i16; 16]);
-    refine(&hist, 20, &m, &cfg, &mut scratch, &mut vx, &mut vy).unwrap();
+    refine(&hist, 20, &m, &cfg, &mut vx, &mut vy).unwrap();
     assert!(vx.iter().chain(&vy).all(|&v| v == 100));
     let bad = Refine { band: 0, ..cfg };
-    assert!(refine(&hist, 20, &m, &bad, &mut scratch, &mut vx, &mut vy).is_err());
+    assert!(refine(&hist, 20, &m, &bad, &mut vx, &mut vy).is_err());
     let bad = Refine { window: 0, ..cfg };
-    assert!(refine(&hist, 20, &m, &bad, &mut scratch, &mut vx, &mut vy).is_err());
-    assert!(refine(&hist, 99, &m, &cfg, &mut scratch, &mut vx, &mut vy).is_err());
-    assert!(refine(&hist, 20, &m, &cfg, &mut scratch[..10], &mut vx, &mut vy).is_err());
-    assert!(refine(&hist, 20, &m, &cfg, &mut scratch, &mut vx[..3], &mut vy).is_err());
+    assert!(refine(&hist, 20, &m, &bad, &mut vx, &mut vy).is_err());
+    assert!(refine(&hist, 99, &m, &cfg, &mut vx, &mut vy).is_err());
+    assert!(refine(&hist, 20, &m, &cfg, &mut vx[..3], &mut vy).is_err());
     // Candidates: the prediction first, 1 + 2·rel + 4·abs in all, clamped.
     let n = (0..)
         .take_while(|&i| candidate(&cfg, 100, 0, i).is_some())

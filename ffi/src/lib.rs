@@ -311,7 +311,6 @@ struct Layout {
     rows: [Span; 4],
     caps: [Span; 2],
     refined: [Span; 2],
-    refine_scratch: Span,
     total: usize,
 }
 
@@ -353,7 +352,6 @@ impl Layout {
             payload: c.take::<u8>(MAX_PAYLOAD)?,
             wire: c.take::<u8>(MAX_ENCODED)?,
             rx: c.take::<u8>(MAX_CONTROL_ENCODED)?,
-            refine_scratch: c.take::<u8>(m.refine_scratch)?,
             total: c.0,
         })
     }
@@ -591,7 +589,6 @@ unsafe fn parts<'b, G: Gray + Plain>(
         refine: RefineBuffers {
             vx: i(l.refined[0]),
             vy: i(l.refined[1]),
-            scratch: s(l.refine_scratch),
         },
     })
 }

@@ -111,16 +111,7 @@ pub fn compensated_frame(
             vx: &pred.0,
             vy: &pred.1,
         };
-        let mut scratch = vec![0u8; usize::from(cfg.band) * usize::from(w)];
-        refine(
-            &hist,
-            tick,
-            &m,
-            &cfg,
-            &mut scratch,
-            &mut used.0,
-            &mut used.1,
-        )?;
+        refine(&hist, tick, &m, &cfg, &mut used.0, &mut used.1)?;
     }
     let mut ws = WorkspaceBuf::new(WorkspaceSizes::for_motion(w, h));
     let mut out = vec![0u16; usize::from(w) * usize::from(h)];

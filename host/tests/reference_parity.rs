@@ -400,13 +400,12 @@ fn refined_motion_matches_reference_and_moves_toward_the_truth() {
     for plane in packed.chunks_exact(pb) {
         hist.push(&PlaneView::new(plane, w, h).unwrap()).unwrap();
     }
-    let mut scratch = vec![0u8; usize::from(cfg.band) * usize::from(w)];
     let (mut vx, mut vy) = (vec![0i16; usize::from(h)], vec![0i16; usize::from(h)]);
     let m = Motion {
         vx: &pred,
         vy: &zero,
     };
-    refine(&hist, kc, &m, &cfg, &mut scratch, &mut vx, &mut vy).unwrap();
+    refine(&hist, kc, &m, &cfg, &mut vx, &mut vy).unwrap();
     let vol = SpikeVolume::from_packed(&packed, usize::from(w), usize::from(h), 0);
     let (rx, ry) = spiv_host::reference::motion::refine(
         &vol,

@@ -72,8 +72,6 @@ const HIST_WORDS: usize = match History::words_needed(W, H, DEPTH) {
 const SIZES: WorkspaceSizes = WorkspaceSizes::for_strip(W, H);
 /// Motion-compensated frames find more regions (1 per 16 px).
 const MC_SIZES: WorkspaceSizes = WorkspaceSizes::for_motion(W, H);
-/// Refine's defaults: one velocity per band of this many rows.
-const REFINE_BAND: usize = 16;
 const ROWS: usize = H as usize;
 const CAP_BANDS: usize = H.div_ceil(CAP_BAND) as usize;
 
@@ -113,9 +111,8 @@ struct Ram {
     control_rx: [u8; MAX_CONTROL_ENCODED],
     rows: [[i16; ROWS]; 4],
     caps: [[u16; CAP_BANDS]; 2],
-    /// Refined velocities and refine's scratch.
+    /// Refined velocities.
     refined: [[i16; ROWS]; 2],
-    refine_scratch: [u8; REFINE_BAND * W as usize],
     /// The tile codecs' scratch (the largest: `SparseContext`).
     codec_scratch: [u16; CODEC_SCRATCH],
 }
@@ -297,7 +294,6 @@ fn run() -> Result<(), Failure> {
         rows: [[0; ROWS]; 4],
         caps: [[0; CAP_BANDS]; 2],
         refined: [[0; ROWS]; 2],
-        refine_scratch: [0; REFINE_BAND * W as usize],
         codec_scratch: [0; CODEC_SCRATCH],
     })
     .ok_or(Failure::Memory("RAM taken twice"))?;
@@ -316,9 +312,6 @@ fn run() -> Result<(), Failure> {
     mc.method = spiv_core::Method::Mc;
     mc.bootstrap = spiv_core::Method::Adaptive;
     mc.refine = Some(Refine::default());
-    if mc.refine.map(|r| usize::from(r.band)) != Some(REFINE_BAND) {
-        return Err(Failure::Memory("refine band differs from REFINE_BAND"));
-    }
     strip(ram, mc, true)?;
     codecs(ram)
 }
@@ -425,7 +418,6 @@ fn strip(ram: &mut Ram, cfg: Config, mc: bool) -> Result<(), Failure> {
             RefineBuffers {
                 vx: rvx,
                 vy: rvy,
-                scratch: &mut ram.refine_scratch,
             }
         } else {
             RefineBuffers::none()
@@ -484,8 +476,7 @@ fn report_memory(ram: &Ram) -> Result<(), Failure> {
         + size_of_val(&ram.control_rx)
         + size_of_val(&ram.rows)
         + size_of_val(&ram.caps)
-        + size_of_val(&ram.refined)
-        + size_of_val(&ram.refine_scratch);
+        + size_of_val(&ram.refined);
     hprintln!(
         "memory: {}x{} px, history {} B ({} planes, {} milli-B/px), state {} B ({} milli-B/px), tables {} B (motion-compensated sizes), frame+payload+wire {} B, motion (counts, downlink, refine) {} B, codec scratch {} B, total {} B",
         W,
