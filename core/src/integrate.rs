@@ -95,6 +95,8 @@ const CELLS: usize = 32;
 struct Cell {
     r: usize,
     j: usize,
+    /// `r·words_per_row + j`.
+    at: usize,
     ring: u64,
     reg: u64,
 }
@@ -180,10 +182,10 @@ pub(crate) fn adapt_region(
     // predicted motion (then the region's spikes are counted where the
     // particle is at k). Chosen once, so the plain path has no branch.
     match ctx.motion {
-        None => adapt_with(ctx, ws, strip_rows, idx, |plane, _t, r, j| {
-            plane.get(base + r * wpr + j).copied().unwrap_or(0)
+        None => adapt_with(ctx, ws, strip_rows, idx, |plane, _t, _r, _j, at| {
+            plane.get(base + at).copied().unwrap_or(0)
         }),
-        Some(m) => adapt_with(ctx, ws, strip_rows, idx, |plane, t, r, j| {
+        Some(m) => adapt_with(ctx, ws, strip_rows, idx, |plane, t, r, j, _at| {
             let br = s0 + r as u16;
             let (vx, vy) = m.at(br);
             let dt = (i64::from(t) - i64::from(k)) as i32;
@@ -192,13 +194,14 @@ pub(crate) fn adapt_region(
     }
 }
 
-/// [`adapt_region`] with `word(plane, tick, strip row, word index)`.
+/// [`adapt_region`] with `word(plane, tick, strip row, word index, strip
+/// word)` (the strip word is `row · words_per_row + word index`).
 fn adapt_with(
     ctx: &crate::context::Ctx<'_, '_>,
     ws: &mut Workspace<'_>,
     strip_rows: u16,
     idx: usize,
-    word: impl Fn(&[u64], u32, usize, usize) -> u64,
+    word: impl Fn(&[u64], u32, usize, usize, usize) -> u64,
 ) -> Region {
     let crate::context::Ctx {
         hist, span, k, p, ..
@@ -268,7 +271,7 @@ fn adapt_with(
             let t = span.start + i as u32;
             let (mut hs, mut hb) = (0u32, 0u32);
             for c in cells {
-                let w = word(plane, t, c.r, c.j);
+                let w = word(plane, t, c.r, c.j, c.at);
                 hb += (w & c.ring).count_ones();
                 hs += (w & c.reg).count_ones();
             }
@@ -292,6 +295,7 @@ fn adapt_with(
             cells[nc] = Cell {
                 r,
                 j,
+                at: r * wpr + j,
                 ring: rn,
                 reg: rg,
             };
@@ -359,7 +363,7 @@ fn adapt_with(
             slices::add_fn(&mut cnt, wplanes.len(), |i| {
                 wplanes
                     .get(i)
-                    .map_or(0, |plane| word(plane, t0 + i as u32, r, j))
+                    .map_or(0, |plane| word(plane, t0 + i as u32, r, j, r * wpr + j))
             });
             while m != 0 {
                 let bit = m.trailing_zeros();

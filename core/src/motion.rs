@@ -571,7 +571,11 @@ mod tests {
         for a in [(25i16, 0i16), (320, 3), (-64, -9)] {
             for d in -12i16..=12 {
                 for b in [(a.0 + d, a.1), (a.0, a.1 + d)] {
-                    assert_eq!(same_path(a, b, dts), shifts_of(a) == shifts_of(b), "{a:?} {b:?}");
+                    assert_eq!(
+                        same_path(a, b, dts),
+                        shifts_of(a) == shifts_of(b),
+                        "{a:?} {b:?}"
+                    );
                 }
             }
         }
