@@ -14,7 +14,7 @@
 
 use core::cmp::Ordering;
 
-use crate::motion::{shift, shifted_word};
+use crate::motion::moved_word;
 use crate::params::Params;
 use crate::region::Region;
 use crate::slices::{self, Counter};
@@ -97,6 +97,8 @@ struct Cell {
     j: usize,
     /// `r·words_per_row + j`.
     at: usize,
+    /// The row's predicted velocity (Q8; 0 without a motion).
+    v: (i16, i16),
     ring: u64,
     reg: u64,
 }
@@ -182,26 +184,24 @@ pub(crate) fn adapt_region(
     // predicted motion (then the region's spikes are counted where the
     // particle is at k). Chosen once, so the plain path has no branch.
     match ctx.motion {
-        None => adapt_with(ctx, ws, strip_rows, idx, |plane, _t, _r, _j, at| {
-            plane.get(base + at).copied().unwrap_or(0)
+        None => adapt_with(ctx, ws, s0, strip_rows, idx, |plane, _t, c: &Cell| {
+            plane.get(base + c.at).copied().unwrap_or(0)
         }),
-        Some(m) => adapt_with(ctx, ws, strip_rows, idx, |plane, t, r, j, _at| {
-            let br = s0 + r as u16;
-            let (vx, vy) = m.at(br);
+        Some(_) => adapt_with(ctx, ws, s0, strip_rows, idx, |plane, t, c: &Cell| {
             let dt = (i64::from(t) - i64::from(k)) as i32;
-            shifted_word(plane, wpr, hist.rows(), br, j, shift(vx, dt), shift(vy, dt))
+            moved_word(plane, wpr, hist.rows(), s0 + c.r as u16, c.j, c.v, dt)
         }),
     }
 }
 
-/// [`adapt_region`] with `word(plane, tick, strip row, word index, strip
-/// word)` (the strip word is `row · words_per_row + word index`).
+/// [`adapt_region`] with `word(plane, tick, cell)`.
 fn adapt_with(
     ctx: &crate::context::Ctx<'_, '_>,
     ws: &mut Workspace<'_>,
+    s0: u16,
     strip_rows: u16,
     idx: usize,
-    word: impl Fn(&[u64], u32, usize, usize, usize) -> u64,
+    word: impl Fn(&[u64], u32, &Cell) -> u64,
 ) -> Region {
     let crate::context::Ctx {
         hist, span, k, p, ..
@@ -261,6 +261,10 @@ fn adapt_with(
     // Per-tick spike sums of region and ring over the n_max span, over the
     // (row, word) cells where either has a pixel: a bounded batch of cells
     // at a time on the stack, every tick of the span per batch.
+    let vel = |r: usize| {
+        ctx.motion
+            .map_or((0, 0), |m| m.at(s0.saturating_add(r as u16)))
+    };
     let mut ps = [0u32; 256];
     let mut pb = [0u32; 256];
     let mut cells = [Cell::default(); CELLS];
@@ -271,7 +275,7 @@ fn adapt_with(
             let t = span.start + i as u32;
             let (mut hs, mut hb) = (0u32, 0u32);
             for c in cells {
-                let w = word(plane, t, c.r, c.j, c.at);
+                let w = word(plane, t, c);
                 hb += (w & c.ring).count_ones();
                 hs += (w & c.reg).count_ones();
             }
@@ -296,6 +300,7 @@ fn adapt_with(
                 r,
                 j,
                 at: r * wpr + j,
+                v: vel(r),
                 ring: rn,
                 reg: rg,
             };
@@ -359,11 +364,18 @@ fn adapt_with(
             if m == 0 {
                 continue;
             }
+            let cell = Cell {
+                r,
+                j,
+                at: r * wpr + j,
+                v: vel(r),
+                ..Cell::default()
+            };
             let mut cnt = Counter::default();
             slices::add_fn(&mut cnt, wplanes.len(), |i| {
                 wplanes
                     .get(i)
-                    .map_or(0, |plane| word(plane, t0 + i as u32, r, j, r * wpr + j))
+                    .map_or(0, |plane| word(plane, t0 + i as u32, &cell))
             });
             while m != 0 {
                 let bit = m.trailing_zeros();

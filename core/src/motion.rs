@@ -39,6 +39,8 @@ use crate::window::{Span, Window};
 
 /// Velocities are in 1/`Q` px per tick.
 pub const Q: i32 = 256;
+// `shift` divides by Q with an arithmetic shift by 8.
+const _: () = assert!(Q == 256);
 
 /// Relative step of [`refine`]'s scaled candidates, in 1/[`REL_DEN`]
 /// (2 %).
@@ -86,7 +88,8 @@ impl Motion<'_> {
 /// px: `⌊(v·dt + 128)/256⌋`.
 #[inline]
 pub fn shift(v: i16, dt: i32) -> i32 {
-    (i32::from(v) * dt + Q / 2).div_euclid(Q)
+    // An arithmetic right shift by 8 is the floor division by Q = 256.
+    (i32::from(v) * dt + Q / 2) >> 8
 }
 
 /// Farthest a particle at velocity `v` (Q8) travels from where it is at
@@ -467,6 +470,29 @@ fn same_path(a: (i16, i16), b: (i16, i16), dts: (i64, i64)) -> bool {
     at(dts.0) && at(dts.1) && (dts.0..=dts.1).all(at)
 }
 
+/// [`shifted_word`] of word `j` of band row `r` for velocity `v` (Q8)
+/// `dt` ticks from the centre: the shift resolved by [`Shift`] (shifts and
+/// masks, no division).
+#[inline(always)]
+pub(crate) fn moved_word(
+    plane: &[u64],
+    wpr: usize,
+    rows: u16,
+    r: u16,
+    j: usize,
+    v: (i16, i16),
+    dt: i32,
+) -> u64 {
+    Source::at(
+        plane,
+        wpr,
+        rows,
+        r,
+        Shift::new(shift(v.0, dt), shift(v.1, dt)),
+    )
+    .word(j)
+}
+
 /// A plane's shift `(sx, sy)` split for [`Source`]: rows `y`, whole words
 /// `q` and bits `b` of x.
 #[derive(Debug, Clone, Copy, Default)]
@@ -480,8 +506,9 @@ impl Shift {
     fn new(sx: i32, sy: i32) -> Shift {
         Shift {
             y: sy,
-            q: sx.div_euclid(64) as isize,
-            b: sx.rem_euclid(64) as u32,
+            // Floor division and remainder by 64, as shifts.
+            q: (sx >> 6) as isize,
+            b: (sx & 63) as u32,
         }
     }
 }

@@ -1,14 +1,21 @@
 //! Speed against error of the sidecar core on the paper's window (400×250 px):
 //! ingest throughput (pixel-samples per second), the time of one adaptive
-//! frame at n_max = 128, TFP for comparison, and the same frame by the f64
+//! frame at n_max = 128, one motion-compensated frame (refine on, true
+//! velocity predicted) and refine alone, TFP for comparison, and the same
+//! adaptive frame by the f64
 //! reference with the error between them. Medians from criterion; run with
 //! `cargo bench -p spiv-host --bench core`.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use spiv_core::buffers::WorkspaceBuf;
+use spiv_core::motion::{refine, Motion, Refine};
 use spiv_core::region::Region;
 use spiv_core::state::Buffers;
 use spiv_core::window::tfp;
-use spiv_core::{reconstruct_adaptive, History, Params, PlaneView, Workspace, WorkspaceSizes};
+use spiv_core::{
+    reconstruct_adaptive, reconstruct_compensated, History, Params, PlaneView, Workspace,
+    WorkspaceSizes,
+};
 use spiv_firmware_sim::scene::{Scene, SceneKind, SceneParams};
 use spiv_firmware_sim::sensor::{simulate, SensorParams};
 use spiv_host::reference::{adaptive_frame, SpikeVolume};
@@ -84,6 +91,34 @@ fn bench(c: &mut Criterion) {
             },
         );
     }
+    // The motion-compensated frame as the sidecar makes it (refine on),
+    // predicted by the scene's true velocity: u = U·y/H, U = 1.25 px/tick,
+    // stored rows bottom-up (y = r + 0.5), Q8.
+    let vx: Vec<i16> = (0..H)
+        .map(|r| (1.25 * (f64::from(r) + 0.5) / f64::from(H) * 256.0).round() as i16)
+        .collect();
+    let vy = vec![0i16; usize::from(H)];
+    let (mut rvx, mut rvy) = (vy.clone(), vy.clone());
+    let mut mws = WorkspaceBuf::new(WorkspaceSizes::for_motion(W, H));
+    let mut out = vec![0u8; px];
+    g.bench_function("motion-compensated n_max=128, refine on", |b| {
+        b.iter(|| {
+            let m = Motion { vx: &vx, vy: &vy };
+            refine(&hist, 80, &m, &Refine::default(), &mut rvx, &mut rvy).unwrap();
+            let m = Motion { vx: &rvx, vy: &rvy };
+            let mut ws = mws.workspace().unwrap();
+            black_box(
+                reconstruct_compensated(&hist, 80, &p, &mut ws, (0, H), &m, &mut out).unwrap(),
+            )
+        })
+    });
+    g.bench_function("refine alone", |b| {
+        b.iter(|| {
+            let m = Motion { vx: &vx, vy: &vy };
+            refine(&hist, 80, &m, &Refine::default(), &mut rvx, &mut rvy).unwrap();
+            black_box(rvx[0])
+        })
+    });
     let mut counts = vec![0u8; px];
     let mut out = vec![0u8; px];
     g.bench_function("tfp n=8", |b| {

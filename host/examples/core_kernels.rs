@@ -1,12 +1,19 @@
 //! Runs the core's kernels on the default scene for instruction counting
 //! (`valgrind --tool=callgrind`, see README): ingest of 160 planes of
-//! 400×250 px, then one adaptive frame at n_max = 128.
+//! 400×250 px, then one adaptive frame at n_max = 128 — or, with `mc`,
+//! one motion-compensated frame (refine on, the scene's true velocity
+//! predicted; `mc_once`).
 //!
-//! `cargo run --release -p spiv-host --example core_kernels [frames]`
+//! `cargo run --release -p spiv-host --example core_kernels [frames] [mc]`
 
+use spiv_core::buffers::WorkspaceBuf;
+use spiv_core::motion::{refine, Motion, Refine};
 use spiv_core::region::Region;
 use spiv_core::state::Buffers;
-use spiv_core::{reconstruct_adaptive, History, Params, PlaneView, Workspace, WorkspaceSizes};
+use spiv_core::{
+    reconstruct_adaptive, reconstruct_compensated, History, Params, PlaneView, Workspace,
+    WorkspaceSizes,
+};
 use spiv_firmware_sim::scene::{Scene, SceneKind, SceneParams};
 use spiv_firmware_sim::sensor::{simulate, SensorParams};
 
@@ -35,7 +42,27 @@ fn frame_once(
     reconstruct_adaptive(hist, k, &Params::default(), ws, out).unwrap()
 }
 
+#[inline(never)]
+fn mc_once(hist: &History<'_>, k: u32, ws: &mut Workspace<'_>, out: &mut [u8]) -> u32 {
+    // u = U·y/H, U = 1.25 px/tick, stored rows bottom-up (y = r + 0.5), Q8.
+    let vx: Vec<i16> = (0..H)
+        .map(|r| (1.25 * (f64::from(r) + 0.5) / f64::from(H) * 256.0).round() as i16)
+        .collect();
+    let vy = vec![0i16; usize::from(H)];
+    let (mut rvx, mut rvy) = (vy.clone(), vy.clone());
+    let m = Motion { vx: &vx, vy: &vy };
+    refine(hist, k, &m, &Refine::default(), &mut rvx, &mut rvy).unwrap();
+    let m = Motion { vx: &rvx, vy: &rvy };
+    reconstruct_compensated(hist, k, &Params::default(), ws, (0, H), &m, out)
+        .unwrap()
+        .regions_out
+}
+
 fn main() {
+    let mc = std::env::args().any(|a| a == "mc");
+    if mc {
+        return main_mc();
+    }
     let frames: u32 = std::env::args()
         .nth(1)
         .and_then(|a| a.parse().ok())
@@ -77,4 +104,20 @@ fn main() {
         checksum ^= u64::from(stats.regions_out);
     }
     println!("planes {} regions-frame checksum {checksum:016x}", last + 1);
+}
+
+fn main_mc() {
+    let scene = Scene::new(SceneParams::new(SceneKind::PaperLinear), 1, 160);
+    let packed = simulate(&scene, SensorParams::default(), 1, 0, 160);
+    let mut hb = vec![0u64; History::words_needed(W, H, 160).unwrap()];
+    let mut hist = History::new(&mut hb, W, H, 0, H, 160).unwrap();
+    ingest_all(&mut hist, &packed);
+    let mut buf = WorkspaceBuf::new(WorkspaceSizes::for_motion(W, H));
+    let mut ws = buf.workspace().unwrap();
+    let mut out = vec![0u8; usize::from(W) * usize::from(H)];
+    let regions = mc_once(&hist, 80, &mut ws, &mut out);
+    let checksum = out
+        .iter()
+        .fold(0u64, |h, &g| h.wrapping_mul(31).wrapping_add(u64::from(g)));
+    println!("motion-compensated frame: {regions} regions, checksum {checksum:016x}");
 }
