@@ -154,10 +154,11 @@ impl Config {
     pub fn memory_sizes(&self, width: u16, height: u16) -> Option<MemorySizes> {
         let px = usize::from(width).checked_mul(usize::from(height))?;
         let mc = self.method == Method::Mc;
+        let rows = crate::state::strip_rows(width, height, self.params.margin);
         let workspace = if mc {
-            WorkspaceSizes::for_motion(width, height)
+            WorkspaceSizes::for_motion(width, rows)
         } else {
-            WorkspaceSizes::for_strip(width, height)
+            WorkspaceSizes::for_strip(width, rows)
         };
         let depth = self.depth();
         let wide = self.params.full_scale > 255;

@@ -26,6 +26,33 @@ use crate::window::check_len;
 /// for widths that are a multiple of 64.
 pub const STATE_MILLIBYTES_PER_PIXEL: usize = 5375;
 
+/// Most pixels a strip of a frame holds at once on the shipped paths
+/// ([`strip_rows`]): the labeller's 32,766 provisional labels fill at about
+/// one per 50 pixels on compensated frames of the paper's scenes (a
+/// 6400×250 compensated frame in one strip lost 20,815 particle pixels to
+/// the full table; 3200×250 used 18,066), so 2^19 pixels leave room twice
+/// over.
+pub const MAX_STRIP_PIXELS: usize = 1 << 19;
+
+/// Rows of a strip for a `width × height` frame: the whole band when it
+/// holds at most [`MAX_STRIP_PIXELS`], else as many rows as fit (at least
+/// two `margin`s and 16 inner rows), so that no wide frame loses particles
+/// to a full label table.
+pub const fn strip_rows(width: u16, height: u16, margin: u16) -> u16 {
+    let w = if width == 0 { 1 } else { width as usize };
+    if w * height as usize <= MAX_STRIP_PIXELS {
+        return height;
+    }
+    let fit = MAX_STRIP_PIXELS / w;
+    let least = 2 * margin as usize + 16;
+    let rows = if fit < least { least } else { fit };
+    if rows > height as usize {
+        height
+    } else {
+        rows as u16
+    }
+}
+
 /// Sizes of the buffers a [`Workspace`] needs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

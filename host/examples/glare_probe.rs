@@ -7,7 +7,10 @@
 //! (10 seeds): the paper's 0.028 there is below this PIV's noise floor for
 //! displacements of 0.2–0.5 px (README, `spiv bench paper`).
 //!
-//! `cargo run --release -p spiv-host --example glare_probe -- [linear|quadratic|log] [GLARE_PEAK] [SEEDS]`
+//! The optional WIDTH (default 400 px) widens the canvas: a row profile
+//! averages more vectors, as on the paper's 6400-px canvas.
+//!
+//! `cargo run --release -p spiv-host --example glare_probe -- [linear|quadratic|log] [GLARE_PEAK] [SEEDS] [WIDTH]`
 use spiv_firmware_sim::scene::{SceneKind, SceneParams};
 use spiv_host::pipeline::{run, Job};
 
@@ -20,11 +23,15 @@ fn main() {
     };
     let glare: f64 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(0.65);
     let seeds: u64 = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(10);
+    let width: Option<u16> = args.get(4).and_then(|s| s.parse().ok());
     let mut bias = std::collections::BTreeMap::<(usize, i64), (f64, f64, usize)>::new();
     let mut rmae = [[0.0f64; 2]; 4];
     for seed in 1..=seeds {
         let mut p = SceneParams::new(kind);
         p.glare_peak = glare;
+        if let Some(w) = width {
+            p.width = w;
+        }
         let job = Job::new(p, seed);
         let o = run(&job, |_| {}).expect("runs");
         for (i, m) in o.measured.iter().enumerate() {

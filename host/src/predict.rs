@@ -113,7 +113,8 @@ pub fn compensated_frame(
         };
         refine(&hist, tick, &m, &cfg, &mut used.0, &mut used.1)?;
     }
-    let mut ws = WorkspaceBuf::new(WorkspaceSizes::for_motion(w, h));
+    let rows = spiv_core::state::strip_rows(w, h, core.margin);
+    let mut ws = WorkspaceBuf::new(WorkspaceSizes::for_motion(w, rows));
     let mut out = vec![0u16; usize::from(w) * usize::from(h)];
     let m = Motion {
         vx: &used.0,

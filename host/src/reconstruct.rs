@@ -122,7 +122,8 @@ pub fn frame_from_planes(
             None
         }
         Method::Adaptive => {
-            let mut ws = WorkspaceBuf::whole(w, h);
+            let rows = spiv_core::state::strip_rows(w, h, p.margin);
+            let mut ws = WorkspaceBuf::new(spiv_core::WorkspaceSizes::for_strip(w, rows));
             let p = Params {
                 n_max: window,
                 ..*p
