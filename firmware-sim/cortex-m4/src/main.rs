@@ -415,10 +415,7 @@ fn strip(ram: &mut Ram, cfg: Config, mc: bool) -> Result<(), Failure> {
             DownlinkBuffers::none()
         },
         refine: if mc {
-            RefineBuffers {
-                vx: rvx,
-                vy: rvy,
-            }
+            RefineBuffers { vx: rvx, vy: rvy }
         } else {
             RefineBuffers::none()
         },
