@@ -312,6 +312,33 @@ pub struct PairResult {
     /// The caps came from a TFP pair at the same ticks, not from the
     /// previous pair.
     pub bootstrapped: bool,
+    /// What the core's tables could not hold in the pair's compensated
+    /// frames (left as background).
+    pub lost: LabelLoss,
+}
+
+/// Particles a frame lost to the core's full tables: they are rendered as
+/// background (`spiv_core::label::LabelStats`), so a run reports them
+/// rather than losing them silently.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct LabelLoss {
+    /// Regions past a full region table.
+    pub regions: u32,
+    /// Particle pixels that found no provisional label.
+    pub pixels: u32,
+}
+
+impl LabelLoss {
+    /// Adds one frame's losses.
+    pub fn add(&mut self, s: &spiv_core::label::LabelStats) {
+        self.regions = self.regions.saturating_add(s.overflow_regions);
+        self.pixels = self.pixels.saturating_add(s.dropped_pixels);
+    }
+
+    /// Nothing lost.
+    pub fn is_none(&self) -> bool {
+        self.regions == 0 && self.pixels == 0
+    }
 }
 
 impl PairResult {
@@ -422,6 +449,7 @@ pub fn run_flow(
                 Ok(out)
             };
         let mut made = opts.method;
+        let mut lost = LabelLoss::default();
         let (pair, caps, bootstrapped) = match (opts.method, opts.dwell_cap) {
             (Method::Adaptive, Some(budget)) => {
                 let (pred, boot) = match prediction.take() {
@@ -470,9 +498,13 @@ pub fn run_flow(
                             pred = own;
                         }
                         let vel = row_velocities(&pred, rec.height, rec.flip, dt);
+                        lost = LabelLoss::default();
                         for (o, k) in out.iter_mut().zip([ka, kb]) {
                             let pl = rec.around(k, core.n_max)?;
-                            *o = compensated_frame(&pl, k, &core, &vel, Some(Refine::default()))?.0;
+                            let (f, _, labels) =
+                                compensated_frame(&pl, k, &core, &vel, Some(Refine::default()))?;
+                            *o = f;
+                            lost.add(&labels);
                         }
                     }
                     (out, Vec::new(), true)
@@ -510,6 +542,7 @@ pub fn run_flow(
             vectors,
             caps,
             bootstrapped,
+            lost,
         });
         progress(i + 1, ticks.len());
     }

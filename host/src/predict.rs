@@ -5,6 +5,7 @@
 //! its path (`spiv_core::reconstruct_compensated`).
 
 use spiv_core::buffers::WorkspaceBuf;
+use spiv_core::label::LabelStats;
 use spiv_core::motion::{refine, Motion, Refine};
 use spiv_core::{reconstruct_compensated, Params, WorkspaceSizes};
 use spiv_formats::Vector;
@@ -100,7 +101,7 @@ pub fn compensated_frame(
     core: &Params,
     pred: &RowVelocities,
     refine_cfg: Option<Refine>,
-) -> Result<(Vec<u16>, RowVelocities), ReconstructError> {
+) -> Result<(Vec<u16>, RowVelocities, LabelStats), ReconstructError> {
     let (w, h) = (planes.width, planes.height);
     let mut ring = planes.ring(k, core.n_max)?;
     let tick = ring.tick;
@@ -120,7 +121,7 @@ pub fn compensated_frame(
         vx: &used.0,
         vy: &used.1,
     };
-    reconstruct_compensated(
+    let stats = reconstruct_compensated(
         &hist,
         tick,
         core,
@@ -129,13 +130,43 @@ pub fn compensated_frame(
         &m,
         &mut out,
     )?;
-    Ok((planes.output(&out), used))
+    Ok((planes.output(&out), used, stats.labels))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use spiv_formats::State;
+
+    /// A frame whose particles cannot all be labelled says so: 512×512
+    /// isolated hot pixels (every other pixel of every other row, firing
+    /// every tick) need 65,536 labels against the labeller's 32,766.
+    #[test]
+    fn a_frame_reports_what_the_full_tables_left_as_background() {
+        let (w, h) = (512u16, 512u16);
+        let mut plane = vec![0u8; usize::from(w) * usize::from(h) / 8];
+        for r in (0..usize::from(h)).step_by(2) {
+            for c in (0..usize::from(w)).step_by(2) {
+                let i = r * usize::from(w) + c;
+                plane[i / 8] |= 1 << (i % 8);
+            }
+        }
+        let planes = Planes::simulated(w, h, plane.repeat(160));
+        let still = (vec![0i16; usize::from(h)], vec![0i16; usize::from(h)]);
+        let (frame, _, lost) =
+            compensated_frame(&planes, 80, &Params::default(), &still, None).unwrap();
+        assert_eq!(frame.len(), usize::from(w) * usize::from(h));
+        assert!(
+            lost.dropped_pixels + lost.overflow_regions > 10_000,
+            "{lost:?}"
+        );
+        let mut loss = crate::flow::LabelLoss::default();
+        assert!(loss.is_none());
+        loss.add(&lost);
+        loss.add(&lost);
+        assert_eq!(loss.pixels, 2 * lost.dropped_pixels);
+        assert_eq!(loss.regions, 2 * lost.overflow_regions);
+    }
 
     fn v(y: f64, u: f64, vv: f64, state: State) -> Vector {
         Vector {
