@@ -14,7 +14,7 @@
 
 use core::cmp::Ordering;
 
-use crate::motion::moved_word;
+use crate::motion::{shift, shifted_word};
 use crate::params::Params;
 use crate::region::Region;
 use crate::slices::{self, Counter};
@@ -189,7 +189,8 @@ pub(crate) fn adapt_region(
         }),
         Some(_) => adapt_with(ctx, ws, s0, strip_rows, idx, |plane, t, c: &Cell| {
             let dt = (i64::from(t) - i64::from(k)) as i32;
-            moved_word(plane, wpr, hist.rows(), s0 + c.r as u16, c.j, c.v, dt)
+            let (sx, sy) = (shift(c.v.0, dt), shift(c.v.1, dt));
+            shifted_word(plane, wpr, hist.rows(), s0 + c.r as u16, c.j, sx, sy)
         }),
     }
 }

@@ -130,8 +130,9 @@ pub fn positions(v: (i16, i16), start: u32, end: u32, kc: u32) -> u32 {
 
 /// Word `j` of band row `r` of a plane (`rows × wpr` words) moved by
 /// `(sx, sy)`: bit `i` is the spike at row `r + sy`, column `64j + i + sx`
-/// (0 outside the band).
-#[inline]
+/// (0 outside the band). Hot in the compensated region sums, hence
+/// always inlined.
+#[inline(always)]
 pub fn shifted_word(
     plane: &[u64],
     wpr: usize,
@@ -141,25 +142,7 @@ pub fn shifted_word(
     sx: i32,
     sy: i32,
 ) -> u64 {
-    let rs = i32::from(r) + sy;
-    if rs < 0 || rs >= i32::from(rows) {
-        return 0;
-    }
-    let base = rs as usize * wpr;
-    let word = |q: i64| -> u64 {
-        if q < 0 || q >= wpr as i64 {
-            0
-        } else {
-            plane.get(base + q as usize).copied().unwrap_or(0)
-        }
-    };
-    let o = 64 * j as i64 + i64::from(sx);
-    let (q, b) = (o.div_euclid(64), o.rem_euclid(64) as u32);
-    if b == 0 {
-        word(q)
-    } else {
-        (word(q) >> b) | (word(q + 1) << (64 - b))
-    }
+    Source::new(plane, wpr, rows, r, sx, sy).word(j)
 }
 
 /// Adds the motion-compensated counts of band rows `rows.0..rows.1` over
@@ -259,8 +242,9 @@ pub fn candidate(cfg: &Refine, vx: i16, vy: i16, n: usize) -> Option<(i16, i16)>
 /// compensated counts over the band wins (the earliest on a tie, so the
 /// prediction when nothing is sharper). The winners are written to
 /// `out_vx`, `out_vy` (one per band row), piecewise linear between band
-/// centres (rounded down) and constant beyond the outer ones. Kept out of line (one call per frame)
-/// so instruction counters can attribute its cost (`firmware-sim/cost.sh`).
+/// centres (rounded down) and constant beyond the outer ones. Kept out of
+/// line (one call per frame) so instruction counters can attribute its
+/// cost (`firmware-sim/cost.sh`).
 #[inline(never)]
 pub fn refine(
     hist: &History<'_>,
@@ -292,6 +276,11 @@ pub fn refine(
         shifts: [Shift::default(); 256],
         items: [Source::EMPTY; 256],
     };
+    // The window's ticks relative to the centre.
+    let dts = (
+        i64::from(span.start) - i64::from(kc),
+        i64::from(span.start) + span.planes().len() as i64 - 1 - i64::from(kc),
+    );
     for (b, slot) in (0..bands).zip(win.iter_mut()) {
         let r0 = b * cfg.band;
         let r1 = r0.saturating_add(cfg.band).min(rows);
@@ -306,10 +295,6 @@ pub fn refine(
         let mut seen: heapless::Vec<(i16, i16), 64> = heapless::Vec::new();
         while let Some((cx, cy)) = candidate(cfg, px, py, n) {
             n += 1;
-            let dts = (
-                i64::from(span.start) - i64::from(kc),
-                i64::from(span.start) + span.planes().len() as i64 - 1 - i64::from(kc),
-            );
             if seen.iter().any(|&o| same_path(o, (cx, cy), dts)) {
                 continue;
             }
@@ -468,29 +453,6 @@ fn same_path(a: (i16, i16), b: (i16, i16), dts: (i64, i64)) -> bool {
         return true;
     }
     at(dts.0) && at(dts.1) && (dts.0..=dts.1).all(at)
-}
-
-/// [`shifted_word`] of word `j` of band row `r` for velocity `v` (Q8)
-/// `dt` ticks from the centre: the shift resolved by [`Shift`] (shifts and
-/// masks, no division).
-#[inline(always)]
-pub(crate) fn moved_word(
-    plane: &[u64],
-    wpr: usize,
-    rows: u16,
-    r: u16,
-    j: usize,
-    v: (i16, i16),
-    dt: i32,
-) -> u64 {
-    Source::at(
-        plane,
-        wpr,
-        rows,
-        r,
-        Shift::new(shift(v.0, dt), shift(v.1, dt)),
-    )
-    .word(j)
 }
 
 /// A plane's shift `(sx, sy)` split for [`Source`]: rows `y`, whole words

@@ -331,8 +331,16 @@ pub struct LabelLoss {
 impl LabelLoss {
     /// Adds one frame's losses.
     pub fn add(&mut self, s: &spiv_core::label::LabelStats) {
-        self.regions = self.regions.saturating_add(s.overflow_regions);
-        self.pixels = self.pixels.saturating_add(s.dropped_pixels);
+        self.merge(LabelLoss {
+            regions: s.overflow_regions,
+            pixels: s.dropped_pixels,
+        });
+    }
+
+    /// Adds another count of losses.
+    pub fn merge(&mut self, o: LabelLoss) {
+        self.regions = self.regions.saturating_add(o.regions);
+        self.pixels = self.pixels.saturating_add(o.pixels);
     }
 
     /// Nothing lost.
@@ -366,6 +374,15 @@ pub struct FlowOutcome {
 }
 
 impl FlowOutcome {
+    /// What the core's full tables lost over all pairs.
+    pub fn lost(&self) -> LabelLoss {
+        let mut l = LabelLoss::default();
+        for p in &self.pairs {
+            l.merge(p.lost);
+        }
+        l
+    }
+
     /// The mean field over pairs: per grid node the mean of the measured
     /// (valid or replaced) vectors, invalid where no pair measured it.
     pub fn mean_field(&self) -> Vec<Vector> {

@@ -194,11 +194,7 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
         t0.elapsed().as_secs_f64(),
         a.out.display()
     );
-    let mut lost = spiv_host::flow::LabelLoss::default();
-    for p in &out.pairs {
-        lost.regions = lost.regions.saturating_add(p.lost.regions);
-        lost.pixels = lost.pixels.saturating_add(p.lost.pixels);
-    }
+    let lost = out.lost();
     if !lost.is_none() {
         eprintln!(
             "warning: the core's tables were full: {} regions and {} particle pixels were left as background (summary.json, lost_to_full_tables)",
