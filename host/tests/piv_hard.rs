@@ -240,11 +240,17 @@ fn sixteen_bit_images_and_masks() {
             assert_eq!(v.state, State::Invalid);
         }
     }
+    // The windows beside the mask: the predictor there is interpolated
+    // from the masked windows' neighbours, not from zeros (which left
+    // them 0.4–0.55 px short).
     let e = errors(&f, &pr);
-    assert!(e
+    let worst = e
         .iter()
         .filter(|x| x.2 == State::Valid)
-        .all(|x| x.0.hypot(x.1) < 0.5));
+        .map(|x| x.0.hypot(x.1))
+        .fold(0.0, f64::max);
+    eprintln!("masked half: worst valid vector {worst:.3} px");
+    assert!(worst < 0.2, "worst valid vector {worst}");
 }
 
 #[test]

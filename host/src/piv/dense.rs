@@ -428,7 +428,8 @@ pub fn for_piv(a: &Array2<f32>, b: &Array2<f32>, field: &super::Field) -> (Flow,
     let mode = mode_for(field);
     let (h, w) = a.dim();
     let init = (mode == DenseMode::Refine).then(|| {
-        let (u, v) = super::deform::dense(&field.grid, &field.u, &field.v, h, w);
+        let (fu, fv) = super::validate::extended(&field.u, &field.v, &field.state);
+        let (u, v) = super::deform::dense(&field.grid, &fu, &fv, h, w);
         Flow { u, v }
     });
     (dense_flow(a, b, init.as_ref(), &mode.settings()), mode)

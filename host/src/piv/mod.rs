@@ -400,7 +400,8 @@ pub fn piv(
         let (pa, pb, pred, outside) = match by {
             None => (None, None, None, base.clone()),
             Some(f) => {
-                let (du, dv) = deform::dense(&f.grid, &f.u, &f.v, h, w);
+                let (fu, fv) = validate::extended(&f.u, &f.v, &f.state);
+                let (du, dv) = deform::dense(&f.grid, &fu, &fv, h, w);
                 let (ra, rb) = match &resamplers {
                     Some(r) => (&r.0, &r.1),
                     None => {
@@ -604,7 +605,8 @@ const MAX_SEARCH: usize = 1024;
 /// another grid), interpolated at its centres and flagged replaced, where
 /// its windows have signal; the rest stays invalid.
 fn degrade_to(field: &mut Field, from: &Field, h: usize, w: usize) {
-    let (du, dv) = deform::dense(&from.grid, &from.u, &from.v, h, w);
+    let (fu, fv) = validate::extended(&from.u, &from.v, &from.state);
+    let (du, dv) = deform::dense(&from.grid, &fu, &fv, h, w);
     let grid = field.grid;
     for r in 0..grid.ny {
         for c in 0..grid.nx {
