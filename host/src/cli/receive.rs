@@ -96,10 +96,12 @@ pub fn run(a: &ReceiveArgs) -> Result<(), CliError> {
         std::fs::create_dir_all(d).map_err(|e| CliError::Usage(format!("{}: {e}", d.display())))?;
     }
     let settings = receiver_settings(a.windows.clone().unwrap_or_else(|| vec![64, 32, 32]));
-    let mc_settings = match &a.windows {
-        Some(w) => receiver_settings(w.clone()),
-        None => spiv_host::piv::Settings::for_compensated_frames(),
-    };
+    // `--windows` sets the passes of both; the compensated pairs keep
+    // their own peak and resampling (as `spiv flow` does).
+    let mut mc_settings = spiv_host::piv::Settings::for_compensated_frames();
+    if let Some(w) = &a.windows {
+        mc_settings.windows = w.clone();
+    }
     let bar = ProgressBar::new_spinner();
     bar.set_style(
         ProgressStyle::with_template("{spinner} receiving from {prefix}: {msg} {elapsed}")
