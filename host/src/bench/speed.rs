@@ -63,13 +63,9 @@ pub fn speed_against_error(mut progress: impl FnMut()) -> Result<Vec<SpeedRow>, 
     };
     let mut rows: Vec<SpeedRow> = Vec::new();
     let base = job.piv.clone();
-    let passes = |s: &Settings| {
-        let w: Vec<String> = s.windows.iter().map(|w| w.to_string()).collect();
-        w.join(",")
-    };
     let spike = job.piv.clone();
-    let mc_name = format!("PIV {} B-spline", passes(&job.mc_piv));
-    let spike_name = format!("PIV {} B-spline", passes(&spike));
+    let mc_name = piv_name(&job.mc_piv);
+    let spike_name = piv_name(&spike);
     let piv_cfgs = [
         ("PIV 64,32,32 B-spline", base.clone()),
         (
@@ -210,4 +206,23 @@ pub fn speed_against_error(mut progress: impl FnMut()) -> Result<Vec<SpeedRow>, 
         rmse: e,
     });
     Ok(rows)
+}
+
+/// A PIV configuration as the table names it: passes, resampling and (when
+/// not the parabola) the sub-pixel peak.
+fn piv_name(s: &Settings) -> String {
+    use crate::piv::{Interp, Subpixel};
+    let w: Vec<String> = s.windows.iter().map(|w| w.to_string()).collect();
+    let interp = match s.interp {
+        Interp::Bilinear => "bilinear",
+        Interp::Bicubic => "bicubic",
+        Interp::Bspline => "B-spline",
+        Interp::Bspline5 => "quintic B-spline",
+    };
+    let peak = match s.subpixel {
+        Subpixel::Parabolic => "",
+        Subpixel::Gaussian => ", Gaussian peak",
+        Subpixel::Gaussian2d => ", 2-D Gaussian peak",
+    };
+    format!("PIV {} {interp}{peak}", w.join(","))
 }
