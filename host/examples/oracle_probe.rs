@@ -34,11 +34,10 @@ const N: i64 = 128;
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let kind = match args.get(1).map(String::as_str) {
-        Some("log") => SceneKind::PaperLog,
-        Some("linear") => SceneKind::PaperLinear,
-        _ => SceneKind::PaperQuadratic,
-    };
+    // `linear`, `quadratic` (the default) or `log`.
+    let profile = args.get(1).map_or("quadratic", String::as_str);
+    let kind =
+        SceneKind::from_name(&format!("paper-{profile}")).unwrap_or(SceneKind::PaperQuadratic);
     let seeds: u64 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(10);
     let reset = match args.get(3).map(String::as_str) {
         Some("subtract") => Reset::Subtract,
