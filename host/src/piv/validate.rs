@@ -491,6 +491,35 @@ mod tests {
     }
 
     #[test]
+    fn the_predictor_field_extends_over_unmeasured_windows() {
+        // The two left columns had no signal (a mask): for the predictor
+        // they take their measured neighbours' values instead of zeros (a
+        // column of neighbours tells nothing of the gradient across it, so
+        // they are carried over, not extrapolated); the field itself keeps
+        // them invalid at zero. Nothing measured: all zero.
+        let f = |_: usize, c: usize| 2.0 + 0.25 * c as f64;
+        let mut u = Array2::from_shape_fn((4, 6), |(r, c)| f(r, c));
+        let v = Array2::from_elem((4, 6), -1.0);
+        let mut st = Array2::from_elem((4, 6), State::Valid);
+        for r in 0..4 {
+            for c in 0..2 {
+                st[[r, c]] = State::Invalid;
+                u[[r, c]] = 0.0;
+            }
+        }
+        let (eu, ev) = extended(&u, &v, &st);
+        for r in 0..4 {
+            assert!((eu[[r, 1]] - f(r, 2)).abs() < 1e-9, "{}", eu[[r, 1]]);
+            assert!((eu[[r, 0]] - f(r, 2)).abs() < 1e-9, "{}", eu[[r, 0]]);
+            assert!((ev[[r, 0]] + 1.0).abs() < 1e-9);
+            assert_eq!((u[[r, 0]], st[[r, 0]]), (0.0, State::Invalid));
+        }
+        let none = Array2::from_elem((4, 6), State::Invalid);
+        let (eu, _) = extended(&Array2::zeros((4, 6)), &v, &none);
+        assert!(eu.iter().all(|&x| x == 0.0));
+    }
+
+    #[test]
     fn nothing_to_replace_from_stays_invalid_and_zero() {
         let mut u = Array2::from_elem((2, 2), 5.0);
         let mut lone = Array2::from_elem((2, 2), State::Invalid);
