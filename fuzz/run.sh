@@ -6,7 +6,12 @@
 #   fuzz/run.sh --runs 10000000     10^7 executions per target (about 15 min
 #                                   on one core of the CI machine)
 #   fuzz/run.sh --runs N TARGET...  some targets only
+#   fuzz/run.sh --grow --runs N     keep what the run adds in fuzz/corpus
+#                                   (then minimise it with `cargo fuzz cmin`)
 #
+# Without --grow the inputs a run adds go to a temporary folder, so a
+# short run leaves the checkout as it was (the committed corpus is read,
+# not written).
 # Prints each target's executions, speed and coverage; exits non-zero on
 # the first crash, leak or timeout (the input is in fuzz/artifacts/<target>).
 # Needs cargo-fuzz: `cargo install cargo-fuzz --locked`.
@@ -14,6 +19,8 @@ set -euo pipefail
 cd "$(dirname "$0")"
 
 budget=(-max_total_time=15)
+grow=0
+if [ "${1:-}" = "--grow" ]; then grow=1; shift; fi
 case "${1:-}" in
   --seconds) budget=(-max_total_time="$2"); shift 2 ;;
   --runs) budget=(-runs="$2" -max_total_time=3600); shift 2 ;;
@@ -24,7 +31,14 @@ targets=("$@")
 cargo fuzz build -s none
 for t in "${targets[@]}"; do
   log=$(mktemp)
-  if ! cargo fuzz run -s none "$t" -- "${budget[@]}" -rss_limit_mb=2048 -print_final_stats=1 >"$log" 2>&1; then
+  # libFuzzer writes new inputs into the first corpus folder it is given.
+  if [ "$grow" = 1 ]; then
+    corpora=("corpus/$t")
+  else
+    fresh=$(mktemp -d)
+    corpora=("$fresh" "corpus/$t")
+  fi
+  if ! cargo fuzz run -s none "$t" "${corpora[@]}" -- "${budget[@]}" -rss_limit_mb=2048 -print_final_stats=1 >"$log" 2>&1; then
     tail -n 40 "$log"
     echo "!! fuzz target $t failed"
     exit 1
@@ -34,4 +48,5 @@ for t in "${targets[@]}"; do
   cov=$(grep -E '^#[0-9]+.*(DONE|pulse|NEW|REDUCE)' "$log" | tail -n 1 | sed -n 's/.*cov: \([0-9]*\) ft: \([0-9]*\).*corp: \([0-9]*\).*/cov \1, features \2, corpus \3/p')
   printf '%-13s %10s executions, %7s/s, %s: clean\n' "$t" "$runs" "$speed" "$cov"
   rm -f "$log"
+  [ "$grow" = 1 ] || rm -rf "$fresh"
 done
