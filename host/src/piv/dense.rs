@@ -428,8 +428,7 @@ pub fn for_piv(a: &Array2<f32>, b: &Array2<f32>, field: &super::Field) -> (Flow,
     let mode = mode_for(field);
     let (h, w) = a.dim();
     let init = (mode == DenseMode::Refine).then(|| {
-        let (fu, fv) = super::validate::extended(&field.u, &field.v, &field.state);
-        let (u, v) = super::deform::dense(&field.grid, &fu, &fv, h, w);
+        let (u, v) = field.predictor(h, w);
         Flow { u, v }
     });
     (dense_flow(a, b, init.as_ref(), &mode.settings()), mode)

@@ -286,6 +286,16 @@ impl Field {
             .collect()
     }
 
+    /// The field at every pixel of an `h × w` image, as a predictor: the
+    /// windows without a measured vector take their measured neighbours'
+    /// ([`validate::extended`]; as zeros they would pull their neighbours'
+    /// predictor towards zero over a grid step), then Catmull-Rom between
+    /// window centres ([`deform::dense`]).
+    pub fn predictor(&self, h: usize, w: usize) -> (Array2<f32>, Array2<f32>) {
+        let (u, v) = validate::extended(&self.u, &self.v, &self.state);
+        deform::dense(&self.grid, &u, &v, h, w)
+    }
+
     /// Counts of (valid, replaced, invalid) vectors.
     pub fn counts(&self) -> (usize, usize, usize) {
         let mut n = (0, 0, 0);
@@ -418,8 +428,7 @@ pub fn piv(
         let (pa, pb, pred, outside) = match by {
             None => (None, None, None, base.clone()),
             Some(f) => {
-                let (fu, fv) = validate::extended(&f.u, &f.v, &f.state);
-                let (du, dv) = deform::dense(&f.grid, &fu, &fv, h, w);
+                let (du, dv) = f.predictor(h, w);
                 let (ra, rb) = match &resamplers {
                     Some(r) => (&r.0, &r.1),
                     None => {
@@ -623,8 +632,7 @@ const MAX_SEARCH: usize = 1024;
 /// another grid), interpolated at its centres and flagged replaced, where
 /// its windows have signal; the rest stays invalid.
 fn degrade_to(field: &mut Field, from: &Field, h: usize, w: usize) {
-    let (fu, fv) = validate::extended(&from.u, &from.v, &from.state);
-    let (du, dv) = deform::dense(&from.grid, &fu, &fv, h, w);
+    let (du, dv) = from.predictor(h, w);
     let grid = field.grid;
     for r in 0..grid.ny {
         for c in 0..grid.nx {

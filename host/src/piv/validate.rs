@@ -42,35 +42,41 @@ fn median(v: &mut [f64]) -> f64 {
     }
 }
 
-/// Up to 8 neighbour values on the stack (the test runs for every vector
-/// of every pass: no allocation per vector).
+/// Up to 8 neighbours' entries on the stack (the test and the replacement
+/// run for every vector of every pass: no allocation per vector).
 #[derive(Default)]
-struct Neighbours {
-    v: [f64; 8],
+struct Eight<T> {
+    v: [T; 8],
     n: usize,
 }
 
-impl Neighbours {
-    fn push(&mut self, x: f64) {
+impl<T: Copy> Eight<T> {
+    fn push(&mut self, x: T) {
         if let Some(slot) = self.v.get_mut(self.n) {
             *slot = x;
             self.n += 1;
         }
     }
 
-    fn values(&mut self) -> &mut [f64] {
+    fn values(&mut self) -> &mut [T] {
         &mut self.v[..self.n]
+    }
+
+    fn as_slice(&self) -> &[T] {
+        &self.v[..self.n]
     }
 }
 
-/// The least-squares plane `a + b·dr + c·dc` through up to 8 points
-/// `(dr, dc, value)` around a vector, or `None` when they do not span a
-/// plane (fewer than 3, or all on one line). With the full
-/// symmetric ring of 8 neighbours its value at the centre is their mean;
-/// at an edge or a corner, where the neighbours sit on one side, it
-/// follows a gradient that the mean would pull towards the far side (a
-/// corner of a shear replaced by the mean of its neighbours was off by
-/// 40 % of its row's speed).
+/// A neighbour's offset and vector: `(dr, dc, u, v)`.
+type Point = (f64, f64, f64, f64);
+
+/// The least-squares plane `a + b·dr + c·dc` of one component through
+/// up to 8 neighbours around a vector. With the full symmetric ring of 8
+/// neighbours its value at the centre is their mean; at an edge or a
+/// corner, where the neighbours sit on one side, it follows a gradient
+/// that the mean would pull towards the far side (a corner of a shear
+/// replaced by the mean of its neighbours was off by 40 % of its row's
+/// speed).
 #[derive(Debug, Clone, Copy)]
 struct Plane {
     a: f64,
@@ -79,20 +85,27 @@ struct Plane {
 }
 
 impl Plane {
-    fn fit(pts: &[(f64, f64, f64)]) -> Option<Plane> {
+    /// The planes of u and of v through `pts` (one fit: the positions'
+    /// moments serve both), or `None` when the points do not span a plane
+    /// (fewer than 3, or all on one line).
+    fn fit(pts: &[Point]) -> Option<(Plane, Plane)> {
         if pts.len() < 3 {
             return None;
         }
         let n = pts.len() as f64;
-        let mean = |f: fn(&(f64, f64, f64)) -> f64| pts.iter().map(f).sum::<f64>() / n;
-        let (mr, mc, mv) = (mean(|p| p.0), mean(|p| p.1), mean(|p| p.2));
+        let mean = |f: fn(&Point) -> f64| pts.iter().map(f).sum::<f64>() / n;
+        let (mr, mc) = (mean(|p| p.0), mean(|p| p.1));
+        let (mu, mv) = (mean(|p| p.2), mean(|p| p.3));
         // Centred second moments of the positions, and with the values.
-        let (mut crr, mut ccc, mut crc, mut crv, mut ccv) = (0.0, 0.0, 0.0, 0.0, 0.0);
-        for &(r, c, v) in pts {
-            let (r, c, v) = (r - mr, c - mc, v - mv);
+        let (mut crr, mut ccc, mut crc) = (0.0, 0.0, 0.0);
+        let (mut cru, mut ccu, mut crv, mut ccv) = (0.0, 0.0, 0.0, 0.0);
+        for &(r, c, u, v) in pts {
+            let (r, c, u, v) = (r - mr, c - mc, u - mu, v - mv);
             crr += r * r;
             ccc += c * c;
             crc += r * c;
+            cru += r * u;
+            ccu += c * u;
             crv += r * v;
             ccv += c * v;
         }
@@ -103,12 +116,15 @@ impl Plane {
         if det <= 1e-9 {
             return None;
         }
-        let (b, c) = ((ccc * crv - crc * ccv) / det, (crr * ccv - crc * crv) / det);
-        Some(Plane {
-            a: mv - b * mr - c * mc,
-            b,
-            c,
-        })
+        let plane = |m: f64, cr: f64, cc: f64| {
+            let (b, c) = ((ccc * cr - crc * cc) / det, (crr * cc - crc * cr) / det);
+            Plane {
+                a: m - b * mr - c * mc,
+                b,
+                c,
+            }
+        };
+        Some((plane(mu, cru, ccu), plane(mv, crv, ccv)))
     }
 
     fn at(&self, dr: f64, dc: f64) -> f64 {
@@ -136,8 +152,8 @@ pub fn median_test(
     let (ny, nx) = u.dim();
     let before = state.clone();
     let mut rejected = 0;
-    let mut nu = Neighbours::default();
-    let mut nv = Neighbours::default();
+    let mut nu = Eight::<f64>::default();
+    let mut nv = Eight::<f64>::default();
     for r in 0..ny {
         for c in 0..nx {
             if before[[r, c]] != State::Valid {
@@ -234,56 +250,33 @@ fn neighbour_planes(
     r: usize,
     c: usize,
 ) -> Option<(Plane, Plane)> {
-    let (pu, pv) = ring(u, v, r, c, |rr, cc| state[[rr, cc]] == State::Valid);
-    Some((Plane::fit(pu.as_slice())?, Plane::fit(pv.as_slice())?))
+    Plane::fit(ring(u, v, r, c, |rr, cc| state[[rr, cc]] == State::Valid).as_slice())
 }
 
-/// Up to 8 points `(dr, dc, value)` on the stack.
-#[derive(Default)]
-struct Points {
-    p: [(f64, f64, f64); 8],
-    n: usize,
-}
-
-impl Points {
-    fn push(&mut self, x: (f64, f64, f64)) {
-        if let Some(slot) = self.p.get_mut(self.n) {
-            *slot = x;
-            self.n += 1;
-        }
-    }
-
-    fn as_slice(&self) -> &[(f64, f64, f64)] {
-        &self.p[..self.n]
-    }
-}
-
-/// The 3 × 3 ring around (r, c) that `keep` admits, as `(dr, dc, value)`
-/// points of u and of v.
+/// The 3 × 3 ring around (r, c) that `keep` admits.
 fn ring(
     u: &Array2<f64>,
     v: &Array2<f64>,
     r: usize,
     c: usize,
     keep: impl Fn(usize, usize) -> bool,
-) -> (Points, Points) {
+) -> Eight<Point> {
     let (ny, nx) = u.dim();
-    let (mut pu, mut pv) = (Points::default(), Points::default());
+    let mut pts = Eight::default();
     for rr in r.saturating_sub(1)..(r + 2).min(ny) {
         for cc in c.saturating_sub(1)..(c + 2).min(nx) {
             if (rr, cc) != (r, c) && keep(rr, cc) {
                 let (dr, dc) = (rr as f64 - r as f64, cc as f64 - c as f64);
-                pu.push((dr, dc, u[[rr, cc]]));
-                pv.push((dr, dc, v[[rr, cc]]));
+                pts.push((dr, dc, u[[rr, cc]], v[[rr, cc]]));
             }
         }
     }
-    (pu, pv)
+    pts
 }
 
-/// The replacement of (r, c) from its measured (valid or replaced)
-/// neighbours: their least-squares plane at the centre, or their mean
-/// where they do not span a plane; `None` without neighbours.
+/// The replacement of (r, c) from its neighbours: the plane of the valid
+/// ones at the centre, or else the mean of the measured (valid or
+/// replaced) ones; `None` without any.
 fn neighbour_fit(
     u: &Array2<f64>,
     v: &Array2<f64>,
@@ -297,18 +290,19 @@ fn neighbour_fit(
     if let Some((pu, pv)) = neighbour_planes(u, v, state, r, c) {
         return Some((pu.a, pv.a));
     }
-    let (pu, pv) = ring(u, v, r, c, |rr, cc| state[[rr, cc]] != State::Invalid);
-    let (pu, pv) = (pu.as_slice(), pv.as_slice());
-    if pu.is_empty() {
+    let pts = ring(u, v, r, c, |rr, cc| state[[rr, cc]] != State::Invalid);
+    let pts = pts.as_slice();
+    if pts.is_empty() {
         return None;
     }
-    let mean = |p: &[(f64, f64, f64)]| p.iter().map(|x| x.2).sum::<f64>() / p.len() as f64;
-    Some((mean(pu), mean(pv)))
+    let n = pts.len() as f64;
+    let sum = pts.iter().fold((0.0, 0.0), |s, p| (s.0 + p.2, s.1 + p.3));
+    Some((sum.0 / n, sum.1 / n))
 }
 
 /// Replaces `Invalid` vectors whose `replaceable` entry is true from their
-/// valid or replaced neighbours (their least-squares plane at the vector,
-/// or their mean where they lie on one line), growing inwards over up to
+/// neighbours (the least-squares plane of the valid ones at the vector,
+/// or else the mean of the valid and replaced ones), growing inwards over up to
 /// `iterations` sweeps; they become `Replaced`. Others keep u = v = 0.
 pub fn replace(
     u: &mut Array2<f64>,
