@@ -8,7 +8,7 @@ mod common;
 
 use common::{errors, pair, params, rms};
 use spiv_firmware_sim::scene::{SceneKind, SceneParams};
-use spiv_host::piv::{piv, Settings, State};
+use spiv_host::piv::{piv, piv_predicted, Field, Settings, State};
 
 fn uniform(shift: (f64, f64), seed: u64) -> Vec<(f64, f64, State)> {
     let p = SceneParams {
@@ -153,4 +153,56 @@ fn corners_of_a_shear_follow_its_gradient() {
     }
     eprintln!("corners of the shear: worst error {worst:.3} px");
     assert!(worst < 0.2, "worst corner error {worst}");
+}
+
+#[test]
+fn a_predicted_field_measures_beyond_the_quarter_rule() {
+    // 30 px to the right and 10 up over 32-px windows: without a
+    // prediction (and without the rescue rungs or the dense fallback, the
+    // closed loops' settings) the passes cannot see it; the prediction
+    // (here the true shift rounded to whole pixels, as a narrow pair's
+    // field times the baseline ratio would be) deforms the first pass and
+    // the passes measure the rest.
+    let shift = (30.4, -9.7);
+    let p = SceneParams {
+        shift,
+        ..params(SceneKind::Uniform)
+    };
+    let pr = pair(p, 77);
+    let s = Settings {
+        windows: vec![32, 32, 32],
+        rescue: false,
+        dense_fallback: false,
+        ..Settings::default()
+    };
+    let blind = piv(&pr.a, &pr.b, None, &s).expect("piv");
+    let e_blind = errors(&blind, &pr);
+    let (h, w) = pr.a.dim();
+    let grid = s.grid(w, h).expect("grid");
+    let (ny, nx) = (grid.ny, grid.nx);
+    let guess = Field {
+        grid,
+        u: ndarray::Array2::from_elem((ny, nx), 30.0),
+        v: ndarray::Array2::from_elem((ny, nx), -10.0),
+        state: ndarray::Array2::from_elem((ny, nx), State::Valid),
+        peak_ratio: ndarray::Array2::zeros((ny, nx)),
+        peak_height: ndarray::Array2::zeros((ny, nx)),
+    };
+    let f = piv_predicted(&pr.a, &pr.b, None, &s, Some(&guess)).expect("piv");
+    let e = errors(&f, &pr);
+    let bad = e.iter().filter(|x| x.2 != State::Valid).count();
+    eprintln!(
+        "blind: rms {:.3} measured {}; predicted: rms {:.4} flagged {bad}/{}",
+        rms(&e_blind),
+        e_blind.iter().filter(|x| x.2.is_measured()).count(),
+        rms(&e),
+        e.len()
+    );
+    assert!(
+        e_blind.iter().filter(|x| x.2.is_measured()).count() == 0 || rms(&e_blind) > 1.0,
+        "the blind passes measured it: the test would not show the prediction's part"
+    );
+    // Particles leave the image over 30 px: the edges' windows lose them.
+    assert!(rms(&e) <= 0.06, "rms {}", rms(&e));
+    assert!(bad * 5 <= e.len(), "{bad} of {} flagged", e.len());
 }

@@ -360,6 +360,19 @@ pub fn piv(
     mask: Option<&Array2<bool>>,
     s: &Settings,
 ) -> Result<Field, PivError> {
+    piv_predicted(a, b, mask, s, None)
+}
+
+/// [`piv`] with a predicted field (any grid, px per pair of `a` and `b`)
+/// that deforms the first pass, as a previous pass's field deforms the
+/// next: the passes then measure what the prediction missed.
+pub fn piv_predicted(
+    a: &Array2<f32>,
+    b: &Array2<f32>,
+    mask: Option<&Array2<bool>>,
+    s: &Settings,
+    initial: Option<&Field>,
+) -> Result<Field, PivError> {
     if a.dim() != b.dim() {
         let ((ha, wa), (hb, wb)) = (a.dim(), b.dim());
         return Err(PivError::SizeMismatch(wa, ha, wb, hb));
@@ -409,11 +422,11 @@ pub fn piv(
         (a, b)
     };
     let mut prev: Option<(Field, f64)> = None;
-    let mut predictor: Option<Field> = None;
+    let mut predictor: Option<Field> = initial.cloned();
     // The last field that passed (any grid): what a failed last pass
     // degrades to.
     let mut good: Option<Field> = None;
-    let resamplers = (s.windows.len() > 1).then(|| {
+    let resamplers = (s.windows.len() > 1 || initial.is_some()).then(|| {
         rayon::join(
             || resample::Resampler::new(a, s.interp),
             || resample::Resampler::new(b, s.interp),
