@@ -25,7 +25,7 @@ fn main() {
     let seeds: u64 = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(10);
     let width: Option<u16> = args.get(4).and_then(|s| s.parse().ok());
     let mut bias = std::collections::BTreeMap::<(usize, i64), (f64, f64, usize, f64)>::new();
-    let mut rmae = [[0.0f64; 2]; 4];
+    let mut rmae = [[0.0f64; 2]; 5];
     for seed in 1..=seeds {
         let mut p = SceneParams::new(kind);
         p.glare_peak = glare;
@@ -49,11 +49,11 @@ fn main() {
         }
     }
     for (i, r) in rmae.iter().enumerate() {
-        let name = ["frame", "tfp", "adaptive", "mc"][i];
+        let name = spiv_host::pipeline::FrameKind::ALL[i].name();
         println!("{name} glare RMAE {:.4} other {:.4}", r[0], r[1]);
     }
     for ((i, y), (b, t, n, a)) in bias {
-        let name = ["frame", "tfp", "adaptive", "mc"][i];
+        let name = spiv_host::pipeline::FrameKind::ALL[i].name();
         let (t, b, a) = (t / n as f64, b / n as f64, a / n as f64);
         println!("{name} y_wall {y}: truth {t:.3} mean error {b:+.4} mean |error| {a:.4}");
     }

@@ -21,7 +21,7 @@
 //!   rows of the fast profiles), one 128-tick window blurs, and the core's
 //!   per-region SNR windows are what keep those rows sharp.
 //!
-//! `cargo run --release -p spiv-host --example oracle_probe -- [linear|quadratic|log] [SEEDS] [zero|subtract] [true|predicted]`
+//! `cargo run --release -p spiv-host --example oracle_probe -- [linear|quadratic|log] [SEEDS] [zero|subtract] [true|predicted] [WIDTH]`
 use ndarray::Array2;
 use spiv_firmware_sim::scene::{SceneKind, SceneParams};
 use spiv_firmware_sim::sensor::Reset;
@@ -44,10 +44,15 @@ fn main() {
         _ => Reset::Zero,
     };
     let predicted = args.get(4).map(String::as_str) == Some("predicted");
+    let width: Option<u16> = args.get(5).and_then(|s| s.parse().ok());
     let names = ["as they come", "static light removed"];
     let mut rmae = [[0.0f64; 2]; 2];
+    let mut bias = std::collections::BTreeMap::<(usize, i64), (f64, f64, usize, f64)>::new();
     for seed in 1..=seeds {
-        let p = SceneParams::new(kind);
+        let mut p = SceneParams::new(kind);
+        if let Some(w) = width {
+            p.width = w;
+        }
         let mut req = Request::new(p.clone(), seed);
         req.sensor.reset = reset;
         let (data, sim) = simulate_planes(&req).expect("simulates");
@@ -121,7 +126,7 @@ fn main() {
         let a0 = counted(&data0, &vel, ka, w, h);
         let b0 = counted(&data0, &vb, kb, w, h);
         let pairs = [(a.clone(), b.clone()), (&a - &a0, &b - &b0)];
-        for ((fa, fb), acc) in pairs.iter().zip(rmae.iter_mut()) {
+        for (i, ((fa, fb), acc)) in pairs.iter().zip(rmae.iter_mut()).enumerate() {
             let s = Settings::for_compensated_frames();
             let f = piv(&fa.mapv(|v| v as f32), &fb.mapv(|v| v as f32), None, &s).expect("piv");
             let vs = f.vectors();
@@ -130,10 +135,25 @@ fn main() {
             let rows = row_profile(&vs, &truth, h as f64);
             acc[0] += region_error(&rows, |y| y < 50.0).rmae / seeds as f64;
             acc[1] += region_error(&rows, |y| y >= 50.0).rmae / seeds as f64;
+            for r in rows.iter().filter(|r| r.y_wall < 90.0) {
+                let e = bias.entry((i, r.y_wall.round() as i64)).or_default();
+                let err = r.measured.unwrap_or(0.0) - r.truth;
+                e.0 += err;
+                e.1 += r.truth;
+                e.2 += 1;
+                e.3 += err.abs();
+            }
         }
     }
     for (name, r) in names.iter().zip(&rmae) {
         println!("{name:22} glare RMAE {:.4} other {:.4}", r[0], r[1]);
+    }
+    for ((i, y), (b, t, n, a)) in bias {
+        let (t, b, a) = (t / n as f64, b / n as f64, a / n as f64);
+        println!(
+            "{:22} y_wall {y}: truth {t:.3} mean error {b:+.4} mean |error| {a:.4}",
+            names[i]
+        );
     }
 }
 

@@ -7,6 +7,7 @@
 //! | [`link`] | the sidecar link in process: the firmware loop's messages through the receiver |
 //! | [`reconstruct`] | frames from spike files (`.dat`, `.npz`) through the core: TFP, TFI, adaptive |
 //! | [`reference`](mod@reference) | the `f64` reference of the core's algorithm, and its tolerance |
+//! | [`baseline`] | the wide baseline: a second compensated pair several pair separations apart, centred on the pair, kept per vector where the flow allows |
 //! | [`piv`] | the PIV engine, stage by stage: `filter`, `resample`, `deform`, `correlate`, `peak`, `validate` |
 //! | [`dwell`] | the dwell cap: window limits per band from a predicted field, and the banded adaptive frame |
 //! | [`flow`] | the main job on any spike recording (`spiv flow`): pairs through the core, PIV, the closed-loop dwell cap |
@@ -19,6 +20,7 @@
 //! The `spiv` binary's subcommands live in `cli`, one file each.
 #![warn(missing_docs)]
 
+pub mod baseline;
 pub mod bench;
 pub mod downlink;
 pub mod dwell;

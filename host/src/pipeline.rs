@@ -11,9 +11,10 @@ use spiv_firmware_sim::simulation::{simulate_planes, Request, Simulated};
 use spiv_formats::vectors::Vector;
 use spiv_formats::FormatError;
 
-use crate::link::{dwell_caps, mc_transfer, transfer, Transfer};
+use crate::baseline;
+use crate::link::{dwell_caps, mc_transfer, transfer, transfer_with, Transfer};
 use crate::metrics::{region_error, row_profile, ProfileRow, RegionError};
-use crate::piv::{piv, to_f32, PivError, Settings};
+use crate::piv::{piv, piv_predicted, to_f32, Field, PivError, Settings};
 use crate::reconstruct::ReconstructError;
 use spiv_core::motion::Refine;
 use spiv_core::Method;
@@ -40,13 +41,24 @@ pub struct Job {
     pub encoding: spiv_core::wire::Encoding,
     /// Lossy mode settings.
     pub lossy: spiv_core::wire::codec::Lossy,
+    /// The wide baseline's separation in pair separations (beyond the
+    /// paper, [`crate::baseline`]): a second compensated pair this many
+    /// `dt` apart, centred on the pair (`None` or below 2: none). The
+    /// request's margin must hold its frames' windows ([`Job::new`] sets
+    /// it so).
+    pub wide: Option<u32>,
 }
 
 impl Job {
-    /// The defaults for `scene` and `seed`.
+    /// The defaults for `scene` and `seed`: the simulation keeps ⌊n_max/2⌋
+    /// ticks beyond the frames of the wide pair as well.
     pub fn new(scene: SceneParams, seed: u64) -> Job {
+        let s = baseline::SEPARATION;
+        let extra = (s - 1) * scene.pair_dt - (s - 1) * scene.pair_dt / 2;
+        let mut request = Request::new(scene, seed);
+        request.margin += extra;
         Job {
-            request: Request::new(scene, seed),
+            request,
             core: Params::default(),
             tfp_window: 8,
             piv: Settings::for_spike_frames(),
@@ -54,6 +66,7 @@ impl Job {
             dwell_cap: None,
             encoding: spiv_core::wire::Encoding::Rice,
             lossy: spiv_core::wire::codec::Lossy::default(),
+            wide: Some(s),
         }
     }
 }
@@ -94,15 +107,24 @@ pub enum FrameKind {
     /// the wire (in process: the prediction is handed to the firmware as the
     /// control link will carry it).
     Mc,
+    /// The motion-compensated pair's field, each vector measured over a
+    /// wide baseline where the flow allows it ([`crate::baseline`]): a
+    /// second compensated pair `s·dt` apart centred on the pair, made
+    /// with the same control, its PIV predicted by the pair's field.
+    /// Without that pair (no prediction, or its ticks outside the
+    /// recording), the motion-compensated pair's field.
+    #[serde(rename = "mc_wide")]
+    McWide,
 }
 
 impl FrameKind {
     /// All of them, in table order.
-    pub const ALL: [FrameKind; 4] = [
+    pub const ALL: [FrameKind; 5] = [
         FrameKind::Frame,
         FrameKind::Tfp,
         FrameKind::Adaptive,
         FrameKind::Mc,
+        FrameKind::McWide,
     ];
 
     /// File-name stem.
@@ -112,6 +134,7 @@ impl FrameKind {
             FrameKind::Tfp => "tfp",
             FrameKind::Adaptive => "adaptive",
             FrameKind::Mc => "mc",
+            FrameKind::McWide => "mc_wide",
         }
     }
 }
@@ -144,7 +167,7 @@ pub struct Outcome {
     pub sim: Simulated,
     /// The truth on the PIV grid.
     pub truth: Vec<Vector>,
-    /// Frame camera, TFP and adaptive, in that order.
+    /// Each of [`FrameKind::ALL`], in that order.
     pub measured: Vec<Measured>,
     /// Height above the wall below which a vector row is in the glare band, px.
     pub glare_limit: f64,
@@ -164,6 +187,8 @@ pub struct LinkSummary {
     /// Bytes of the motion-compensated pair on the wire (0 when it fell
     /// back to the adaptive pair).
     pub mc_bytes: u64,
+    /// Bytes of the wide-baseline pair on the wire (0 when none was made).
+    pub wide_bytes: u64,
     /// Raw spike bytes over the ticks of one pair period (4·dt).
     pub raw_bytes_per_period: u64,
     /// Frames lost or corrupted on the way (0 in process).
@@ -211,6 +236,7 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
         adaptive_bytes: ad_t.bytes,
         tfp_bytes: tfp_t.bytes,
         mc_bytes: 0,
+        wide_bytes: 0,
         raw_bytes_per_period: u64::from(base.schedule.every) * u64::from(w) * u64::from(h) / 8,
         lost_frames: ad_t.report.lost_frames + tfp_t.report.lost_frames,
         bit_exact: exact(&ad_t) && exact(&tfp_t),
@@ -239,14 +265,47 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
         refine: Some(Refine::default()),
         ..base
     };
-    let (mc, mc_t) = match mc_transfer(&data, (w, h), cfg, &pred, dt_ticks, &job.mc_piv)? {
-        Some((_, t)) => (up(&t, "motion-compensated")?, Some(t)),
-        None => (adaptive.clone(), None),
+    let (mc, mc_t, control) = match mc_transfer(&data, (w, h), cfg, &pred, dt_ticks, &job.mc_piv)? {
+        Some((c, t)) => (up(&t, "motion-compensated")?, Some(t), Some(c)),
+        None => (adaptive.clone(), None, None),
+    };
+    // The wide pair: the same control, frames s·dt apart centred on the
+    // pair (when the recording holds their windows).
+    let wide_s = job.wide.filter(|&s| s >= 2);
+    let wide_t = match (control, wide_s) {
+        (Some(control), Some(s)) => {
+            let planes_held =
+                (data.len() / (usize::from(w).div_ceil(8) * usize::from(h)).max(1)) as u64;
+            let half = u64::from(job.core.n_max / 2);
+            match baseline::ticks(ka, kb - ka, s) {
+                Some((k0, k1)) if u64::from(k0) >= half && u64::from(k1) + half <= planes_held => {
+                    let mut wcfg = Config {
+                        method: Method::Mc,
+                        ..cfg
+                    };
+                    wcfg.schedule.first = k0;
+                    wcfg.schedule.dt = k1 - k0;
+                    wcfg.schedule.every = (k1 - k0).saturating_mul(4);
+                    Some(transfer_with(&data, w, h, wcfg, control)?)
+                }
+                _ => None,
+            }
+        }
+        _ => None,
+    };
+    let wide = match &wide_t {
+        Some(t) => Some(up(t, "wide-baseline")?),
+        None => None,
     };
     let link = LinkSummary {
-        lost_frames: link.lost_frames + mc_t.as_ref().map_or(0, |t| t.report.lost_frames),
-        bit_exact: link.bit_exact && mc_t.as_ref().is_none_or(exact),
+        lost_frames: link.lost_frames
+            + mc_t.as_ref().map_or(0, |t| t.report.lost_frames)
+            + wide_t.as_ref().map_or(0, |t| t.report.lost_frames),
+        bit_exact: link.bit_exact
+            && mc_t.as_ref().is_none_or(exact)
+            && wide_t.as_ref().is_none_or(exact),
         mc_bytes: mc_t.as_ref().map_or(0, |t| t.bytes),
+        wide_bytes: wide_t.as_ref().map_or(0, |t| t.bytes),
         ..link
     };
     let t_rec = t0.elapsed().as_secs_f64() * 1e3 - t_sim;
@@ -256,27 +315,50 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
     let truth = sim.scene.truth_vectors(&job.piv.centres(w, h), dt);
     let glare_limit = 2.0 * p.glare_sigma;
     let cam_max = job.request.camera.max_dn();
-    let pairs: [(FrameKind, [Vec<u16>; 2], u16); 4] = [
+    let wide_pair = wide.clone().unwrap_or_else(|| mc.clone());
+    let pairs: [(FrameKind, [Vec<u16>; 2], u16); 5] = [
         (FrameKind::Frame, sim.frames.clone(), cam_max),
         (FrameKind::Tfp, tfp, job.core.full_scale),
         (FrameKind::Adaptive, adaptive, job.core.full_scale),
         (FrameKind::Mc, mc, job.core.full_scale),
+        (FrameKind::McWide, wide_pair, job.core.full_scale),
     ];
     let mut measured: Vec<Measured> = Vec::new();
+    let mut mc_field: Option<(Field, f64)> = None;
     for (source, pair, full_scale) in pairs {
         let t = std::time::Instant::now();
         let settings = match source {
-            FrameKind::Mc => &job.mc_piv,
+            FrameKind::Mc | FrameKind::McWide => &job.mc_piv,
             _ => &job.piv,
         };
-        let field = piv(
-            &to_f32(&pair[0], wu, hu),
-            &to_f32(&pair[1], wu, hu),
-            None,
-            settings,
-        )?;
-        let piv_ms = t.elapsed().as_secs_f64() * 1e3;
-        let vectors = field.vectors();
+        let (vectors, piv_ms) = match (source, &mc_field, wide_s) {
+            (FrameKind::McWide, Some((narrow, narrow_ms)), Some(s)) if wide.is_some() => {
+                let f = piv_predicted(
+                    &to_f32(&pair[0], wu, hu),
+                    &to_f32(&pair[1], wu, hu),
+                    None,
+                    settings,
+                    Some(&baseline::scaled(narrow, s)),
+                )?;
+                let ms = narrow_ms + t.elapsed().as_secs_f64() * 1e3;
+                (baseline::combine(narrow, &f, s), ms)
+            }
+            (FrameKind::McWide, Some((narrow, narrow_ms)), _) => (narrow.vectors(), *narrow_ms),
+            _ => {
+                let field = piv(
+                    &to_f32(&pair[0], wu, hu),
+                    &to_f32(&pair[1], wu, hu),
+                    None,
+                    settings,
+                )?;
+                let ms = t.elapsed().as_secs_f64() * 1e3;
+                let v = field.vectors();
+                if source == FrameKind::Mc {
+                    mc_field = Some((field, ms));
+                }
+                (v, ms)
+            }
+        };
         // The truth on this field's grid (the compensated pair's settings
         // may end on another window).
         let own_truth;

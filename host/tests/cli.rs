@@ -473,6 +473,9 @@ fn run_writes_the_table_images_vectors_plots_and_summary() {
         "mc_a.png",
         "mc_b.png",
         "vectors_mc.csv",
+        "mc_wide_a.png",
+        "mc_wide_b.png",
+        "vectors_mc_wide.csv",
         "profile.png",
         "vectors.png",
         "summary.json",
@@ -485,7 +488,7 @@ fn run_writes_the_table_images_vectors_plots_and_summary() {
             .expect("parse");
     assert_eq!(s["scene"], "paper-linear");
     let results = s["results"].as_array().expect("results");
-    assert_eq!(results.len(), 4);
+    assert_eq!(results.len(), 5);
     let rmae = |i: usize, region: &str| results[i][region]["rmae"].as_f64().expect("number");
     // Against the simulator's truth (seed 1; today frame camera 0.543 /
     // 0.003, adaptive 0.130 / 0.027): the spike camera sees the flow in
@@ -503,6 +506,20 @@ fn run_writes_the_table_images_vectors_plots_and_summary() {
     assert!(rmae(3, "rest") < 0.02, "mc rest {}", rmae(3, "rest"));
     assert!(rmae(3, "rest") < 0.5 * rmae(2, "rest"));
     assert!(table.contains("spike, motion-comp."), "{table}");
+    // The wide baseline (seed 1: glare 0.004 against the pair's 0.011,
+    // other rows 0.001 against 0.002).
+    assert!(
+        rmae(4, "rest") <= rmae(3, "rest"),
+        "mc wide rest {}",
+        rmae(4, "rest")
+    );
+    assert!(
+        rmae(4, "glare") < 0.01,
+        "mc wide glare {}",
+        rmae(4, "glare")
+    );
+    assert!(table.contains("spike, m.-c. wide"), "{table}");
+    assert!(s["wire"]["mc_wide_pair_bytes"].as_u64().unwrap_or(0) > 0);
     // The table is the one in summary.json: the frame camera's error in the
     // glare rows is printed as it is stored.
     let fg = results[0]["glare"]["rmae"].as_f64().expect("number");
@@ -597,4 +614,9 @@ fn flow_writes_vectors_per_pair_the_mean_field_and_plots() {
     assert!(e.contains("no pair fits"), "{e}");
     let e = fails(&["flow", p(&dat), "--window", "0", "--out", p(&out)]);
     assert!(e.contains("window 0"), "{e}");
+    let e = fails(&["flow", p(&dat), "--wide", "1", "--out", p(&out)]);
+    assert!(e.contains("--wide 1"), "{e}");
+    let e = fails(&["flow", p(&dat), "--wide", "x", "--out", p(&out)]);
+    assert!(e.contains("--wide x"), "{e}");
+    ok(&["flow", p(&dat), "--wide", "off", "--out", p(&out)]);
 }

@@ -84,6 +84,7 @@ pub fn run(a: &RunArgs) -> Result<(), CliError> {
         RGBColor(255, 127, 14),
         RGBColor(214, 39, 40),
         RGBColor(44, 160, 44),
+        RGBColor(148, 103, 189),
     ];
     let names: Vec<String> = o
         .measured
@@ -110,15 +111,16 @@ pub fn run(a: &RunArgs) -> Result<(), CliError> {
         o.glare_limit,
     )
     .map_err(|e| CliError::Usage(e.to_string()))?;
-    // The spike camera's headline: the motion-compensated pair.
-    let ad = &o.measured[3];
+    // The spike camera's headline: the motion-compensated pair, with the
+    // field measured over the wide baseline where the flow allows it.
+    let (ad, wide) = (&o.measured[3], &o.measured[4]);
     plot::vectors(
         &a.out.join("vectors.png"),
         &ad.pair[0],
         u32::from(w),
         u32::from(h),
         ad.full_scale,
-        &ad.vectors,
+        &wide.vectors,
         1.0,
     )
     .map_err(|e| CliError::Usage(e.to_string()))?;

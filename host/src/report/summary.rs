@@ -37,11 +37,16 @@ pub fn run_summary(o: &Outcome, job: &Job) -> serde_json::Value {
             "glare": rmae_ratio(o.measured[0].glare.rmae, o.measured[3].glare.rmae),
             "rest": rmae_ratio(o.measured[0].rest.rmae, o.measured[3].rest.rmae),
         },
+        "frame_over_mc_wide_rmae": {
+            "glare": rmae_ratio(o.measured[0].glare.rmae, o.measured[4].glare.rmae),
+            "rest": rmae_ratio(o.measured[0].rest.rmae, o.measured[4].rest.rmae),
+        },
         "stage_ms": { "simulate": o.stage_ms[0], "sidecar": o.stage_ms[1], "piv": o.stage_ms[2] },
         "wire": {
             "encoding": format!("{:?}", job.encoding),
             "adaptive_pair_bytes": o.link.adaptive_bytes,
             "mc_pair_bytes": o.link.mc_bytes,
+            "mc_wide_pair_bytes": o.link.wide_bytes,
             "tfp_pair_bytes": o.link.tfp_bytes,
             "raw_spike_bytes_per_pair_period": o.link.raw_bytes_per_period,
             "reduction_adaptive": o.link.raw_bytes_per_period as f64 / o.link.adaptive_bytes.max(1) as f64,

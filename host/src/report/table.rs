@@ -15,6 +15,7 @@ pub fn label(s: FrameKind, tfp: u16) -> String {
         FrameKind::Tfp => format!("spike, TFP n={tfp}"),
         FrameKind::Adaptive => "spike, adaptive".into(),
         FrameKind::Mc => "spike, motion-comp.".into(),
+        FrameKind::McWide => "spike, m.-c. wide".into(),
     }
 }
 
@@ -83,11 +84,12 @@ pub fn run_table(o: &Outcome, job: &Job) -> String {
 /// bit-exactness.
 pub fn wire_line(o: &Outcome, job: &Job) -> String {
     format!(
-        "wire ({:?}): adaptive pair {} B, TFP pair {} B, motion-comp. pair {} B, raw spikes {} B per pair period ({:.1}x less); lost {}, bit-exact {}",
+        "wire ({:?}): adaptive pair {} B, TFP pair {} B, motion-comp. pair {} B (wide pair {} B), raw spikes {} B per pair period ({:.1}x less); lost {}, bit-exact {}",
         job.encoding,
         o.link.adaptive_bytes,
         o.link.tfp_bytes,
         o.link.mc_bytes,
+        o.link.wide_bytes,
         o.link.raw_bytes_per_period,
         o.link.raw_bytes_per_period as f64 / o.link.adaptive_bytes.max(1) as f64,
         o.link.lost_frames,
