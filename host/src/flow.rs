@@ -170,6 +170,11 @@ pub struct FlowOptions {
     /// Also run the dense stage on every pair ([`crate::piv::dense`]) and
     /// average it into [`FlowOutcome::mean_dense`].
     pub dense: bool,
+    /// Motion-compensated pairs: the wide baseline's separation in pair
+    /// separations ([`crate::baseline`]; `None` or below 2: none). A pair
+    /// whose wide frames' windows do not fit the recording keeps its own
+    /// field.
+    pub wide: Option<u32>,
 }
 
 impl FlowOptions {
@@ -193,6 +198,7 @@ impl FlowOptions {
             piv: Settings::for_spike_frames(),
             mc_piv: Settings::for_compensated_frames(),
             dense: false,
+            wide: Some(crate::baseline::SEPARATION),
         }
     }
 
@@ -235,6 +241,9 @@ pub struct FlowRequest {
     pub windows: Option<Vec<usize>>,
     /// Run the dense stage on every pair and average it.
     pub dense: bool,
+    /// Motion-compensated pairs: the wide baseline's separation in pair
+    /// separations (default [`crate::baseline::SEPARATION`]; `None`: off).
+    pub wide: Option<u32>,
 }
 
 impl Default for FlowRequest {
@@ -249,6 +258,7 @@ impl Default for FlowRequest {
             dwell_cap: Some(8.0),
             windows: None,
             dense: false,
+            wide: Some(crate::baseline::SEPARATION),
         }
     }
 }
@@ -291,6 +301,14 @@ impl FlowRequest {
             o.mc_piv.windows = w.clone();
         }
         o.dense = self.dense;
+        if let Some(s) = self.wide {
+            if !(2..=64).contains(&s) {
+                return Err(FlowError::Schedule(format!(
+                    "--wide {s}: expected 2..=64 pair separations, or off"
+                )));
+            }
+        }
+        o.wide = self.wide;
         Ok(o)
     }
 }
@@ -315,6 +333,9 @@ pub struct PairResult {
     /// What the core's tables could not hold in the pair's compensated
     /// frames (left as background).
     pub lost: LabelLoss,
+    /// The wide pair's frame ticks, when one measured the field
+    /// ([`crate::baseline`]).
+    pub wide: Option<[u64; 2]>,
 }
 
 /// Particles a frame lost to the core's full tables: they are rendered as
@@ -467,6 +488,8 @@ pub fn run_flow(
             };
         let mut made = opts.method;
         let mut lost = LabelLoss::default();
+        // The compensated pair's last control, for its wide pair.
+        let mut mc_vel: Option<crate::predict::RowVelocities> = None;
         let (pair, caps, bootstrapped) = match (opts.method, opts.dwell_cap) {
             (Method::Adaptive, Some(budget)) => {
                 let (pred, boot) = match prediction.take() {
@@ -523,6 +546,7 @@ pub fn run_flow(
                             *o = f;
                             lost.add(&labels);
                         }
+                        mc_vel = Some(vel);
                     }
                     (out, Vec::new(), true)
                 }
@@ -546,7 +570,38 @@ pub fn run_flow(
             }
             d.2 += 1;
         }
-        let vectors = f.vectors();
+        // The wide baseline: compensated frames s·dt apart centred on the
+        // pair, with the pair's last control, where their windows fit.
+        let half = u64::from(core.n_max / 2);
+        let wide_ticks = match (made, &mc_vel, opts.wide.filter(|&s| s >= 2)) {
+            (Method::Mc, Some(_), Some(s)) => u32::try_from(ka)
+                .ok()
+                .and_then(|ka32| crate::baseline::ticks(ka32, opts.dt, s))
+                .map(|(k0, k1)| (u64::from(k0), u64::from(k1), s))
+                .filter(|&(k0, k1, _)| k0 >= half && k1 + half <= rec.planes.min(opts.end)),
+            _ => None,
+        };
+        let (vectors, wide) = match (wide_ticks, &mc_vel) {
+            (Some((k0, k1, s)), Some(vel)) => {
+                let mut wf = [Vec::new(), Vec::new()];
+                for (o, k) in wf.iter_mut().zip([k0, k1]) {
+                    let pl = rec.around(k, core.n_max)?;
+                    let (fr, _, labels) =
+                        compensated_frame(&pl, k, &core, vel, Some(Refine::default()))?;
+                    *o = fr;
+                    lost.add(&labels);
+                }
+                let g = crate::piv::piv_predicted(
+                    &to_f32(&wf[0], wu, hu),
+                    &to_f32(&wf[1], wu, hu),
+                    None,
+                    settings,
+                    Some(&crate::baseline::scaled(&f, s)),
+                )?;
+                (crate::baseline::combine(&f, &g, s), Some([k0, k1]))
+            }
+            _ => (f.vectors(), None),
+        };
         let valid = vectors.iter().filter(|v| v.state == State::Valid).count();
         // A pair that mostly failed predicts nothing: bootstrap again.
         prediction = (2 * valid >= vectors.len()).then(|| vectors.clone());
@@ -560,6 +615,7 @@ pub fn run_flow(
             caps,
             bootstrapped,
             lost,
+            wide,
         });
         progress(i + 1, ticks.len());
     }

@@ -595,6 +595,7 @@ fn flow<'py>(
         dwell_cap,
         windows,
         dense,
+        ..FlowRequest::default()
     };
     if width.is_some() != height.is_some() {
         return Err(SpivError::new_err("give both width and height, or neither"));

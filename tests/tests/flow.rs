@@ -205,3 +205,36 @@ fn the_real_capture_runs_end_to_end() {
         assert!(p.vectors.iter().any(|v| v.state == State::Valid));
     }
 }
+
+#[test]
+fn the_wide_baseline_measures_the_recording_better_where_it_fits() {
+    let dir = tempfile::tempdir().unwrap();
+    simulate(dir.path(), None, 600, None);
+    let mut rec = open(&dir.path().join("spikes.dat"));
+    let dt = rec.meta_dt.expect("scene.json names the pair");
+    let o = FlowOptions::new(&rec, dt);
+    assert_eq!(o.wide, Some(spiv_host::baseline::SEPARATION), "the default");
+    let wide = run_flow(&mut rec, &o, |_, _| {}).unwrap();
+    // The first pair (ticks 64/77) has no room for frames 19 ticks earlier
+    // with their 64 ticks of history, nor the last two (from tick 584)
+    // for frames 33 ticks after their second one with 64 ticks ahead of
+    // them in 600 planes; the others have.
+    let has: Vec<bool> = wide.pairs.iter().map(|p| p.wide.is_some()).collect();
+    assert_eq!(
+        has,
+        [false, true, true, true, true, true, true, true, true, false, false]
+    );
+    assert_eq!(wide.pairs[1].wide, Some([97, 149]));
+    let pair = FlowOptions { wide: None, ..o };
+    let alone = run_flow(&mut rec, &pair, |_, _| {}).unwrap();
+    assert!(alone.pairs.iter().all(|p| p.wide.is_none()));
+    let (wo, wg) = rmae(dir.path(), &wide.mean_field(), rec.height);
+    let (ao, ag) = rmae(dir.path(), &alone.mean_field(), rec.height);
+    eprintln!(
+        "mean field, other / glare rows: wide {wo:.4} / {wg:.4}, pair alone {ao:.4} / {ag:.4}"
+    );
+    assert!(
+        wg < 0.8 * ag && wo <= ao,
+        "wide {wo:.4} / {wg:.4}, alone {ao:.4} / {ag:.4}"
+    );
+}

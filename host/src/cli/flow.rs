@@ -51,6 +51,12 @@ pub struct FlowArgs {
     /// for the paper's algorithm with one n_max everywhere.
     #[arg(long, default_value = "8")]
     dwell_cap: String,
+    /// Motion-compensated pairs: also measure over a wide baseline, a
+    /// second compensated pair this many pair separations apart centred on
+    /// the pair, kept per vector where the flow allows it; "off" for the
+    /// pair alone.
+    #[arg(long, default_value = "4")]
+    wide: String,
     /// PIV window side of each pass, px (default: 64,32,32, and
     /// 64,32,32,32,32 for motion-compensated pairs).
     #[arg(long, value_delimiter = ',')]
@@ -95,6 +101,7 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
         dwell_cap: parse_dwell_cap(&a.dwell_cap)?,
         windows: a.windows.clone(),
         dense: a.dense,
+        wide: parse_wide(&a.wide)?,
     }
     .options(&rec, &a.input)
     .map_err(flow_err)?;
@@ -158,6 +165,7 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
                 "valid": v, "replaced": r, "invalid": i,
                 "bootstrapped": p.bootstrapped,
                 "caps": p.caps,
+                "wide_ticks": p.wide,
                 "lost_to_full_tables": {"regions": p.lost.regions, "pixels": p.lost.pixels},
             })
         })
@@ -168,6 +176,7 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
         "method": o.method.name(),
         "window": o.window,
         "dwell_cap_px": o.dwell_cap,
+        "wide_baseline": o.wide,
         "dt_ticks": o.dt, "every_ticks": o.every,
         "piv": o.piv,
         "pairs": per_pair,
@@ -212,4 +221,16 @@ fn flow_err(e: spiv_host::flow::FlowError) -> CliError {
         FlowError::Piv(p) => CliError::Piv(p),
         FlowError::Schedule(s) => CliError::Usage(s),
     }
+}
+
+/// `--wide`: a separation in pair separations, or "off".
+fn parse_wide(s: &str) -> Result<Option<u32>, CliError> {
+    if s.eq_ignore_ascii_case("off") {
+        return Ok(None);
+    }
+    s.parse::<u32>().map(Some).map_err(|_| {
+        CliError::Usage(format!(
+            "--wide {s}: expected a whole number 2..=64, or off"
+        ))
+    })
 }
