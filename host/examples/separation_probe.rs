@@ -132,10 +132,20 @@ fn main() {
             }
             let k0 = ka - (s - 1) * dt / 2;
             let k1 = k0 + s * dt;
+            // WIDE_NMAX: the wide frames' window limit (default 128).
+            let wn: u16 = std::env::var("WIDE_NMAX")
+                .ok()
+                .and_then(|s| s.parse().ok())
+                .unwrap_or(128);
+            let wcore = if s > 1 {
+                spiv_core::Params { n_max: wn, ..core }
+            } else {
+                core
+            };
             let (a, _, _) =
-                compensated_frame(&planes, u64::from(k0), &core, &pred, refine).expect("a");
+                compensated_frame(&planes, u64::from(k0), &wcore, &pred, refine).expect("a");
             let (b, _, _) =
-                compensated_frame(&planes, u64::from(k1), &core, &pred, refine).expect("b");
+                compensated_frame(&planes, u64::from(k1), &wcore, &pred, refine).expect("b");
             let mut init = narrow.clone();
             init.u.mapv_inplace(|u| u * f64::from(s));
             init.v.mapv_inplace(|v| v * f64::from(s));

@@ -187,6 +187,42 @@ pub fn speed_against_error(mut progress: impl FnMut()) -> Result<Vec<SpeedRow>, 
             rmse: e,
         });
         progress();
+        // The wide baseline on top (`crate::baseline`): two more
+        // compensated frames 4·dt apart around the pair, their PIV from the
+        // pair's field, each vector chosen. Time = all of the above + that.
+        let s = crate::baseline::SEPARATION;
+        let pair_dt = u32::try_from(kb - ka).unwrap_or(u32::MAX);
+        if let Some((k0, k1)) = u32::try_from(ka)
+            .ok()
+            .and_then(|ka| crate::baseline::ticks(ka, pair_dt, s))
+        {
+            let t = Instant::now();
+            let narrow = piv(&to(&a), &to(&bb), None, &job.mc_piv)?;
+            let wa =
+                crate::predict::compensated_frame(&planes, u64::from(k0), &job.core, &vel, refine)?
+                    .0;
+            let wb =
+                crate::predict::compensated_frame(&planes, u64::from(k1), &job.core, &vel, refine)?
+                    .0;
+            let wide = crate::piv::piv_predicted(
+                &to(&wa),
+                &to(&wb),
+                None,
+                &job.mc_piv,
+                Some(&crate::baseline::scaled(&narrow, s)),
+            )?;
+            let vectors = crate::baseline::combine(&narrow, &wide, s);
+            let wide_ms = t.elapsed().as_secs_f64() * 1e3;
+            let prof = row_profile(&vectors, &truth, f64::from(h));
+            rows.push(SpeedRow {
+                name: format!(
+                    "the same + wide baseline {s}·dt (two more compensated frames, PIV predicted)"
+                ),
+                ms: rec_ms + wide_ms,
+                rmse: region_error(&prof, |_| true).rmse,
+            });
+            progress();
+        }
     }
     // The f64 reference of the adaptive frame.
     let t = Instant::now();

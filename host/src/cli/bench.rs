@@ -246,7 +246,7 @@ fn blasius(seeds: u64) -> Result<(), CliError> {
 }
 
 fn speed(plot_path: &Path) -> Result<(), CliError> {
-    let b = bar(17, "configurations");
+    let b = bar(18, "configurations");
     let rows = spiv_host::bench::speed::speed_against_error(|| b.inc(1))?;
     b.finish_and_clear();
     println!("speed against error, paper-linear seed 1 (400x250): wall time per frame pair (reconstruction of both frames + PIV, the PIV a median of 3 runs) and RMSE of the row profile, px per pair");
