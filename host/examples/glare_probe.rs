@@ -12,19 +12,19 @@
 //! averages more vectors, as on the paper's 6400-px canvas.
 //!
 //! `cargo run --release -p spiv-host --example glare_probe -- [linear|quadratic|log] [GLARE_PEAK] [SEEDS] [WIDTH]`
-use spiv_firmware_sim::scene::{SceneKind, SceneParams};
+mod common;
+
+use spiv_firmware_sim::scene::SceneParams;
 use spiv_host::pipeline::{run, Job};
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     // `linear`, `quadratic` (the default) or `log`.
-    let profile = args.get(1).map_or("quadratic", String::as_str);
-    let kind =
-        SceneKind::from_name(&format!("paper-{profile}")).unwrap_or(SceneKind::PaperQuadratic);
+    let kind = common::profile(args.get(1));
     let glare: f64 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(0.65);
     let seeds: u64 = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(10);
     let width: Option<u16> = args.get(4).and_then(|s| s.parse().ok());
-    let mut bias = std::collections::BTreeMap::<(usize, i64), (f64, f64, usize, f64)>::new();
+    let mut near = common::WallRows::default();
     let mut rmae = [[0.0f64; 2]; 5];
     for seed in 1..=seeds {
         let mut p = SceneParams::new(kind);
@@ -37,24 +37,16 @@ fn main() {
         for (i, m) in o.measured.iter().enumerate() {
             rmae[i][0] += m.glare.rmae / seeds as f64;
             rmae[i][1] += m.rest.rmae / seeds as f64;
-            for r in &m.rows {
-                if r.y_wall < 90.0 {
-                    let e = bias.entry((i, r.y_wall.round() as i64)).or_default();
-                    e.0 += r.measured.unwrap_or(0.0) - r.truth;
-                    e.1 += r.truth;
-                    e.2 += 1;
-                    e.3 += (r.measured.unwrap_or(0.0) - r.truth).abs();
-                }
-            }
+            near.add(i, &m.rows);
         }
     }
     for (i, r) in rmae.iter().enumerate() {
         let name = spiv_host::pipeline::FrameKind::ALL[i].name();
         println!("{name} glare RMAE {:.4} other {:.4}", r[0], r[1]);
     }
-    for ((i, y), (b, t, n, a)) in bias {
-        let name = spiv_host::pipeline::FrameKind::ALL[i].name();
-        let (t, b, a) = (t / n as f64, b / n as f64, a / n as f64);
-        println!("{name} y_wall {y}: truth {t:.3} mean error {b:+.4} mean |error| {a:.4}");
-    }
+    let names: Vec<String> = spiv_host::pipeline::FrameKind::ALL
+        .iter()
+        .map(|k| k.name().to_string())
+        .collect();
+    near.print(&names);
 }

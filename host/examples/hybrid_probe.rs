@@ -38,8 +38,10 @@
 //! 0.032 (glare rows).
 //!
 //! `cargo run --release -p spiv-host --example hybrid_probe -- [linear|quadratic|log] [SEEDS] [WIDTH]`
+mod common;
+
 use ndarray::Array2;
-use spiv_firmware_sim::scene::{SceneKind, SceneParams};
+use spiv_firmware_sim::scene::SceneParams;
 use spiv_firmware_sim::simulation::{simulate_planes, Request};
 use spiv_host::metrics::{region_error, row_profile};
 use spiv_host::piv::{piv, Settings};
@@ -49,13 +51,11 @@ use spiv_host::reference::{adaptive_rows_compensated, motion::compensated_count,
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     // `linear`, `quadratic` (the default) or `log`.
-    let profile = args.get(1).map_or("quadratic", String::as_str);
-    let kind =
-        SceneKind::from_name(&format!("paper-{profile}")).unwrap_or(SceneKind::PaperQuadratic);
+    let kind = common::profile(args.get(1));
     let seeds: u64 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(4);
     let width: Option<u16> = args.get(3).and_then(|s| s.parse().ok());
     let mut acc = [[0.0f64; 2]; 3];
-    let mut bias = std::collections::BTreeMap::<(usize, i64), (f64, f64, usize, f64)>::new();
+    let mut near = common::WallRows::default();
     for seed in 1..=seeds {
         let mut p = SceneParams::new(kind);
         if let Some(w) = width {
@@ -222,25 +222,12 @@ fn main() {
             let rows = row_profile(&f, &truth, h as f64);
             acc[i][0] += region_error(&rows, |y| y < 50.0).rmae / seeds as f64;
             acc[i][1] += region_error(&rows, |y| y >= 50.0).rmae / seeds as f64;
-            for r in rows.iter().filter(|r| r.y_wall < 90.0) {
-                let e = bias.entry((i, r.y_wall.round() as i64)).or_default();
-                let err = r.measured.unwrap_or(0.0) - r.truth;
-                e.0 += err;
-                e.1 += r.truth;
-                e.2 += 1;
-                e.3 += err.abs();
-            }
+            near.add(i, &rows);
         }
     }
     let names = ["reference MC", "hybrid n*/n_max", "comp TFP n_max"];
     for (i, name) in names.iter().enumerate() {
         println!("{name:18} glare {:.4} other {:.4}", acc[i][0], acc[i][1]);
     }
-    for ((i, y), (b, t, n, a)) in bias {
-        let (t, b, a) = (t / n as f64, b / n as f64, a / n as f64);
-        println!(
-            "{:18} y_wall {y}: truth {t:.3} mean error {b:+.4} mean |error| {a:.4}",
-            names[i]
-        );
-    }
+    near.print(&names.map(String::from));
 }

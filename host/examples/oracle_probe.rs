@@ -22,8 +22,10 @@
 //!   per-region SNR windows are what keep those rows sharp.
 //!
 //! `cargo run --release -p spiv-host --example oracle_probe -- [linear|quadratic|log] [SEEDS] [zero|subtract] [true|predicted] [WIDTH]`
+mod common;
+
 use ndarray::Array2;
-use spiv_firmware_sim::scene::{SceneKind, SceneParams};
+use spiv_firmware_sim::scene::SceneParams;
 use spiv_firmware_sim::sensor::Reset;
 use spiv_firmware_sim::simulation::{simulate_planes, Request};
 use spiv_host::metrics::{region_error, row_profile};
@@ -35,9 +37,7 @@ const N: i64 = 128;
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     // `linear`, `quadratic` (the default) or `log`.
-    let profile = args.get(1).map_or("quadratic", String::as_str);
-    let kind =
-        SceneKind::from_name(&format!("paper-{profile}")).unwrap_or(SceneKind::PaperQuadratic);
+    let kind = common::profile(args.get(1));
     let seeds: u64 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(10);
     let reset = match args.get(3).map(String::as_str) {
         Some("subtract") => Reset::Subtract,
@@ -47,7 +47,7 @@ fn main() {
     let width: Option<u16> = args.get(5).and_then(|s| s.parse().ok());
     let names = ["as they come", "static light removed"];
     let mut rmae = [[0.0f64; 2]; 2];
-    let mut bias = std::collections::BTreeMap::<(usize, i64), (f64, f64, usize, f64)>::new();
+    let mut near = common::WallRows::default();
     for seed in 1..=seeds {
         let mut p = SceneParams::new(kind);
         if let Some(w) = width {
@@ -135,26 +135,13 @@ fn main() {
             let rows = row_profile(&vs, &truth, h as f64);
             acc[0] += region_error(&rows, |y| y < 50.0).rmae / seeds as f64;
             acc[1] += region_error(&rows, |y| y >= 50.0).rmae / seeds as f64;
-            for r in rows.iter().filter(|r| r.y_wall < 90.0) {
-                let e = bias.entry((i, r.y_wall.round() as i64)).or_default();
-                let err = r.measured.unwrap_or(0.0) - r.truth;
-                e.0 += err;
-                e.1 += r.truth;
-                e.2 += 1;
-                e.3 += err.abs();
-            }
+            near.add(i, &rows);
         }
     }
     for (name, r) in names.iter().zip(&rmae) {
         println!("{name:22} glare RMAE {:.4} other {:.4}", r[0], r[1]);
     }
-    for ((i, y), (b, t, n, a)) in bias {
-        let (t, b, a) = (t / n as f64, b / n as f64, a / n as f64);
-        println!(
-            "{:22} y_wall {y}: truth {t:.3} mean error {b:+.4} mean |error| {a:.4}",
-            names[i]
-        );
-    }
+    near.print(&names.map(String::from));
 }
 
 /// Spikes per tick counted along each upright row's true path over the

@@ -17,16 +17,16 @@
 //!
 //! `cargo run --release -p spiv-host --example wall_probe -- [linear|quadratic|log] [SEEDS] [WIDTH] [BLIND] [mc|spike]`
 use ndarray::Array2;
-use spiv_firmware_sim::scene::{Scene, SceneKind, SceneParams};
+mod common;
+
+use spiv_firmware_sim::scene::{Scene, SceneParams};
 use spiv_host::metrics::{region_error, row_profile};
 use spiv_host::piv::{piv, Settings};
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     // `linear`, `quadratic` (the default) or `log`.
-    let profile = args.get(1).map_or("quadratic", String::as_str);
-    let kind =
-        SceneKind::from_name(&format!("paper-{profile}")).unwrap_or(SceneKind::PaperQuadratic);
+    let kind = common::profile(args.get(1));
     let seeds: u64 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(10);
     let width: u16 = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(400);
     let blind: f64 = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(0.0);

@@ -43,6 +43,23 @@ pub fn ticks(ka: u32, dt: u32, s: u32) -> Option<(u32, u32)> {
     Some((k0, k0.checked_add(s.checked_mul(dt)?)?))
 }
 
+/// [`ticks`] for a pair at `ka`, when both wide frames' windows (⌊n_max/2⌋
+/// ticks before each, as many after) lie within `planes` planes.
+pub fn ticks_within(ka: u64, dt: u32, s: u32, n_max: u16, planes: u64) -> Option<(u64, u64)> {
+    let (k0, k1) = ticks(u32::try_from(ka).ok()?, dt, s)?;
+    let (k0, k1) = (u64::from(k0), u64::from(k1));
+    let half = u64::from(n_max / 2);
+    (k0 >= half && k1 + half <= planes).then_some((k0, k1))
+}
+
+/// How far the wide pair's second frame lies beyond the pair's, ticks
+/// (⌈(s − 1)·dt/2⌉; the first frame lies ⌊(s − 1)·dt/2⌋ before the
+/// pair's): what a recording must hold besides the pair's own windows.
+pub fn reach(dt: u32, s: u32) -> u32 {
+    let span = s.saturating_sub(1).saturating_mul(dt);
+    span - span / 2
+}
+
 /// The field `f` times `s`: the wide pair's predictor.
 pub fn scaled(f: &Field, s: u32) -> Field {
     let mut out = f.clone();
@@ -147,6 +164,17 @@ mod tests {
         assert_eq!(ticks(10, 13, 4), None);
         assert_eq!(ticks(64, 13, 0), None);
         assert_eq!(ticks(u32::MAX - 1, 13, 4), None);
+        assert_eq!(reach(13, 4), 97 - 77);
+        assert_eq!(reach(13, 1), 0);
+        // Windows of 128 ticks: 64 before the first frame, 64 after the
+        // second.
+        assert_eq!(ticks_within(64, 13, 4, 128, 200), None);
+        assert_eq!(ticks_within(84, 13, 4, 128, 182), Some((65, 117)));
+        assert_eq!(ticks_within(84, 13, 4, 128, 180), None);
+        assert_eq!(
+            ticks_within(u64::from(u32::MAX) + 1, 13, 4, 128, u64::MAX),
+            None
+        );
     }
 
     #[test]

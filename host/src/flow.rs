@@ -572,13 +572,12 @@ pub fn run_flow(
         }
         // The wide baseline: compensated frames s·dt apart centred on the
         // pair, with the pair's last control, where their windows fit.
-        let half = u64::from(core.n_max / 2);
+        let planes = rec.planes.min(opts.end);
         let wide_ticks = match (made, &mc_vel, opts.wide.filter(|&s| s >= 2)) {
-            (Method::Mc, Some(_), Some(s)) => u32::try_from(ka)
-                .ok()
-                .and_then(|ka32| crate::baseline::ticks(ka32, opts.dt, s))
-                .map(|(k0, k1)| (u64::from(k0), u64::from(k1), s))
-                .filter(|&(k0, k1, _)| k0 >= half && k1 + half <= rec.planes.min(opts.end)),
+            (Method::Mc, Some(_), Some(s)) => {
+                crate::baseline::ticks_within(ka, opts.dt, s, core.n_max, planes)
+                    .map(|(k0, k1)| (k0, k1, s))
+            }
             _ => None,
         };
         let (vectors, wide) = match (wide_ticks, &mc_vel) {

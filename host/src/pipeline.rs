@@ -54,7 +54,7 @@ impl Job {
     /// ticks beyond the frames of the wide pair as well.
     pub fn new(scene: SceneParams, seed: u64) -> Job {
         let s = baseline::SEPARATION;
-        let extra = (s - 1) * scene.pair_dt - (s - 1) * scene.pair_dt / 2;
+        let extra = baseline::reach(scene.pair_dt, s);
         let mut request = Request::new(scene, seed);
         request.margin += extra;
         Job {
@@ -274,11 +274,12 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
     let wide_s = job.wide.filter(|&s| s >= 2);
     let wide_t = match (control, wide_s) {
         (Some(control), Some(s)) => {
-            let planes_held =
-                (data.len() / (usize::from(w).div_ceil(8) * usize::from(h)).max(1)) as u64;
-            let half = u64::from(job.core.n_max / 2);
-            match baseline::ticks(ka, kb - ka, s) {
-                Some((k0, k1)) if u64::from(k0) >= half && u64::from(k1) + half <= planes_held => {
+            let planes = sim.meta.capture.planes;
+            match baseline::ticks_within(u64::from(ka), kb - ka, s, job.core.n_max, planes) {
+                Some((k0, k1)) => {
+                    // Frame ticks are u32 on the sidecar: ticks_within
+                    // found both below ka + s·dt.
+                    let (k0, k1) = (k0 as u32, k1 as u32);
                     let mut wcfg = Config {
                         method: Method::Mc,
                         ..cfg
@@ -288,7 +289,7 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
                     wcfg.schedule.every = (k1 - k0).saturating_mul(4);
                     Some(transfer_with(&data, w, h, wcfg, control)?)
                 }
-                _ => None,
+                None => None,
             }
         }
         _ => None,

@@ -73,7 +73,7 @@ fn no_valid_vector_breaks_the_quarter_rule_in_glare() {
             if let Some(g) = glare {
                 p.glare_peak = g;
             }
-            // On the simulation before the wide baseline's 39 extra ticks
+            // On the simulation before the wide baseline's 40 extra ticks
             // (`Job::new` keeps them since): on that longer stretch two
             // streaked adaptive pairs get valid vectors past the quarter
             // rule from spike-frame PIV — quadratic seed 1 (8.7 px, among

@@ -132,7 +132,7 @@ fn paper_linear_spike_frames_measure_the_flow() {
     // Motion-compensated (mean of seeds 1, 2): glare 0.022, other rows
     // 0.002 (frame camera 0.002); with one pixel's noise model for
     // compensated counts they were 0.038 / 0.005.
-    // Wide baseline (the simulation 39 ticks longer for its frames, which
+    // Wide baseline (the simulation 40 ticks longer for its frames, which
     // moved every row's noise): glare 0.0039 against the pair's 0.0069,
     // other rows 0.0008 against 0.0017 (frame camera 0.0020).
     check(SceneKind::PaperLinear, 0.23, 0.05, (0.0045, 0.035), 0.0055);

@@ -47,7 +47,10 @@ pub fn speed_against_error(mut progress: impl FnMut()) -> Result<Vec<SpeedRow>, 
     let to = |d: &[u16]| to_f32(d, wu, hu);
     // PIV time: the median of 3 runs (the first run of the process also
     // pays for starting the thread pool and touching fresh memory).
-    let err = |a: &Array2<f32>, b: &Array2<f32>, s: &Settings| -> Result<(f64, f64), JobError> {
+    let err = |a: &Array2<f32>,
+               b: &Array2<f32>,
+               s: &Settings|
+     -> Result<(f64, f64, crate::piv::Field), JobError> {
         let mut times = [0.0f64; 3];
         let mut field = None;
         for t in times.iter_mut() {
@@ -59,7 +62,7 @@ pub fn speed_against_error(mut progress: impl FnMut()) -> Result<Vec<SpeedRow>, 
         let ms = times[1];
         let f = field.ok_or(JobError::NoPair("PIV"))?;
         let rows = row_profile(&f.vectors(), &truth, f64::from(h));
-        Ok((ms, region_error(&rows, |_| true).rmse))
+        Ok((ms, region_error(&rows, |_| true).rmse, f))
     };
     let mut rows: Vec<SpeedRow> = Vec::new();
     let base = job.piv.clone();
@@ -86,7 +89,7 @@ pub fn speed_against_error(mut progress: impl FnMut()) -> Result<Vec<SpeedRow>, 
     // Frame camera.
     let (fa, fb) = (to(&sim.frames[0]), to(&sim.frames[1]));
     for (name, s) in &piv_cfgs {
-        let (ms, e) = err(&fa, &fb, s)?;
+        let (ms, e, _) = err(&fa, &fb, s)?;
         rows.push(SpeedRow {
             name: format!("frame camera, {name}"),
             ms,
@@ -109,7 +112,7 @@ pub fn speed_against_error(mut progress: impl FnMut()) -> Result<Vec<SpeedRow>, 
         (Method::Adaptive, 128),
     ] {
         let (rms, a, bb) = recon(m, n)?;
-        let (ms, e) = err(&a, &bb, &spike)?;
+        let (ms, e, _) = err(&a, &bb, &spike)?;
         rows.push(SpeedRow {
             name: format!("core {m:?} n={n} (fixed point), {spike_name}"),
             ms: rms + ms,
@@ -126,7 +129,7 @@ pub fn speed_against_error(mut progress: impl FnMut()) -> Result<Vec<SpeedRow>, 
         let a = crate::dwell::adaptive_banded(&planes, ka, &job.core, &caps)?;
         let bb = crate::dwell::adaptive_banded(&planes, kb, &job.core, &caps)?;
         let rec_ms = t.elapsed().as_secs_f64() * 1e3;
-        let (ms, e) = err(&to(&a), &to(&bb), &spike)?;
+        let (ms, e, _) = err(&to(&a), &to(&bb), &spike)?;
         rows.push(SpeedRow {
             name: format!("core Adaptive, dwell cap {cap} px, {spike_name}"),
             ms: rec_ms + ms,
@@ -157,7 +160,7 @@ pub fn speed_against_error(mut progress: impl FnMut()) -> Result<Vec<SpeedRow>, 
         let [a, bb] = ad_t.pairs.first().ok_or(JobError::NoPair("adaptive"))?;
         let (a, bb) = (upright_f32(a), upright_f32(bb));
         let rec_ms = t.elapsed().as_secs_f64() * 1e3;
-        let (ms, e) = err(&a, &bb, &spike)?;
+        let (ms, e, _) = err(&a, &bb, &spike)?;
         rows.push(SpeedRow {
             name: format!(
                 "sidecar + wire {label}, {:.0} KB/pair, dwell cap 8 px, {spike_name}",
@@ -180,7 +183,7 @@ pub fn speed_against_error(mut progress: impl FnMut()) -> Result<Vec<SpeedRow>, 
         let a = crate::predict::compensated_frame(&planes, ka, &job.core, &vel, refine)?.0;
         let bb = crate::predict::compensated_frame(&planes, kb, &job.core, &vel, refine)?.0;
         let rec_ms = t.elapsed().as_secs_f64() * 1e3;
-        let (ms, e) = err(&to(&a), &to(&bb), &job.mc_piv)?;
+        let (ms, e, narrow) = err(&to(&a), &to(&bb), &job.mc_piv)?;
         rows.push(SpeedRow {
             name: format!("core motion-compensated n=128, TFP prediction refined, {mc_name}"),
             ms: rec_ms + ms,
@@ -189,21 +192,15 @@ pub fn speed_against_error(mut progress: impl FnMut()) -> Result<Vec<SpeedRow>, 
         progress();
         // The wide baseline on top (`crate::baseline`): two more
         // compensated frames 4·dt apart around the pair, their PIV from the
-        // pair's field, each vector chosen. Time = all of the above + that.
+        // pair's field, each vector chosen. Time = the pair's row + that.
         let s = crate::baseline::SEPARATION;
         let pair_dt = u32::try_from(kb - ka).unwrap_or(u32::MAX);
-        if let Some((k0, k1)) = u32::try_from(ka)
-            .ok()
-            .and_then(|ka| crate::baseline::ticks(ka, pair_dt, s))
+        let held = sim.meta.capture.planes;
+        if let Some((k0, k1)) = crate::baseline::ticks_within(ka, pair_dt, s, job.core.n_max, held)
         {
             let t = Instant::now();
-            let narrow = piv(&to(&a), &to(&bb), None, &job.mc_piv)?;
-            let wa =
-                crate::predict::compensated_frame(&planes, u64::from(k0), &job.core, &vel, refine)?
-                    .0;
-            let wb =
-                crate::predict::compensated_frame(&planes, u64::from(k1), &job.core, &vel, refine)?
-                    .0;
+            let wa = crate::predict::compensated_frame(&planes, k0, &job.core, &vel, refine)?.0;
+            let wb = crate::predict::compensated_frame(&planes, k1, &job.core, &vel, refine)?.0;
             let wide = crate::piv::piv_predicted(
                 &to(&wa),
                 &to(&wb),
@@ -218,7 +215,7 @@ pub fn speed_against_error(mut progress: impl FnMut()) -> Result<Vec<SpeedRow>, 
                 name: format!(
                     "the same + wide baseline {s}·dt (two more compensated frames, PIV predicted)"
                 ),
-                ms: rec_ms + wide_ms,
+                ms: rec_ms + ms + wide_ms,
                 rmse: region_error(&prof, |_| true).rmse,
             });
             progress();
@@ -235,7 +232,7 @@ pub fn speed_against_error(mut progress: impl FnMut()) -> Result<Vec<SpeedRow>, 
         Array2::from_shape_fn((hu, wu), |(i, j)| v[(hu - 1 - i) * wu + j] as f32)
     };
     let (a, bb) = (up(&ra.gray), up(&rb.gray));
-    let (ms, e) = err(&a, &bb, &spike)?;
+    let (ms, e, _) = err(&a, &bb, &spike)?;
     rows.push(SpeedRow {
         name: format!("f64 reference Adaptive n=128, {spike_name}"),
         ms: ref_ms + ms,
