@@ -42,7 +42,7 @@ pub struct DownlinkStats {
 pub struct DownlinkBuffers<'a> {
     /// Receive buffer of the stream decoder.
     pub rx: &'a mut [u8],
-    /// The applied x velocity of each stored row, 1/256 px per tick.
+    /// The applied x velocity of each stored row, 1/4096 px per tick.
     pub vx: &'a mut [i16],
     /// The applied y velocity of each stored row (stored rows, down).
     pub vy: &'a mut [i16],

@@ -97,7 +97,7 @@ struct Cell {
     j: usize,
     /// `r·words_per_row + j`.
     at: usize,
-    /// The row's predicted velocity (Q8; 0 without a motion).
+    /// The row's predicted velocity (1/4096 px per tick; 0 without a motion).
     v: (i16, i16),
     ring: u64,
     reg: u64,

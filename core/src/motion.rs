@@ -2,8 +2,8 @@
 //! spikes along a particle's predicted path instead of at a fixed place,
 //! and refining the prediction from the spikes themselves.
 //!
-//! A velocity `v` per band row (x right, y down in stored rows, Q8: 1/256 px
-//! per tick) moves plane `t` of a window centred on `k_c` by
+//! A velocity `v` per band row (x right, y down in stored rows, Q12: 1/4096
+//! px per tick) moves plane `t` of a window centred on `k_c` by
 //! `s = round(v·(t − k_c))` before its spikes are added: the compensated
 //! count of pixel (r, c) over a window is the number of ticks `t` with a
 //! spike at (r + s_y, c + s_x). A particle moving at `v` then piles its
@@ -30,17 +30,29 @@
 //! earlier one does are not counted again.
 //!
 //! Rounding rule, the one definition both this module and the host's `f64`
-//! reference use: `round(v·Δt/256) = ⌊(v·Δt + 128)/256⌋` (halves up).
+//! reference use: `round(v·Δt/4096) = ⌊(v·Δt + 2048)/4096⌋` (halves up).
+//!
+//! Why 1/4096 and not 1/256 (the unit until stop 33): where frames
+//! overlap in time, the compensated pair shares most of its spikes, and
+//! a shared spike moves between the two frames by exactly the predicted
+//! displacement; PIV of the pair reads about half way between the
+//! prediction and the truth (10 % off → 5 % off on the paper's shear
+//! rows). A slow row's velocity rounded to 1/256 px per tick was up to
+//! 14 % off (0.0135 px/tick, the quadratic profile 26 px above the wall,
+//! became 3/256), and its PIV inherited half of that. The range is
+//! ±8 px per tick (i16), beyond any particle a spike camera images as
+//! a particle rather than a streak; faster predictions saturate.
 
 use crate::error::{Error, ParamError};
 use crate::history::History;
 use crate::slices::{self, Counter};
 use crate::window::{Span, Window};
 
-/// Velocities are in 1/`Q` px per tick.
-pub const Q: i32 = 256;
-// `shift` divides by Q with an arithmetic shift by 8.
-const _: () = assert!(Q == 256);
+/// Velocities are in 1/`Q` px per tick (Q12).
+pub const Q: i32 = 1 << Q_BITS;
+/// Fraction bits of a velocity: `shift` divides by [`Q`] with an
+/// arithmetic shift by this.
+pub const Q_BITS: u32 = 12;
 
 /// Relative step of [`refine`]'s scaled candidates, in 1/[`REL_DEN`]
 /// (2 %).
@@ -49,8 +61,9 @@ pub const RELATIVE_STEP: i32 = 2;
 pub const REL_DEN: i32 = 100;
 /// Most bands [`refine`] handles (its winners live on the stack: 2 KiB).
 pub const MAX_BANDS: usize = 512;
-/// Step of [`refine`]'s offset candidates, Q8 (3/256 ≈ 0.012 px/tick).
-pub const ABSOLUTE_STEP: i32 = 3;
+/// Step of [`refine`]'s offset candidates, 1/[`Q`] px per tick (48/4096
+/// ≈ 0.012 px/tick).
+pub const ABSOLUTE_STEP: i32 = 48;
 
 /// Shortest path, px, over which a compensated particle test also requires
 /// a pixel to stand out against its own plain count (`segment`). Where
@@ -66,9 +79,10 @@ pub const MIN_TRAVEL: i32 = 1;
 /// A predicted velocity per band row.
 #[derive(Debug, Clone, Copy)]
 pub struct Motion<'a> {
-    /// x velocity of each band row, 1/256 px per tick (missing rows: 0).
+    /// x velocity of each band row, 1/4096 px per tick (missing rows: 0).
     pub vx: &'a [i16],
-    /// y velocity of each band row (stored rows, down), 1/256 px per tick.
+    /// y velocity of each band row (stored rows, down), 1/4096 px per
+    /// tick.
     pub vy: &'a [i16],
 }
 
@@ -84,15 +98,16 @@ impl Motion<'_> {
     }
 }
 
-/// The shift of a plane `dt` ticks from the centre for velocity `v` (Q8),
-/// px: `⌊(v·dt + 128)/256⌋`.
+/// The shift of a plane `dt` ticks from the centre for velocity `v` (Q12),
+/// px: `⌊(v·dt + 2048)/4096⌋`.
 #[inline]
 pub fn shift(v: i16, dt: i32) -> i32 {
-    // An arithmetic right shift by 8 is the floor division by Q = 256.
-    (i32::from(v) * dt + Q / 2) >> 8
+    // An arithmetic right shift by Q_BITS is the floor division by Q;
+    // |v·dt| ≤ 32768·65535 + Q/2 fits in an i32 (callers clamp dt).
+    (i32::from(v) * dt + Q / 2) >> Q_BITS
 }
 
-/// Farthest a particle at velocity `v` (Q8) travels from where it is at
+/// Farthest a particle at velocity `v` (Q12) travels from where it is at
 /// `kc` within the ticks `start..end`, px: the larger of |x| and |y| of
 /// [`shift`] at the window's two ends (0 for an empty window).
 pub fn travel(v: (i16, i16), start: u32, end: u32, kc: u32) -> i32 {
@@ -107,7 +122,7 @@ pub fn travel(v: (i16, i16), start: u32, end: u32, kc: u32) -> i32 {
         .unwrap_or(0)
 }
 
-/// Distinct pixels a particle at velocity `v` (Q8) visits within the ticks
+/// Distinct pixels a particle at velocity `v` (Q12) visits within the ticks
 /// `start..end` of a window centred on `kc`: 1 plus the ticks at which its
 /// [`shift`] changes (the spikes of that many pixels make one compensated
 /// count; 1 for a still row or an empty window). At most 255 ticks are
@@ -586,7 +601,13 @@ mod tests {
                 shifts: [Shift::default(); 256],
                 items: [Source::EMPTY; 256],
             };
-            for v in [(0i16, 0i16), (300, -40), (-700, 90), (5, 2), (-1300, -300)] {
+            for v in [
+                (0i16, 0i16),
+                (4800, -640),
+                (-11200, 1440),
+                (80, 32),
+                (-20800, -4800),
+            ] {
                 for rows in [(0u16, h), (1, 3)] {
                     let mut want = 0u64;
                     for r in rows.0..rows.1 {
@@ -605,8 +626,8 @@ mod tests {
                 .map(|dt| (shift(v.0, dt as i32), shift(v.1, dt as i32)))
                 .collect()
         };
-        for a in [(25i16, 0i16), (320, 3), (-64, -9)] {
-            for d in -12i16..=12 {
+        for a in [(400i16, 0i16), (5120, 48), (-1024, -144)] {
+            for d in (-192i16..=192).step_by(8) {
                 for b in [(a.0 + d, a.1), (a.0, a.1 + d)] {
                     assert_eq!(
                         same_path(a, b, dts),
@@ -616,7 +637,7 @@ mod tests {
                 }
             }
         }
-        assert!(same_path((25, 0), (25, 1), dts));
-        assert!(!same_path((25, 0), (40, 0), dts));
+        assert!(same_path((400, 0), (400, 16), dts));
+        assert!(!same_path((400, 0), (640, 0), dts));
     }
 }

@@ -7,6 +7,9 @@ use spiv_core::motion::{add_compensated, candidate, refine, shift, shifted_word,
 use spiv_core::window::{Span, Window};
 use spiv_core::{History, PlaneView};
 
+/// Velocities' unit, 1/Q px per tick.
+const Q: i64 = spiv_core::motion::Q as i64;
+
 /// A history over `planes` (stored row order, `w × h`), depth 255.
 fn history<'a>(words: &'a mut Vec<u64>, planes: &[Vec<u8>], w: u16, h: u16) -> History<'a> {
     *words = vec![0; History::words_needed(w, h, 255).unwrap()];
@@ -40,8 +43,8 @@ proptest! {
     fn compensated_counts_equal_counting_by_hand(
         seed in any::<u64>(),
         wsel in 0usize..3,
-        vx in -400i16..400,
-        vy in -300i16..300,
+        vx in -6400i16..6400,
+        vy in -4800i16..4800,
         kc in 5u32..35,
         n in 1u16..40,
     ) {
@@ -64,7 +67,7 @@ proptest! {
         let hist = history(&mut words, &planes, w, h);
         let win = Window::in_history(&hist, kc, n);
         let span = Span::new(&hist, win);
-        let vxs: Vec<i16> = (0..h).map(|r| vx.wrapping_add(i16::try_from(r).unwrap() * 7)).collect();
+        let vxs: Vec<i16> = (0..h).map(|r| vx.wrapping_add(i16::try_from(r).unwrap() * 112)).collect();
         let vys = vec![vy; hu];
         let m = Motion { vx: &vxs, vy: &vys };
         let mut counts = vec![0u8; wu * hu];
@@ -74,8 +77,8 @@ proptest! {
                 let mut want = 0u8;
                 for t in win.start..win.end() {
                     let dt = i64::from(t) - i64::from(kc);
-                    let sx = (i64::from(vxs[r]) * dt + 128).div_euclid(256);
-                    let sy = (i64::from(vy) * dt + 128).div_euclid(256);
+                    let sx = (i64::from(vxs[r]) * dt + Q / 2).div_euclid(Q);
+                    let sy = (i64::from(vy) * dt + Q / 2).div_euclid(Q);
                     want += u8::from(spike(&planes[t as usize], wu, hu, r as i64 + sy, c as i64 + sx));
                 }
                 prop_assert_eq!(counts[r * wu + c], want, "r {} c {}", r, c);
@@ -101,11 +104,14 @@ proptest! {
 
 #[test]
 fn shifts_round_halves_up() {
-    assert_eq!(shift(128, 1), 1); // 0.5 → 1
-    assert_eq!(shift(-128, 1), 0); // −0.5 → 0
-    assert_eq!(shift(256, -3), -3);
-    assert_eq!(shift(100, 10), 4); // 3.906
-    assert_eq!(shift(i16::MAX, 255), (32767 * 255 + 128) / 256);
+    // Velocities are 1/4096 px per tick.
+    assert_eq!(shift(2048, 1), 1); // 0.5 → 1
+    assert_eq!(shift(-2048, 1), 0); // −0.5 → 0
+    assert_eq!(shift(4096, -3), -3);
+    assert_eq!(shift(1600, 10), 4); // 3.906
+    assert_eq!(shift(2047, 1), 0); // 0.4998
+    assert_eq!(shift(i16::MAX, 255), (32767 * 255 + 2048) / 4096);
+    assert_eq!(shift(i16::MIN, 65_535), (-32768 * 65_535 + 2048) >> 12);
 }
 
 /// Dots moving right at `v(row)` px/tick on a faint random background,
@@ -146,7 +152,9 @@ fn refine_finds_the_velocity_of_moving_particles() {
     let mut words = Vec::new();
     let hist = history(&mut words, &planes, w, h);
     // A prediction 20 % low everywhere.
-    let pred: Vec<i16> = (0..48).map(|r| (truth(r) * 0.8 * 256.0) as i16).collect();
+    let pred: Vec<i16> = (0..48)
+        .map(|r| (truth(r) * 0.8 * Q as f64) as i16)
+        .collect();
     let zero = vec![0i16; 48];
     let m = Motion {
         vx: &pred,
@@ -157,13 +165,13 @@ fn refine_finds_the_velocity_of_moving_particles() {
     refine(&hist, 50, &m, &cfg, &mut vx, &mut vy).unwrap();
     for (b, r) in [(0, 7), (1, 24), (2, 40)] {
         // Rows at or next to the band's centre (rows 7.5, 23.5, 39.5).
-        let got = f64::from(vx[r]) / 256.0;
+        let got = f64::from(vx[r]) / Q as f64;
         let want = truth(r);
         assert!(
             (got - want).abs() <= 0.02 * want + 0.01,
             "band {b}: {got} against {want}"
         );
-        assert!(vy[r].abs() <= 6, "band {b}: vy {}", vy[r]);
+        assert!(vy[r].abs() <= 96, "band {b}: vy {}", vy[r]);
     }
     // Between band centres the velocity is interpolated, beyond them constant.
     assert_eq!(vx[0], vx[7]);
@@ -208,12 +216,18 @@ fn refine_keeps_the_prediction_when_nothing_is_sharper_and_refuses_bad_input() {
 #[test]
 fn travel_is_the_farthest_shift_of_the_window() {
     use spiv_core::motion::travel;
-    for (vx, vy) in [(0i16, 0i16), (1, 0), (-130, 7), (300, -500), (5, 129)] {
+    for (vx, vy) in [
+        (0i16, 0i16),
+        (16, 0),
+        (-2080, 112),
+        (4800, -8000),
+        (80, 2064),
+    ] {
         for (start, end, kc) in [(0u32, 0u32, 0u32), (10, 74, 42), (40, 41, 40), (0, 128, 64)] {
             let want = (start..end)
                 .map(|t| {
                     let dt = i64::from(t) - i64::from(kc);
-                    let s = |v: i16| (i64::from(v) * dt + 128).div_euclid(256).abs();
+                    let s = |v: i16| (i64::from(v) * dt + Q / 2).div_euclid(Q).abs();
                     s(vx).max(s(vy))
                 })
                 .max()
@@ -269,7 +283,7 @@ fn static_light_is_never_a_compensated_particle() {
     let mut out = vec![0u8; w * h];
     let mut ws = WorkspaceBuf::whole(w as u16, h as u16);
     let plain = reconstruct_adaptive(&hist, k, &p, &mut ws.workspace().unwrap(), &mut out).unwrap();
-    let vx = vec![(v * 256.0) as i16; h];
+    let vx = vec![(v * Q as f64) as i16; h];
     let vy = vec![0i16; h];
     let m = Motion { vx: &vx, vy: &vy };
     let mut ws = WorkspaceBuf::new(WorkspaceSizes::for_motion(w as u16, h as u16));
@@ -346,7 +360,7 @@ fn static_light_swept_along_a_path_is_not_a_particle() {
         .collect();
     let mut words = Vec::new();
     let hist = history(&mut words, &planes, w as u16, h as u16);
-    let vx = vec![(0.7 * 256.0) as i16; h];
+    let vx = vec![(0.7 * Q as f64) as i16; h];
     let vy = vec![0i16; h];
     let m = Motion { vx: &vx, vy: &vy };
     let mut ws = WorkspaceBuf::new(WorkspaceSizes::for_motion(w as u16, h as u16));

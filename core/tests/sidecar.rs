@@ -69,9 +69,9 @@ impl Probe<u16> for Kept {
 /// Runs the loop over `planes` with `cfg`; returns the frames as sent and
 /// the wire bytes.
 /// The velocity the sidecar is given for `Mc` frames: 0.3 px/tick to the
-/// right in the top half, 0.1 in the bottom (1/256 px per tick).
+/// right in the top half, 0.1 in the bottom (1/4096 px per tick).
 fn mc_velocity() -> Vec<i16> {
-    (0..H).map(|r| if r < H / 2 { 77 } else { 26 }).collect()
+    (0..H).map(|r| if r < H / 2 { 1229 } else { 410 }).collect()
 }
 
 /// The control message telling the sidecar [`mc_velocity`] from pair 0,

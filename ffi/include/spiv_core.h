@@ -180,10 +180,10 @@ typedef struct SpivGuide {
   const uint16_t *caps;
   // Entries of `caps`.
   size_t n_caps;
-  // Predicted x velocity of each stored row, 1/256 px per tick
+  // Predicted x velocity of each stored row, 1/4096 px per tick
   // (motion-compensated frames; null: the bootstrap method).
   const int16_t *vx;
-  // Predicted y velocity of each stored row (down), 1/256 px per tick.
+  // Predicted y velocity of each stored row (down), 1/4096 px per tick.
   const int16_t *vy;
   // Entries of `vx` and `vy` (at least `height` when given).
   size_t rows;

@@ -21,7 +21,7 @@
 //!   predictions or caps ([`SpivGuide`]), [`spiv_send_frame`] to code and
 //!   frame it into wire messages.
 //!
-//! Units: ticks (one spike plane each), pixels, velocities in 1/256 px per
+//! Units: ticks (one spike plane each), pixels, velocities in 1/4096 px per
 //! tick, gray levels `0..=full_scale`. Planes are Vidar bit planes in stored
 //! row order, `width·height/8` bytes (docs/protocol.md, FORMATS.md).
 //!
@@ -930,10 +930,10 @@ pub struct SpivGuide {
     pub caps: *const u16,
     /// Entries of `caps`.
     pub n_caps: usize,
-    /// Predicted x velocity of each stored row, 1/256 px per tick
+    /// Predicted x velocity of each stored row, 1/4096 px per tick
     /// (motion-compensated frames; null: the bootstrap method).
     pub vx: *const i16,
-    /// Predicted y velocity of each stored row (down), 1/256 px per tick.
+    /// Predicted y velocity of each stored row (down), 1/4096 px per tick.
     pub vy: *const i16,
     /// Entries of `vx` and `vy` (at least `height` when given).
     pub rows: usize,

@@ -445,7 +445,7 @@ pub struct Control {
     /// first, the camera's stored rows being bottom-up); empty: `n_max`
     /// everywhere.
     pub caps: Vec<u16>,
-    /// `Mc` frames: x and y velocity of each stored row, 1/256 px per tick
+    /// `Mc` frames: x and y velocity of each stored row, 1/4096 px per tick
     /// (empty: none).
     pub motion: (Vec<i16>, Vec<i16>),
     /// Window limit, ticks; 0: the sidecar's own.

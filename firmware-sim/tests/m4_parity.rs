@@ -45,13 +45,13 @@ fn strip_control(dir: &std::path::Path) -> Vec<u8> {
     let flip = json["flip"].as_bool().expect("flip");
     let (w, h) = (params.width, params.height);
     let flow = params.flow();
-    let q8 = |px_per_tick: f64| (px_per_tick * 256.0).round() as i16;
+    let q = |px_per_tick: f64| (px_per_tick * f64::from(spiv_core::motion::Q)).round() as i16;
     let (mut vx, mut vy) = (Vec::new(), Vec::new());
     for r in 0..h {
         let upright = if flip { h - 1 - r } else { r };
         let (u, v) = flow.displacement(f64::from(w) / 2.0, f64::from(upright) + 0.5, dt);
-        vx.push(q8(u / dt));
-        vy.push(q8(if flip { -v } else { v } / dt));
+        vx.push(q(u / dt));
+        vy.push(q(if flip { -v } else { v } / dt));
     }
     spiv_firmware_sim::firmware::Control {
         motion: (vx, vy),

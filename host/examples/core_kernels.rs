@@ -44,9 +44,12 @@ fn frame_once(
 
 #[inline(never)]
 fn mc_once(hist: &History<'_>, k: u32, ws: &mut Workspace<'_>, out: &mut [u8]) -> u32 {
-    // u = U·y/H, U = 1.25 px/tick, stored rows bottom-up (y = r + 0.5), Q8.
+    // u = U·y/H, U = 1.25 px/tick, stored rows bottom-up (y = r + 0.5), 1/4096 px per tick.
     let vx: Vec<i16> = (0..H)
-        .map(|r| (1.25 * (f64::from(r) + 0.5) / f64::from(H) * 256.0).round() as i16)
+        .map(|r| {
+            (1.25 * (f64::from(r) + 0.5) / f64::from(H) * f64::from(spiv_core::motion::Q)).round()
+                as i16
+        })
         .collect();
     let vy = vec![0i16; usize::from(H)];
     let (mut rvx, mut rvy) = (vy.clone(), vy.clone());

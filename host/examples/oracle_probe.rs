@@ -94,7 +94,7 @@ fn main() {
             )
             .expect("frame");
             (0..h)
-                .map(|y| f64::from(used.0[h - 1 - y]) / 256.0)
+                .map(|y| f64::from(used.0[h - 1 - y]) / f64::from(spiv_core::motion::Q))
                 .collect()
         };
         let use_pred = predicted;

@@ -24,7 +24,7 @@ use crate::reconstruct::{Planes, ReconstructError};
 /// the previous pair's field plays the second round's part.
 pub const ROUNDS: usize = 2;
 
-/// Velocities per stored row, 1/256 px per tick: `(vx, vy)`.
+/// Velocities per stored row, 1/4096 px per tick: `(vx, vy)`.
 pub type RowVelocities = (Vec<i16>, Vec<i16>);
 
 /// True when at least half of `field` was measured: the one rule for
@@ -72,8 +72,8 @@ pub fn row_velocities(field: &[Vector], h: u16, flip: bool, dt: f64) -> RowVeloc
         let t = (y - a.0) / (b.0 - a.0);
         (a.1 + t * (b.1 - a.1), a.2 + t * (b.2 - a.2))
     };
-    let q8 = |px_per_pair: f64| -> i16 {
-        let v = px_per_pair / dt.max(1e-9) * 256.0;
+    let q = |px_per_pair: f64| -> i16 {
+        let v = px_per_pair / dt.max(1e-9) * f64::from(spiv_core::motion::Q);
         if v.is_finite() {
             v.round().clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16
         } else {
@@ -85,8 +85,8 @@ pub fn row_velocities(field: &[Vector], h: u16, flip: bool, dt: f64) -> RowVeloc
     for r in 0..n {
         let y = if flip { (n - 1 - r) as f64 } else { r as f64 };
         let (u, v) = at(y);
-        vx[r] = q8(u);
-        vy[r] = q8(if flip { -v } else { v });
+        vx[r] = q(u);
+        vy[r] = q(if flip { -v } else { v });
     }
     (vx, vy)
 }
@@ -188,10 +188,19 @@ mod tests {
         ];
         // Upright storage: row 10 → mean u 3 px/pair over 10 ticks = 0.3 px/tick.
         let (vx, vy) = row_velocities(&field, 30, false, 10.0);
-        assert_eq!(vx[10], (0.3f64 * 256.0).round() as i16);
-        assert_eq!(vx[15], (0.45f64 * 256.0).round() as i16);
+        assert_eq!(
+            vx[10],
+            (0.3f64 * f64::from(spiv_core::motion::Q)).round() as i16
+        );
+        assert_eq!(
+            vx[15],
+            (0.45f64 * f64::from(spiv_core::motion::Q)).round() as i16
+        );
         assert_eq!((vx[0], vx[29]), (vx[10], vx[20]));
-        assert_eq!(vy[12], (0.1f64 * 256.0).round() as i16);
+        assert_eq!(
+            vy[12],
+            (0.1f64 * f64::from(spiv_core::motion::Q)).round() as i16
+        );
         // Bottom-up storage: stored row 29 − y, y velocities negated.
         let (fx, fy) = row_velocities(&field, 30, true, 10.0);
         assert_eq!((fx[19], fy[19]), (vx[10], -vy[10]));

@@ -38,7 +38,7 @@ fn run_core<G: Gray>(
     run_core_with(packed, w, h, k, p, strip_rows, None)
 }
 
-/// Velocities per band row (x, y), 1/256 px per tick.
+/// Velocities per band row (x, y), 1/4096 px per tick.
 type Velocities<'a> = Option<(&'a [i16], &'a [i16])>;
 
 fn run_core_with<G: Gray>(
@@ -388,7 +388,7 @@ fn refined_motion_matches_reference_and_moves_toward_the_truth() {
     let truth: Vec<f64> = (0..usize::from(h))
         .map(|r| {
             let y = f64::from(h) - 1.0 - r as f64;
-            scene.truth(&[(f64::from(w) / 2.0, y)], 1.0)[0].2 * 256.0
+            scene.truth(&[(f64::from(w) / 2.0, y)], 1.0)[0].2 * f64::from(spiv_core::motion::Q)
         })
         .collect();
     let pred: Vec<i16> = truth.iter().map(|&t| (0.85 * t) as i16).collect();
@@ -424,14 +424,14 @@ fn refined_motion_matches_reference_and_moves_toward_the_truth() {
             .sum::<f64>()
     };
     eprintln!(
-        "refine: mean |error| outside the glare {:.1} -> {:.1} (1/256 px/tick), truth mean {:.0}",
+        "refine: mean |error| outside the glare {:.1} -> {:.1} (1/4096 px/tick), truth mean {:.0}",
         err(&pred) / 96.0,
         err(&vx) / 96.0,
         truth[64..].iter().sum::<f64>() / 96.0
     );
     assert!(
         err(&vx) < 0.3 * err(&pred),
-        "refined {:.0} against predicted {:.0} (sum of |error|, 1/256 px/tick)",
+        "refined {:.0} against predicted {:.0} (sum of |error|, 1/4096 px/tick)",
         err(&vx),
         err(&pred)
     );
@@ -454,7 +454,8 @@ fn motion_compensated_frames_match_reference() {
     let truth: Vec<i16> = (0..usize::from(h))
         .map(|r| {
             let y = f64::from(h) - 1.0 - r as f64;
-            (scene.truth(&[(f64::from(w) / 2.0, y)], 1.0)[0].2 * 256.0).round() as i16
+            (scene.truth(&[(f64::from(w) / 2.0, y)], 1.0)[0].2 * f64::from(spiv_core::motion::Q))
+                .round() as i16
         })
         .collect();
     let off: Vec<i16> = truth.iter().map(|&v| (f64::from(v) * 1.3) as i16).collect();

@@ -26,9 +26,12 @@ fn a_wide_compensated_frame_loses_no_particle_pixels_in_the_shipped_strips() {
         hist.push(&PlaneView::new(b, w, h).unwrap()).unwrap();
     }
     // The scene's velocity, u = U·(y/H)², U = 1.25 px/tick, stored rows
-    // bottom-up (y = r + 0.5), Q8.
+    // bottom-up (y = r + 0.5), 1/4096 px per tick.
     let vx: Vec<i16> = (0..h)
-        .map(|r| (1.25 * ((f64::from(r) + 0.5) / f64::from(h)).powi(2) * 256.0).round() as i16)
+        .map(|r| {
+            (1.25 * ((f64::from(r) + 0.5) / f64::from(h)).powi(2) * f64::from(spiv_core::motion::Q))
+                .round() as i16
+        })
         .collect();
     let vy = vec![0i16; usize::from(h)];
     let m = Motion { vx: &vx, vy: &vy };

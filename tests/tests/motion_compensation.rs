@@ -40,13 +40,13 @@ fn compensation_measures_like_the_frame_camera_and_degrades_gracefully() {
             region_error(&rows, |y| y < 50.0).rmae,
         )
     };
-    // The true velocity of each stored row (bottom-up), 1/256 px per tick.
+    // The true velocity of each stored row (bottom-up), 1/4096 px per tick.
     let v_true: Vec<f64> = (0..hu)
         .map(|r| {
             sim.scene
                 .truth(&[(wu as f64 / 2.0, (hu - 1 - r) as f64)], 1.0)[0]
                 .2
-                * 256.0
+                * f64::from(spiv_core::motion::Q)
         })
         .collect();
     let scaled = |s: f64| -> RowVelocities {

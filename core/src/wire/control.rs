@@ -14,7 +14,7 @@
 //!   for its own).
 //! - `pitch`: stored rows between velocity nodes (≥ 1 when `nodes > 0`).
 //!   Node `i` is the velocity of stored row `i·pitch`, x right and y down in
-//!   stored rows, in 1/256 px per tick ([`crate::motion::Q`]). Rows between
+//!   stored rows, in 1/4096 px per tick ([`crate::motion::Q`]). Rows between
 //!   nodes are interpolated linearly ([`ControlView::rows_into`]); rows past
 //!   the last node take the last node. `nodes = 0`: no motion (motion-
 //!   compensated frames fall back to the paper's adaptive ones).
@@ -99,7 +99,7 @@ impl<'a> ControlView<'a> {
         self.nodes.len() / 4
     }
 
-    /// Node `i`: `(vx, vy)`, 1/256 px per tick ((0, 0) past the end).
+    /// Node `i`: `(vx, vy)`, 1/4096 px per tick ((0, 0) past the end).
     pub fn node(&self, i: usize) -> (i16, i16) {
         (
             u16_at(self.nodes, 4 * i) as i16,

@@ -47,8 +47,9 @@ use crc::{Crc, CRC_32_ISO_HDLC};
 
 /// `"SP"`.
 pub const MAGIC: u16 = 0x5053;
-/// The version this code writes and reads.
-pub const VERSION: u8 = 1;
+/// The version this code writes and reads (2 since control velocities are
+/// in 1/4096 px per tick; 1 had them in 1/256).
+pub const VERSION: u8 = 2;
 /// Header bytes.
 pub const HEADER_LEN: usize = 30;
 /// CRC bytes.

@@ -187,7 +187,7 @@ pub fn adaptive_rows(
 
 /// [`adaptive_rows`] motion-compensated (`spiv_core::reconstruct_compensated`):
 /// particles are segmented and integrated on counts compensated for the
-/// velocity of each band row (`vx`, `vy`, 1/256 px per tick; see
+/// velocity of each band row (`vx`, `vy`, 1/4096 px per tick; see
 /// [`motion::compensated_count`], over the whole band), saturation and
 /// background on plain counts.
 pub fn adaptive_rows_compensated(

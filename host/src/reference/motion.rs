@@ -12,13 +12,13 @@
 
 use super::SpikeVolume;
 
-/// `round(v/256 · dt)`, halves up.
+/// `round(v/Q · dt)` (Q = 4096), halves up.
 fn shift(v: i16, dt: i64) -> i64 {
-    (f64::from(v) / 256.0 * dt as f64 + 0.5).floor() as i64
+    (f64::from(v) / f64::from(spiv_core::motion::Q) * dt as f64 + 0.5).floor() as i64
 }
 
 /// Compensated count of pixel (r, c) over the window of `n` ticks centred
-/// on `kc`, for a velocity `(vx, vy)` (1/256 px per tick).
+/// on `kc`, for a velocity `(vx, vy)` (1/4096 px per tick).
 pub fn compensated_count(
     vol: &SpikeVolume,
     kc: u32,
