@@ -557,8 +557,56 @@ pub fn run_flow(
             Method::Mc => &opts.mc_piv,
             _ => &opts.piv,
         };
-        let (fa, fb) = (to_f32(&pair[0], wu, hu), to_f32(&pair[1], wu, hu));
-        let f = piv(&fa, &fb, None, settings)?;
+        let mut pair = pair;
+        let (mut fa, mut fb) = (to_f32(&pair[0], wu, hu), to_f32(&pair[1], wu, hu));
+        let mut f = piv(&fa, &fb, None, settings)?;
+        // The wide baseline: compensated frames s·dt apart centred on the
+        // pair, with the pair's last control, where their windows fit;
+        // their combined field predicts both pairs once more
+        // (`baseline::ROUNDS`).
+        let planes = rec.planes.min(opts.end);
+        let wide_ticks = match (made, &mc_vel, opts.wide.filter(|&s| s >= 2)) {
+            (Method::Mc, Some(_), Some(s)) => {
+                crate::baseline::ticks_within(ka, opts.dt, s, core.n_max, planes)
+                    .map(|(k0, k1)| (k0, k1, s))
+            }
+            _ => None,
+        };
+        let (vectors, wide) = match (wide_ticks, mc_vel) {
+            (Some((k0, k1, s)), Some(mut vel)) => {
+                let mut round = 0;
+                loop {
+                    let mut wf = [Vec::new(), Vec::new()];
+                    let mut wide_lost = LabelLoss::default();
+                    for (o, k) in wf.iter_mut().zip([k0, k1]) {
+                        let pl = rec.around(k, core.n_max)?;
+                        let (fr, _, labels) =
+                            compensated_frame(&pl, k, &core, &vel, Some(Refine::default()))?;
+                        *o = fr;
+                        wide_lost.add(&labels);
+                    }
+                    let (wa, wb) = (to_f32(&wf[0], wu, hu), to_f32(&wf[1], wu, hu));
+                    let combined = crate::baseline::measure(&f, (&wa, &wb), s, settings)?;
+                    if round == crate::baseline::ROUNDS || !crate::predict::predicts(&combined) {
+                        lost.merge(wide_lost);
+                        break (combined, Some([k0, k1]));
+                    }
+                    round += 1;
+                    vel = row_velocities(&combined, rec.height, rec.flip, dt);
+                    lost = LabelLoss::default();
+                    for (o, k) in pair.iter_mut().zip([ka, kb]) {
+                        let pl = rec.around(k, core.n_max)?;
+                        let (fr, _, labels) =
+                            compensated_frame(&pl, k, &core, &vel, Some(Refine::default()))?;
+                        *o = fr;
+                        lost.add(&labels);
+                    }
+                    (fa, fb) = (to_f32(&pair[0], wu, hu), to_f32(&pair[1], wu, hu));
+                    f = piv(&fa, &fb, None, settings)?;
+                }
+            }
+            _ => (f.vectors(), None),
+        };
         if opts.dense {
             let (flow, _) = crate::piv::dense::for_piv(&fa, &fb, &f);
             let d = dense_sum.get_or_insert_with(|| (vec![0.0; wu * hu], vec![0.0; wu * hu], 0));
@@ -570,37 +618,6 @@ pub fn run_flow(
             }
             d.2 += 1;
         }
-        // The wide baseline: compensated frames s·dt apart centred on the
-        // pair, with the pair's last control, where their windows fit.
-        let planes = rec.planes.min(opts.end);
-        let wide_ticks = match (made, &mc_vel, opts.wide.filter(|&s| s >= 2)) {
-            (Method::Mc, Some(_), Some(s)) => {
-                crate::baseline::ticks_within(ka, opts.dt, s, core.n_max, planes)
-                    .map(|(k0, k1)| (k0, k1, s))
-            }
-            _ => None,
-        };
-        let (vectors, wide) = match (wide_ticks, &mc_vel) {
-            (Some((k0, k1, s)), Some(vel)) => {
-                let mut wf = [Vec::new(), Vec::new()];
-                for (o, k) in wf.iter_mut().zip([k0, k1]) {
-                    let pl = rec.around(k, core.n_max)?;
-                    let (fr, _, labels) =
-                        compensated_frame(&pl, k, &core, vel, Some(Refine::default()))?;
-                    *o = fr;
-                    lost.add(&labels);
-                }
-                let g = crate::piv::piv_predicted(
-                    &to_f32(&wf[0], wu, hu),
-                    &to_f32(&wf[1], wu, hu),
-                    None,
-                    settings,
-                    Some(&crate::baseline::scaled(&f, s)),
-                )?;
-                (crate::baseline::combine(&f, &g, s), Some([k0, k1]))
-            }
-            _ => (f.vectors(), None),
-        };
         let valid = vectors.iter().filter(|v| v.state == State::Valid).count();
         // A pair that mostly failed predicts nothing: bootstrap again.
         prediction = (2 * valid >= vectors.len()).then(|| vectors.clone());

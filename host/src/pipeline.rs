@@ -14,7 +14,7 @@ use spiv_formats::FormatError;
 use crate::baseline;
 use crate::link::{dwell_caps, mc_transfer, transfer, transfer_with, Transfer};
 use crate::metrics::{region_error, row_profile, ProfileRow, RegionError};
-use crate::piv::{piv, piv_predicted, to_f32, Field, PivError, Settings};
+use crate::piv::{piv, to_f32, Field, PivError, Settings};
 use crate::reconstruct::ReconstructError;
 use spiv_core::motion::Refine;
 use spiv_core::Method;
@@ -265,18 +265,19 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
         refine: Some(Refine::default()),
         ..base
     };
-    let (mc, mc_t, control) = match mc_transfer(&data, (w, h), cfg, &pred, dt_ticks, &job.mc_piv)? {
-        Some((c, t)) => (up(&t, "motion-compensated")?, Some(t), Some(c)),
-        None => (adaptive.clone(), None, None),
-    };
+    let (mut mc, mut mc_t, control) =
+        match mc_transfer(&data, (w, h), cfg, &pred, dt_ticks, &job.mc_piv)? {
+            Some((c, t)) => (up(&t, "motion-compensated")?, Some(t), Some(c)),
+            None => (adaptive.clone(), None, None),
+        };
     // The wide pair: the same control, frames s·dt apart centred on the
     // pair (when the recording holds their windows).
     let wide_s = job.wide.filter(|&s| s >= 2);
-    let wide_t = match (control, wide_s) {
-        (Some(control), Some(s)) => {
+    let wide_cfg = match (&control, wide_s) {
+        (Some(_), Some(s)) => {
             let planes = sim.meta.capture.planes;
-            match baseline::ticks_within(u64::from(ka), kb - ka, s, job.core.n_max, planes) {
-                Some((k0, k1)) => {
+            baseline::ticks_within(u64::from(ka), kb - ka, s, job.core.n_max, planes).map(
+                |(k0, k1)| {
                     // Frame ticks are u32 on the sidecar: ticks_within
                     // found both below ka + s·dt.
                     let (k0, k1) = (k0 as u32, k1 as u32);
@@ -287,17 +288,52 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
                     wcfg.schedule.first = k0;
                     wcfg.schedule.dt = k1 - k0;
                     wcfg.schedule.every = (k1 - k0).saturating_mul(4);
-                    Some(transfer_with(&data, w, h, wcfg, control)?)
-                }
-                None => None,
-            }
+                    wcfg
+                },
+            )
         }
         _ => None,
     };
-    let wide = match &wide_t {
+    let mut wide_t = match (&control, wide_cfg) {
+        (Some(control), Some(wcfg)) => Some(transfer_with(&data, w, h, wcfg, control.clone())?),
+        _ => None,
+    };
+    let mut wide = match &wide_t {
         Some(t) => Some(up(t, "wide-baseline")?),
         None => None,
     };
+    // The pair and its wide pair measure together once more
+    // (`baseline::ROUNDS`): their combined field is the next control.
+    if let (Some(s), Some(wcfg)) = (wide_s, wide_cfg) {
+        for _ in 0..baseline::ROUNDS {
+            let Some(wp) = &wide else { break };
+            let narrow = piv(
+                &to_f32(&mc[0], wu, hu),
+                &to_f32(&mc[1], wu, hu),
+                None,
+                &job.mc_piv,
+            )?;
+            let (wa, wb) = (to_f32(&wp[0], wu, hu), to_f32(&wp[1], wu, hu));
+            let field = baseline::measure(&narrow, (&wa, &wb), s, &job.mc_piv)?;
+            if !crate::predict::predicts(&field) {
+                break;
+            }
+            let control = spiv_firmware_sim::firmware::Control {
+                motion: crate::predict::row_velocities(&field, h, true, dt_ticks),
+                ..Default::default()
+            };
+            let pair_cfg = Config {
+                method: Method::Mc,
+                ..cfg
+            };
+            let pair_t = transfer_with(&data, w, h, pair_cfg, control.clone())?;
+            let wt = transfer_with(&data, w, h, wcfg, control)?;
+            mc = up(&pair_t, "motion-compensated")?;
+            mc_t = Some(pair_t);
+            wide = Some(up(&wt, "wide-baseline")?);
+            wide_t = Some(wt);
+        }
+    }
     let link = LinkSummary {
         lost_frames: link.lost_frames
             + mc_t.as_ref().map_or(0, |t| t.report.lost_frames)
@@ -334,15 +370,9 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
         };
         let (vectors, piv_ms) = match (source, &mc_field, wide_s) {
             (FrameKind::McWide, Some((narrow, narrow_ms)), Some(s)) if wide.is_some() => {
-                let f = piv_predicted(
-                    &to_f32(&pair[0], wu, hu),
-                    &to_f32(&pair[1], wu, hu),
-                    None,
-                    settings,
-                    Some(&baseline::scaled(narrow, s)),
-                )?;
-                let ms = narrow_ms + t.elapsed().as_secs_f64() * 1e3;
-                (baseline::combine(narrow, &f, s), ms)
+                let (a, b) = (to_f32(&pair[0], wu, hu), to_f32(&pair[1], wu, hu));
+                let v = baseline::measure(narrow, (&a, &b), s, settings)?;
+                (v, narrow_ms + t.elapsed().as_secs_f64() * 1e3)
             }
             (FrameKind::McWide, Some((narrow, narrow_ms)), _) => (narrow.vectors(), *narrow_ms),
             _ => {

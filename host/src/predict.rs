@@ -16,13 +16,20 @@ use crate::reconstruct::{Planes, ReconstructError};
 /// run`, `spiv flow`, the benches): the TFP pair at the same ticks predicts
 /// the first, the compensated pair's own field each later one. The TFP
 /// field is biased where glare hides the particles nearest the wall and
-/// noisy elsewhere; the compensated field is neither, so a second round
-/// compensates with a better velocity (`spiv bench paper`, 10 seeds, other
-/// rows, one round → two: linear 0.007 → 0.005, quadratic 0.009 → 0.007,
-/// log 0.004 → 0.004; glare rows 0.042 → 0.031, 0.093 → 0.101, 0.157 →
-/// 0.141). A third round changed nothing beyond the seeds' spread. Live,
-/// the previous pair's field plays the second round's part.
-pub const ROUNDS: usize = 2;
+/// noisy elsewhere; the compensated field is neither, so later rounds
+/// compensate with a better velocity. The compensated pair's frames share
+/// most of their spikes, and a shared spike moves between them by exactly
+/// the predicted displacement, so PIV of the pair reads about half way
+/// between the prediction and the truth (`host/examples/hybrid_probe.rs`,
+/// `PSCALE`): each round halves what is left of the prediction's error.
+/// Measured (`spiv bench paper --seeds 30`, velocities in 1/4096 px/tick,
+/// glare rows of the wide baseline, linear / quadratic / log): two rounds
+/// 0.007 / 0.032 / 0.045, four 0.007 / 0.028 / 0.032, six or eight no
+/// better beyond the seeds' spread. (Two rounds were enough while
+/// velocities were rounded to 1/256 px/tick: the rounding, not the
+/// rounds, was what was left.) Live, the previous pair's field plays the
+/// later rounds' part.
+pub const ROUNDS: usize = 4;
 
 /// Velocities per stored row, 1/4096 px per tick: `(vx, vy)`.
 pub type RowVelocities = (Vec<i16>, Vec<i16>);
