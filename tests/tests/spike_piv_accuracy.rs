@@ -134,8 +134,10 @@ fn paper_linear_spike_frames_measure_the_flow() {
     // compensated counts they were 0.038 / 0.005.
     // Wide baseline (the simulation 40 ticks longer for its frames, which
     // moved every row's noise): glare 0.0039 against the pair's 0.0069,
-    // other rows 0.0008 against 0.0017 (frame camera 0.0020).
-    check(SceneKind::PaperLinear, 0.23, 0.05, (0.0045, 0.035), 0.0055);
+    // other rows 0.0008 against 0.0017 (frame camera 0.0020). With
+    // velocities in 1/4096 px/tick, four rounds and a wide round (stop
+    // 33): glare 0.0026 against the pair's 0.0098, other rows 0.0008.
+    check(SceneKind::PaperLinear, 0.23, 0.05, (0.0045, 0.035), 0.0045);
 }
 
 #[test]
@@ -148,6 +150,9 @@ fn paper_quadratic_spike_frames_measure_the_flow() {
     // figure is 0.028), other rows 0.0029 against 0.0036 (frame camera
     // 0.0038). The longer simulation moved the adaptive frames' glare
     // rows from 0.235 to 0.361 (same code, other noise), hence 0.45.
+    // Stop 33 (1/4096 px/tick, four rounds and a wide round): glare
+    // 0.022 against the pair's 0.051 — these two seeds read worse, the
+    // ten of `spiv bench paper` better (0.049 → 0.029).
     check(SceneKind::PaperQuadratic, 0.45, 0.10, (0.010, 0.085), 0.028);
 }
 
@@ -158,8 +163,9 @@ fn paper_log_spike_frames_measure_the_flow() {
     // 0.001); one pixel's noise model: 0.104 / 0.004.
     // Wide baseline: glare 0.049 against the pair's 0.064 (the steep
     // rows next to the wall keep the pair), other rows 0.0012 against
-    // 0.0021 (frame camera 0.0012).
-    check(SceneKind::PaperLog, 0.40, 0.03, (0.003, 0.10), 0.075);
+    // 0.0021 (frame camera 0.0012). Stop 33 (1/4096 px/tick, four
+    // rounds and a wide round): glare 0.024 against the pair's 0.026.
+    check(SceneKind::PaperLog, 0.40, 0.03, (0.003, 0.10), 0.040);
 }
 
 #[test]
