@@ -436,6 +436,25 @@ impl FlowOutcome {
     }
 }
 
+/// Both frames of a motion-compensated pair at `ticks`, counted along
+/// `vel` as the core refines it, and what their labelling lost.
+fn compensated_pair(
+    rec: &mut Recording,
+    ticks: [u64; 2],
+    core: &Params,
+    vel: &crate::predict::RowVelocities,
+) -> Result<([Vec<u16>; 2], LabelLoss), FlowError> {
+    let mut out = [Vec::new(), Vec::new()];
+    let mut lost = LabelLoss::default();
+    for (o, k) in out.iter_mut().zip(ticks) {
+        let pl = rec.around(k, core.n_max)?;
+        let (f, _, labels) = compensated_frame(&pl, k, core, vel, Some(Refine::default()))?;
+        *o = f;
+        lost.add(&labels);
+    }
+    Ok((out, lost))
+}
+
 /// Runs the flow job over `rec`; `progress` is told (pairs done, pairs).
 pub fn run_flow(
     rec: &mut Recording,
@@ -538,14 +557,7 @@ pub fn run_flow(
                             pred = own;
                         }
                         let vel = row_velocities(&pred, rec.height, rec.flip, dt);
-                        lost = LabelLoss::default();
-                        for (o, k) in out.iter_mut().zip([ka, kb]) {
-                            let pl = rec.around(k, core.n_max)?;
-                            let (f, _, labels) =
-                                compensated_frame(&pl, k, &core, &vel, Some(Refine::default()))?;
-                            *o = f;
-                            lost.add(&labels);
-                        }
+                        (out, lost) = compensated_pair(rec, [ka, kb], &core, &vel)?;
                         mc_vel = Some(vel);
                     }
                     (out, Vec::new(), true)
@@ -576,15 +588,7 @@ pub fn run_flow(
             (Some((k0, k1, s)), Some(mut vel)) => {
                 let mut round = 0;
                 loop {
-                    let mut wf = [Vec::new(), Vec::new()];
-                    let mut wide_lost = LabelLoss::default();
-                    for (o, k) in wf.iter_mut().zip([k0, k1]) {
-                        let pl = rec.around(k, core.n_max)?;
-                        let (fr, _, labels) =
-                            compensated_frame(&pl, k, &core, &vel, Some(Refine::default()))?;
-                        *o = fr;
-                        wide_lost.add(&labels);
-                    }
+                    let (wf, wide_lost) = compensated_pair(rec, [k0, k1], &core, &vel)?;
                     let (wa, wb) = (to_f32(&wf[0], wu, hu), to_f32(&wf[1], wu, hu));
                     let combined = crate::baseline::measure(&f, (&wa, &wb), s, settings)?;
                     if round == crate::baseline::ROUNDS || !crate::predict::predicts(&combined) {
@@ -593,14 +597,7 @@ pub fn run_flow(
                     }
                     round += 1;
                     vel = row_velocities(&combined, rec.height, rec.flip, dt);
-                    lost = LabelLoss::default();
-                    for (o, k) in pair.iter_mut().zip([ka, kb]) {
-                        let pl = rec.around(k, core.n_max)?;
-                        let (fr, _, labels) =
-                            compensated_frame(&pl, k, &core, &vel, Some(Refine::default()))?;
-                        *o = fr;
-                        lost.add(&labels);
-                    }
+                    (pair, lost) = compensated_pair(rec, [ka, kb], &core, &vel)?;
                     (fa, fb) = (to_f32(&pair[0], wu, hu), to_f32(&pair[1], wu, hu));
                     f = piv(&fa, &fb, None, settings)?;
                 }
