@@ -15,6 +15,21 @@
 //! engine's own floor on these rows: the paper's 0.028 leaves a spike
 //! camera almost nothing.
 //!
+//! `SEP=s` puts the second image `s` pair separations after the first (the
+//! wide baseline) and divides the vectors by `s`. Measured in stop 34
+//! (quadratic, 10 seeds): the bottom row's +0.019 px is the same at s = 1,
+//! 2 and 4 — a bias of the window over a curved profile next to the
+//! grid's edge, not noise. Blind below 18 px with s = 4 the rows read
+//! −0.016 / +0.009 px (glare 0.039), the pattern of the spike path's
+//! wide baseline (−0.010 / +0.008); the fast rows are lost at s = 4, as
+//! this probe starts PIV without a predictor. A predictor filter that keeps
+//! quadratics at the grid's edges (the least-squares quadratic through
+//! four nodes instead of the line through three) took the blind rows
+//! from −0.015 / +0.010 to −0.011 / +0.007 here (30 seeds, s = 1) and
+//! `spiv bench paper --seeds 30` from 0.026 to 0.020, but
+//! `spiv flow`'s time-resolved loop lost its glare rows (README, tried and
+//! dropped).
+//!
 //! `cargo run --release -p spiv-host --example wall_probe -- [linear|quadratic|log] [SEEDS] [WIDTH] [BLIND] [mc|spike]`
 use ndarray::Array2;
 mod common;
@@ -34,6 +49,13 @@ fn main() {
         Some("spike") => Settings::for_spike_frames(),
         _ => Settings::for_compensated_frames(),
     };
+    // The wide baseline: the second image `SEP` pair separations after
+    // the first, vectors divided by `SEP`.
+    let sep: u32 = std::env::var("SEP")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1)
+        .max(1);
     let mut bias = std::collections::BTreeMap::<i64, (f64, f64, usize)>::new();
     let mut rmae = [0.0f64; 2];
     for seed in 1..=seeds {
@@ -42,7 +64,7 @@ fn main() {
         p.width = width;
         let dt = p.pair_dt;
         let (w, h) = (usize::from(p.width), usize::from(p.height));
-        let scene = Scene::new(p, seed, 64 + dt + 1);
+        let scene = Scene::new(p, seed, 64 + sep * dt + 1);
         let image = |t: u32| {
             let mut light = vec![0f32; w * h];
             scene.render(f64::from(t), &mut light);
@@ -55,8 +77,12 @@ fn main() {
                 }
             })
         };
-        let f = piv(&image(64), &image(64 + dt), None, &settings).expect("piv");
-        let vs = f.vectors();
+        let f = piv(&image(64), &image(64 + sep * dt), None, &settings).expect("piv");
+        let mut vs = f.vectors();
+        for v in &mut vs {
+            v.u /= f64::from(sep);
+            v.v /= f64::from(sep);
+        }
         let pts: Vec<(f64, f64)> = vs.iter().map(|v| (v.x, v.y)).collect();
         let truth = scene.truth_vectors(&pts, f64::from(dt));
         let rows = row_profile(&vs, &truth, h as f64);
