@@ -153,7 +153,13 @@ fn paper_quadratic_spike_frames_measure_the_flow() {
     // Stop 33 (1/4096 px/tick, four rounds and a wide round): glare
     // 0.022 against the pair's 0.051 — these two seeds read worse, the
     // ten of `spiv bench paper` better (0.049 → 0.029).
-    check(SceneKind::PaperQuadratic, 0.45, 0.10, (0.010, 0.085), 0.028);
+    // Stop 34 (the wide pair's predictor filter keeps quadratics at the
+    // grid's edges, `piv::smooth::Edge`): wide 0.017 (0.022 with the
+    // line, so 0.020 guards it); the pair alone, whose last round the
+    // wide field predicts, 0.118 (0.072 over the ten seeds of `spiv
+    // bench paper`, 0.059 before): its own PIV keeps the line and reads
+    // the near-wall rows with the bias the old prediction cancelled.
+    check(SceneKind::PaperQuadratic, 0.45, 0.10, (0.010, 0.13), 0.020);
 }
 
 #[test]

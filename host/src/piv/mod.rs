@@ -99,6 +99,11 @@ pub struct Settings {
     /// other rows: nothing measured → RMAE 0.26 from relaxed vectors).
     #[serde(default = "yes")]
     pub rescue: bool,
+    /// The predictor filter's stencil at the grid's edges
+    /// ([`smooth::Edge`]): the line in the defaults; the quadratic for the
+    /// wide baseline's measurement ([`crate::baseline::measure`]).
+    #[serde(default)]
+    pub edge: smooth::Edge,
 }
 
 fn yes() -> bool {
@@ -151,6 +156,7 @@ impl Default for Settings {
             subpixel: Subpixel::Parabolic,
             dense_fallback: false,
             rescue: true,
+            edge: smooth::Edge::Line,
         }
     }
 }
@@ -475,7 +481,7 @@ pub fn piv_predicted(
         // (`smooth`); the last one measures the residual of the field as
         // it stands, so that what it reports is not smoothed.
         let filtered = match &predictor {
-            Some(f) if pi + 1 < npass => Some(smooth::filtered(f)),
+            Some(f) if pi + 1 < npass => Some(smooth::filtered(f, s.edge)),
             _ => None,
         };
         let (mut field, mut support) = run(filtered.as_ref().or(predictor.as_ref()), rung)?;
