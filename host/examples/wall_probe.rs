@@ -25,10 +25,10 @@
 //! this probe starts PIV without a predictor. A predictor filter that keeps
 //! quadratics at the grid's edges (the least-squares quadratic through
 //! four nodes instead of the line through three) took the blind rows
-//! from −0.015 / +0.010 to −0.011 / +0.007 here (30 seeds, s = 1) and
-//! `spiv bench paper --seeds 30` from 0.026 to 0.020, but
-//! `spiv flow`'s time-resolved loop lost its glare rows (README, tried and
-//! dropped).
+//! from −0.015 / +0.010 to −0.011 / +0.007 here (30 seeds, s = 1). It is
+//! the wide pair's stencil since (`piv::smooth::Edge`, `baseline::measure`):
+//! `spiv bench paper --seeds 30` 0.026 → 0.020; in the pair's own PIV,
+//! which predicts the loop, it made `spiv flow`'s glare rows drift.
 //!
 //! `cargo run --release -p spiv-host --example wall_probe -- [linear|quadratic|log] [SEEDS] [WIDTH] [BLIND] [mc|spike]`
 use ndarray::Array2;

@@ -55,6 +55,22 @@ pub enum Edge {
     Quadratic,
 }
 
+impl Edge {
+    /// The filtered value of a node `c` whose measured neighbours lie on
+    /// one side only, `side(d)` the one `d` nodes away (`None` where
+    /// unmeasured or beyond the grid); `c` itself where the stencil lacks
+    /// a node.
+    fn one_sided(self, c: f64, side: impl Fn(isize) -> Option<f64>) -> f64 {
+        match (self, side(1), side(2), side(3)) {
+            (Edge::Line, Some(f1), Some(f2), _) => (5.0 * c + 2.0 * f1 - f2) / 6.0,
+            (Edge::Quadratic, Some(f1), Some(f2), Some(f3)) => {
+                (19.0 * c + 3.0 * f1 - 3.0 * f2 + f3) / 20.0
+            }
+            _ => c,
+        }
+    }
+}
+
 /// `f` with the 1-2-1 filter applied along x, then along y, to its
 /// measured vectors, with the `edge` stencil where one side has no
 /// measured neighbour.
@@ -83,26 +99,8 @@ pub fn filtered(f: &Field, edge: Edge) -> Field {
                     let c = src[k as usize];
                     line[k as usize] = match (at(k - 1), at(k + 1)) {
                         (Some(l), Some(r)) => 0.25 * (l + 2.0 * c + r),
-                        (None, Some(r)) => match at(k + 2) {
-                            Some(rr) => match (edge, at(k + 3)) {
-                                (Edge::Line, _) => (5.0 * c + 2.0 * r - rr) / 6.0,
-                                (Edge::Quadratic, Some(f3)) => {
-                                    (19.0 * c + 3.0 * r - 3.0 * rr + f3) / 20.0
-                                }
-                                (Edge::Quadratic, None) => c,
-                            },
-                            None => c,
-                        },
-                        (Some(l), None) => match at(k - 2) {
-                            Some(ll) => match (edge, at(k - 3)) {
-                                (Edge::Line, _) => (5.0 * c + 2.0 * l - ll) / 6.0,
-                                (Edge::Quadratic, Some(f3)) => {
-                                    (19.0 * c + 3.0 * l - 3.0 * ll + f3) / 20.0
-                                }
-                                (Edge::Quadratic, None) => c,
-                            },
-                            None => c,
-                        },
+                        (None, Some(_)) => edge.one_sided(c, |d| at(k + d)),
+                        (Some(_), None) => edge.one_sided(c, |d| at(k - d)),
                         (None, None) => c,
                     };
                 }
