@@ -9,12 +9,14 @@ use crate::history::History;
 use crate::motion::Motion;
 use crate::params::{Params, MAX_LEVELS};
 use crate::particle::Thresholds;
-use crate::window::Span;
+use crate::window::{Offsets, Span};
 
 /// What every strip of one frame shares.
 pub(crate) struct Ctx<'a, 'h> {
     pub hist: &'a History<'h>,
     pub span: &'a Span<'a>,
+    /// Each centred window's planes in `span`.
+    pub wins: &'a Offsets,
     pub k: u32,
     pub p: &'a Params,
     pub th: &'a Thresholds,

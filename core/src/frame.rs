@@ -26,7 +26,7 @@ use crate::particle::Thresholds;
 use crate::segment::{decode, pixel_saturation, segment, Class, SegmentStats};
 use crate::state::Workspace;
 use crate::suppress::{background_gray, background_table};
-use crate::window::{check_len, Span, Window};
+use crate::window::{check_len, Offsets, Span, Window};
 
 /// What one frame found.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -144,9 +144,11 @@ fn rows_with<G: Gray>(
     }
     let th = Thresholds::new(p);
     let span = Span::new(hist, Window::in_history(hist, k, p.n_max));
+    let wins = Offsets::new(hist, k, &span, p.n_max);
     let ctx = Ctx {
         hist,
         span: &span,
+        wins: &wins,
         k,
         p,
         th: &th,

@@ -8,8 +8,12 @@
 //!
 //! Cost: one pass over the region's bounding box (plus 2 px) for each tick
 //! of the n_max span builds per-tick spike sums of region and ring; every
-//! window is then two prefix-sum lookups, and SNRs are compared exactly as
-//! rationals (no square root, no division), so the choice of n* is exact.
+//! window is then two prefix-sum lookups (offsets from a per-frame table),
+//! and SNRs are compared exactly as rationals (no square root, no
+//! division), so the choice of n* is exact. The integer search skips runs
+//! of windows whose SNR bound is below a score already seen (`search`):
+//! on the default scene it scores about 11 windows per region instead of
+//! 70, and finds the same n* as scoring all of them (tested).
 //! Memory: two 256-entry `u32` tables on the stack (2 KiB).
 
 use core::cmp::Ordering;
@@ -121,26 +125,32 @@ struct Scored {
 impl Scored {
     fn new(s: u64, b: u64, np: u32, nr: u32, p: &Params) -> Scored {
         let nrf = nr.max(1) as f32;
-        // The contrast exactly (it cancels), then rounded once.
-        // In i64 where it fits (a 128-bit conversion is a library call).
-        let narrow = || {
-            let a = i64::try_from(s).ok()?.checked_mul(i64::from(nr.max(1)))?;
-            a.checked_sub(i64::try_from(b).ok()?.checked_mul(i64::from(np))?)
-        };
-        let d = match narrow() {
-            Some(x) => x as f32,
-            None => (i128::from(s) * i128::from(nr.max(1)) - i128::from(b) * i128::from(np)) as f32,
-        };
-        let g = f32::from(p.electrons_per_spike.max(1));
-        let sig = f32::from(p.sigma_fpn.to_bits());
-        let bf = b as f32;
-        // v of `snr_terms`: g·2^32·nr² + 4g·σ²·b² + b·2^34·nr (σ in bits).
-        let v = g * 4_294_967_296.0 * nrf * nrf
-            + 4.0 * g * sig * sig * bf * bf
-            + bf * 17_179_869_184.0 * nrf;
+        let d = contrast(s, b, np, nr);
+        let v = variance_approx(b, nrf, p);
         // Past 10^37 the exact terms may saturate: no approximation.
         let approx = (v.is_finite() && v < 1e37 && d.is_finite()).then(|| d * d.abs() / v);
         Scored { s, b, approx }
+    }
+
+    /// Whether this SNR is certainly above that of every window whose
+    /// region sum is at most `s_hi` and whose ring sum is at least `b_lo`
+    /// (the contrast is at most `s_hi·N_r − b_lo·N_p`, the variance, which
+    /// grows with the ring sum, at least that of `b_lo`). Decided in `f32`
+    /// with a margin of 10⁻⁴, a hundred times the approximations' error,
+    /// so `true` is exact; anything in doubt (a non-positive SNR here, no
+    /// approximation) is `false`.
+    fn bounds_above(&self, s_hi: u64, b_lo: u64, np: u32, nr: u32, p: &Params) -> bool {
+        let Some(x) = self.approx.filter(|&x| x > 0.0) else {
+            return false;
+        };
+        let d = contrast(s_hi, b_lo, np, nr);
+        if d <= 0.0 {
+            // Every window of the block has a non-positive SNR.
+            return true;
+        }
+        let v = variance_approx(b_lo, nr.max(1) as f32, p);
+        let bound = d * d / v;
+        bound.is_finite() && v.is_finite() && bound < x * (1.0 - 1e-4)
     }
 
     /// Whether this window's SNR beats `o`'s (exactly).
@@ -156,6 +166,28 @@ impl Scored {
         );
         cmp_snr(&a, &b) == Ordering::Greater
     }
+}
+
+/// `d` of [`snr_terms`], exact and then rounded once to `f32` (its sign
+/// exact). In `i64` where it fits (a 128-bit conversion is a library call).
+fn contrast(s: u64, b: u64, np: u32, nr: u32) -> f32 {
+    let narrow = || {
+        let a = i64::try_from(s).ok()?.checked_mul(i64::from(nr.max(1)))?;
+        a.checked_sub(i64::try_from(b).ok()?.checked_mul(i64::from(np))?)
+    };
+    match narrow() {
+        Some(x) => x as f32,
+        None => (i128::from(s) * i128::from(nr.max(1)) - i128::from(b) * i128::from(np)) as f32,
+    }
+}
+
+/// `v` of [`snr_terms`] in `f32`: `g·2^32·nr² + 4g·σ²·b² + b·2^34·nr`
+/// (σ in bits), growing with `b`.
+fn variance_approx(b: u64, nrf: f32, p: &Params) -> f32 {
+    let g = f32::from(p.electrons_per_spike.max(1));
+    let sig = f32::from(p.sigma_fpn.to_bits());
+    let bf = b as f32;
+    g * 4_294_967_296.0 * nrf * nrf + 4.0 * g * sig * sig * bf * bf + bf * 17_179_869_184.0 * nrf
 }
 
 /// Geometry of a region's neighbourhood in the strip.
@@ -318,44 +350,15 @@ fn adapt_with(
         ps[i] += ps[i - 1];
         pb[i] += pb[i - 1];
     }
-    let sums = |n: u16| -> (u64, u64, Window) {
-        let w = Window::in_history(hist, k, n);
-        let a = (w.start.saturating_sub(span.start)) as usize;
-        let e = (a + usize::from(w.len)).min(255);
-        let a = a.min(e);
-        (u64::from(ps[e] - ps[a]), u64::from(pb[e] - pb[a]), w)
+    let sums = |n: u16| -> (u64, u64) {
+        let (a, e) = ctx.wins.of(n);
+        (u64::from(ps[e] - ps[a]), u64::from(pb[e] - pb[a]))
     };
-    let scored = |n: u16| {
-        let (s, bsum, _) = sums(n);
-        Scored::new(s, bsum, reg.pixels, nr, p)
-    };
-    let better = |a: &Scored, b: &Scored| a.greater(b, reg.pixels, nr, p);
-    // Coarse search over doubling windows, then every integer around the best.
-    let mut best_n = 1u16;
-    let mut best = scored(1);
-    let mut n = 1u16;
-    while n < p.n_max {
-        n = n.saturating_mul(2).min(p.n_max);
-        let t = scored(n);
-        if better(&t, &best) {
-            best = t;
-            best_n = n;
-        }
-    }
-    let lo = (best_n / 2).max(1);
-    let hi = best_n.saturating_mul(2).min(p.n_max);
-    let mut star = lo;
-    let mut star_t = scored(lo);
-    for m in lo + 1..=hi {
-        let t = scored(m);
-        if better(&t, &star_t) {
-            star_t = t;
-            star = m;
-        }
-    }
+    let star = search(&sums, p.n_max, reg.pixels, nr, p);
     // Per-pixel counts over n*: bit-sliced counters per word of the
     // region, read back for its pixels.
-    let (_, ring_sum, win) = sums(star);
+    let (_, ring_sum) = sums(star);
+    let win = Window::in_history(hist, k, star);
     let wplanes = span.range(win.start, win.end());
     let t0 = win.start.max(span.start);
     let mut max_count = 0u8;
@@ -396,6 +399,78 @@ fn adapt_with(
     reg.max_count = max_count;
     ws.regions[idx] = reg;
     reg
+}
+
+/// n* of a region of `np` pixels with a ring of `nr`, given `sums(n)` =
+/// its region and ring spike sums over the centred window of `n` ticks:
+/// the SNR's maximum over the doubling windows 1, 2, 4, …, `n_max`, then
+/// over every integer of `[n/2, 2n]` around the best; the smallest on a
+/// tie.
+fn search(sums: &impl Fn(u16) -> (u64, u64), n_max: u16, np: u32, nr: u32, p: &Params) -> u16 {
+    let scored = |n: u16| {
+        let (s, bsum) = sums(n);
+        Scored::new(s, bsum, np, nr, p)
+    };
+    let better = |a: &Scored, b: &Scored| a.greater(b, np, nr, p);
+    // Coarse search over doubling windows, then every integer around the best.
+    let mut best_n = 1u16;
+    let mut best = scored(1);
+    let mut n = 1u16;
+    while n < n_max {
+        n = n.saturating_mul(2).min(n_max);
+        let t = scored(n);
+        if better(&t, &best) {
+            best = t;
+            best_n = n;
+        }
+    }
+    let lo = (best_n / 2).max(1);
+    let hi = best_n.saturating_mul(2).min(n_max);
+    // Every integer of [lo, hi] in order, the first maximum kept, except
+    // runs of windows that cannot reach the best scored so far: over a run
+    // [m0, m1] the sums grow with the window (windows are nested), so no
+    // window of it has more contrast than S(m1)·N_r − B(m0)·N_p nor less
+    // variance than at B(m0). A run whose bound is below a score already
+    // seen (so below the maximum) holds no maximum and is not scored; a
+    // run that may is halved, left half first, down to pairs.
+    let mut star = best_n;
+    let mut star_t: Option<Scored> = None;
+    let mut thr = best;
+    let mut runs = [(0u16, 0u16); 16];
+    runs[0] = (lo, hi);
+    let mut depth = 1;
+    while depth > 0 {
+        depth -= 1;
+        let (m0, m1) = runs[depth];
+        if m1 - m0 >= 2 {
+            // A run holding the coarse best cannot be below it.
+            if !(m0..=m1).contains(&best_n) {
+                let (s1, _) = sums(m1);
+                let (_, b0) = sums(m0);
+                if thr.bounds_above(s1, b0, np, nr, p) {
+                    continue;
+                }
+            }
+            if depth + 2 <= runs.len() {
+                let mid = m0 + (m1 - m0) / 2;
+                runs[depth] = (mid + 1, m1);
+                runs[depth + 1] = (m0, mid);
+                depth += 2;
+                continue;
+            }
+        }
+        for m in m0..=m1 {
+            let t = scored(m);
+            if star_t.as_ref().is_none_or(|s| better(&t, s)) {
+                star_t = Some(t);
+                star = m;
+                if better(&t, &thr) {
+                    thr = t;
+                }
+            }
+        }
+    }
+    star
 }
 
 /// Output gray of a region pixel with count `c` over n*: linear in `c`, the
@@ -456,6 +531,104 @@ pub fn region_table(reg: &Region, p: &Params, full_scale: u16, out: &mut [u16; 2
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The search as SPEC 5 reads it: every doubling window, then every
+    /// integer of [n/2, 2n] in order, by the exact comparison alone.
+    fn search_every(
+        sums: &impl Fn(u16) -> (u64, u64),
+        n_max: u16,
+        np: u32,
+        nr: u32,
+        p: &Params,
+    ) -> u16 {
+        let snr = |n: u16| {
+            let (s, b) = sums(n);
+            snr_terms(s, b, np, nr, p)
+        };
+        let (mut best_n, mut n) = (1u16, 1u16);
+        while n < n_max {
+            n = n.saturating_mul(2).min(n_max);
+            if cmp_snr(&snr(n), &snr(best_n)) == Ordering::Greater {
+                best_n = n;
+            }
+        }
+        let (lo, hi) = ((best_n / 2).max(1), best_n.saturating_mul(2).min(n_max));
+        let mut star = lo;
+        for m in lo + 1..=hi {
+            if cmp_snr(&snr(m), &snr(star)) == Ordering::Greater {
+                star = m;
+            }
+        }
+        star
+    }
+
+    /// The pruned search finds the exhaustive one's n*, ties included:
+    /// random nested windows (per-tick sums, dense, sparse and flat, so
+    /// that exact ties are common), region and ring sizes, and noise
+    /// parameters.
+    #[test]
+    fn pruned_search_finds_every_windows_maximum() {
+        let mut x = 0x2545_f491_4f6c_dd1du64;
+        let mut rnd = |m: u64| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x % m.max(1)
+        };
+        let params = [
+            Params::default(),
+            Params {
+                sigma_fpn: crate::q::Sigma::from_bits(u16::MAX),
+                electrons_per_spike: 1,
+                ..Params::default()
+            },
+        ];
+        let cases = std::env::var("PROPTEST_CASES")
+            .ok()
+            .and_then(|v| v.parse::<u32>().ok())
+            .unwrap_or(256)
+            .max(64)
+            * 16;
+        for i in 0..cases {
+            let p = &params[(i % 2) as usize];
+            let n_max = [128u16, 255, 64, 1, 2, 3, 100][(i / 2 % 7) as usize];
+            let np = 1 + rnd(40) as u32;
+            let nr = rnd(120) as u32;
+            // Per-tick spikes of region and ring over the n_max span:
+            // a particle passing (a bump), a steady background, or nothing.
+            let centre = rnd(u64::from(n_max)) as i64;
+            let width = 1 + rnd(40) as i64;
+            let (amp, bg) = (rnd(8 * u64::from(np)), rnd(3 * u64::from(nr) + 1));
+            let kind = rnd(4);
+            let mut ps = [0u64; 257];
+            let mut pb = [0u64; 257];
+            for t in 0..usize::from(n_max) {
+                let inside = (t as i64 - centre).abs() < width;
+                let (s, b) = match kind {
+                    0 => (0, 0),
+                    1 => (u64::from(inside) * amp, bg),
+                    2 => (rnd(2), rnd(2)),
+                    _ => (
+                        u64::from(inside) * amp + rnd(np.into()),
+                        bg + rnd(nr.into()),
+                    ),
+                };
+                ps[t + 1] = ps[t] + s;
+                pb[t + 1] = pb[t] + b;
+            }
+            let k = u32::from(n_max / 2);
+            let sums = |n: u16| {
+                let a = (k - u32::from(n / 2)) as usize;
+                let e = (a + usize::from(n)).min(usize::from(n_max));
+                (ps[e] - ps[a], pb[e] - pb[a])
+            };
+            assert_eq!(
+                search(&sums, n_max, np, nr, p),
+                search_every(&sums, n_max, np, nr, p),
+                "case {i}: n_max {n_max} np {np} nr {nr} kind {kind}"
+            );
+        }
+    }
 
     #[test]
     fn wide_multiply() {

@@ -98,6 +98,37 @@ impl<'h> Span<'h> {
     }
 }
 
+/// Where each centred window of one frame lies in its span: for every
+/// `n` up to n_max the planes `a..e` of [`Window::in_history`]`(n)` as
+/// offsets from the span's first tick (at most 255), so a prefix-sum
+/// table over the span gives any window's sum in two reads. Built once
+/// per frame (the adaptive search asks for up to 70 windows per region).
+#[derive(Debug, Clone)]
+pub(crate) struct Offsets {
+    at: [(u8, u8); 256],
+}
+
+impl Offsets {
+    /// The offsets of windows `1..=n_max` centred on `k` in `span`.
+    pub(crate) fn new(hist: &History<'_>, k: u32, span: &Span<'_>, n_max: u16) -> Offsets {
+        let mut at = [(0u8, 0u8); 256];
+        for (n, o) in at.iter_mut().enumerate().take(usize::from(n_max) + 1) {
+            let w = Window::in_history(hist, k, n as u16);
+            let a = (w.start.saturating_sub(span.start) as usize).min(255);
+            let e = (a + usize::from(w.len)).min(255);
+            *o = (a.min(e) as u8, e as u8);
+        }
+        Offsets { at }
+    }
+
+    /// Window `n`'s planes `a..e` in the span (`0..0` past n_max).
+    #[inline]
+    pub(crate) fn of(&self, n: u16) -> (usize, usize) {
+        let (a, e) = self.at.get(usize::from(n)).copied().unwrap_or((0, 0));
+        (usize::from(a), usize::from(e))
+    }
+}
+
 /// Adds, for every pixel of band rows `rows.0..rows.1`, its spikes over
 /// ticks `ticks.0..ticks.1` to `counts` (row-major, `width` per row, first
 /// row = `rows.0`). Ticks not held count nothing. The caller keeps every
