@@ -97,14 +97,15 @@ const CELLS: usize = 32;
 /// ring's and the region's pixels in it.
 #[derive(Debug, Clone, Copy, Default)]
 struct Cell {
-    r: usize,
-    j: usize,
-    /// `r·words_per_row + j`.
+    /// The word's index in a band plane.
     at: usize,
-    /// The row's predicted velocity (1/4096 px per tick; 0 without a motion).
-    v: (i16, i16),
     ring: u64,
     reg: u64,
+    /// The row's predicted velocity (1/4096 px per tick; 0 without a motion).
+    v: (i16, i16),
+    /// Strip row and word of the row.
+    r: u16,
+    j: u16,
 }
 
 /// A window's SNR, ready to compare: its spike sums, and the SNR's square
@@ -211,18 +212,17 @@ pub(crate) fn adapt_region(
 ) -> Region {
     let (hist, k) = (ctx.hist, ctx.k);
     let wpr = hist.words_per_row();
-    let base = usize::from(s0) * wpr;
     // Word j of strip row r at tick t: plain, or moved by the row's
     // predicted motion (then the region's spikes are counted where the
     // particle is at k). Chosen once, so the plain path has no branch.
     match ctx.motion {
         None => adapt_with(ctx, ws, s0, strip_rows, idx, |plane, _t, c: &Cell| {
-            plane.get(base + c.at).copied().unwrap_or(0)
+            plane.get(c.at).copied().unwrap_or(0)
         }),
         Some(_) => adapt_with(ctx, ws, s0, strip_rows, idx, |plane, t, c: &Cell| {
             let dt = (i64::from(t) - i64::from(k)) as i32;
             let (sx, sy) = (shift(c.v.0, dt), shift(c.v.1, dt));
-            shifted_word(plane, wpr, hist.rows(), s0 + c.r as u16, c.j, sx, sy)
+            shifted_word(plane, wpr, hist.rows(), s0 + c.r, usize::from(c.j), sx, sy)
         }),
     }
 }
@@ -244,6 +244,8 @@ fn adapt_with(
     let width = usize::from(ws.sizes.width);
     let wpr = crate::plane::words_per_row(ws.sizes.width);
     let plane = usize::from(ws.sizes.rows) * wpr;
+    // The strip's first word in a band plane.
+    let band0 = usize::from(s0) * hist.words_per_row();
     let b = Bounds {
         r0: usize::from(reg.row0.saturating_sub(2)),
         r1: (usize::from(reg.row1) + 2).min(usize::from(strip_rows)),
@@ -330,9 +332,9 @@ fn adapt_with(
                 continue;
             }
             cells[nc] = Cell {
-                r,
-                j,
-                at: r * wpr + j,
+                r: r as u16,
+                j: j as u16,
+                at: band0 + r * wpr + j,
                 v: vel(r),
                 ring: rn,
                 reg: rg,
@@ -369,9 +371,9 @@ fn adapt_with(
                 continue;
             }
             let cell = Cell {
-                r,
-                j,
-                at: r * wpr + j,
+                r: r as u16,
+                j: j as u16,
+                at: band0 + r * wpr + j,
                 v: vel(r),
                 ..Cell::default()
             };

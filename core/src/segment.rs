@@ -292,11 +292,13 @@ pub(crate) fn tile_pos(i: usize, lo: usize, hi: usize) -> (usize, usize, u32) {
     (clamp(t0), clamp(t0 + 1), f)
 }
 
-/// Adds the spikes of `planes` (each the band, `wpr` words per row) of
-/// band rows `s0..s0 + rows` to the bit-sliced counters `counts`: per row,
-/// blocks of eight words, each tick's words read as one slice, summed
-/// into carry-save nibbles 15 ticks at a time (`crate::slices`).
-fn add_sliced(planes: &[&[u64]], wpr: usize, s0: u16, rows: usize, counts: &mut [u64]) {
+/// Adds the spikes of the planes of both `runs` (each plane the band,
+/// `wpr` words per row) of band rows `s0..s0 + rows` to the bit-sliced
+/// counters `counts`: per row, blocks of [`BLOCK`] words, each tick's
+/// words read as one slice, summed into carry-save nibbles 15 ticks at a
+/// time (`crate::slices`) — the two annuli a level adds share their
+/// nibbles.
+fn add_sliced(runs: [&[&[u64]]; 2], wpr: usize, s0: u16, rows: usize, counts: &mut [u64]) {
     for r in 0..rows {
         let off = (usize::from(s0) + r) * wpr;
         let mut j0 = 0;
@@ -306,7 +308,7 @@ fn add_sliced(planes: &[&[u64]], wpr: usize, s0: u16, rows: usize, counts: &mut 
             let Some(out) = counts.get_mut(cell) else {
                 return;
             };
-            add_block(planes, off + j0, nb, out);
+            add_block(runs, off + j0, nb, out);
             j0 += nb;
         }
     }
@@ -321,11 +323,12 @@ const BLOCK: usize = 4;
 /// words, the partials in registers.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-fn add_block(planes: &[&[u64]], off: usize, nb: usize, out: &mut [u64]) {
+fn add_block(runs: [&[&[u64]]; 2], off: usize, nb: usize, out: &mut [u64]) {
     use wide::u64x2;
-    for chunk in planes.chunks(15) {
+    let mut planes = runs[0].iter().chain(runs[1]).peekable();
+    while planes.peek().is_some() {
         let (mut a, mut b) = ([u64x2::ZERO; 4], [u64x2::ZERO; 4]);
-        for pl in chunk {
+        for pl in planes.by_ref().take(15) {
             let [w0, w1, w2, w3] = match pl.get(off..off + BLOCK) {
                 Some(&[a, b, c, d]) => [a, b, c, d],
                 // The row's last words (or a plane not held): missing
@@ -357,11 +360,13 @@ fn add_block(planes: &[&[u64]], off: usize, nb: usize, out: &mut [u64]) {
 /// partials of more words than one do not stay in registers.
 #[cfg(not(target_arch = "x86_64"))]
 #[inline(always)]
-fn add_block(planes: &[&[u64]], off: usize, nb: usize, out: &mut [u64]) {
+fn add_block(runs: [&[&[u64]]; 2], off: usize, nb: usize, out: &mut [u64]) {
+    let n0 = runs[0].len();
     for (q, c) in out.chunks_exact_mut(8).enumerate().take(nb) {
         if let Ok(c) = <&mut Counter>::try_from(c) {
-            slices::add(c, planes, |pl: &[u64]| {
-                pl.get(off + q).copied().unwrap_or(0)
+            slices::add_fn(c, n0 + runs[1].len(), |i| {
+                let pl = if i < n0 { runs[0].get(i) } else { runs[1].get(i - n0) };
+                pl.and_then(|pl| pl.get(off + q)).copied().unwrap_or(0)
             });
         }
     }
@@ -472,8 +477,15 @@ pub(crate) fn segment(
             None => [(win.start, win.end()), (win.end(), win.end())],
             Some(pw) => [(win.start, pw.start), (pw.end(), win.end())],
         };
+        let [(a0, e0), (a1, e1)] = added;
+        add_sliced(
+            [span.range(a0, e0), span.range(a1, e1)],
+            wpr,
+            s0,
+            rows,
+            &mut ws.counts[..8 * words],
+        );
         for (a, e) in added {
-            add_sliced(span.range(a, e), wpr, s0, rows, &mut ws.counts[..8 * words]);
             if let (true, Some(m)) = (mc, &motion) {
                 let planes = span.range(a, e);
                 let start = a.max(span.start);
