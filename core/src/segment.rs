@@ -365,7 +365,11 @@ fn add_block(runs: [&[&[u64]]; 2], off: usize, nb: usize, out: &mut [u64]) {
     for (q, c) in out.chunks_exact_mut(8).enumerate().take(nb) {
         if let Ok(c) = <&mut Counter>::try_from(c) {
             slices::add_fn(c, n0 + runs[1].len(), |i| {
-                let pl = if i < n0 { runs[0].get(i) } else { runs[1].get(i - n0) };
+                let pl = if i < n0 {
+                    runs[0].get(i)
+                } else {
+                    runs[1].get(i - n0)
+                };
                 pl.and_then(|pl| pl.get(off + q)).copied().unwrap_or(0)
             });
         }
