@@ -212,19 +212,19 @@ fn strip<G: Gray>(
     for (l, tbl) in gray.iter_mut().enumerate().take(nlev) {
         background_table(levels[l], lens[l], p, fs, tbl);
     }
-    for i in first..last {
-        let (class, lev) = decode(ws.class[i]);
+    let outs = out.get_mut(out_base..).unwrap_or_default();
+    let pixels = ws.class[first..last].iter().zip(&ws.c_t[first..last]);
+    for (i, ((&cb, &c), o)) in (first..).zip(pixels.zip(outs)) {
+        let (class, lev) = decode(cb);
         let g = if class == Class::Particle && ws.labels[i] == 0 {
             let (r, col) = (s0 + (i / width) as u16, (i % width) as u16);
             let (c, t, len) = pixel_saturation(ctx, &levels[..nlev], r, col);
             background_gray(c, t, len, p, fs)
         } else {
             gray.get(usize::from(lev))
-                .map_or(0, |tbl| tbl[usize::from(ws.c_t[i])])
+                .map_or(0, |tbl| tbl[usize::from(c)])
         };
-        if let Some(o) = out.get_mut(out_base + i - first) {
-            *o = G::from_level(g);
-        }
+        *o = G::from_level(g);
     }
     // "Any region" bits, for the rings: the particle pixels (mask plane 1,
     // as the segmentation left it) that a region took. Written to plane
