@@ -253,6 +253,7 @@ fn adapt_with(
         j1: ((usize::from(reg.col1) + 2).min(width) - 1) / 64,
     };
     let (rr0, rr1) = (usize::from(reg.row0), usize::from(reg.row1));
+    let counts = &*ws.counts;
     let (any, rest) = ws.masks.split_at_mut(plane);
     let (regm, rest) = rest.split_at_mut(plane);
     let ring = &mut rest[..plane];
@@ -363,6 +364,16 @@ fn adapt_with(
     let win = Window::in_history(hist, k, star);
     let wplanes = span.range(win.start, win.end());
     let t0 = win.start.max(span.start);
+    // Plain counts: the segmentation left every pixel's count over the
+    // whole span in its counters (its last window is n_max's), so where
+    // n*'s window is the longer part of the span, a pixel's count is that
+    // minus its spikes outside the window (fewer ticks to add).
+    let lo = (win.start.saturating_sub(span.start) as usize).min(planes.len());
+    let hi = (lo + wplanes.len()).min(planes.len());
+    let whole = ctx.motion.is_none()
+        && ctx.levels.iter().rev().find(|&&n| n != 0) == Some(&p.n_max)
+        && planes.len() - wplanes.len() < wplanes.len();
+    let outside = |i: usize| if i < lo { i } else { i + (hi - lo) };
     let mut max_count = 0u8;
     for r in rr0..rr1 {
         for j in b.j0..=b.j1 {
@@ -378,15 +389,31 @@ fn adapt_with(
                 ..Cell::default()
             };
             let mut cnt = Counter::default();
-            slices::add_fn(&mut cnt, wplanes.len(), |i| {
-                wplanes
-                    .get(i)
-                    .map_or(0, |plane| word(plane, t0 + i as u32, &cell))
-            });
+            let all = if whole {
+                slices::add_fn(&mut cnt, planes.len() - wplanes.len(), |i| {
+                    let i = outside(i);
+                    planes
+                        .get(i)
+                        .map_or(0, |plane| word(plane, span.start + i as u32, &cell))
+                });
+                counts
+                    .get(8 * (r * wpr + j)..8 * (r * wpr + j) + 8)
+                    .and_then(|c| <&Counter>::try_from(c).ok())
+            } else {
+                slices::add_fn(&mut cnt, wplanes.len(), |i| {
+                    wplanes
+                        .get(i)
+                        .map_or(0, |plane| word(plane, t0 + i as u32, &cell))
+                });
+                None
+            };
             while m != 0 {
                 let bit = m.trailing_zeros();
                 m &= m - 1;
-                let v = slices::count(&cnt, bit);
+                let v = match all {
+                    Some(all) => slices::count(all, bit).saturating_sub(slices::count(&cnt, bit)),
+                    None => slices::count(&cnt, bit),
+                };
                 if let Some(x) = ws.c_t.get_mut(r * width + j * 64 + bit as usize) {
                     *x = v;
                 }
