@@ -218,7 +218,10 @@ fn strip<G: Gray>(
         let (class, lev) = decode(cb);
         let g = if class == Class::Particle && ws.labels[i] == 0 {
             let (r, col) = (s0 + (i / width) as u16, (i % width) as u16);
-            let (c, t, len) = pixel_saturation(ctx, &levels[..nlev], r, col);
+            // On plain counts the segmentation stopped at the pixel's
+            // level with its count there.
+            let known = ctx.motion.is_none().then_some((usize::from(lev), c));
+            let (c, t, len) = pixel_saturation(ctx, &levels[..nlev], r, col, known);
             background_gray(c, t, len, p, fs)
         } else {
             gray.get(usize::from(lev))

@@ -90,12 +90,18 @@ pub fn is_saturated(c: u8, win: &Window, n_fs: u16) -> bool {
 /// with their detection window they would be dark pits in a suppressed
 /// background. They are background, so they are suppressed like it. Cost:
 /// one word read per tick of the deciding window (at most n_max), paid only
-/// for such pixels.
+/// for such pixels, and with `known` only for the ticks past the level the
+/// segmentation stopped at.
+///
+/// `known`: the pixel's level index and its plain count over that level's
+/// window, when the segmentation decided it there on plain counts (it was
+/// then not saturated at any earlier level), so the search starts there.
 pub(crate) fn pixel_saturation(
     ctx: &crate::context::Ctx<'_, '_>,
     levels: &[u16],
     row: u16,
     col: u16,
+    known: Option<(usize, u8)>,
 ) -> (u8, u16, u16) {
     let (hist, span, p) = (ctx.hist, ctx.span, ctx.p);
     let word = usize::from(row) * hist.words_per_row() + usize::from(col) / 64;
@@ -112,11 +118,13 @@ pub(crate) fn pixel_saturation(
     // the previous one (as `saturation_times` counts).
     let mut last = (0u8, p.n_max, 0u16);
     let mut prev: Option<Window> = None;
-    for &n in levels {
+    let from = known.map_or(0, |(j, _)| j);
+    for &n in levels.iter().skip(from) {
         let win = Window::in_history(hist, ctx.k, n);
-        let c = match prev {
-            None => bits(win.start, win.end()),
-            Some(pw) => last
+        let c = match (prev, known) {
+            (None, Some((_, c))) => c,
+            (None, None) => bits(win.start, win.end()),
+            (Some(pw), _) => last
                 .0
                 .saturating_add(bits(win.start, pw.start))
                 .saturating_add(bits(pw.end(), win.end())),
