@@ -22,13 +22,18 @@ impl Adapt {
         Adapt { a: 4, n: 1 }
     }
 
+    /// The smallest `k` ≤ 16 with `N·2^k ≥ A` (16 if none): from the
+    /// two top bits' distance, one step up where that falls short.
     #[inline]
     fn k(&self) -> u32 {
-        let mut k = 0;
-        while (self.n << k) < self.a && k < 16 {
-            k += 1;
+        if self.n >= self.a {
+            return 0;
         }
-        k
+        // A > N ≥ 1 (N starts at 1 and halves from 64 to 32): the
+        // distance is at most 31 and N·2^k·2 < 2^63.
+        let k0 = self.n.leading_zeros() - self.a.leading_zeros();
+        let k = k0 + u32::from((u64::from(self.n) << k0) < u64::from(self.a));
+        k.min(16)
     }
 
     #[inline]
@@ -84,10 +89,31 @@ fn predict(get: impl Fn(usize) -> i32, r: usize, c: usize, w: usize) -> i32 {
 pub(super) fn encode<G: Gray>(samples: &[G], w: usize, out: &mut [u8]) -> Result<usize, WireError> {
     let mut bw = BitWriter::new(out);
     let mut ad = Adapt::new();
-    let get = |i: usize| i32::from(samples[i].level());
-    for i in 0..samples.len() {
-        let pred = predict(get, i / w, i % w, w);
-        ad.put(&mut bw, zigzag(get(i) - pred))?;
+    if w == 0 {
+        return bw.finish();
+    }
+    let lv = |g: &G| i32::from(g.level());
+    // Row by row (`predict` with the row and column known): the first
+    // row from the left, a row's first sample from above, the rest by
+    // the median edge predictor.
+    let mut above: Option<&[G]> = None;
+    for row in samples.chunks(w) {
+        let mut left = 0i32;
+        for (c, g) in row.iter().enumerate() {
+            let x = lv(g);
+            let pred = match (above, c) {
+                (None, 0) => 0,
+                (None, _) => left,
+                (Some(up), 0) => up.first().map_or(0, lv),
+                (Some(up), _) => match (up.get(c), up.get(c - 1)) {
+                    (Some(b), Some(cc)) => med(left, lv(b), lv(cc)),
+                    _ => 0,
+                },
+            };
+            ad.put(&mut bw, zigzag(x - pred))?;
+            left = x;
+        }
+        above = Some(row);
     }
     bw.finish()
 }
@@ -104,4 +130,31 @@ pub(super) fn decode<G: Gray>(payload: &[u8], width: u16, out: &mut [G]) -> Resu
         out[i] = level(v)?;
     }
     br.finished()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The closed-form parameter is the loop's: the smallest k ≤ 16 with
+    /// N·2^k ≥ A, for every N the coder reaches (1..64) and A up to past
+    /// 2^22 (where the loop stops at 16), and the saturated A.
+    #[test]
+    fn rice_parameter_is_the_smallest_k() {
+        let by_loop = |a: u32, n: u32| {
+            let mut k = 0;
+            while (n << k) < a && k < 16 {
+                k += 1;
+            }
+            k
+        };
+        for n in 1..64u32 {
+            let mut a = 0u32;
+            while a < (1 << 23) {
+                assert_eq!(Adapt { a, n }.k(), by_loop(a, n), "a {a} n {n}");
+                a += 1 + a / 64;
+            }
+            assert_eq!(Adapt { a: u32::MAX, n }.k(), 16);
+        }
+    }
 }
