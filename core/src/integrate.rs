@@ -407,13 +407,23 @@ fn adapt_with(
                 });
                 None
             };
+            // A byte group's counts at a time, read out of the planes once.
+            let mut group = (u32::MAX, [0u8; 8]);
             while m != 0 {
                 let bit = m.trailing_zeros();
                 m &= m - 1;
-                let v = match all {
-                    Some(all) => slices::count(all, bit).saturating_sub(slices::count(&cnt, bit)),
-                    None => slices::count(&cnt, bit),
-                };
+                if group.0 != bit / 8 {
+                    let g = bit / 8;
+                    let mut v = slices::bytes8(&cnt, g);
+                    if let Some(all) = all {
+                        let a = slices::bytes8(all, g);
+                        for (v, a) in v.iter_mut().zip(a) {
+                            *v = a.saturating_sub(*v);
+                        }
+                    }
+                    group = (g, v);
+                }
+                let v = group.1[(bit % 8) as usize];
                 if let Some(x) = ws.c_t.get_mut(r * width + j * 64 + bit as usize) {
                     *x = v;
                 }

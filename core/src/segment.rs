@@ -663,12 +663,18 @@ pub(crate) fn segment(
                     }
                     maybe
                 };
+                // Candidates a byte group at a time: the group's counts
+                // read out of the bit planes once.
                 let mut m = cand;
+                let mut group = (u32::MAX, [0u8; 8]);
                 while m != 0 {
                     let i = m.trailing_zeros();
                     m &= m - 1;
                     let x = 64 * jw + i as usize;
-                    let cp = slices::count(c, i);
+                    if group.0 != i / 8 {
+                        group = (i / 8, slices::bytes8(c, i / 8));
+                    }
+                    let cp = group.1[(i % 8) as usize];
                     let tested = if mc { ws.mc[r * width + x] } else { cp };
                     let b_q10 = lv.b_at(x).max((u32::from(cp) << B_FRAC_BITS) & lv.floor);
                     let particle = if segs > 1 {
