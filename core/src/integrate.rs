@@ -191,6 +191,34 @@ fn variance_approx(b: u64, nrf: f32, p: &Params) -> f32 {
     g * 4_294_967_296.0 * nrf * nrf + 4.0 * g * sig * sig * bf * bf + bf * 17_179_869_184.0 * nrf
 }
 
+/// Adds to `ps[i + 1]` and `pb[i + 1]` the spikes of plane `i` (tick
+/// `start + i`) under the region and ring masks of the `N` cells `cells`,
+/// `word(plane, tick, cell)` reading a cell's word.
+#[inline(always)]
+fn sum_cells<const N: usize>(
+    planes: &[&[u64]],
+    start: u32,
+    word: &impl Fn(&[u64], u32, &Cell) -> u64,
+    cells: &[Cell],
+    ps: &mut [u32; 256],
+    pb: &mut [u32; 256],
+) {
+    let Ok(cells) = <&[Cell; N]>::try_from(cells) else {
+        return;
+    };
+    for (i, plane) in planes.iter().enumerate().take(255) {
+        let t = start + i as u32;
+        let (mut hs, mut hb) = (0u32, 0u32);
+        for c in cells {
+            let w = word(plane, t, c);
+            hb += (w & c.ring).count_ones();
+            hs += (w & c.reg).count_ones();
+        }
+        ps[i + 1] += hs;
+        pb[i + 1] += hb;
+    }
+}
+
 /// Geometry of a region's neighbourhood in the strip.
 #[derive(Debug, Clone, Copy)]
 struct Bounds {
@@ -306,19 +334,25 @@ fn adapt_with(
     let mut cells = [Cell::default(); CELLS];
     let mut nc = 0usize;
     let planes = span.planes();
+    // Cells six at a time through every tick (their masks stay in
+    // registers; a tick's sums are added once per six cells), the rest
+    // in fours, twos and ones.
     let flush = |cells: &[Cell], ps: &mut [u32; 256], pb: &mut [u32; 256]| {
-        for (i, plane) in planes.iter().enumerate() {
-            let t = span.start + i as u32;
-            let (mut hs, mut hb) = (0u32, 0u32);
-            for c in cells {
-                let w = word(plane, t, c);
-                hb += (w & c.ring).count_ones();
-                hs += (w & c.reg).count_ones();
-            }
-            if let (Some(x), Some(y)) = (ps.get_mut(i + 1), pb.get_mut(i + 1)) {
-                *x += hs;
-                *y += hb;
-            }
+        let mut rest = cells;
+        while rest.len() >= 6 {
+            sum_cells::<6>(planes, span.start, &word, &rest[..6], ps, pb);
+            rest = &rest[6..];
+        }
+        if rest.len() >= 4 {
+            sum_cells::<4>(planes, span.start, &word, &rest[..4], ps, pb);
+            rest = &rest[4..];
+        }
+        if rest.len() >= 2 {
+            sum_cells::<2>(planes, span.start, &word, &rest[..2], ps, pb);
+            rest = &rest[2..];
+        }
+        if !rest.is_empty() {
+            sum_cells::<1>(planes, span.start, &word, rest, ps, pb);
         }
     };
     for r in b.r0..b.r1 {
