@@ -217,6 +217,19 @@ fn tile_medians_sliced(
     (r_lo, r_hi): (usize, usize),
 ) {
     let lane = |x: u64, q: usize| ((x >> (16 * q)) & 0xffff).count_ones();
+    // Set bits of each 16-bit lane over rows: byte-wise population counts
+    // summed over the rows (at most 16 rows of 8 per byte), then byte
+    // pairs added — a few operations per row for all four lanes.
+    let lanes = |xs: &[u64]| -> [u32; 4] {
+        let mut acc = 0u64;
+        for &x in xs {
+            let x = x - ((x >> 1) & 0x5555_5555_5555_5555);
+            let x = (x & 0x3333_3333_3333_3333) + ((x >> 2) & 0x3333_3333_3333_3333);
+            acc += (x + (x >> 4)) & 0x0f0f_0f0f_0f0f_0f0f;
+        }
+        let acc = (acc & 0x00ff_00ff_00ff_00ff) + ((acc >> 8) & 0x00ff_00ff_00ff_00ff);
+        core::array::from_fn(|q| ((acc >> (16 * q)) & 0xffff) as u32)
+    };
     let nr = r_hi - r_lo;
     for j in 0..wpr {
         let valid = low_bits(width - 64 * j);
@@ -225,9 +238,9 @@ fn tile_medians_sliced(
         for (k, cw) in cand.iter_mut().enumerate().take(nr) {
             let sr = r_lo + k - usize::from(s0);
             *cw = !part[sr * wpr + j] & valid;
-            for (q, nq) in n.iter_mut().enumerate() {
-                *nq += lane(*cw, q);
-            }
+        }
+        for (nq, c) in n.iter_mut().zip(lanes(&cand[..nr.min(16)])) {
+            *nq += c;
         }
         // A lane of particle pixels only: all its pixels.
         let mut refill = 0u64;
@@ -257,12 +270,7 @@ fn tile_medians_sliced(
                 // No candidate has this bit: every lane's median has 0.
                 continue;
             }
-            let mut ones = [0u32; 4];
-            for &xk in x.iter().take(nr) {
-                for (q, o) in ones.iter_mut().enumerate() {
-                    *o += lane(xk, q);
-                }
-            }
+            let ones = lanes(&x[..nr.min(16)]);
             let mut take1 = 0u64;
             for q in 0..4 {
                 let zeros = left[q] - ones[q];
