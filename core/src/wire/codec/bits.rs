@@ -47,29 +47,20 @@ impl<'a> BitWriter<'a> {
         Ok(())
     }
 
-    /// `value`'s low `n` bits (n ≤ 56).
-    #[inline]
-    fn put_long(&mut self, value: u64, n: u32) -> Result<(), WireError> {
-        self.acc = (self.acc << n) | (value & ((1u64 << n) - 1));
-        self.n += n;
-        while self.n >= 8 {
-            self.n -= 8;
-            let b = self.out.get_mut(self.pos).ok_or(WireError::TooLarge)?;
-            *b = (self.acc >> self.n) as u8;
-            self.pos += 1;
-        }
-        Ok(())
-    }
-
     #[inline]
     pub(super) fn rice(&mut self, z: u32, k: u32) -> Result<(), WireError> {
         let q = z >> k;
         if q < ESCAPE {
-            // q ones and a zero, then the k low bits (k ≤ 16): at most
-            // 41 bits in one put.
-            let ones = ((1u64 << q) - 1) << 1;
-            let low = u64::from(z) & ((1u64 << k) - 1);
-            self.put_long((ones << k) | low, q + 1 + k)
+            // q ones and a zero, then the k low bits: in one 32-bit put
+            // where they fit (almost always; wider words cost a 32-bit
+            // core more than a second put).
+            let low = z & ((1u32 << k) - 1);
+            if q + 1 + k <= 32 {
+                self.put(((((1u32 << q) - 1) << 1) << k) | low, q + 1 + k)
+            } else {
+                self.put(((1u32 << q) - 1) << 1, q + 1)?;
+                self.put(low, k)
+            }
         } else {
             self.put((1u32 << ESCAPE) - 1, ESCAPE)?;
             self.put(z, ESCAPE_BITS)
