@@ -108,6 +108,13 @@ pub fn at_least(c: &Counter, t: u32) -> u64 {
     if t > 255 {
         return 0;
     }
+    if t.is_power_of_two() {
+        // At least 2^m: any bit from m up (the segmentation's first
+        // filter, "at least 2", at every level).
+        return c[t.trailing_zeros() as usize..]
+            .iter()
+            .fold(0, |a, &p| a | p);
+    }
     // From the top bit down: `gt` already greater, `eq` equal so far.
     let (mut gt, mut eq) = (0u64, u64::MAX);
     for b in (0..8).rev() {
@@ -200,7 +207,9 @@ mod tests {
             let want = words.iter().filter(|&&w| (w >> i) & 1 == 1).count() as u8;
             assert_eq!(count(&c, i), want);
             assert_eq!(bytes8(&c, i / 8)[(i % 8) as usize], want);
-            for t in [0u32, 1, 2, 85, 86, 87, 199, 200, 255, 256] {
+            for t in [
+                0u32, 1, 2, 4, 8, 16, 32, 64, 85, 86, 87, 128, 199, 200, 255, 256,
+            ] {
                 assert_eq!(
                     (at_least(&c, t) >> i) & 1 == 1,
                     u32::from(want) >= t,
