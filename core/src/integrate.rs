@@ -641,13 +641,7 @@ mod tests {
     /// parameters.
     #[test]
     fn pruned_search_finds_every_windows_maximum() {
-        let mut x = 0x2545_f491_4f6c_dd1du64;
-        let mut rnd = |m: u64| {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            x % m.max(1)
-        };
+        let mut rnd = crate::testing::rng(0x2545_f491_4f6c_dd1du64);
         let params = [
             Params::default(),
             Params {
@@ -747,13 +741,7 @@ mod tests {
     #[test]
     fn region_tables_equal_the_formula() {
         let mut t = [0u16; 256];
-        let mut x = 12345u64;
-        let mut rnd = |m: u64| {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            x % m
-        };
+        let mut rnd = crate::testing::rng(12345u64);
         for i in 0..20_000 {
             let p = Params {
                 beta: crate::q::Beta::from_bits(
@@ -784,13 +772,7 @@ mod tests {
     /// extreme parameters.
     #[test]
     fn scored_windows_order_exactly() {
-        let mut x = 0x9e37_79b9_7f4a_7c15u64;
-        let mut rnd = |m: u64| {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            x % m.max(1)
-        };
+        let mut rnd = crate::testing::rng(0x9e37_79b9_7f4a_7c15u64);
         let params = [
             Params::default(),
             Params {

@@ -1,9 +1,11 @@
 //! Region labelling: particle pixels form regions by 8-connectivity
 //! (union-find over runs of a row's particle pixels, in a caller-supplied
-//! table); regions under 3 px are noise. Bounded: when the provisional-label table or the region table is
-//! full, further pixels or regions stay background, and are counted.
+//! table); regions under 3 px are noise. Bounded: when the
+//! provisional-label table or the region table is full, further pixels or
+//! regions stay background, and are counted.
 
 use crate::region::Region;
+use crate::slices::low_bits;
 use crate::state::Workspace;
 
 /// Regions smaller than this many pixels are noise.
@@ -63,12 +65,6 @@ fn for_each_bit(mask: &[u64], wpr: usize, width: usize, mut f: impl FnMut(usize)
     }
 }
 
-/// Labels the particle pixels of the first `rows` rows of the workspace:
-/// the set bits of `ws.masks[words..2·words]` (`words` = `rows` × words
-/// per row), as the segmentation leaves them. Writes `labels` (region
-/// index + 1, 0 for none) and the region table; returns the counts. Only
-/// particle pixels are visited (raster order), so the cost follows them,
-/// not the frame.
 /// Calls `f(a, e)` for each run of set bits of one row's mask words, in
 /// order (columns `a..e`; bits past the row's width are clear).
 #[inline]
@@ -86,7 +82,7 @@ fn for_each_run(row: &[u64], mut f: impl FnMut(usize, usize)) {
             }
             f(a, base + ones as usize);
             open = None;
-            m &= !low_bits(ones);
+            m &= !low_bits(ones as usize);
         }
         while m != 0 {
             let s = m.trailing_zeros();
@@ -96,21 +92,11 @@ fn for_each_run(row: &[u64], mut f: impl FnMut(usize, usize)) {
                 break;
             }
             f(base + s as usize, base + end as usize);
-            m &= !low_bits(end);
+            m &= !low_bits(end as usize);
         }
     }
     if let Some(a) = open {
         f(a, 64 * row.len());
-    }
-}
-
-/// Bits `0..n` set (`n` ≤ 64).
-#[inline]
-fn low_bits(n: u32) -> u64 {
-    if n >= 64 {
-        u64::MAX
-    } else {
-        (1u64 << n) - 1
     }
 }
 
@@ -130,7 +116,7 @@ fn for_each_run_in(row: &[u64], lo: usize, hi: usize, mut f: impl FnMut(usize)) 
         } else {
             64
         };
-        let m = w & low_bits(e) & !low_bits(a);
+        let m = w & low_bits(e as usize) & !low_bits(a as usize);
         let mut starts = m & !((m << 1) | carry);
         carry = m >> 63;
         while starts != 0 {
@@ -140,10 +126,12 @@ fn for_each_run_in(row: &[u64], lo: usize, hi: usize, mut f: impl FnMut(usize)) 
     }
 }
 
-/// Labels the particle pixels of mask plane 1 into regions (see the
-/// module docs): `labels` gets each region pixel's region index + 1, and
-/// the region table the regions in the raster order of their first
-/// pixel. Run by run (a row's consecutive particle pixels share their
+/// Labels the particle pixels of the first `rows` rows of the workspace:
+/// the set bits of `ws.masks[words..2·words]` (`words` = `rows` × words
+/// per row), as the segmentation leaves them. Writes `labels` (region
+/// index + 1, 0 for none) and the region table, the regions in the raster
+/// order of their first pixel; returns the counts. Only particle pixels
+/// are visited, so the cost follows them, not the frame. Run by run (a row's consecutive particle pixels share their
 /// neighbours' unions, so a run costs about what a pixel did); when the
 /// runs could fill the provisional table, pixel by pixel, whose table
 /// overflow rules the module docs state. Both give the same labels,
@@ -177,7 +165,6 @@ fn label_runs(ws: &mut Workspace<'_>, rows: u16) -> LabelStats {
     let wpr = crate::plane::words_per_row(ws.sizes.width);
     let px = width * usize::from(rows);
     let words = usize::from(rows) * wpr;
-    let cap_regions = ws.regions.len().min(usize::from(NONE) - 1);
     let mut stats = LabelStats::default();
     let labels = &mut ws.labels[..px];
     labels.fill(0);
@@ -224,11 +211,7 @@ fn label_runs(ws: &mut Workspace<'_>, rows: u16) -> LabelStats {
             labels[r * width + a..r * width + e].fill(root);
         });
     }
-    // Flatten: every label points at its root (roots are smaller, done first).
-    for l in 1..=next {
-        let p = parents[usize::from(l)];
-        parents[usize::from(l)] = parents[usize::from(p)];
-    }
+    flatten(parents, next);
     // Pass 2: one region per root, with size and bounding box.
     let mut n = 0usize;
     let regions = &mut *ws.regions;
@@ -238,31 +221,7 @@ fn label_runs(ws: &mut Workspace<'_>, rows: u16) -> LabelStats {
             let Some(root) = root_of(parents, labels[r * width + a]) else {
                 return;
             };
-            let p = parents[usize::from(root)];
-            let id = if p & ASSIGNED != 0 {
-                p & !ASSIGNED
-            } else if n < cap_regions {
-                regions[n] = Region {
-                    root,
-                    row0: u16::MAX,
-                    col0: u16::MAX,
-                    ..Region::default()
-                };
-                parents[usize::from(root)] = ASSIGNED | n as u16;
-                n += 1;
-                (n - 1) as u16
-            } else {
-                parents[usize::from(root)] = ASSIGNED | NONE;
-                stats.overflow_regions += 1;
-                NONE
-            };
-            if let Some(reg) = regions.get_mut(usize::from(id)).filter(|_| id != NONE) {
-                reg.pixels += (e - a) as u32;
-                reg.row0 = reg.row0.min(r as u16);
-                reg.row1 = reg.row1.max(r as u16 + 1);
-                reg.col0 = reg.col0.min(a as u16);
-                reg.col1 = reg.col1.max(e as u16);
-            }
+            add_run(regions, &mut n, parents, &mut stats, root, (r, a, e));
         });
     }
     let kept = drop_noise(regions, n, parents, &mut stats);
@@ -278,6 +237,54 @@ fn label_runs(ws: &mut Workspace<'_>, rows: u16) -> LabelStats {
     }
     stats.regions = kept as u32;
     stats
+}
+
+/// Points every provisional label `1..=next` at its root (roots are
+/// smaller, so done first).
+fn flatten(parents: &mut [u16], next: u16) {
+    for l in 1..=next {
+        let p = parents[usize::from(l)];
+        parents[usize::from(l)] = parents[usize::from(p)];
+    }
+}
+
+/// Pass 2 of both labellings: the pixels `a..e` of row `r`, of the set
+/// whose root is `root`, join its region — a new one (the next of the
+/// first `n`) when the root has none yet and the table has room, none
+/// (counted) when it is full.
+fn add_run(
+    regions: &mut [Region],
+    n: &mut usize,
+    parents: &mut [u16],
+    stats: &mut LabelStats,
+    root: u16,
+    (r, a, e): (usize, usize, usize),
+) {
+    let p = parents[usize::from(root)];
+    let id = if p & ASSIGNED != 0 {
+        p & !ASSIGNED
+    } else if *n < regions.len().min(usize::from(NONE) - 1) {
+        regions[*n] = Region {
+            root,
+            row0: u16::MAX,
+            col0: u16::MAX,
+            ..Region::default()
+        };
+        parents[usize::from(root)] = ASSIGNED | *n as u16;
+        *n += 1;
+        (*n - 1) as u16
+    } else {
+        parents[usize::from(root)] = ASSIGNED | NONE;
+        stats.overflow_regions += 1;
+        NONE
+    };
+    if let Some(reg) = regions.get_mut(usize::from(id)).filter(|_| id != NONE) {
+        reg.pixels += (e - a) as u32;
+        reg.row0 = reg.row0.min(r as u16);
+        reg.row1 = reg.row1.max(r as u16 + 1);
+        reg.col0 = reg.col0.min(a as u16);
+        reg.col1 = reg.col1.max(e as u16);
+    }
 }
 
 /// Drops the noise regions of the first `n`, compacts the table and
@@ -316,7 +323,6 @@ fn label_pixels(ws: &mut Workspace<'_>, rows: u16) -> LabelStats {
         .len()
         .saturating_sub(1)
         .min(usize::from(NONE) - 1) as u16;
-    let cap_regions = ws.regions.len().min(usize::from(NONE) - 1);
     let mut stats = LabelStats::default();
     let labels = &mut ws.labels[..px];
     labels.fill(0);
@@ -363,11 +369,7 @@ fn label_pixels(ws: &mut Workspace<'_>, rows: u16) -> LabelStats {
         }
         labels[i] = root;
     });
-    // Flatten: every label points at its root (roots are smaller, done first).
-    for l in 1..=next {
-        let p = parents[usize::from(l)];
-        parents[usize::from(l)] = parents[usize::from(p)];
-    }
+    flatten(parents, next);
     // Pass 2: one region per root, with size and bounding box.
     let mut n = 0usize;
     let regions = &mut *ws.regions;
@@ -375,32 +377,8 @@ fn label_pixels(ws: &mut Workspace<'_>, rows: u16) -> LabelStats {
         let Some(root) = root_of(parents, labels[i]) else {
             return;
         };
-        let e = parents[usize::from(root)];
-        let id = if e & ASSIGNED != 0 {
-            e & !ASSIGNED
-        } else if n < cap_regions {
-            regions[n] = Region {
-                root,
-                row0: u16::MAX,
-                col0: u16::MAX,
-                ..Region::default()
-            };
-            parents[usize::from(root)] = ASSIGNED | n as u16;
-            n += 1;
-            (n - 1) as u16
-        } else {
-            parents[usize::from(root)] = ASSIGNED | NONE;
-            stats.overflow_regions += 1;
-            NONE
-        };
-        if let Some(reg) = regions.get_mut(usize::from(id)).filter(|_| id != NONE) {
-            let (r, c) = ((i / width) as u16, (i % width) as u16);
-            reg.pixels += 1;
-            reg.row0 = reg.row0.min(r);
-            reg.row1 = reg.row1.max(r + 1);
-            reg.col0 = reg.col0.min(c);
-            reg.col1 = reg.col1.max(c + 1);
-        }
+        let (r, c) = (i / width, i % width);
+        add_run(regions, &mut n, parents, &mut stats, root, (r, c, c + 1));
     });
     let kept = drop_noise(regions, n, parents, &mut stats);
     // Pass 3: final labels.
@@ -462,13 +440,7 @@ mod tests {
     /// runs could fill (then the pixel rule runs, and drops pixels).
     #[test]
     fn runs_label_as_pixels_do() {
-        let mut x = 0x853c_49e6_748f_ea9bu64;
-        let mut rnd = |m: u64| {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            x % m.max(1)
-        };
+        let mut rnd = crate::testing::rng(0x853c_49e6_748f_ea9bu64);
         let mut dropped = 0;
         for case in 0..600 {
             let width = [1u16, 5, 63, 64, 65, 127, 128, 129, 200][case % 9];

@@ -62,6 +62,8 @@ pub mod sidecar;
 pub mod slices;
 pub mod state;
 pub mod suppress;
+#[cfg(test)]
+mod testing;
 pub mod window;
 pub mod wire;
 
