@@ -310,84 +310,110 @@ pub(crate) fn tile_pos(i: usize, lo: usize, hi: usize) -> (usize, usize, u32) {
 
 /// Adds the spikes of the planes of both `runs` (each plane the band,
 /// `wpr` words per row) of band rows `s0..s0 + rows` to the bit-sliced
-/// counters `counts`: per row, blocks of [`BLOCK`] words, each tick's
-/// words read as one slice, summed into carry-save nibbles 15 ticks at a
-/// time (`crate::slices`) — the two annuli a level adds share their
-/// nibbles.
-fn add_sliced(runs: [&[&[u64]]; 2], wpr: usize, s0: u16, rows: usize, counts: &mut [u64]) {
-    for r in 0..rows {
-        let off = (usize::from(s0) + r) * wpr;
-        let mut j0 = 0;
-        while j0 < wpr {
-            let nb = BLOCK.min(wpr - j0);
-            let cell = (r * wpr + j0) * 8..(r * wpr + j0 + nb) * 8;
-            let Some(out) = counts.get_mut(cell) else {
-                return;
-            };
-            add_block(runs, off + j0, nb, out);
-            j0 += nb;
+/// counters `counts`. The strip's rows are consecutive words of every
+/// plane and their counters consecutive cells, so the planes are taken 15
+/// at a time (trimmed to the strip) and summed into carry-save nibbles
+/// block by block along the whole strip (`crate::slices`): one simple loop
+/// over the group's planes per block, its partials in registers — the two
+/// annuli a level adds share their nibbles.
+fn add_sliced<'a>(runs: [&[&'a [u64]]; 2], wpr: usize, s0: u16, rows: usize, counts: &mut [u64]) {
+    let off = usize::from(s0) * wpr;
+    let words = rows * wpr;
+    let Some(counts) = counts.get_mut(..8 * words) else {
+        return;
+    };
+    // A plane not held (or short) counts nothing where it has no words.
+    let trim = |pl: &&'a [u64]| -> &'a [u64] {
+        pl.get(off..)
+            .map_or(&[][..], |s| s.get(..words).unwrap_or(s))
+    };
+    let mut planes = runs[0].iter().chain(runs[1]).map(trim);
+    loop {
+        let mut group: [&[u64]; 15] = [&[]; 15];
+        let mut m = 0;
+        for (slot, pl) in group.iter_mut().zip(planes.by_ref()) {
+            *slot = pl;
+            m += 1;
         }
+        if m == 0 {
+            return;
+        }
+        add_group(&group[..m], counts);
     }
 }
 
-/// Words side by side in [`add_block`].
+/// Words side by side in [`add_group`]'s blocks.
+#[cfg(target_arch = "x86_64")]
 const BLOCK: usize = 4;
 
-/// [`add_sliced`] for the `nb` (≤ [`BLOCK`]) words from `off` of every
-/// plane into their counters `out` (`8·nb` words): two words per vector lane
-/// pair, so a tick costs one load and seven vector operations per two
-/// words, the partials in registers.
+/// Adds the ≤ 15 planes of `group` (each a strip's words, or shorter) to
+/// their counters `counts` (8 per word): [`BLOCK`] words at a time, two per
+/// vector, so a plane costs two loads and fourteen vector operations per
+/// block; the strip's last words (and short planes) one at a time.
 #[cfg(target_arch = "x86_64")]
-#[inline(always)]
-fn add_block(runs: [&[&[u64]]; 2], off: usize, nb: usize, out: &mut [u64]) {
+fn add_group(group: &[&[u64]], counts: &mut [u64]) {
     use wide::u64x2;
-    let mut planes = runs[0].iter().chain(runs[1]).peekable();
-    while planes.peek().is_some() {
+    let blocks = counts.len() / (8 * BLOCK);
+    let (full, rest) = counts.split_at_mut(blocks * 8 * BLOCK);
+    for (q, out) in full.chunks_exact_mut(8 * BLOCK).enumerate() {
+        let j0 = q * BLOCK;
         let (mut a, mut b) = ([u64x2::ZERO; 4], [u64x2::ZERO; 4]);
-        for pl in planes.by_ref().take(15) {
-            let [w0, w1, w2, w3] = match pl.get(off..off + BLOCK) {
-                Some(&[a, b, c, d]) => [a, b, c, d],
-                // The row's last words (or a plane not held): missing
-                // words count nothing.
-                _ => core::array::from_fn(|q| {
-                    if q < nb {
-                        pl.get(off + q).copied().unwrap_or(0)
-                    } else {
-                        0
-                    }
-                }),
+        let load = |pl: &[u64]| -> (u64x2, u64x2) {
+            let [w0, w1, w2, w3] = match pl.get(j0..j0 + BLOCK) {
+                Some(&[w0, w1, w2, w3]) => [w0, w1, w2, w3],
+                _ => core::array::from_fn(|i| pl.get(j0 + i).copied().unwrap_or(0)),
             };
-            slices::csa(&mut a, u64x2::new([w0, w1]));
-            slices::csa(&mut b, u64x2::new([w2, w3]));
+            (u64x2::new([w0, w1]), u64x2::new([w2, w3]))
+        };
+        let mut pairs = group.chunks_exact(2);
+        for pr in pairs.by_ref() {
+            let (x0, x1) = load(pr[0]);
+            let (y0, y1) = load(pr[1]);
+            slices::csa2(&mut a, x0, y0);
+            slices::csa2(&mut b, x1, y1);
+        }
+        if let [pl] = pairs.remainder() {
+            let (x0, x1) = load(pl);
+            slices::csa(&mut a, x0);
+            slices::csa(&mut b, x1);
         }
         let (a, b) = (a.map(|v| v.to_array()), b.map(|v| v.to_array()));
-        for (q, c) in out.chunks_exact_mut(8).enumerate() {
-            let s = if q < 2 { &a } else { &b };
-            let l = q % 2;
+        for (i, c) in out.chunks_exact_mut(8).enumerate() {
+            let s = if i < 2 { &a } else { &b };
+            let l = i % 2;
             if let Ok(c) = <&mut Counter>::try_from(c) {
                 slices::add_nibble(c, [s[0][l], s[1][l], s[2][l], s[3][l]]);
             }
         }
     }
+    add_words(group, blocks * BLOCK, rest);
 }
 
-/// [`add_block`] in plain `u64`s, one word at a time: without a 128-bit
+/// [`add_group`] in plain `u64`s, one word at a time: without a 128-bit
 /// vector unit (a Cortex-M4 splits every `u64` operation in two) the
 /// partials of more words than one do not stay in registers.
 #[cfg(not(target_arch = "x86_64"))]
+fn add_group(group: &[&[u64]], counts: &mut [u64]) {
+    add_words(group, 0, counts);
+}
+
+/// The planes of `group` from word `j0` on into their counters `counts`,
+/// one word at a time.
 #[inline(always)]
-fn add_block(runs: [&[&[u64]]; 2], off: usize, nb: usize, out: &mut [u64]) {
-    let n0 = runs[0].len();
-    for (q, c) in out.chunks_exact_mut(8).enumerate().take(nb) {
+fn add_words(group: &[&[u64]], j0: usize, counts: &mut [u64]) {
+    for (q, c) in counts.chunks_exact_mut(8).enumerate() {
+        let j = j0 + q;
+        let word = |pl: &[u64]| pl.get(j).copied().unwrap_or(0);
+        let mut s = [0u64; 4];
+        let mut pairs = group.chunks_exact(2);
+        for pr in pairs.by_ref() {
+            slices::csa2(&mut s, word(pr[0]), word(pr[1]));
+        }
+        if let [pl] = pairs.remainder() {
+            slices::csa(&mut s, word(pl));
+        }
         if let Ok(c) = <&mut Counter>::try_from(c) {
-            slices::add_fn(c, n0 + runs[1].len(), |i| {
-                let pl = if i < n0 {
-                    runs[0].get(i)
-                } else {
-                    runs[1].get(i - n0)
-                };
-                pl.and_then(|pl| pl.get(off + q)).copied().unwrap_or(0)
-            });
+            slices::add_nibble(c, s);
         }
     }
 }

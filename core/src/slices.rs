@@ -76,6 +76,27 @@ where
     s[3] ^= c2;
 }
 
+/// Adds two words to a 4-bit carry-save counter `s`: a full adder on the
+/// low plane (five operations), its carry rippled through the others.
+#[inline(always)]
+pub fn csa2<T>(s: &mut [T; 4], x: T, y: T)
+where
+    T: Copy
+        + core::ops::BitAnd<Output = T>
+        + core::ops::BitOr<Output = T>
+        + core::ops::BitXor<Output = T>
+        + core::ops::BitXorAssign,
+{
+    let u = s[0] ^ x;
+    let c = (s[0] & x) | (u & y);
+    s[0] = u ^ y;
+    let c1 = s[1] & c;
+    s[1] ^= c;
+    let c2 = s[2] & c1;
+    s[2] ^= c1;
+    s[3] ^= c2;
+}
+
 /// Adds a 4-bit bit-sliced number to `c`.
 #[inline(always)]
 pub(crate) fn add_nibble(c: &mut Counter, p: [u64; 4]) {
@@ -215,6 +236,23 @@ mod tests {
                     u32::from(want) >= t,
                     "{i} {t}"
                 );
+            }
+        }
+        // Pairs through the full adder, the odd one through `csa`.
+        for n in [0usize, 1, 2, 7, 14, 15] {
+            let mut s = [0u64; 4];
+            for pr in words[..n].chunks(2) {
+                match *pr {
+                    [x, y] => csa2(&mut s, x, y),
+                    [x] => csa(&mut s, x),
+                    _ => {}
+                }
+            }
+            let mut c = Counter::default();
+            add_nibble(&mut c, s);
+            for i in 0..64u32 {
+                let want = words[..n].iter().filter(|&&w| (w >> i) & 1 == 1).count();
+                assert_eq!(usize::from(count(&c, i)), want, "{n} {i}");
             }
         }
         let squares: u64 = (0..64).map(|i| u64::from(count(&c, i)).pow(2)).sum();
