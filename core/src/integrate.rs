@@ -193,12 +193,17 @@ fn variance_approx(b: u64, nrf: f32, p: &Params) -> f32 {
 
 /// Adds to `ps[i + 1]` and `pb[i + 1]` the spikes of plane `i` (tick
 /// `start + i`) under the region and ring masks of the `N` cells `cells`,
-/// `word(plane, tick, cell)` reading a cell's word.
+/// `word(plane, tick, cell)` reading a cell's word. With `plain` (the
+/// word is the plane's word `at`) and cells within [`NEAR`] words of the
+/// first (a region's rows, a few words each), each tick's words are read
+/// from one `NEAR`-word window of the plane: one bounds check per tick
+/// instead of one per cell (issue 18: the per-tick sums are the region
+/// stage's main cost).
 #[inline(always)]
 fn sum_cells<const N: usize>(
     planes: &[&[u64]],
     start: u32,
-    word: &impl Fn(&[u64], u32, &Cell) -> u64,
+    (word, plain): (&impl Fn(&[u64], u32, &Cell) -> u64, bool),
     cells: &[Cell],
     ps: &mut [u32; 256],
     pb: &mut [u32; 256],
@@ -206,18 +211,42 @@ fn sum_cells<const N: usize>(
     let Ok(cells) = <&[Cell; N]>::try_from(cells) else {
         return;
     };
+    let base = cells[0].at;
+    let near = plain
+        && cells
+            .iter()
+            .all(|c| c.at.checked_sub(base).is_some_and(|o| o < NEAR));
+    let offs: [usize; N] = core::array::from_fn(|q| cells[q].at.wrapping_sub(base) % NEAR);
     for (i, plane) in planes.iter().enumerate().take(255) {
         let t = start + i as u32;
         let (mut hs, mut hb) = (0u32, 0u32);
-        for c in cells {
-            let w = word(plane, t, c);
-            hb += (w & c.ring).count_ones();
-            hs += (w & c.reg).count_ones();
+        let window = plane
+            .get(base..base.saturating_add(NEAR))
+            .and_then(|s| <&[u64; NEAR]>::try_from(s).ok());
+        match window {
+            Some(win) if near => {
+                for (c, &o) in cells.iter().zip(&offs) {
+                    let w = win[o % NEAR];
+                    hb += (w & c.ring).count_ones();
+                    hs += (w & c.reg).count_ones();
+                }
+            }
+            _ => {
+                for c in cells {
+                    let w = word(plane, t, c);
+                    hb += (w & c.ring).count_ones();
+                    hs += (w & c.reg).count_ones();
+                }
+            }
         }
         ps[i + 1] += hs;
         pb[i + 1] += hb;
     }
 }
+
+/// Words of a plane within which [`sum_cells`] reads a batch's cells
+/// through one window.
+const NEAR: usize = 64;
 
 /// Geometry of a region's neighbourhood in the strip.
 #[derive(Debug, Clone, Copy)]
@@ -244,10 +273,10 @@ pub(crate) fn adapt_region(
     // predicted motion (then the region's spikes are counted where the
     // particle is at k). Chosen once, so the plain path has no branch.
     match ctx.motion {
-        None => adapt_with(ctx, ws, s0, strip_rows, idx, |plane, _t, c: &Cell| {
+        None => adapt_with(ctx, ws, s0, strip_rows, idx, true, |plane, _t, c: &Cell| {
             plane.get(c.at).copied().unwrap_or(0)
         }),
-        Some(_) => adapt_with(ctx, ws, s0, strip_rows, idx, |plane, t, c: &Cell| {
+        Some(_) => adapt_with(ctx, ws, s0, strip_rows, idx, false, |plane, t, c: &Cell| {
             let dt = (i64::from(t) - i64::from(k)) as i32;
             let (sx, sy) = (shift(c.v.0, dt), shift(c.v.1, dt));
             shifted_word(plane, wpr, hist.rows(), s0 + c.r, usize::from(c.j), sx, sy)
@@ -255,13 +284,15 @@ pub(crate) fn adapt_region(
     }
 }
 
-/// [`adapt_region`] with `word(plane, tick, cell)`.
+/// [`adapt_region`] with `word(plane, tick, cell)`; `plain` when that is
+/// the plane's word `cell.at`.
 fn adapt_with(
     ctx: &crate::context::Ctx<'_, '_>,
     ws: &mut Workspace<'_>,
     s0: u16,
     strip_rows: u16,
     idx: usize,
+    plain: bool,
     word: impl Fn(&[u64], u32, &Cell) -> u64,
 ) -> Region {
     let crate::context::Ctx {
@@ -340,19 +371,19 @@ fn adapt_with(
     let flush = |cells: &[Cell], ps: &mut [u32; 256], pb: &mut [u32; 256]| {
         let mut rest = cells;
         while rest.len() >= 6 {
-            sum_cells::<6>(planes, span.start, &word, &rest[..6], ps, pb);
+            sum_cells::<6>(planes, span.start, (&word, plain), &rest[..6], ps, pb);
             rest = &rest[6..];
         }
         if rest.len() >= 4 {
-            sum_cells::<4>(planes, span.start, &word, &rest[..4], ps, pb);
+            sum_cells::<4>(planes, span.start, (&word, plain), &rest[..4], ps, pb);
             rest = &rest[4..];
         }
         if rest.len() >= 2 {
-            sum_cells::<2>(planes, span.start, &word, &rest[..2], ps, pb);
+            sum_cells::<2>(planes, span.start, (&word, plain), &rest[..2], ps, pb);
             rest = &rest[2..];
         }
         if !rest.is_empty() {
-            sum_cells::<1>(planes, span.start, &word, rest, ps, pb);
+            sum_cells::<1>(planes, span.start, (&word, plain), rest, ps, pb);
         }
     };
     for r in b.r0..b.r1 {
