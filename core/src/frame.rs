@@ -23,7 +23,7 @@ use crate::label::{label, LabelStats};
 use crate::motion::Motion;
 use crate::params::{Params, MAX_LEVELS};
 use crate::particle::Thresholds;
-use crate::segment::{decode, pixel_saturation, segment, Class, SegmentStats};
+use crate::segment::{decode, pixel_saturation, segment, SegmentStats, LEVEL_MASK};
 use crate::state::Workspace;
 use crate::suppress::{background_gray, background_table};
 use crate::window::{check_len, Offsets, Span, Window};
@@ -212,27 +212,21 @@ fn strip<G: Gray>(
     for (l, tbl) in gray.iter_mut().enumerate().take(nlev) {
         background_table(levels[l], lens[l], p, fs, tbl);
     }
+    // Every pixel at its level's background gray; region pixels are
+    // overwritten below, and particle pixels no region took get their own
+    // saturation time in the next pass.
     let outs = out.get_mut(out_base..).unwrap_or_default();
     let pixels = ws.class[first..last].iter().zip(&ws.c_t[first..last]);
-    for (i, ((&cb, &c), o)) in (first..).zip(pixels.zip(outs)) {
-        let (class, lev) = decode(cb);
-        let g = if class == Class::Particle && ws.labels[i] == 0 {
-            let (r, col) = (s0 + (i / width) as u16, (i % width) as u16);
-            // On plain counts the segmentation stopped at the pixel's
-            // level with its count there.
-            let known = ctx.motion.is_none().then_some((usize::from(lev), c));
-            let (c, t, len) = pixel_saturation(ctx, &levels[..nlev], r, col, known);
-            background_gray(c, t, len, p, fs)
-        } else {
-            gray.get(usize::from(lev))
-                .map_or(0, |tbl| tbl[usize::from(c)])
-        };
+    for ((&cb, &c), o) in pixels.zip(outs) {
+        let g = gray
+            .get(usize::from(cb & LEVEL_MASK))
+            .map_or(0, |tbl| tbl[usize::from(c)]);
         *o = G::from_level(g);
     }
     // "Any region" bits, for the rings: the particle pixels (mask plane 1,
     // as the segmentation left it) that a region took. Written to plane
     // 0 in increasing order, which only overwrites particle words already
-    // read.
+    // read. The others are background (see `segment::pixel_saturation`).
     let wpr = crate::plane::words_per_row(hist.width());
     let words = usize::from(rows) * wpr;
     for w in 0..words {
@@ -242,8 +236,22 @@ fn strip<G: Gray>(
         while m != 0 {
             let b = m.trailing_zeros();
             m &= m - 1;
-            if ws.labels[base + b as usize] != 0 {
+            let i = base + b as usize;
+            if ws.labels[i] != 0 {
                 any |= 1 << b;
+            } else if (first..last).contains(&i) {
+                let (r, col) = (s0 + (i / width) as u16, (i % width) as u16);
+                // On plain counts the segmentation stopped at the pixel's
+                // level with its count there.
+                let (_, lev) = decode(ws.class[i]);
+                let known = ctx
+                    .motion
+                    .is_none()
+                    .then_some((usize::from(lev), ws.c_t[i]));
+                let (c, t, len) = pixel_saturation(ctx, &levels[..nlev], r, col, known);
+                if let Some(o) = out.get_mut(out_base + i - first) {
+                    *o = G::from_level(background_gray(c, t, len, p, fs));
+                }
             }
         }
         ws.masks[w] = any;

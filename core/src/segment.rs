@@ -39,7 +39,7 @@ pub enum Class {
 }
 
 const KIND_SHIFT: u32 = 4;
-const LEVEL_MASK: u8 = 0x0f;
+pub(crate) const LEVEL_MASK: u8 = 0x0f;
 
 /// Encodes a class byte.
 #[inline]
