@@ -162,14 +162,23 @@ pub fn count(c: &Counter, i: u32) -> u8 {
     v
 }
 
-/// The counts of pixels `8g..8g + 8`, one per byte (byte `i` is pixel
-/// `8g + i`).
+/// The counts of pixels `8g..8g + 8` (`g` in 0..8), one per byte (byte
+/// `i` is pixel `8g + i`): each plane's byte `g` read as a byte (one load,
+/// not a load and a shift) and spread by [`SPREAD`].
 #[inline]
 pub fn bytes8(c: &Counter, g: u32) -> [u8; 8] {
-    let sh = 8 * g;
+    let bytes: &[u8; 64] = bytemuck::cast_ref(c);
+    let g = (g % 8) as usize;
+    // Byte g of a plane holds pixels 8g..8g + 8 in memory order on a
+    // little-endian target, from the other end on a big-endian one.
+    let at = if cfg!(target_endian = "little") {
+        g
+    } else {
+        7 - g
+    };
     let mut v = 0u64;
-    for (b, &p) in c.iter().enumerate() {
-        v |= SPREAD[((p >> sh) & 0xff) as usize] << b;
+    for b in 0..8 {
+        v |= SPREAD[usize::from(bytes[8 * b + at])] << b;
     }
     v.to_le_bytes()
 }
