@@ -315,8 +315,17 @@ pub(crate) fn tile_pos(i: usize, lo: usize, hi: usize) -> (usize, usize, u32) {
 /// at a time (trimmed to the strip) and summed into carry-save nibbles
 /// block by block along the whole strip (`crate::slices`): one simple loop
 /// over the group's planes per block, its partials in registers — the two
-/// annuli a level adds share their nibbles.
-fn add_sliced<'a>(runs: [&[&'a [u64]]; 2], wpr: usize, s0: u16, rows: usize, counts: &mut [u64]) {
+/// annuli a level adds share their nibbles. With `fresh` the counters
+/// start from zero (their old contents are not read, so they need no
+/// clearing first).
+fn add_sliced<'a>(
+    runs: [&[&'a [u64]]; 2],
+    wpr: usize,
+    s0: u16,
+    rows: usize,
+    counts: &mut [u64],
+    mut fresh: bool,
+) {
     let off = usize::from(s0) * wpr;
     let words = rows * wpr;
     let Some(counts) = counts.get_mut(..8 * words) else {
@@ -336,9 +345,13 @@ fn add_sliced<'a>(runs: [&[&'a [u64]]; 2], wpr: usize, s0: u16, rows: usize, cou
             m += 1;
         }
         if m == 0 {
+            if fresh {
+                counts.fill(0);
+            }
             return;
         }
-        add_group(&group[..m], counts);
+        add_group(&group[..m], counts, fresh);
+        fresh = false;
     }
 }
 
@@ -350,8 +363,9 @@ const BLOCK: usize = 4;
 /// their counters `counts` (8 per word): [`BLOCK`] words at a time, two per
 /// vector, so a plane costs two loads and fourteen vector operations per
 /// block; the strip's last words (and short planes) one at a time.
+/// `fresh`: the counters are set, not added to.
 #[cfg(target_arch = "x86_64")]
-fn add_group(group: &[&[u64]], counts: &mut [u64]) {
+fn add_group(group: &[&[u64]], counts: &mut [u64], fresh: bool) {
     use wide::u64x2;
     let blocks = counts.len() / (8 * BLOCK);
     let (full, rest) = counts.split_at_mut(blocks * 8 * BLOCK);
@@ -381,26 +395,37 @@ fn add_group(group: &[&[u64]], counts: &mut [u64]) {
         for (i, c) in out.chunks_exact_mut(8).enumerate() {
             let s = if i < 2 { &a } else { &b };
             let l = i % 2;
-            if let Ok(c) = <&mut Counter>::try_from(c) {
-                slices::add_nibble(c, [s[0][l], s[1][l], s[2][l], s[3][l]]);
-            }
+            flush(c, [s[0][l], s[1][l], s[2][l], s[3][l]], fresh);
         }
     }
-    add_words(group, blocks * BLOCK, rest);
+    add_words(group, blocks * BLOCK, rest, fresh);
+}
+
+/// Adds a carry-save nibble to a word's counter (`c`, 8 words), or sets
+/// the counter to it when `fresh`.
+#[inline(always)]
+fn flush(c: &mut [u64], s: [u64; 4], fresh: bool) {
+    if let Ok(c) = <&mut Counter>::try_from(c) {
+        if fresh {
+            *c = [s[0], s[1], s[2], s[3], 0, 0, 0, 0];
+        } else {
+            slices::add_nibble(c, s);
+        }
+    }
 }
 
 /// [`add_group`] in plain `u64`s, one word at a time: without a 128-bit
 /// vector unit (a Cortex-M4 splits every `u64` operation in two) the
 /// partials of more words than one do not stay in registers.
 #[cfg(not(target_arch = "x86_64"))]
-fn add_group(group: &[&[u64]], counts: &mut [u64]) {
-    add_words(group, 0, counts);
+fn add_group(group: &[&[u64]], counts: &mut [u64], fresh: bool) {
+    add_words(group, 0, counts, fresh);
 }
 
 /// The planes of `group` from word `j0` on into their counters `counts`,
-/// one word at a time.
+/// one word at a time (`fresh`: set, not added to).
 #[inline(always)]
-fn add_words(group: &[&[u64]], j0: usize, counts: &mut [u64]) {
+fn add_words(group: &[&[u64]], j0: usize, counts: &mut [u64], fresh: bool) {
     for (q, c) in counts.chunks_exact_mut(8).enumerate() {
         let j = j0 + q;
         let word = |pl: &[u64]| pl.get(j).copied().unwrap_or(0);
@@ -412,9 +437,7 @@ fn add_words(group: &[&[u64]], j0: usize, counts: &mut [u64]) {
         if let [pl] = pairs.remainder() {
             slices::csa(&mut s, word(pl));
         }
-        if let Ok(c) = <&mut Counter>::try_from(c) {
-            slices::add_nibble(c, s);
-        }
+        flush(c, s, fresh);
     }
 }
 
@@ -501,7 +524,6 @@ pub(crate) fn segment(
     let (levels, nlev) = p.levels();
     let tiles = Tiles::for_strip(ws.sizes.width, s0, s1);
     let mut stats = SegmentStats::default();
-    ws.counts[..8 * words].fill(0);
     let (act, rest) = ws.masks.split_at_mut(words);
     let part = &mut rest[..words];
     for (i, a) in act.iter_mut().enumerate() {
@@ -530,6 +552,7 @@ pub(crate) fn segment(
             s0,
             rows,
             &mut ws.counts[..8 * words],
+            j == 0,
         );
         for (a, e) in added {
             if let (true, Some(m)) = (mc, &motion) {
