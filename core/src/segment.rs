@@ -776,17 +776,28 @@ fn background_rest(
     class: &mut [u8],
     c_t: &mut [u8],
 ) {
+    let bg8 = u64::from(class_bg) * 0x0101_0101_0101_0101;
     while left != 0 {
         let g = left.trailing_zeros() / 8;
         let bytes = slices::bytes8(c, g);
-        let grp = (left >> (8 * g)) & 0xff;
+        let grp = ((left >> (8 * g)) & 0xff) as usize;
         let at = base + 8 * g as usize;
-        if grp == 0xff {
-            if let (Some(cl), Some(ct)) = (class.get_mut(at..at + 8), c_t.get_mut(at..at + 8)) {
-                cl.fill(class_bg);
-                ct.copy_from_slice(&bytes);
-            }
+        left &= !(0xffu64 << (8 * g));
+        let group = (class.get_mut(at..at + 8), c_t.get_mut(at..at + 8));
+        if let (Some(cl), Some(ct)) = group {
+            // The group's eight bytes at once, its pixels' bytes replaced
+            // (a byte mask from the group's bits).
+            let m = slices::SPREAD[grp] * 0xff;
+            let blend = |old: &mut [u8], new: u64| {
+                let mut o = [0u8; 8];
+                o.copy_from_slice(old);
+                let v = (u64::from_le_bytes(o) & !m) | (new & m);
+                old.copy_from_slice(&v.to_le_bytes());
+            };
+            blend(cl, bg8);
+            blend(ct, u64::from_le_bytes(bytes));
         } else {
+            // The buffer's last pixels: one at a time.
             let mut m = grp;
             while m != 0 {
                 let q = m.trailing_zeros() as usize;
@@ -797,7 +808,6 @@ fn background_rest(
                 }
             }
         }
-        left &= !(0xffu64 << (8 * g));
     }
 }
 
