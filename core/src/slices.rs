@@ -43,16 +43,22 @@ pub fn add<T: Copy>(c: &mut Counter, items: &[T], word: impl Fn(T) -> u64) {
 }
 
 /// Adds the words `word(0..n)` to `c`: 15 words at a time are summed into
-/// 4-bit carry-save counters ([`csa`]: 7 logic operations per word), then
-/// added to the 8-bit counters with a ripple of full adders that stops
-/// where the carry dies. The caller keeps every count below 256.
+/// 4-bit carry-save counters, two at a time ([`csa2`]: a full adder and
+/// its carry's ripple, five logic operations per word), then added to the
+/// 8-bit counters with a ripple of full adders that stops where the carry
+/// dies. The caller keeps every count below 256.
 #[inline(always)]
 pub fn add_fn(c: &mut Counter, n: usize, word: impl Fn(usize) -> u64) {
     let mut i = 0;
     while i < n {
         let e = (i + 15).min(n);
         let mut s = [0u64; 4];
-        for q in i..e {
+        let mut q = i;
+        while q + 1 < e {
+            csa2(&mut s, word(q), word(q + 1));
+            q += 2;
+        }
+        if q < e {
             csa(&mut s, word(q));
         }
         add_nibble(c, s);
