@@ -339,12 +339,24 @@ fn adapt_with(
         m | m << 1 | m << 2 | m >> 1 | m >> 2 | prev >> 63 | prev >> 62 | next << 63 | next << 62
     };
     let mut nr = 0u32;
-    for r in b.r0..b.r1 {
-        for j in b.j0..=b.j1 {
-            let mut d = 0u64;
-            for rr in r.saturating_sub(2).max(rr0)..(r + 3).min(rr1) {
-                d |= hdil(rr, j);
+    for j in b.j0..=b.j1 {
+        // Rows r − 2 ..= r + 2 dilated horizontally, each row once: the
+        // vertical dilation is their OR.
+        let h = |rr: usize| {
+            if (rr0..rr1).contains(&rr) {
+                hdil(rr, j)
+            } else {
+                0
             }
+        };
+        let mut near = [0u64; 5];
+        for (q, x) in near.iter_mut().enumerate().take(4) {
+            *x = (b.r0 + q).checked_sub(2).map_or(0, h);
+        }
+        for r in b.r0..b.r1 {
+            near[4] = h(r + 2);
+            let mut d = near.iter().fold(0, |a, &x| a | x);
+            near = [near[1], near[2], near[3], near[4], 0];
             if j + 1 == wpr {
                 d &= last_bits;
             }
