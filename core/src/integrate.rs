@@ -377,12 +377,15 @@ fn adapt_with(
     let mut cells = [Cell::default(); CELLS];
     let mut nc = 0usize;
     let planes = span.planes();
-    // Cells six at a time through every tick (their masks stay in
-    // registers; a tick's sums are added once per six cells), the rest
-    // in fours, twos and ones.
+    // Cells eight at a time through every tick (a tick's sums are added
+    // once per eight cells), the rest in sixes, fours, twos and ones.
     let flush = |cells: &[Cell], ps: &mut [u32; 256], pb: &mut [u32; 256]| {
         let mut rest = cells;
-        while rest.len() >= 6 {
+        while rest.len() >= 8 {
+            sum_cells::<8>(planes, span.start, (&word, plain), &rest[..8], ps, pb);
+            rest = &rest[8..];
+        }
+        if rest.len() >= 6 {
             sum_cells::<6>(planes, span.start, (&word, plain), &rest[..6], ps, pb);
             rest = &rest[6..];
         }
