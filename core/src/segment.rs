@@ -19,7 +19,7 @@
 use crate::history::History;
 use crate::motion::{add_compensated, positions, travel, MIN_TRAVEL};
 use crate::params::Params;
-use crate::particle::is_particle_compensated;
+use crate::particle::{is_particle_compensated, Thresholds};
 use crate::q::B_FRAC_BITS;
 use crate::slices::{self, low_bits, Counter};
 use crate::state::Workspace;
@@ -720,8 +720,31 @@ pub(crate) fn segment(
                     }
                     maybe
                 };
-                // Candidates a byte group at a time: the group's counts
-                // read out of the bit planes once.
+                if !mc {
+                    let end = base + 64;
+                    let class = ws.class.get_mut(base..end.min(ws.class.len()));
+                    let c_t = ws.c_t.get_mut(base..end.min(ws.c_t.len()));
+                    let (part_bits, sat) = test_plain(
+                        c,
+                        cand,
+                        &lv,
+                        (th, p),
+                        64 * jw,
+                        (class.unwrap_or_default(), c_t.unwrap_or_default()),
+                    );
+                    stats.particle_pixels += part_bits.count_ones();
+                    stats.saturated_pixels += sat.count_ones();
+                    ws.masks[words + w] |= part_bits;
+                    done |= part_bits | sat;
+                    if lv.last {
+                        background_rest(c, a & !done, base, lv.decided.1, ws.class, ws.c_t);
+                        done = a;
+                    }
+                    ws.masks[w] = a & !done;
+                    continue;
+                }
+                // Compensated candidates: a byte group's plain counts read
+                // out of the bit planes once.
                 let mut m = cand;
                 let mut group = (u32::MAX, [0u8; 8]);
                 while m != 0 {
@@ -732,7 +755,7 @@ pub(crate) fn segment(
                         group = (i / 8, slices::bytes8(c, i / 8));
                     }
                     let cp = group.1[(i % 8) as usize];
-                    let tested = if mc { ws.mc[r * width + x] } else { cp };
+                    let tested = ws.mc[r * width + x];
                     let b_q10 = lv.b_at(x).max((u32::from(cp) << B_FRAC_BITS) & lv.floor);
                     let particle = if segs > 1 {
                         is_particle_compensated(tested, b_q10, p, segs)
@@ -764,6 +787,47 @@ pub(crate) fn segment(
         }
     }
     stats
+}
+
+/// The plain particle test of the candidates `cand` of a word (counters
+/// `c`, first column `x0`; `class` and `c_t` from its first pixel): a
+/// byte group's counts read out of the bit planes once, each candidate
+/// tested against the background at its column; particles and saturated
+/// pixels get their class byte and count. Returns both as bits. Kept apart
+/// from the compensated test so its loop holds only what it needs.
+fn test_plain(
+    c: &Counter,
+    cand: u64,
+    lv: &Level<'_>,
+    (th, p): (&Thresholds, &Params),
+    x0: usize,
+    (class, c_t): (&mut [u8], &mut [u8]),
+) -> (u64, u64) {
+    let (mut part, mut sat) = (0u64, 0u64);
+    let mut m = cand;
+    let mut group = (u32::MAX, [0u8; 8]);
+    while m != 0 {
+        let i = m.trailing_zeros();
+        m &= m - 1;
+        if group.0 != i / 8 {
+            group = (i / 8, slices::bytes8(c, i / 8));
+        }
+        let cp = group.1[(i % 8) as usize];
+        let decided = if th.is_particle(cp, lv.b_at(x0 + i as usize), p) {
+            part |= 1 << i;
+            lv.decided.0
+        } else if u32::from(cp) >= lv.sat_c {
+            sat |= 1 << i;
+            lv.decided.1
+        } else {
+            continue;
+        };
+        if let (Some(cl), Some(ct)) = (class.get_mut(i as usize), c_t.get_mut(i as usize)) {
+            *cl = decided;
+            *ct = cp;
+        }
+    }
+    (part, sat)
 }
 
 /// Pixels `left` of a word (its first pixel at `base`) decided background
