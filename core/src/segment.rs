@@ -444,9 +444,10 @@ fn add_words(group: &[&[u64]], j0: usize, counts: &mut [u64], fresh: bool) {
 /// One level's test of one strip row: what its pixels are tested against.
 struct Level<'a> {
     /// Row background of each tile column, 1/32 count (bilinear between
-    /// the row's two tile rows).
+    /// the row's two tile rows), padded with a copy of the first and the
+    /// last column on either side (entry `t + 1` is tile column `t`), so
+    /// the blend between tile centres needs no clamping at the edges.
     bg: &'a [u32],
-    tiles_x: usize,
     /// Where the row moves, the pixel's own plain count floors its
     /// background (all ones), else 0.
     floor: u32,
@@ -461,8 +462,12 @@ impl Level<'_> {
     /// nearest tile centres of the row.
     #[inline]
     fn b_at(&self, x: usize) -> u32 {
-        let (t0, t1, f) = tile_pos(x, 0, self.tiles_x - 1);
-        (32 - f) * self.bg[t0] + f * self.bg[t1]
+        // `tile_pos` one tile to the right: pixel centre x + 0.5 is
+        // (2x + 17)/32 padded tiles from the first pad's centre.
+        let v = 2 * x + 17;
+        let (t, f) = (v >> 5, (v & 31) as u32);
+        let bg = |t: usize| self.bg.get(t).copied().unwrap_or(0);
+        (32 - f) * bg(t) + f * bg(t + 1)
     }
 
     /// The lowest background of the columns of word `j` (`width` px in
@@ -470,9 +475,10 @@ impl Level<'_> {
     /// tile centres, so its least value is that of a tile it blends.
     #[inline]
     fn b_low(&self, j: usize, width: usize) -> u32 {
-        let (a, _, _) = tile_pos(64 * j, 0, self.tiles_x - 1);
-        let (_, e, _) = tile_pos((64 * j + 63).min(width - 1), 0, self.tiles_x - 1);
-        32 * self.bg[a..=e].iter().copied().min().unwrap_or(0)
+        let a = (128 * j + 17) >> 5;
+        let e = ((2 * (64 * j + 63).min(width - 1) + 17) >> 5) + 1;
+        let tiles = self.bg.get(a..=e).unwrap_or_default();
+        32 * tiles.iter().copied().min().unwrap_or(0)
     }
 }
 
@@ -535,8 +541,8 @@ pub(crate) fn segment(
     }
     // Row backgrounds per tile column (1/32 count), on the stack in blocks:
     // a row is at most 4096 tile columns (65535 px).
-    let mut bg_row = [0u32; 4096];
-    let bg_row = &mut bg_row[..tiles.x.min(4096)];
+    let mut bg_row = [0u32; 4098];
+    let bg_row = &mut bg_row[..tiles.x.min(4096) + 2];
     let mut prev: Option<Window> = None;
     for (j, &n) in levels.iter().enumerate().take(nlev) {
         let win = Window::in_history(hist, k, n);
@@ -655,10 +661,13 @@ pub(crate) fn segment(
             }
             let (wy0, wy1) = (32 - fy, fy);
             let (row_t0, row_t1) = ((ty0 - tiles.y0) * tiles.x, (ty1 - tiles.y0) * tiles.x);
-            for (tx, b) in bg_row.iter_mut().enumerate() {
+            let n_bg = bg_row.len();
+            for (tx, b) in bg_row[1..n_bg - 1].iter_mut().enumerate() {
                 let tile = |t: usize| u32::from(ws.tiles.get(t).copied().unwrap_or(0));
                 *b = wy0 * tile(row_t0 + tx) + wy1 * tile(row_t1 + tx);
             }
+            bg_row[0] = bg_row[1];
+            bg_row[n_bg - 1] = bg_row[n_bg - 2];
             // Where the row moves, the pixel's own plain count is a floor
             // of its background (docs above): all ones to keep it, else 0.
             let floor: u32 = match (mc, &motion) {
@@ -675,7 +684,6 @@ pub(crate) fn segment(
             };
             let lv = Level {
                 bg: bg_row,
-                tiles_x: tiles.x,
                 floor,
                 sat_c,
                 last,
