@@ -689,68 +689,30 @@ pub(crate) fn segment(
                 last,
                 decided,
             };
+            if !mc {
+                words_plain(ws, &lv, (th, p), r, (width, wpr, words), &mut stats);
+                continue;
+            }
             for w in row_words {
                 let a = ws.masks[w];
-                // Plain: only the pixels that could change.
-                let a0 = if mc { a } else { ws.masks[2 * words + w] };
-                if a0 == 0 {
+                if a == 0 {
                     continue;
                 }
                 let c = counter(ws.counts, w);
                 let jw = w - r * wpr;
-                // Which active pixels need the exact particle test: plain,
-                // a count that passes at the word's lowest background (the
-                // others that reach the saturation count are saturated
-                // background outright); compensated, all (their tested
-                // count is another).
                 let base = r * width + 64 * jw;
                 let mut done = 0u64;
-                let cand = if mc {
-                    // Compensated: a particle needs a tested count above
-                    // the background (so above the word's lowest, the
-                    // floor only raises it); saturation reads the plain
-                    // counts. Only those pixels are read and tested.
-                    let t = lv.b_low(jw, width) >> B_FRAC_BITS;
-                    let row = &ws.mc[base..(base + 64).min(r * width + width)];
-                    let mut above = 0u64;
-                    for (q, &v) in row.iter().enumerate() {
-                        above |= u64::from(u32::from(v) > t) << q;
-                    }
-                    a & (above | slices::at_least(c, sat_c))
-                } else {
-                    let tp = u32::from(th.min_count(lv.b_low(jw, width)));
-                    let maybe = a0 & slices::at_least(c, tp);
-                    let sat = a0 & !maybe & slices::at_least(c, sat_c);
-                    if sat != 0 {
-                        background_rest(c, sat, base, lv.decided.1, ws.class, ws.c_t);
-                        stats.saturated_pixels += sat.count_ones();
-                        done = sat;
-                    }
-                    maybe
-                };
-                if !mc {
-                    let end = base + 64;
-                    let class = ws.class.get_mut(base..end.min(ws.class.len()));
-                    let c_t = ws.c_t.get_mut(base..end.min(ws.c_t.len()));
-                    let (part_bits, sat) = test_plain(
-                        c,
-                        cand,
-                        &lv,
-                        (th, p),
-                        64 * jw,
-                        (class.unwrap_or_default(), c_t.unwrap_or_default()),
-                    );
-                    stats.particle_pixels += part_bits.count_ones();
-                    stats.saturated_pixels += sat.count_ones();
-                    ws.masks[words + w] |= part_bits;
-                    done |= part_bits | sat;
-                    if lv.last {
-                        background_rest(c, a & !done, base, lv.decided.1, ws.class, ws.c_t);
-                        done = a;
-                    }
-                    ws.masks[w] = a & !done;
-                    continue;
+                // Compensated: a particle needs a tested count above the
+                // background (so above the word's lowest, the floor only
+                // raises it); saturation reads the plain counts. Only those
+                // pixels are read and tested.
+                let t = lv.b_low(jw, width) >> B_FRAC_BITS;
+                let row = &ws.mc[base..(base + 64).min(r * width + width)];
+                let mut above = 0u64;
+                for (q, &v) in row.iter().enumerate() {
+                    above |= u64::from(u32::from(v) > t) << q;
                 }
+                let cand = a & (above | slices::at_least(c, sat_c));
                 // Compensated candidates: a byte group's plain counts read
                 // out of the bit planes once.
                 let mut m = cand;
@@ -795,6 +757,62 @@ pub(crate) fn segment(
         }
     }
     stats
+}
+
+/// One level's plain test of strip row `r`'s words (`width` px, `wpr`
+/// words per row, `words` in the strip): for each word with pixels that
+/// could change (mask plane 2), those whose count passes at the word's
+/// lowest background are tested exactly ([`test_plain`]), the others that
+/// reach the saturation count are saturated background outright; on the
+/// last level the rest are background at their count. Apart from the
+/// compensated path so each loop holds only what it needs.
+fn words_plain(
+    ws: &mut Workspace<'_>,
+    lv: &Level<'_>,
+    (th, p): (&Thresholds, &Params),
+    r: usize,
+    (width, wpr, words): (usize, usize, usize),
+    stats: &mut SegmentStats,
+) {
+    for w in r * wpr..(r + 1) * wpr {
+        let a = ws.masks[w];
+        let a0 = ws.masks[2 * words + w];
+        if a0 == 0 {
+            continue;
+        }
+        let c = counter(ws.counts, w);
+        let jw = w - r * wpr;
+        let base = r * width + 64 * jw;
+        let tp = u32::from(th.min_count(lv.b_low(jw, width)));
+        let maybe = a0 & slices::at_least(c, tp);
+        let sat = a0 & !maybe & slices::at_least(c, lv.sat_c);
+        let mut done = 0u64;
+        if sat != 0 {
+            background_rest(c, sat, base, lv.decided.1, ws.class, ws.c_t);
+            stats.saturated_pixels += sat.count_ones();
+            done = sat;
+        }
+        let end = base + 64;
+        let class = ws.class.get_mut(base..end.min(ws.class.len()));
+        let c_t = ws.c_t.get_mut(base..end.min(ws.c_t.len()));
+        let (part_bits, sat) = test_plain(
+            c,
+            maybe,
+            lv,
+            (th, p),
+            64 * jw,
+            (class.unwrap_or_default(), c_t.unwrap_or_default()),
+        );
+        stats.particle_pixels += part_bits.count_ones();
+        stats.saturated_pixels += sat.count_ones();
+        ws.masks[words + w] |= part_bits;
+        done |= part_bits | sat;
+        if lv.last {
+            background_rest(c, a & !done, base, lv.decided.1, ws.class, ws.c_t);
+            done = a;
+        }
+        ws.masks[w] = a & !done;
+    }
 }
 
 /// The plain particle test of the candidates `cand` of a word (counters
