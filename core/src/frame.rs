@@ -215,13 +215,18 @@ fn strip<G: Gray>(
     // Every pixel at its level's background gray; region pixels are
     // overwritten below, and particle pixels no region took get their own
     // saturation time in the next pass.
+    let mut px_tables = [[G::default(); 256]; MAX_LEVELS];
+    for (pt, tbl) in px_tables.iter_mut().zip(&gray).take(nlev) {
+        for (o, &g) in pt.iter_mut().zip(tbl) {
+            *o = G::from_level(g);
+        }
+    }
     let outs = out.get_mut(out_base..).unwrap_or_default();
     let pixels = ws.class[first..last].iter().zip(&ws.c_t[first..last]);
     for ((&cb, &c), o) in pixels.zip(outs) {
-        let g = gray
+        *o = px_tables
             .get(usize::from(cb & LEVEL_MASK))
-            .map_or(0, |tbl| tbl[usize::from(c)]);
-        *o = G::from_level(g);
+            .map_or(G::default(), |tbl| tbl[usize::from(c)]);
     }
     // "Any region" bits, for the rings: the particle pixels (mask plane 1,
     // as the segmentation left it) that a region took. Written to plane
