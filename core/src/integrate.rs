@@ -200,7 +200,7 @@ fn variance_approx(b: u64, nrf: f32, p: &Params) -> f32 {
 /// instead of one per cell (issue 18: the per-tick sums are the region
 /// stage's main cost).
 #[inline(always)]
-fn sum_cells<const N: usize>(
+fn sum_cells<const N: usize, const RING_ONLY: bool>(
     planes: &[&[u64]],
     start: u32,
     (word, plain): (&impl Fn(&[u64], u32, &Cell) -> u64, bool),
@@ -228,19 +228,59 @@ fn sum_cells<const N: usize>(
                 for (c, &o) in cells.iter().zip(&offs) {
                     let w = win[o % NEAR];
                     hb += (w & c.ring).count_ones();
-                    hs += (w & c.reg).count_ones();
+                    if !RING_ONLY {
+                        hs += (w & c.reg).count_ones();
+                    }
                 }
             }
             _ => {
                 for c in cells {
                     let w = word(plane, t, c);
                     hb += (w & c.ring).count_ones();
-                    hs += (w & c.reg).count_ones();
+                    if !RING_ONLY {
+                        hs += (w & c.reg).count_ones();
+                    }
                 }
             }
         }
-        ps[i + 1] += hs;
+        if !RING_ONLY {
+            ps[i + 1] += hs;
+        }
         pb[i + 1] += hb;
+    }
+}
+
+/// [`sum_cells`] for any number of cells: eight at a time through every
+/// tick (a tick's sums are added once per eight cells), the rest in sixes,
+/// fours, twos and ones. `RING_ONLY`: the cells have no region pixels, so
+/// only the ring's sums are taken (one popcount per cell and tick).
+fn sum_all<const RING_ONLY: bool>(
+    planes: &[&[u64]],
+    start: u32,
+    word: (&impl Fn(&[u64], u32, &Cell) -> u64, bool),
+    cells: &[Cell],
+    ps: &mut [u32; 256],
+    pb: &mut [u32; 256],
+) {
+    let mut rest = cells;
+    while rest.len() >= 8 {
+        sum_cells::<8, RING_ONLY>(planes, start, word, &rest[..8], ps, pb);
+        rest = &rest[8..];
+    }
+    if rest.len() >= 6 {
+        sum_cells::<6, RING_ONLY>(planes, start, word, &rest[..6], ps, pb);
+        rest = &rest[6..];
+    }
+    if rest.len() >= 4 {
+        sum_cells::<4, RING_ONLY>(planes, start, word, &rest[..4], ps, pb);
+        rest = &rest[4..];
+    }
+    if rest.len() >= 2 {
+        sum_cells::<2, RING_ONLY>(planes, start, word, &rest[..2], ps, pb);
+        rest = &rest[2..];
+    }
+    if !rest.is_empty() {
+        sum_cells::<1, RING_ONLY>(planes, start, word, rest, ps, pb);
     }
 }
 
@@ -316,13 +356,20 @@ fn adapt_with(
     let (any, rest) = ws.masks.split_at_mut(plane);
     let (regm, rest) = rest.split_at_mut(plane);
     let ring = &mut rest[..plane];
-    // Region bits.
+    // Region bits: of the pixels some region took ("any"), those labelled
+    // with this one (only they are read, not the whole bounding box).
     for r in rr0..rr1 {
-        regm[r * wpr + b.j0..=r * wpr + b.j1].fill(0);
-        for c in usize::from(reg.col0)..usize::from(reg.col1) {
-            if ws.labels[r * width + c] == id {
-                regm[r * wpr + c / 64] |= 1 << (c % 64);
+        for j in b.j0..=b.j1 {
+            let mut m = any[r * wpr + j];
+            let mut own = 0u64;
+            while m != 0 {
+                let bit = m.trailing_zeros();
+                m &= m - 1;
+                if ws.labels.get(r * width + 64 * j + bit as usize) == Some(&id) {
+                    own |= 1 << bit;
+                }
             }
+            regm[r * wpr + j] = own;
         }
     }
     // Ring: region dilated by 2 px (Chebyshev), minus every region pixel.
@@ -374,33 +421,13 @@ fn adapt_with(
     };
     let mut ps = [0u32; 256];
     let mut pb = [0u32; 256];
+    // Cells with region pixels, and cells of ring pixels only (the rows
+    // above and below a region: one popcount per tick instead of two).
     let mut cells = [Cell::default(); CELLS];
-    let mut nc = 0usize;
+    let mut rings = [Cell::default(); CELLS];
+    let (mut nc, mut nring) = (0usize, 0usize);
     let planes = span.planes();
-    // Cells eight at a time through every tick (a tick's sums are added
-    // once per eight cells), the rest in sixes, fours, twos and ones.
-    let flush = |cells: &[Cell], ps: &mut [u32; 256], pb: &mut [u32; 256]| {
-        let mut rest = cells;
-        while rest.len() >= 8 {
-            sum_cells::<8>(planes, span.start, (&word, plain), &rest[..8], ps, pb);
-            rest = &rest[8..];
-        }
-        if rest.len() >= 6 {
-            sum_cells::<6>(planes, span.start, (&word, plain), &rest[..6], ps, pb);
-            rest = &rest[6..];
-        }
-        if rest.len() >= 4 {
-            sum_cells::<4>(planes, span.start, (&word, plain), &rest[..4], ps, pb);
-            rest = &rest[4..];
-        }
-        if rest.len() >= 2 {
-            sum_cells::<2>(planes, span.start, (&word, plain), &rest[..2], ps, pb);
-            rest = &rest[2..];
-        }
-        if !rest.is_empty() {
-            sum_cells::<1>(planes, span.start, (&word, plain), rest, ps, pb);
-        }
-    };
+    let w = (&word, plain);
     for r in b.r0..b.r1 {
         for j in b.j0..=b.j1 {
             let rg = if (rr0..rr1).contains(&r) {
@@ -412,7 +439,7 @@ fn adapt_with(
             if rg | rn == 0 {
                 continue;
             }
-            cells[nc] = Cell {
+            let cell = Cell {
                 r: r as u16,
                 j: j as u16,
                 at: band0 + r * wpr + j,
@@ -420,18 +447,32 @@ fn adapt_with(
                 ring: rn,
                 reg: rg,
             };
-            nc += 1;
-            if nc == CELLS {
-                flush(&cells, &mut ps, &mut pb);
-                nc = 0;
+            if rg == 0 {
+                rings[nring] = cell;
+                nring += 1;
+                if nring == CELLS {
+                    sum_all::<true>(planes, span.start, w, &rings, &mut ps, &mut pb);
+                    nring = 0;
+                }
+            } else {
+                cells[nc] = cell;
+                nc += 1;
+                if nc == CELLS {
+                    sum_all::<false>(planes, span.start, w, &cells, &mut ps, &mut pb);
+                    nc = 0;
+                }
             }
         }
     }
-    flush(&cells[..nc], &mut ps, &mut pb);
+    sum_all::<false>(planes, span.start, w, &cells[..nc], &mut ps, &mut pb);
+    sum_all::<true>(planes, span.start, w, &rings[..nring], &mut ps, &mut pb);
     // ps[i + 1] = spikes of ticks span.start .. span.start + i + 1
-    for i in 1..=planes.len().min(255) {
-        ps[i] += ps[i - 1];
-        pb[i] += pb[i - 1];
+    let n = planes.len().min(255);
+    let (mut rs, mut rb) = (0u32, 0u32);
+    for (s, b) in ps[1..=n].iter_mut().zip(&mut pb[1..=n]) {
+        rs += *s;
+        rb += *b;
+        (*s, *b) = (rs, rb);
     }
     let sums = |n: u16| -> (u64, u64) {
         let (a, e) = ctx.wins.of(n);
