@@ -220,26 +220,24 @@ fn sum_cells<const N: usize, const RING_ONLY: bool>(
     for (i, plane) in planes.iter().enumerate().take(255) {
         let t = start + i as u32;
         let (mut hs, mut hb) = (0u32, 0u32);
+        let mut add = |w: u64, c: &Cell| {
+            hb += (w & c.ring).count_ones();
+            if !RING_ONLY {
+                hs += (w & c.reg).count_ones();
+            }
+        };
         let window = plane
             .get(base..base.saturating_add(NEAR))
             .and_then(|s| <&[u64; NEAR]>::try_from(s).ok());
         match window {
             Some(win) if near => {
                 for (c, &o) in cells.iter().zip(&offs) {
-                    let w = win[o % NEAR];
-                    hb += (w & c.ring).count_ones();
-                    if !RING_ONLY {
-                        hs += (w & c.reg).count_ones();
-                    }
+                    add(win[o % NEAR], c);
                 }
             }
             _ => {
                 for c in cells {
-                    let w = word(plane, t, c);
-                    hb += (w & c.ring).count_ones();
-                    if !RING_ONLY {
-                        hs += (w & c.reg).count_ones();
-                    }
+                    add(word(plane, t, c), c);
                 }
             }
         }
@@ -469,10 +467,10 @@ fn adapt_with(
     // ps[i + 1] = spikes of ticks span.start .. span.start + i + 1
     let n = planes.len().min(255);
     let (mut rs, mut rb) = (0u32, 0u32);
-    for (s, b) in ps[1..=n].iter_mut().zip(&mut pb[1..=n]) {
-        rs += *s;
-        rb += *b;
-        (*s, *b) = (rs, rb);
+    for (x, y) in ps[1..=n].iter_mut().zip(&mut pb[1..=n]) {
+        rs += *x;
+        rb += *y;
+        (*x, *y) = (rs, rb);
     }
     let sums = |n: u16| -> (u64, u64) {
         let (a, e) = ctx.wins.of(n);

@@ -716,15 +716,12 @@ pub(crate) fn segment(
                 // Compensated candidates: a byte group's plain counts read
                 // out of the bit planes once.
                 let mut m = cand;
-                let mut group = (u32::MAX, [0u8; 8]);
+                let mut counts = slices::Groups::new(c);
                 while m != 0 {
                     let i = m.trailing_zeros();
                     m &= m - 1;
                     let x = 64 * jw + i as usize;
-                    if group.0 != i / 8 {
-                        group = (i / 8, slices::bytes8(c, i / 8));
-                    }
-                    let cp = group.1[(i % 8) as usize];
+                    let cp = counts.count(i);
                     let tested = ws.mc[r * width + x];
                     let b_q10 = lv.b_at(x).max((u32::from(cp) << B_FRAC_BITS) & lv.floor);
                     let particle = if segs > 1 {
@@ -831,14 +828,11 @@ fn test_plain(
 ) -> (u64, u64) {
     let (mut part, mut sat) = (0u64, 0u64);
     let mut m = cand;
-    let mut group = (u32::MAX, [0u8; 8]);
+    let mut counts = slices::Groups::new(c);
     while m != 0 {
         let i = m.trailing_zeros();
         m &= m - 1;
-        if group.0 != i / 8 {
-            group = (i / 8, slices::bytes8(c, i / 8));
-        }
-        let cp = group.1[(i % 8) as usize];
+        let cp = counts.count(i);
         let decided = if th.is_particle(cp, lv.b_at(x0 + i as usize), p) {
             part |= 1 << i;
             lv.decided.0
@@ -857,7 +851,7 @@ fn test_plain(
 }
 
 /// Pixels `left` of a word (its first pixel at `base`) decided background
-/// at the last level, at their count.
+/// (saturated at this level, or left at the last level), at their count.
 fn background_rest(
     c: &Counter,
     mut left: u64,

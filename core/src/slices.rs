@@ -189,6 +189,34 @@ pub fn bytes8(c: &Counter, g: u32) -> [u8; 8] {
     v.to_le_bytes()
 }
 
+/// The counts of a counter's pixels asked in increasing order, read out
+/// of the bit planes a byte group (8 px, [`bytes8`]) at a time.
+pub(crate) struct Groups<'a> {
+    c: &'a Counter,
+    group: u32,
+    bytes: [u8; 8],
+}
+
+impl<'a> Groups<'a> {
+    pub(crate) fn new(c: &'a Counter) -> Groups<'a> {
+        Groups {
+            c,
+            group: u32::MAX,
+            bytes: [0; 8],
+        }
+    }
+
+    /// The count of pixel `i` (0..64).
+    #[inline]
+    pub(crate) fn count(&mut self, i: u32) -> u8 {
+        if self.group != i / 8 {
+            self.group = i / 8;
+            self.bytes = bytes8(self.c, i / 8);
+        }
+        self.bytes[(i % 8) as usize]
+    }
+}
+
 /// The sum over the 64 pixels of their squared counts, from the bit
 /// planes: `c² = Σ_a 4^a·c_a + Σ_{a<b} 2^(a+b+1)·c_a·c_b`, so the sum is
 /// popcounts of the planes and of their pairwise ANDs (planes above the
