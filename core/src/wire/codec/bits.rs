@@ -10,15 +10,23 @@ pub(super) const ESCAPE: u32 = 24;
 pub(super) const ESCAPE_BITS: u32 = 18;
 
 /// MSB-first bit writer. Hand-written for the no_std core: bits gather in a
-/// 64-bit accumulator and leave a whole byte at a time (a per-bit loop cost
-/// the Cortex-M4 about 10 instructions per bit).
+/// 32-bit accumulator and leave 32 at a time as four big-endian bytes. A
+/// per-bit loop cost the Cortex-M4 about 10 instructions per bit; a byte at
+/// a time, with its bounds check and loop, was half of the Rice coder's
+/// cost on the host; a 64-bit accumulator's variable shifts are a dozen
+/// instructions each on the M4.
+///
+/// A payload that does not fit `out` is [`WireError::TooLarge`], at the
+/// latest from [`BitWriter::finish`]: the bytes are the same whenever it
+/// fits, whatever the flush width.
 pub(super) struct BitWriter<'a> {
     out: &'a mut [u8],
     /// Bytes written.
     pos: usize,
-    /// Pending bits, the newest lowest; only the low `n` are meaningful.
-    acc: u64,
-    /// Pending bit count, below 8 between calls.
+    /// Pending bits, the newest lowest; only the low `n` are meaningful
+    /// (the bits above them are old ones, shifted out before use).
+    acc: u32,
+    /// Pending bit count, below 32 between calls.
     n: u32,
 }
 
@@ -35,45 +43,83 @@ impl<'a> BitWriter<'a> {
     /// Appends the low `n` (≤ 32) bits of `value`, most significant first.
     #[inline]
     pub(super) fn put(&mut self, value: u32, n: u32) -> Result<(), WireError> {
-        let mask = if n >= 32 { u64::MAX } else { (1u64 << n) - 1 };
-        self.acc = (self.acc << n) | (u64::from(value) & mask);
-        self.n += n;
-        while self.n >= 8 {
-            self.n -= 8;
-            let b = self.out.get_mut(self.pos).ok_or(WireError::TooLarge)?;
-            *b = (self.acc >> self.n) as u8;
-            self.pos += 1;
+        let mask = if n >= 32 { u32::MAX } else { (1u32 << n) - 1 };
+        self.push(value & mask, n)
+    }
+
+    /// Appends `len` (≤ 32) bits that are all of `bits` (nothing above
+    /// them).
+    #[inline(always)]
+    fn push(&mut self, bits: u32, len: u32) -> Result<(), WireError> {
+        let total = self.n + len;
+        if total < 32 {
+            // len < 32 here.
+            self.acc = (self.acc << len) | bits;
+            self.n = total;
+            return Ok(());
         }
+        // The word fills: the pending `n` bits, then the top of `bits`;
+        // `rem` (< 32) of them stay pending. Two shifts, as `n` may be 0.
+        let rem = total - 32;
+        let word = ((self.acc << 1) << (31 - self.n)) | (bits >> rem);
+        self.acc = bits;
+        self.n = rem;
+        let dst = self
+            .out
+            .get_mut(self.pos..self.pos + 4)
+            .ok_or(WireError::TooLarge)?;
+        dst.copy_from_slice(&word.to_be_bytes());
+        self.pos += 4;
         Ok(())
     }
 
-    #[inline]
+    /// The Rice code of `z` with parameter `k` (≤ 16): `z >> k` ones, a
+    /// zero and the low `k` bits, or the escape.
+    #[inline(always)]
     pub(super) fn rice(&mut self, z: u32, k: u32) -> Result<(), WireError> {
         let q = z >> k;
-        if q < ESCAPE {
-            // q ones and a zero, then the k low bits: in one 32-bit put
-            // where they fit (almost always; wider words cost a 32-bit
-            // core more than a second put).
+        let len = q + 1 + k;
+        // One compare: at most ESCAPE bits means q < ESCAPE and a single
+        // 32-bit push; everything else (rare) takes `rice_long`.
+        if len <= ESCAPE {
+            // q ones and a zero, then the k low bits, in one push (almost
+            // always; wider words cost a 32-bit core more than a second put).
+            let ones = ((1u32 << q) - 1) << (k + 1);
             let low = z & ((1u32 << k) - 1);
-            if q + 1 + k <= 32 {
-                self.put(((((1u32 << q) - 1) << 1) << k) | low, q + 1 + k)
-            } else {
-                self.put(((1u32 << q) - 1) << 1, q + 1)?;
-                self.put(low, k)
-            }
+            self.push(ones | low, len)
+        } else {
+            self.rice_long(z, k)
+        }
+    }
+
+    // Inline like the fast path: an out-of-line call would keep the
+    // writer's state in memory across the whole encoding loop.
+    #[inline(always)]
+    fn rice_long(&mut self, z: u32, k: u32) -> Result<(), WireError> {
+        let q = z >> k;
+        if q < ESCAPE {
+            self.put(((1u32 << q) - 1) << 1, q + 1)?;
+            self.put(z, k)
         } else {
             self.put((1u32 << ESCAPE) - 1, ESCAPE)?;
             self.put(z, ESCAPE_BITS)
         }
     }
 
-    /// Pads the last byte with zeros; returns the bytes written.
+    /// Writes the pending bits, the last byte padded with zeros; returns
+    /// the bytes written.
     pub(super) fn finish(mut self) -> Result<usize, WireError> {
-        if self.n > 0 {
+        while self.n > 0 {
             let b = self.out.get_mut(self.pos).ok_or(WireError::TooLarge)?;
-            *b = (self.acc << (8 - self.n)) as u8;
+            *b = if self.n >= 8 {
+                self.n -= 8;
+                (self.acc >> self.n) as u8
+            } else {
+                let v = (self.acc << (8 - self.n)) as u8;
+                self.n = 0;
+                v
+            };
             self.pos += 1;
-            self.n = 0;
         }
         Ok(self.pos)
     }
@@ -125,6 +171,111 @@ impl<'a> BitReader<'a> {
             Ok(())
         } else {
             Err(WireError::Payload)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The plainest MSB-first writer: one bit at a time into a byte list.
+    struct PerBit(Vec<bool>);
+
+    impl PerBit {
+        fn put(&mut self, value: u32, n: u32) {
+            for i in (0..n).rev() {
+                self.0.push((value >> i) & 1 == 1);
+            }
+        }
+
+        fn rice(&mut self, z: u32, k: u32) {
+            let q = z >> k;
+            if q < ESCAPE {
+                self.put(u32::MAX, q);
+                self.put(0, 1);
+                self.put(z, k);
+            } else {
+                self.put(u32::MAX, ESCAPE);
+                self.put(z, ESCAPE_BITS);
+            }
+        }
+
+        fn bytes(&self) -> Vec<u8> {
+            self.0
+                .chunks(8)
+                .map(|c| {
+                    c.iter()
+                        .enumerate()
+                        .fold(0u8, |b, (i, &v)| b | (u8::from(v) << (7 - i)))
+                })
+                .collect()
+        }
+    }
+
+    /// One op of a random stream: a plain put of 0..=32 bits, or a Rice
+    /// code with k 0..=16 of a value that sometimes escapes or needs two
+    /// pushes.
+    fn ops(seed: u64, len: usize) -> Vec<(bool, u32, u32)> {
+        let mut s = seed;
+        let mut next = move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            s
+        };
+        (0..len)
+            .map(|_| {
+                let r = next();
+                if r & 1 == 0 {
+                    let n = (r >> 1) as u32 % 33;
+                    (false, (r >> 8) as u32, n)
+                } else {
+                    let k = (r >> 1) as u32 % 17;
+                    let z = match (r >> 6) % 4 {
+                        0 => (r >> 8) as u32 % (1 << ESCAPE_BITS),
+                        _ => (r >> 8) as u32 % ((1 << k) * 30),
+                    };
+                    (true, z, k)
+                }
+            })
+            .collect()
+    }
+
+    /// The writer's bytes are the per-bit writer's for random streams of
+    /// puts and Rice codes; a buffer one byte short of them is
+    /// `TooLarge`, not a truncated payload.
+    #[test]
+    fn writer_matches_a_per_bit_writer_and_refuses_short_buffers() {
+        for seed in 1..200u64 {
+            let stream = ops(seed, (seed as usize * 7) % 300);
+            let mut reference = PerBit(Vec::new());
+            for &(rice, v, n) in &stream {
+                if rice {
+                    reference.rice(v, n);
+                } else {
+                    reference.put(v, n);
+                }
+            }
+            let want = reference.bytes();
+            let write = |out: &mut [u8]| {
+                let mut w = BitWriter::new(out);
+                for &(rice, v, n) in &stream {
+                    if rice {
+                        w.rice(v, n)?;
+                    } else {
+                        w.put(v, n)?;
+                    }
+                }
+                w.finish()
+            };
+            let mut out = vec![0xA5u8; want.len()];
+            assert_eq!(write(&mut out), Ok(want.len()), "seed {seed}");
+            assert_eq!(out, want, "seed {seed}");
+            if !want.is_empty() {
+                let mut short = vec![0u8; want.len() - 1];
+                assert_eq!(write(&mut short), Err(WireError::TooLarge), "seed {seed}");
+            }
         }
     }
 }
