@@ -220,26 +220,33 @@ fn tile_medians_sliced(
     // Set bits of each 16-bit lane over rows: byte-wise population counts
     // summed over the rows (at most 16 rows of 8 per byte), then byte
     // pairs added — a few operations per row for all four lanes.
-    let lanes = |xs: &[u64]| -> [u32; 4] {
-        let mut acc = 0u64;
-        for &x in xs {
-            let x = x - ((x >> 1) & 0x5555_5555_5555_5555);
-            let x = (x & 0x3333_3333_3333_3333) + ((x >> 2) & 0x3333_3333_3333_3333);
-            acc += (x + (x >> 4)) & 0x0f0f_0f0f_0f0f_0f0f;
-        }
+    let lanes = |xs: &[u64; 16]| -> [u32; 4] {
+        let acc = byte_counts(xs);
         let acc = (acc & 0x00ff_00ff_00ff_00ff) + ((acc >> 8) & 0x00ff_00ff_00ff_00ff);
         core::array::from_fn(|q| ((acc >> (16 * q)) & 0xffff) as u32)
     };
     let nr = r_hi - r_lo;
     for j in 0..wpr {
         let valid = low_bits(width - 64 * j);
+        // Rows past `nr` stay zero throughout (no candidates, no bits), so
+        // every row loop below runs all 16 without bounds (vectorised);
+        // the rows' bit planes are copied side by side first (read in
+        // place, strided, with a bounds check per row and bit, they took
+        // half the medians' time).
         let mut cand = [0u64; 16];
+        let mut planes = [[0u64; 16]; 8];
         let mut n = [0u32; 4];
         for (k, cw) in cand.iter_mut().enumerate().take(nr) {
             let sr = r_lo + k - usize::from(s0);
             *cw = !part[sr * wpr + j] & valid;
+            let at = (sr * wpr + j) * 8;
+            if let Some(c) = counts.get(at..at + 8) {
+                for (pl, &cb) in planes.iter_mut().zip(c) {
+                    pl[k] = cb;
+                }
+            }
         }
-        for (nq, c) in n.iter_mut().zip(lanes(&cand[..nr.min(16)])) {
+        for (nq, c) in n.iter_mut().zip(lanes(&cand)) {
             *nq += c;
         }
         // A lane of particle pixels only: all its pixels.
@@ -259,18 +266,12 @@ fn tile_medians_sliced(
         let mut left = n;
         let mut med = [0u8; 4];
         for b in (0..8).rev() {
-            let mut x = [0u64; 16];
-            let mut any = 0u64;
-            for (k, xk) in x.iter_mut().enumerate().take(nr) {
-                let sr = r_lo + k - usize::from(s0);
-                *xk = cand[k] & counts[(sr * wpr + j) * 8 + b];
-                any |= *xk;
-            }
-            if any == 0 {
+            let x: [u64; 16] = core::array::from_fn(|k| cand[k] & planes[b][k]);
+            if x.iter().fold(0, |a, &v| a | v) == 0 {
                 // No candidate has this bit: every lane's median has 0.
                 continue;
             }
-            let ones = lanes(&x[..nr.min(16)]);
+            let ones = lanes(&x);
             let mut take1 = 0u64;
             for q in 0..4 {
                 let zeros = left[q] - ones[q];
@@ -283,7 +284,7 @@ fn tile_medians_sliced(
                     take1 |= 0xffff << (16 * q);
                 }
             }
-            for (cw, &xk) in cand.iter_mut().zip(&x).take(nr) {
+            for (cw, &xk) in cand.iter_mut().zip(&x) {
                 // Lanes that took 1 keep the set ones, the others the clear.
                 *cw = (xk & take1) | ((*cw ^ xk) & !take1);
             }
@@ -294,6 +295,38 @@ fn tile_medians_sliced(
             }
         }
     }
+}
+
+/// Per byte, the set bits of that byte over the 16 words `xs` (at most
+/// 128). Two words per SSE2 operation on the host: the halves' counts (at
+/// most 64 each) are added at the end.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn byte_counts(xs: &[u64; 16]) -> u64 {
+    use wide::u64x2;
+    let k = u64x2::splat;
+    let mut acc = u64x2::ZERO;
+    for pair in xs.chunks_exact(2) {
+        let x = u64x2::new([pair[0], pair[1]]);
+        let x = x - ((x >> 1) & k(0x5555_5555_5555_5555));
+        let x = (x & k(0x3333_3333_3333_3333)) + ((x >> 2) & k(0x3333_3333_3333_3333));
+        acc += (x + (x >> 4)) & k(0x0f0f_0f0f_0f0f_0f0f);
+    }
+    let [a0, a1] = acc.to_array();
+    a0 + a1
+}
+
+/// [`byte_counts`] one word at a time (no vector unit).
+#[cfg(not(target_arch = "x86_64"))]
+#[inline(always)]
+fn byte_counts(xs: &[u64; 16]) -> u64 {
+    let mut acc = 0u64;
+    for &x in xs {
+        let x = x - ((x >> 1) & 0x5555_5555_5555_5555);
+        let x = (x & 0x3333_3333_3333_3333) + ((x >> 2) & 0x3333_3333_3333_3333);
+        acc += (x + (x >> 4)) & 0x0f0f_0f0f_0f0f_0f0f;
+    }
+    acc
 }
 
 /// Bilinear position between tile centres: the lower tile index (clamped)
