@@ -170,7 +170,7 @@ echo "parity: Cortex-M4, host kernels, native firmware loop and cortex-m4/expect
 if [ "$check" = 1 ]; then
   base=$m4/cost-baseline.txt
   fail=0
-  for k in ingest frame send mc_frame mc_send context sparse sparse_context; do
+  for k in ingest frame send mc_frame mc_send rice context sparse sparse_context; do
     want=$(sed -n "s/^$k=//p" "$base")
     got=$(eval echo "\$t_$k")
     if [ "$got" -gt $((want + want / 10)) ]; then
