@@ -61,13 +61,19 @@ pub const MAX_MESSAGE: usize = HEADER_LEN + MAX_PAYLOAD + CRC_LEN;
 /// Largest message on the wire: COBS overhead and the delimiter included.
 pub const MAX_ENCODED: usize = cobs::max_encoding_length(MAX_MESSAGE) + 1;
 
-/// The CRC of the link: CRC-32/ISO-HDLC, as zlib's `crc32`.
-///
-/// Slice-by-16 tables (16 KiB of flash, built at compile time; a `static`,
-/// so the image holds them once): the sidecar checks every frame's two
-/// bytes per sample and every message, and the byte-at-a-time table cost
-/// the host about 6 instructions per byte.
-pub static CRC: Crc<u32, Table<16>> = Crc::<u32, Table<16>>::new(&CRC_32_ISO_HDLC);
+/// The CRC tables: slice-by-16 on 64-bit hosts (16 KiB, built at compile
+/// time), where the byte-at-a-time table cost about 6 instructions per
+/// byte and sending a frame 9 % more; the byte table on 32-bit MCUs,
+/// where the Cortex-M4 sends in the same count either way (measured with
+/// `firmware-sim/cost.sh`) and the flash is better kept.
+#[cfg(target_pointer_width = "64")]
+type CrcTable = Table<16>;
+#[cfg(not(target_pointer_width = "64"))]
+type CrcTable = Table<1>;
+
+/// The CRC of the link: CRC-32/ISO-HDLC, as zlib's `crc32` (a `static`,
+/// so the image holds its tables once).
+pub static CRC: Crc<u32, CrcTable> = Crc::<u32, CrcTable>::new(&CRC_32_ISO_HDLC);
 
 /// What a message carries.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
