@@ -28,6 +28,10 @@ use crate::state::Workspace;
 use crate::suppress::{background_gray, background_table};
 use crate::window::{check_len, Offsets, Span, Window};
 
+/// Entries of the output pass's flat per-level table: 256 counts for
+/// every value of a class byte's level field.
+const PX_TABLE: usize = (LEVEL_MASK as usize + 1) * 256;
+
 /// What one frame found.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -215,8 +219,11 @@ fn strip<G: Gray>(
     // Every pixel at its level's background gray; region pixels are
     // overwritten below, and particle pixels no region took get their own
     // saturation time in the next pass.
-    let mut px_tables = [[G::default(); 256]; MAX_LEVELS];
-    for (pt, tbl) in px_tables.iter_mut().zip(&gray).take(nlev) {
+    // One flat table for every value of a class byte's level field (the
+    // levels past the frame's are zero), so a pixel's value is one
+    // indexed load without a bounds check.
+    let mut px_tables = [G::default(); PX_TABLE];
+    for (pt, tbl) in px_tables.chunks_exact_mut(256).zip(&gray).take(nlev) {
         for (o, &g) in pt.iter_mut().zip(tbl) {
             *o = G::from_level(g);
         }
@@ -224,9 +231,7 @@ fn strip<G: Gray>(
     let outs = out.get_mut(out_base..).unwrap_or_default();
     let pixels = ws.class[first..last].iter().zip(&ws.c_t[first..last]);
     for ((&cb, &c), o) in pixels.zip(outs) {
-        *o = px_tables
-            .get(usize::from(cb & LEVEL_MASK))
-            .map_or(G::default(), |tbl| tbl[usize::from(c)]);
+        *o = px_tables[usize::from(cb & LEVEL_MASK) << 8 | usize::from(c)];
     }
     // "Any region" bits, for the rings: the particle pixels (mask plane 1,
     // as the segmentation left it) that a region took. Written to plane
