@@ -412,7 +412,20 @@ fn add_group(group: &[&[u64]], counts: &mut [u64], fresh: bool) {
             };
             (u64x2::new([w0, w1]), u64x2::new([w2, w3]))
         };
-        let mut pairs = group.chunks_exact(2);
+        // Four planes per iteration: with two, the loop-carried partials
+        // were copied between registers every time round.
+        let mut quads = group.chunks_exact(4);
+        for q4 in quads.by_ref() {
+            let (x0, x1) = load(q4[0]);
+            let (y0, y1) = load(q4[1]);
+            slices::csa2(&mut a, x0, y0);
+            slices::csa2(&mut b, x1, y1);
+            let (x0, x1) = load(q4[2]);
+            let (y0, y1) = load(q4[3]);
+            slices::csa2(&mut a, x0, y0);
+            slices::csa2(&mut b, x1, y1);
+        }
+        let mut pairs = quads.remainder().chunks_exact(2);
         for pr in pairs.by_ref() {
             let (x0, x1) = load(pr[0]);
             let (y0, y1) = load(pr[1]);
