@@ -218,10 +218,9 @@ fn strip<G: Gray>(
     }
     // Every pixel at its level's background gray; region pixels are
     // overwritten below, and particle pixels no region took get their own
-    // saturation time in the next pass.
-    // One flat table for every value of a class byte's level field (the
-    // levels past the frame's are zero), so a pixel's value is one
-    // indexed load without a bounds check.
+    // saturation time in the next pass. One flat table for every value of
+    // a class byte's level field (the levels past the frame's are zero),
+    // so a pixel's value is one indexed load without a bounds check.
     let mut px_tables = [G::default(); PX_TABLE];
     for (pt, tbl) in px_tables.chunks_exact_mut(256).zip(&gray).take(nlev) {
         for (o, &g) in pt.iter_mut().zip(tbl) {

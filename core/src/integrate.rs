@@ -261,25 +261,18 @@ fn sum_all<const RING_ONLY: bool>(
     pb: &mut [u32; 256],
 ) {
     let mut rest = cells;
-    while rest.len() >= 8 {
-        sum_cells::<8, RING_ONLY>(planes, start, word, &rest[..8], ps, pb);
-        rest = &rest[8..];
+    // Batch sizes are const generics, so each size is its own call: the
+    // largest that fits, as often as it fits (after the eights, each
+    // smaller size runs at most once).
+    macro_rules! batches {
+        ($($n:literal),*) => {$(
+            while rest.len() >= $n {
+                sum_cells::<$n, RING_ONLY>(planes, start, word, &rest[..$n], ps, pb);
+                rest = &rest[$n..];
+            }
+        )*};
     }
-    if rest.len() >= 6 {
-        sum_cells::<6, RING_ONLY>(planes, start, word, &rest[..6], ps, pb);
-        rest = &rest[6..];
-    }
-    if rest.len() >= 4 {
-        sum_cells::<4, RING_ONLY>(planes, start, word, &rest[..4], ps, pb);
-        rest = &rest[4..];
-    }
-    if rest.len() >= 2 {
-        sum_cells::<2, RING_ONLY>(planes, start, word, &rest[..2], ps, pb);
-        rest = &rest[2..];
-    }
-    if !rest.is_empty() {
-        sum_cells::<1, RING_ONLY>(planes, start, word, rest, ps, pb);
-    }
+    batches!(8, 6, 4, 2, 1);
 }
 
 /// Words of a plane within which [`sum_cells`] reads a batch's cells

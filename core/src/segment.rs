@@ -474,15 +474,9 @@ fn add_group(group: &[&[u64]], counts: &mut [u64], fresh: bool) {
 fn add_words(group: &[&[u64]], j0: usize, counts: &mut [u64], fresh: bool) {
     for (q, c) in counts.chunks_exact_mut(8).enumerate() {
         let j = j0 + q;
-        let word = |pl: &[u64]| pl.get(j).copied().unwrap_or(0);
-        let mut s = [0u64; 4];
-        let mut pairs = group.chunks_exact(2);
-        for pr in pairs.by_ref() {
-            slices::csa2(&mut s, word(pr[0]), word(pr[1]));
-        }
-        if let [pl] = pairs.remainder() {
-            slices::csa(&mut s, word(pl));
-        }
+        let s = slices::nibble(0..group.len(), |i| {
+            group.get(i).and_then(|pl| pl.get(j)).copied().unwrap_or(0)
+        });
         flush(c, s, fresh);
     }
 }
@@ -709,24 +703,14 @@ pub(crate) fn segment(
             let (row_t0, row_t1) = ((ty0 - tiles.y0) * tiles.x, (ty1 - tiles.y0) * tiles.x);
             let n_bg = bg_row.len();
             let cols = n_bg - 2;
-            match (
-                ws.tiles.get(row_t0..row_t0 + cols),
-                ws.tiles.get(row_t1..row_t1 + cols),
-            ) {
-                // The two tile rows as slices: a loop the compiler
-                // vectorises (per column with bounds checks it cost 6
-                // instructions per pixel of the frame).
-                (Some(t0), Some(t1)) => {
-                    for ((b, &a), &c) in bg_row[1..n_bg - 1].iter_mut().zip(t0).zip(t1) {
-                        *b = wy0 * u32::from(a) + wy1 * u32::from(c);
-                    }
-                }
-                _ => {
-                    for (tx, b) in bg_row[1..n_bg - 1].iter_mut().enumerate() {
-                        let tile = |t: usize| u32::from(ws.tiles.get(t).copied().unwrap_or(0));
-                        *b = wy0 * tile(row_t0 + tx) + wy1 * tile(row_t1 + tx);
-                    }
-                }
+            // The two tile rows as slices (both were just written by the
+            // medians, so they are in the buffer): a loop the compiler
+            // vectorises (per column with bounds checks it cost 6
+            // instructions per pixel of the frame).
+            let t0 = ws.tiles.get(row_t0..row_t0 + cols).unwrap_or_default();
+            let t1 = ws.tiles.get(row_t1..row_t1 + cols).unwrap_or_default();
+            for ((b, &a), &c) in bg_row[1..n_bg - 1].iter_mut().zip(t0).zip(t1) {
+                *b = wy0 * u32::from(a) + wy1 * u32::from(c);
             }
             bg_row[0] = bg_row[1];
             bg_row[n_bg - 1] = bg_row[n_bg - 2];

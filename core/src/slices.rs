@@ -52,16 +52,7 @@ pub fn add_fn(c: &mut Counter, n: usize, word: impl Fn(usize) -> u64) {
     let mut i = 0;
     while i < n {
         let e = (i + 15).min(n);
-        let mut s = [0u64; 4];
-        let mut q = i;
-        while q + 1 < e {
-            csa2(&mut s, word(q), word(q + 1));
-            q += 2;
-        }
-        if q < e {
-            csa(&mut s, word(q));
-        }
-        add_nibble(c, s);
+        add_nibble(c, nibble(i..e, &word));
         i = e;
     }
 }
@@ -80,6 +71,22 @@ where
     let c2 = s[2] & c1;
     s[2] ^= c1;
     s[3] ^= c2;
+}
+
+/// The words `word(q)` for `q` in `range` (at most 15 of them) summed
+/// into a 4-bit carry-save nibble, two at a time through [`csa2`].
+#[inline(always)]
+pub fn nibble(range: core::ops::Range<usize>, word: impl Fn(usize) -> u64) -> [u64; 4] {
+    let mut s = [0u64; 4];
+    let mut q = range.start;
+    while q + 1 < range.end {
+        csa2(&mut s, word(q), word(q + 1));
+        q += 2;
+    }
+    if q < range.end {
+        csa(&mut s, word(q));
+    }
+    s
 }
 
 /// Adds two words to a 4-bit carry-save counter `s`: a full adder on the
