@@ -199,8 +199,12 @@ fn variance_approx(b: u64, nrf: f32, p: &Params) -> f32 {
 /// from one `NEAR`-word window of the plane: one bounds check per tick
 /// instead of one per cell (issue 18: the per-tick sums are the region
 /// stage's main cost).
+///
+/// `HALF` (plain cells only, [`HALVES`]): each cell is one `u32` half of
+/// a plane word — `at` indexes the plane read as `u32`s, the masks are in
+/// its low 32 bits.
 #[inline(always)]
-fn sum_cells<const N: usize, const RING_ONLY: bool>(
+fn sum_cells<const N: usize, const RING_ONLY: bool, const HALF: bool>(
     planes: &[&[u64]],
     start: u32,
     (word, plain): (&impl Fn(&[u64], u32, &Cell) -> u64, bool),
@@ -220,6 +224,35 @@ fn sum_cells<const N: usize, const RING_ONLY: bool>(
     for (i, plane) in planes.iter().enumerate().take(255) {
         let t = start + i as u32;
         let (mut hs, mut hb) = (0u32, 0u32);
+        if HALF {
+            let plane: &[u32] = bytemuck::cast_slice(plane);
+            let window = plane
+                .get(base..base.saturating_add(NEAR))
+                .and_then(|s| <&[u32; NEAR]>::try_from(s).ok());
+            let mut add = |w: u32, c: &Cell| {
+                hb += (w & c.ring as u32).count_ones();
+                if !RING_ONLY {
+                    hs += (w & c.reg as u32).count_ones();
+                }
+            };
+            match window {
+                Some(win) if near => {
+                    for (c, &o) in cells.iter().zip(&offs) {
+                        add(win[o % NEAR], c);
+                    }
+                }
+                _ => {
+                    for c in cells {
+                        add(plane.get(c.at).copied().unwrap_or(0), c);
+                    }
+                }
+            }
+            if !RING_ONLY {
+                ps[i + 1] += hs;
+            }
+            pb[i + 1] += hb;
+            continue;
+        }
         let mut add = |w: u64, c: &Cell| {
             hb += (w & c.ring).count_ones();
             if !RING_ONLY {
@@ -252,7 +285,7 @@ fn sum_cells<const N: usize, const RING_ONLY: bool>(
 /// tick (a tick's sums are added once per eight cells), the rest in sixes,
 /// fours, twos and ones. `RING_ONLY`: the cells have no region pixels, so
 /// only the ring's sums are taken (one popcount per cell and tick).
-fn sum_all<const RING_ONLY: bool>(
+fn sum_all<const RING_ONLY: bool, const HALF: bool>(
     planes: &[&[u64]],
     start: u32,
     word: (&impl Fn(&[u64], u32, &Cell) -> u64, bool),
@@ -267,7 +300,7 @@ fn sum_all<const RING_ONLY: bool>(
     macro_rules! batches {
         ($($n:literal),*) => {$(
             while rest.len() >= $n {
-                sum_cells::<$n, RING_ONLY>(planes, start, word, &rest[..$n], ps, pb);
+                sum_cells::<$n, RING_ONLY, HALF>(planes, start, word, &rest[..$n], ps, pb);
                 rest = &rest[$n..];
             }
         )*};
@@ -278,6 +311,43 @@ fn sum_all<const RING_ONLY: bool>(
 /// Words of a plane within which [`sum_cells`] reads a batch's cells
 /// through one window.
 const NEAR: usize = 64;
+
+/// Plain per-tick sums count `u32` halves of the plane words on 32-bit
+/// targets: there a `u64` popcount is two software popcounts of about ten
+/// instructions each, and a region's cell rarely has pixels in both
+/// halves, so a cell is split into the halves it uses (issue 18: the
+/// Cortex-M4's per-tick sums). On 64-bit targets a popcount is one
+/// instruction and fewer, wider cells win.
+const HALVES: bool = cfg!(target_pointer_width = "32");
+
+/// The cells of one plane word `at` with ring and region masks `ring`,
+/// `reg`: the word itself, or with `half` its `u32` halves that hold any
+/// pixel (`at` then indexes the plane read as `u32`s, the masks shifted
+/// down); `None` for a part with no pixel.
+fn parts(cell: Cell, half: bool) -> [Option<Cell>; 2] {
+    let keep = |c: Cell| (c.ring | c.reg != 0).then_some(c);
+    if !half {
+        return [keep(cell), None];
+    }
+    // Bits 0..32 of a word are its first u32 in memory on a
+    // little-endian target, its second on a big-endian one.
+    let lo = usize::from(cfg!(target_endian = "big"));
+    let low = u64::from(u32::MAX);
+    [
+        keep(Cell {
+            at: 2 * cell.at + lo,
+            ring: cell.ring & low,
+            reg: cell.reg & low,
+            ..cell
+        }),
+        keep(Cell {
+            at: 2 * cell.at + (1 - lo),
+            ring: cell.ring >> 32,
+            reg: cell.reg >> 32,
+            ..cell
+        }),
+    ]
+}
 
 /// Geometry of a region's neighbourhood in the strip.
 #[derive(Debug, Clone, Copy)]
@@ -304,20 +374,23 @@ pub(crate) fn adapt_region(
     // predicted motion (then the region's spikes are counted where the
     // particle is at k). Chosen once, so the plain path has no branch.
     match ctx.motion {
-        None => adapt_with(ctx, ws, s0, strip_rows, idx, true, |plane, _t, c: &Cell| {
+        None => adapt_with::<HALVES>(ctx, ws, s0, strip_rows, idx, true, |plane, _t, c: &Cell| {
             plane.get(c.at).copied().unwrap_or(0)
         }),
-        Some(_) => adapt_with(ctx, ws, s0, strip_rows, idx, false, |plane, t, c: &Cell| {
-            let dt = (i64::from(t) - i64::from(k)) as i32;
-            let (sx, sy) = (shift(c.v.0, dt), shift(c.v.1, dt));
-            shifted_word(plane, wpr, hist.rows(), s0 + c.r, usize::from(c.j), sx, sy)
-        }),
+        Some(_) => {
+            adapt_with::<false>(ctx, ws, s0, strip_rows, idx, false, |plane, t, c: &Cell| {
+                let dt = (i64::from(t) - i64::from(k)) as i32;
+                let (sx, sy) = (shift(c.v.0, dt), shift(c.v.1, dt));
+                shifted_word(plane, wpr, hist.rows(), s0 + c.r, usize::from(c.j), sx, sy)
+            })
+        }
     }
 }
 
 /// [`adapt_region`] with `word(plane, tick, cell)`; `plain` when that is
-/// the plane's word `cell.at`.
-fn adapt_with(
+/// the plane's word `cell.at`; `HALF` (plain only): per-tick sums over
+/// `u32` halves ([`HALVES`]).
+fn adapt_with<const HALF: bool>(
     ctx: &crate::context::Ctx<'_, '_>,
     ws: &mut Workspace<'_>,
     s0: u16,
@@ -427,9 +500,6 @@ fn adapt_with(
                 0
             };
             let rn = ring[r * wpr + j];
-            if rg | rn == 0 {
-                continue;
-            }
             let cell = Cell {
                 r: r as u16,
                 j: j as u16,
@@ -438,25 +508,27 @@ fn adapt_with(
                 ring: rn,
                 reg: rg,
             };
-            if rg == 0 {
-                rings[nring] = cell;
-                nring += 1;
-                if nring == CELLS {
-                    sum_all::<true>(planes, span.start, w, &rings, &mut ps, &mut pb);
-                    nring = 0;
-                }
-            } else {
-                cells[nc] = cell;
-                nc += 1;
-                if nc == CELLS {
-                    sum_all::<false>(planes, span.start, w, &cells, &mut ps, &mut pb);
-                    nc = 0;
+            for cell in parts(cell, HALF).into_iter().flatten() {
+                if cell.reg == 0 {
+                    rings[nring] = cell;
+                    nring += 1;
+                    if nring == CELLS {
+                        sum_all::<true, HALF>(planes, span.start, w, &rings, &mut ps, &mut pb);
+                        nring = 0;
+                    }
+                } else {
+                    cells[nc] = cell;
+                    nc += 1;
+                    if nc == CELLS {
+                        sum_all::<false, HALF>(planes, span.start, w, &cells, &mut ps, &mut pb);
+                        nc = 0;
+                    }
                 }
             }
         }
     }
-    sum_all::<false>(planes, span.start, w, &cells[..nc], &mut ps, &mut pb);
-    sum_all::<true>(planes, span.start, w, &rings[..nring], &mut ps, &mut pb);
+    sum_all::<false, HALF>(planes, span.start, w, &cells[..nc], &mut ps, &mut pb);
+    sum_all::<true, HALF>(planes, span.start, w, &rings[..nring], &mut ps, &mut pb);
     // ps[i + 1] = spikes of ticks span.start .. span.start + i + 1
     let n = planes.len().min(255);
     let (mut rs, mut rb) = (0u32, 0u32);
@@ -906,5 +978,83 @@ mod tests {
             ..Region::default()
         };
         assert_eq!(region_gray(4, &flat, &p, 255), 26);
+    }
+
+    /// The per-tick sums over whole words and over their `u32` halves
+    /// (the 32-bit targets' cells, [`parts`]) both equal a pixel-by-pixel
+    /// count: random planes (sparse and dense), random cells near each
+    /// other and far apart (the windowed and the per-cell reads), masks in
+    /// one half, the other or both, every batch size.
+    #[test]
+    fn halves_and_words_sum_like_pixels() {
+        let mut rnd = crate::testing::rng(0x9e37_79b9_7f4a_7c15);
+        let words = 400;
+        for case in 0..64u64 {
+            let ticks = 1 + rnd(40) as usize;
+            let density = 1 + rnd(8);
+            let planes: std::vec::Vec<std::vec::Vec<u64>> = (0..ticks)
+                .map(|_| {
+                    (0..words)
+                        .map(|_| {
+                            (0..density)
+                                .fold(u64::MAX, |a, _| a & (rnd(u64::MAX) | rnd(u64::MAX) << 32))
+                        })
+                        .collect()
+                })
+                .collect();
+            let refs: std::vec::Vec<&[u64]> = planes.iter().map(|p| p.as_slice()).collect();
+            let n = 1 + rnd(40) as usize;
+            let spread = if case % 2 == 0 { 40 } else { words as u64 };
+            let mask = |rnd: &mut dyn FnMut(u64) -> u64| match rnd(4) {
+                0 => 0,
+                1 => rnd(u64::MAX) & 0xffff_ffff,
+                2 => rnd(u64::MAX) << 32,
+                _ => rnd(u64::MAX) ^ rnd(u64::MAX) << 21,
+            };
+            let mut at = rnd(words as u64 - spread.min(40)) as usize;
+            let cells: std::vec::Vec<Cell> = (0..n)
+                .map(|_| {
+                    at = (at + rnd(spread / 4 + 1) as usize) % words;
+                    let ring = mask(&mut rnd);
+                    Cell {
+                        at,
+                        ring,
+                        reg: mask(&mut rnd) & !ring,
+                        ..Cell::default()
+                    }
+                })
+                .collect();
+            let (mut es, mut eb) = ([0u32; 256], [0u32; 256]);
+            for (i, plane) in planes.iter().enumerate() {
+                for c in &cells {
+                    for bit in 0..64 {
+                        if (plane[c.at] >> bit) & 1 == 1 {
+                            es[i + 1] += u32::from((c.reg >> bit) & 1 == 1);
+                            eb[i + 1] += u32::from((c.ring >> bit) & 1 == 1);
+                        }
+                    }
+                }
+            }
+            let word = |plane: &[u64], _t: u32, c: &Cell| plane.get(c.at).copied().unwrap_or(0);
+            for half in [false, true] {
+                let parts: std::vec::Vec<Cell> = cells
+                    .iter()
+                    .flat_map(|&c| parts(c, half))
+                    .flatten()
+                    .collect();
+                let (regs, rings): (std::vec::Vec<Cell>, std::vec::Vec<Cell>) =
+                    parts.iter().partition(|c| c.reg != 0);
+                let (mut ps, mut pb) = ([0u32; 256], [0u32; 256]);
+                let w = (&word, true);
+                if half {
+                    sum_all::<false, true>(&refs, 0, w, &regs, &mut ps, &mut pb);
+                    sum_all::<true, true>(&refs, 0, w, &rings, &mut ps, &mut pb);
+                } else {
+                    sum_all::<false, false>(&refs, 0, w, &regs, &mut ps, &mut pb);
+                    sum_all::<true, false>(&refs, 0, w, &rings, &mut ps, &mut pb);
+                }
+                assert_eq!((ps, pb), (es, eb), "case {case}, halves {half}");
+            }
+        }
     }
 }
