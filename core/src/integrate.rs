@@ -177,8 +177,20 @@ fn contrast(s: u64, b: u64, np: u32, nr: u32) -> f32 {
         a.checked_sub(i64::try_from(b).ok()?.checked_mul(i64::from(np))?)
     };
     match narrow() {
-        Some(x) => x as f32,
+        Some(x) => f32_of(x),
         None => (i128::from(s) * i128::from(nr.max(1)) - i128::from(b) * i128::from(np)) as f32,
+    }
+}
+
+/// `x` rounded to `f32`. On 32-bit targets through a 32-bit conversion
+/// where it fits: a 64-bit one is a library call there (about 40
+/// Thumb-2 instructions), a 32-bit one a single instruction, and both
+/// round the same value.
+#[inline]
+fn f32_of(x: i64) -> f32 {
+    match i32::try_from(x) {
+        Ok(v) if cfg!(target_pointer_width = "32") => v as f32,
+        _ => x as f32,
     }
 }
 
@@ -187,7 +199,10 @@ fn contrast(s: u64, b: u64, np: u32, nr: u32) -> f32 {
 fn variance_approx(b: u64, nrf: f32, p: &Params) -> f32 {
     let g = f32::from(p.electrons_per_spike.max(1));
     let sig = f32::from(p.sigma_fpn.to_bits());
-    let bf = b as f32;
+    let bf = match u32::try_from(b) {
+        Ok(v) if cfg!(target_pointer_width = "32") => v as f32,
+        _ => b as f32,
+    };
     g * 4_294_967_296.0 * nrf * nrf + 4.0 * g * sig * sig * bf * bf + bf * 17_179_869_184.0 * nrf
 }
 
