@@ -515,6 +515,9 @@ fn adapt_with<const HALF: bool>(
                 0
             };
             let rn = ring[r * wpr + j];
+            if rg | rn == 0 {
+                continue;
+            }
             let cell = Cell {
                 r: r as u16,
                 j: j as u16,
