@@ -236,20 +236,31 @@ fn sum_cells<const N: usize, const RING_ONLY: bool, const HALF: bool>(
             .iter()
             .all(|c| c.at.checked_sub(base).is_some_and(|o| o < NEAR));
     let offs: [usize; N] = core::array::from_fn(|q| cells[q].at.wrapping_sub(base) % NEAR);
-    for (i, plane) in planes.iter().enumerate().take(255) {
-        let t = start + i as u32;
-        let (mut hs, mut hb) = (0u32, 0u32);
-        if HALF {
-            let plane: &[u32] = bytemuck::cast_slice(plane);
-            let window = plane
-                .get(base..base.saturating_add(NEAR))
-                .and_then(|s| <&[u32; NEAR]>::try_from(s).ok());
+    // One loop bound (the planes and their sums cut to the same length),
+    // and the choice between the windowed and the per-cell reads made once
+    // per batch, not per tick: the per-tick overhead was half the work of
+    // a small batch.
+    let n = planes.len().min(255);
+    let planes = &planes[..n];
+    // The window's end, checked once: a batch whose window would wrap
+    // reads its cells one by one.
+    let end = base.checked_add(NEAR);
+    let near = near && end.is_some();
+    let end = end.unwrap_or(base);
+    let sums = ps[1..=n].iter_mut().zip(pb[1..=n].iter_mut());
+    if HALF {
+        for (plane, (s, b)) in planes.iter().zip(sums) {
+            let (mut hs, mut hb) = (0u32, 0u32);
             let mut add = |w: u32, c: &Cell| {
                 hb += (w & c.ring as u32).count_ones();
                 if !RING_ONLY {
                     hs += (w & c.reg as u32).count_ones();
                 }
             };
+            let plane: &[u32] = bytemuck::cast_slice(plane);
+            let window = plane
+                .get(base..end)
+                .and_then(|s| <&[u32; NEAR]>::try_from(s).ok());
             match window {
                 Some(win) if near => {
                     for (c, &o) in cells.iter().zip(&offs) {
@@ -263,36 +274,53 @@ fn sum_cells<const N: usize, const RING_ONLY: bool, const HALF: bool>(
                 }
             }
             if !RING_ONLY {
-                ps[i + 1] += hs;
+                *s += hs;
             }
-            pb[i + 1] += hb;
-            continue;
+            *b += hb;
         }
-        let mut add = |w: u64, c: &Cell| {
-            hb += (w & c.ring).count_ones();
+        return;
+    }
+    let add = |hs: &mut u32, hb: &mut u32, w: u64, c: &Cell| {
+        *hb += (w & c.ring).count_ones();
+        if !RING_ONLY {
+            *hs += (w & c.reg).count_ones();
+        }
+    };
+    if near {
+        for (plane, (s, b)) in planes.iter().zip(sums) {
+            let (mut hs, mut hb) = (0u32, 0u32);
+            let window = plane
+                .get(base..end)
+                .and_then(|s| <&[u64; NEAR]>::try_from(s).ok());
+            match window {
+                Some(win) => {
+                    for (c, &o) in cells.iter().zip(&offs) {
+                        add(&mut hs, &mut hb, win[o % NEAR], c);
+                    }
+                }
+                None => {
+                    for c in cells {
+                        add(&mut hs, &mut hb, plane.get(c.at).copied().unwrap_or(0), c);
+                    }
+                }
+            }
             if !RING_ONLY {
-                hs += (w & c.reg).count_ones();
+                *s += hs;
             }
-        };
-        let window = plane
-            .get(base..base.saturating_add(NEAR))
-            .and_then(|s| <&[u64; NEAR]>::try_from(s).ok());
-        match window {
-            Some(win) if near => {
-                for (c, &o) in cells.iter().zip(&offs) {
-                    add(win[o % NEAR], c);
-                }
-            }
-            _ => {
-                for c in cells {
-                    add(word(plane, t, c), c);
-                }
-            }
+            *b += hb;
+        }
+        return;
+    }
+    for (i, (plane, (s, b))) in planes.iter().zip(sums).enumerate() {
+        let t = start + i as u32;
+        let (mut hs, mut hb) = (0u32, 0u32);
+        for c in cells {
+            add(&mut hs, &mut hb, word(plane, t, c), c);
         }
         if !RING_ONLY {
-            ps[i + 1] += hs;
+            *s += hs;
         }
-        pb[i + 1] += hb;
+        *b += hb;
     }
 }
 
