@@ -348,7 +348,21 @@ fn sum_all<const RING_ONLY: bool, const HALF: bool>(
             }
         )*};
     }
-    batches!(8, 6, 4, 2, 1);
+    // Sizes measured on the default scene: plain ring-only cells (one
+    // mask each) in batches up to ten, plain region cells in every size up
+    // to eight (a region's last cells one batch, not several), shifted
+    // words (compensated frames) as before.
+    match (word.1, RING_ONLY) {
+        (true, true) => {
+            batches!(10, 8, 6, 4, 2, 1);
+        }
+        (true, false) => {
+            batches!(8, 7, 6, 5, 4, 3, 2, 1);
+        }
+        (false, _) => {
+            batches!(8, 6, 4, 2, 1);
+        }
+    }
 }
 
 /// Words of a plane within which [`sum_cells`] reads a batch's cells
