@@ -199,10 +199,7 @@ fn f32_of(x: i64) -> f32 {
 fn variance_approx(b: u64, nrf: f32, p: &Params) -> f32 {
     let g = f32::from(p.electrons_per_spike.max(1));
     let sig = f32::from(p.sigma_fpn.to_bits());
-    let bf = match u32::try_from(b) {
-        Ok(v) if cfg!(target_pointer_width = "32") => v as f32,
-        _ => b as f32,
-    };
+    let bf = i64::try_from(b).map_or(b as f32, f32_of);
     g * 4_294_967_296.0 * nrf * nrf + 4.0 * g * sig * sig * bf * bf + bf * 17_179_869_184.0 * nrf
 }
 
@@ -242,72 +239,18 @@ fn sum_cells<const N: usize, const RING_ONLY: bool, const HALF: bool>(
     // a small batch.
     let n = planes.len().min(255);
     let planes = &planes[..n];
-    // The window's end, checked once: a batch whose window would wrap
-    // reads its cells one by one.
-    let end = base.checked_add(NEAR);
-    let near = near && end.is_some();
-    let end = end.unwrap_or(base);
     let sums = ps[1..=n].iter_mut().zip(pb[1..=n].iter_mut());
-    if HALF {
-        for (plane, (s, b)) in planes.iter().zip(sums) {
-            let (mut hs, mut hb) = (0u32, 0u32);
-            let mut add = |w: u32, c: &Cell| {
-                hb += (w & c.ring as u32).count_ones();
-                if !RING_ONLY {
-                    hs += (w & c.reg as u32).count_ones();
-                }
-            };
-            let plane: &[u32] = bytemuck::cast_slice(plane);
-            let window = plane
-                .get(base..end)
-                .and_then(|s| <&[u32; NEAR]>::try_from(s).ok());
-            match window {
-                Some(win) if near => {
-                    for (c, &o) in cells.iter().zip(&offs) {
-                        add(win[o % NEAR], c);
-                    }
-                }
-                _ => {
-                    for c in cells {
-                        add(plane.get(c.at).copied().unwrap_or(0), c);
-                    }
-                }
-            }
-            if !RING_ONLY {
-                *s += hs;
-            }
-            *b += hb;
-        }
-        return;
-    }
-    let add = |hs: &mut u32, hb: &mut u32, w: u64, c: &Cell| {
-        *hb += (w & c.ring).count_ones();
-        if !RING_ONLY {
-            *hs += (w & c.reg).count_ones();
-        }
-    };
-    if near {
-        for (plane, (s, b)) in planes.iter().zip(sums) {
-            let (mut hs, mut hb) = (0u32, 0u32);
-            let window = plane
-                .get(base..end)
-                .and_then(|s| <&[u64; NEAR]>::try_from(s).ok());
-            match window {
-                Some(win) => {
-                    for (c, &o) in cells.iter().zip(&offs) {
-                        add(&mut hs, &mut hb, win[o % NEAR], c);
-                    }
-                }
-                None => {
-                    for c in cells {
-                        add(&mut hs, &mut hb, plane.get(c.at).copied().unwrap_or(0), c);
-                    }
-                }
-            }
-            if !RING_ONLY {
-                *s += hs;
-            }
-            *b += hb;
+    if plain {
+        // The window's end checked once, so its length is known in the
+        // loop; a batch whose window would wrap reads its cells one by one.
+        let window = base
+            .checked_add(NEAR)
+            .filter(|_| near)
+            .map(|end| (base, end, &offs));
+        if HALF {
+            plain_sums::<u32, N, RING_ONLY>(planes, cells, window, sums);
+        } else {
+            plain_sums::<u64, N, RING_ONLY>(planes, cells, window, sums);
         }
         return;
     }
@@ -315,12 +258,95 @@ fn sum_cells<const N: usize, const RING_ONLY: bool, const HALF: bool>(
         let t = start + i as u32;
         let (mut hs, mut hb) = (0u32, 0u32);
         for c in cells {
-            add(&mut hs, &mut hb, word(plane, t, c), c);
+            let w = word(plane, t, c);
+            hb += (w & c.ring).count_ones();
+            if !RING_ONLY {
+                hs += (w & c.reg).count_ones();
+            }
         }
         if !RING_ONLY {
             *s += hs;
         }
         *b += hb;
+    }
+}
+
+/// What [`plain_sums`] reads a plane as: its `u64` words, or their `u32`
+/// halves ([`HALVES`]).
+trait Lane: bytemuck::Pod + core::ops::BitAnd<Output = Self> {
+    /// A cell's mask as a lane (a half's mask is in the low 32 bits).
+    fn mask(m: u64) -> Self;
+    fn ones(self) -> u32;
+}
+
+impl Lane for u64 {
+    fn mask(m: u64) -> u64 {
+        m
+    }
+    fn ones(self) -> u32 {
+        self.count_ones()
+    }
+}
+
+impl Lane for u32 {
+    fn mask(m: u64) -> u32 {
+        m as u32
+    }
+    fn ones(self) -> u32 {
+        self.count_ones()
+    }
+}
+
+/// [`sum_cells`] of plain cells, the planes read as lanes `W` (`at`
+/// indexes them): through one `NEAR`-lane `window` (first lane, end and
+/// each cell's offset) when the batch has one, else cell by cell.
+#[inline(always)]
+fn plain_sums<'a, W: Lane, const N: usize, const RING_ONLY: bool>(
+    planes: &[&[u64]],
+    cells: &[Cell; N],
+    window: Option<(usize, usize, &[usize; N])>,
+    sums: impl Iterator<Item = (&'a mut u32, &'a mut u32)>,
+) {
+    let add = |(hs, hb): &mut (u32, u32), w: W, c: &Cell| {
+        *hb += (w & W::mask(c.ring)).ones();
+        if !RING_ONLY {
+            *hs += (w & W::mask(c.reg)).ones();
+        }
+    };
+    let cell_by_cell = |h: &mut (u32, u32), plane: &[W]| {
+        for c in cells {
+            add(h, plane.get(c.at).copied().unwrap_or_else(W::zeroed), c);
+        }
+    };
+    let put = |(s, b): (&mut u32, &mut u32), h: (u32, u32)| {
+        if !RING_ONLY {
+            *s += h.0;
+        }
+        *b += h.1;
+    };
+    let Some((base, end, offs)) = window else {
+        for (plane, sb) in planes.iter().zip(sums) {
+            let mut h = (0, 0);
+            cell_by_cell(&mut h, bytemuck::cast_slice(plane));
+            put(sb, h);
+        }
+        return;
+    };
+    for (plane, sb) in planes.iter().zip(sums) {
+        let plane: &[W] = bytemuck::cast_slice(plane);
+        let mut h = (0, 0);
+        match plane
+            .get(base..end)
+            .and_then(|s| <&[W; NEAR]>::try_from(s).ok())
+        {
+            Some(win) => {
+                for (c, &o) in cells.iter().zip(offs) {
+                    add(&mut h, win[o % NEAR], c);
+                }
+            }
+            None => cell_by_cell(&mut h, plane),
+        }
+        put(sb, h);
     }
 }
 
