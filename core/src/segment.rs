@@ -207,9 +207,11 @@ fn tile_medians_bytes(
 /// The same medians from the bit-sliced plain counts: four tiles (the
 /// 16-bit lanes of a 64-px word) at once, by radix selection from the top
 /// bit down — per bit, the lanes' candidates with that bit set are
-/// counted and each lane keeps the half that holds its rank.
+/// counted and each lane keeps the half that holds its rank. Only the
+/// `live` low planes can be set ([`slices::live_planes`]).
 fn tile_medians_sliced(
     counts: &[u64],
+    live: usize,
     part: &[u64],
     tiles_out: &mut [u8],
     (width, wpr): (usize, usize),
@@ -265,7 +267,7 @@ fn tile_medians_sliced(
         let mut rank = n.map(|x| x.saturating_sub(1) / 2);
         let mut left = n;
         let mut med = [0u8; 4];
-        for b in (0..8).rev() {
+        for b in (0..live.min(8)).rev() {
             let x: [u64; 16] = core::array::from_fn(|k| cand[k] & planes[b][k]);
             if x.iter().fold(0, |a, &v| a | v) == 0 {
                 // No candidate has this bit: every lane's median has 0.
@@ -492,6 +494,9 @@ struct Level<'a> {
     /// background (all ones), else 0.
     floor: u32,
     sat_c: u32,
+    /// Bit planes the level's counts can set ([`slices::live_planes`] of
+    /// the window's length): the ones above are zero and not read.
+    live: usize,
     last: bool,
     /// Class bytes of a particle and a background decided at this level.
     decided: (u8, u8),
@@ -623,6 +628,7 @@ pub(crate) fn segment(
         } else {
             (u32::from(p.n_fs) * u32::from(win.len)).div_ceil(u32::from(n))
         };
+        let live = slices::live_planes(u32::from(win.len));
         let last = j + 1 == nlev;
         let decided = (
             encode(Class::Particle, j as u8),
@@ -669,7 +675,7 @@ pub(crate) fn segment(
                         continue;
                     }
                     let c = counter(ws.counts, w);
-                    let a0 = a & slices::at_least(c, t_any);
+                    let a0 = a & slices::at_least_live(c, t_any, live);
                     ws.masks[2 * words + w] = a0;
                     any |= a0;
                     if last && a0 != a {
@@ -689,6 +695,7 @@ pub(crate) fn segment(
                         let (row0, rr) = tile_rows(ty);
                         tile_medians_sliced(
                             &ws.counts[..8 * words],
+                            live,
                             &ws.masks[words..2 * words],
                             &mut ws.tiles[row0..row0 + tiles.x],
                             (width, wpr),
@@ -732,6 +739,7 @@ pub(crate) fn segment(
                 bg: bg_row,
                 floor,
                 sat_c,
+                live,
                 last,
                 decided,
             };
@@ -758,7 +766,7 @@ pub(crate) fn segment(
                 for (q, &v) in row.iter().enumerate() {
                     above |= u64::from(u32::from(v) > t) << q;
                 }
-                let cand = a & (above | slices::at_least(c, sat_c));
+                let cand = a & (above | slices::at_least_live(c, sat_c, live));
                 // Compensated candidates: a byte group's plain counts read
                 // out of the bit planes once.
                 let mut m = cand;
@@ -827,8 +835,8 @@ fn words_plain(
         let jw = w - r * wpr;
         let base = r * width + 64 * jw;
         let tp = u32::from(th.min_count(lv.b_low(jw, width)));
-        let maybe = a0 & slices::at_least(c, tp);
-        let sat = a0 & !maybe & slices::at_least(c, lv.sat_c);
+        let maybe = a0 & slices::at_least_live(c, tp, lv.live);
+        let sat = a0 & !maybe & slices::at_least_live(c, lv.sat_c, lv.live);
         let mut done = 0u64;
         if sat != 0 {
             background_rest(c, sat, base, lv.decided.1, ws.class, ws.c_t);

@@ -136,22 +136,39 @@ pub(crate) fn add_nibble(c: &mut Counter, p: [u64; 4]) {
 /// The pixels whose count is at least `t` (all for 0, none above 255).
 #[inline]
 pub fn at_least(c: &Counter, t: u32) -> u64 {
+    at_least_live(c, t, 8)
+}
+
+/// Planes a count of at most `max` can set (`max` < 256): the bit length
+/// of `max`. A window's counts are at most its length, so the planes above
+/// stay zero and need not be read.
+#[inline]
+pub fn live_planes(max: u32) -> usize {
+    (32 - max.min(255).leading_zeros()) as usize
+}
+
+/// [`at_least`] where only the low `live` planes (at most 8) can be set,
+/// as [`live_planes`] gives them: the others are not read.
+#[inline]
+pub fn at_least_live(c: &Counter, t: u32, live: usize) -> u64 {
+    let live = live.min(8);
     if t == 0 {
         return u64::MAX;
     }
-    if t > 255 {
+    if t >= 1 << live {
+        // Above every count the live planes can hold (t > 255 included).
         return 0;
     }
     if t.is_power_of_two() {
         // At least 2^m: any bit from m up (the segmentation's first
         // filter, "at least 2", at every level).
-        return c[t.trailing_zeros() as usize..]
+        return c[t.trailing_zeros() as usize..live]
             .iter()
             .fold(0, |a, &p| a | p);
     }
     // From the top bit down: `gt` already greater, `eq` equal so far.
     let (mut gt, mut eq) = (0u64, u64::MAX);
-    for b in (0..8).rev() {
+    for b in (0..live).rev() {
         if (t >> b) & 1 == 1 {
             eq &= c[b];
         } else {
@@ -316,6 +333,21 @@ mod tests {
                     u32::from(want) >= t,
                     "{i} {t}"
                 );
+            }
+        }
+        // Counters of the first n words hold counts of at most n: only
+        // their live planes are read, and the answers stay exact.
+        for n in [0usize, 1, 2, 3, 5, 7, 15, 16, 37, 127, 128, 200] {
+            let mut c = Counter::default();
+            add(&mut c, &words[..n], |w| w);
+            let live = live_planes(n as u32);
+            assert!(c[live.min(8)..].iter().all(|&p| p == 0), "{n}");
+            for t in 0u32..=257 {
+                let got = at_least_live(&c, t, live);
+                for i in 0..64u32 {
+                    let want = words[..n].iter().filter(|&&w| (w >> i) & 1 == 1).count();
+                    assert_eq!((got >> i) & 1 == 1, want >= t as usize, "{n} {t} {i}");
+                }
             }
         }
         // Pairs through the full adder, the odd one through `csa`.
