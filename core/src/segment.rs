@@ -556,8 +556,13 @@ impl Level<'_> {
         // (2x + 17)/32 padded tiles from the first pad's centre.
         let v = 2 * x + 17;
         let (t, f) = (v >> 5, (v & 31) as u32);
-        let bg = |t: usize| self.bg.get(t).copied().unwrap_or(0);
-        (32 - f) * bg(t) + f * bg(t + 1)
+        // Both tiles at once, one bounds check: with the padding, t + 1 is
+        // within the row for every column (a past-the-end read is 0, as
+        // it was tile by tile).
+        match self.bg.get(t..t + 2) {
+            Some(&[a, b]) => (32 - f) * a + f * b,
+            _ => (32 - f) * self.bg.get(t).copied().unwrap_or(0),
+        }
     }
 
     /// The lowest background of the columns of word `j` (`width` px in
@@ -594,8 +599,9 @@ impl Level<'_> {
 /// saturation count — and reads counts and tests exactly only those; a
 /// word's pixels that cannot change stay undecided without a byte read,
 /// and tile medians are computed only for the rows that have such
-/// pixels. The result is the exact test's for every pixel (`segment_old`
-/// in the tests holds it to the byte-by-byte evaluation).
+/// pixels. The result is the exact test's for every pixel (the host's
+/// `reference_parity` tests hold the frames to the f64 reference, which
+/// tests every pixel at every level).
 pub(crate) fn segment(
     ctx: &crate::context::Ctx<'_, '_>,
     ws: &mut Workspace<'_>,
