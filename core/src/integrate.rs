@@ -232,7 +232,8 @@ fn variance_approx(b: u64, nrf: f32, p: &Params) -> f32 {
 ///
 /// `HALF` (plain cells only, [`HALVES`]): each cell is one `u32` half of
 /// a plane word — `at` indexes the plane read as `u32`s, the masks are in
-/// its low 32 bits.
+/// its low 32 bits. `NARROW` (with `HALF` only): every cell is a narrow
+/// half ([`narrowed`]), counted by [`POP8`] lookups.
 #[inline(always)]
 fn sum_cells<const N: usize, const RING_ONLY: bool, const HALF: bool, const NARROW: bool>(
     planes: &[&[u64]],
