@@ -23,7 +23,8 @@ use crate::label::{label, LabelStats};
 use crate::motion::Motion;
 use crate::params::{Params, MAX_LEVELS};
 use crate::particle::Thresholds;
-use crate::segment::{decode, pixel_saturation, segment, SegmentStats, LEVEL_MASK};
+use crate::segment::{counter, decode, pixel_saturation, segment, SegmentStats, LEVEL_MASK};
+use crate::slices;
 use crate::state::Workspace;
 use crate::suppress::{background_gray, background_table};
 use crate::window::{check_len, Offsets, Span, Window};
@@ -276,7 +277,8 @@ fn strip<G: Gray>(
                     .motion
                     .is_none()
                     .then_some((usize::from(lev), ws.c_t[i]));
-                let (c, t, len) = pixel_saturation(ctx, &levels[..nlev], r, col, known);
+                let at_last = slices::count(counter(ws.counts, w), b);
+                let (c, t, len) = pixel_saturation(ctx, &levels[..nlev], r, col, known, at_last);
                 if let Some(o) = out.get_mut(out_base + i - first) {
                     *o = G::from_level(background_gray(c, t, len, p, fs));
                 }

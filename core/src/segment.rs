@@ -91,19 +91,38 @@ pub fn is_saturated(c: u8, win: &Window, n_fs: u16) -> bool {
 /// background. They are background, so they are suppressed like it. Cost:
 /// one word read per tick of the deciding window (at most n_max), paid only
 /// for such pixels, and with `known` only for the ticks past the level the
-/// segmentation stopped at.
+/// segmentation stopped at; none when `at_last` shows that no level can
+/// saturate.
 ///
 /// `known`: the pixel's level index and its plain count over that level's
 /// window, when the segmentation decided it there on plain counts (it was
 /// then not saturated at any earlier level), so the search starts there.
+/// `at_last`: its plain count over the last level's window (the
+/// segmentation's counters end there for every pixel). Windows are nested,
+/// so that count bounds every level's; when no level from the first one
+/// searched could reach `N_fs` with it, the answer is the last level at
+/// that count, without reading a tick (on the default scene, every such
+/// pixel).
 pub(crate) fn pixel_saturation(
     ctx: &crate::context::Ctx<'_, '_>,
     levels: &[u16],
     row: u16,
     col: u16,
     known: Option<(usize, u8)>,
+    at_last: u8,
 ) -> (u8, u16, u16) {
     let (hist, span, p) = (ctx.hist, ctx.span, ctx.p);
+    let from = known.map_or(0, |(j, _)| j);
+    if let Some(&n_last) = levels.last() {
+        let searched = levels.get(from..).unwrap_or_default();
+        let can_saturate = searched
+            .iter()
+            .any(|&n| is_saturated(at_last, &Window::in_history(hist, ctx.k, n), p.n_fs));
+        if !can_saturate {
+            let len = Window::in_history(hist, ctx.k, n_last).len;
+            return (at_last, n_last, len);
+        }
+    }
     let word = usize::from(row) * hist.words_per_row() + usize::from(col) / 64;
     let shift = col % 64;
     let bits = |a: u32, e: u32| -> u8 {
@@ -118,7 +137,6 @@ pub(crate) fn pixel_saturation(
     // the previous one (as `saturation_times` counts).
     let mut last = (0u8, p.n_max, 0u16);
     let mut prev: Option<Window> = None;
-    let from = known.map_or(0, |(j, _)| j);
     for &n in levels.iter().skip(from) {
         let win = Window::in_history(hist, ctx.k, n);
         let c = match (prev, known) {
@@ -1000,9 +1018,10 @@ fn background_rest(
     }
 }
 
-/// The bit-sliced counter of word `w` (zero past the buffer).
+/// The bit-sliced counter of word `w` (zero past the buffer). After
+/// [`segment`], every pixel's plain count over the last level's window.
 #[inline]
-fn counter(counts: &[u64], w: usize) -> &Counter {
+pub(crate) fn counter(counts: &[u64], w: usize) -> &Counter {
     const ZERO: Counter = [0; 8];
     counts
         .get(8 * w..8 * w + 8)
