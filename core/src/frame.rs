@@ -178,6 +178,36 @@ fn rows_with<G: Gray>(
     Ok(stats)
 }
 
+/// Pixels per round of the output pass.
+const ROUND: usize = if cfg!(target_arch = "x86_64") { 16 } else { 8 };
+
+/// The flat table indices of [`ROUND`] pixels (class bytes `cb`, counts
+/// `ct`, both `ROUND` long): the class byte's level field above the count,
+/// so below [`PX_TABLE`]. On x86-64 built as one SSE2 mask and two byte
+/// interleaves (−2.4 instructions per pixel of the frame against a
+/// shift, an OR and an address add per pixel).
+#[inline(always)]
+fn px_indices(cb: &[u8], ct: &[u8]) -> [u16; ROUND] {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use wide::u8x16;
+        let load = |s: &[u8]| {
+            let mut a = [0u8; 16];
+            a.copy_from_slice(&s[..16]);
+            u8x16::new(a)
+        };
+        let (l, t) = (load(cb) & u8x16::splat(LEVEL_MASK), load(ct));
+        let lo: [u16; 8] = bytemuck::cast(u8x16::unpack_low(t, l).to_array());
+        let hi: [u16; 8] = bytemuck::cast(u8x16::unpack_high(t, l).to_array());
+        let mut idx = [0u16; ROUND];
+        idx[..8].copy_from_slice(&lo);
+        idx[8..].copy_from_slice(&hi);
+        idx
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    core::array::from_fn(|q| u16::from_le_bytes([ct[q], cb[q] & LEVEL_MASK]))
+}
+
 fn strip<G: Gray>(
     ctx: &Ctx<'_, '_>,
     ws: &mut Workspace<'_>,
@@ -236,16 +266,18 @@ fn strip<G: Gray>(
         &mut outs[..n],
     );
     let px = |cb: u8, c: u8| px_tables[usize::from(cb & LEVEL_MASK) << 8 | usize::from(c)];
-    // Eight pixels per round: the loop's own work (three pointers, a
-    // test) was a third of the pass.
+    // ROUND pixels per round: the loop's own work (three pointers, a
+    // test) was a third of the pass; their table indices are built
+    // together ([`px_indices`]).
     let (mut c8, mut t8, mut o8) = (
-        cls.chunks_exact(8),
-        cts.chunks_exact(8),
-        outs.chunks_exact_mut(8),
+        cls.chunks_exact(ROUND),
+        cts.chunks_exact(ROUND),
+        outs.chunks_exact_mut(ROUND),
     );
     for ((cb, ct), o) in c8.by_ref().zip(t8.by_ref()).zip(o8.by_ref()) {
-        for q in 0..8 {
-            o[q] = px(cb[q], ct[q]);
+        let idx = px_indices(cb, ct);
+        for (o, &i) in o.iter_mut().zip(&idx) {
+            *o = px_tables[usize::from(i)];
         }
     }
     let tail = c8.remainder().iter().zip(t8.remainder());
