@@ -89,24 +89,31 @@ pub fn is_particle_compensated(c: u8, b_q10: u32, p: &Params, segs: u32) -> bool
 /// Per-frame tables that decide the particle test without `u128` for almost
 /// every pixel. The test is monotone: harder as `b` grows, easier as `c`
 /// grows. So for `b` in `[1024·f, 1024·f + 1024)`, `c < lo[f]` is never a
-/// particle and `c ≥ hi[f]` always is. A count between passes at the bin's
-/// start and fails at its end, so the last background it passes at lies in
-/// that bin: found once per count by bisection (ten exact tests) and kept,
-/// after which the test is one comparison (on the default scene 20,000 of
-/// the frame's 34,000 exact tests were such counts, each a few 128-bit
-/// products). Exact, not an approximation. 2 KiB.
+/// particle and `c ≥ hi[f]` always is (`lo` also bounds a word's
+/// candidates, [`Thresholds::min_count`]). And each count `c` is particle
+/// exactly below one background, `bound[c]`: found once per count the
+/// frame asks about (the last bin whose start it passes, from `lo`, then
+/// ten exact tests by bisection when it fails at that bin's end) and kept,
+/// after which the test is one load and one comparison (on the default
+/// scene the frame asks about 34,000 pixels and a few dozen counts; the
+/// exact test is a few 128-bit products). Exact, not an approximation.
+/// 2 KiB.
 #[derive(Debug, Clone)]
 pub struct Thresholds {
     lo: [u16; 256],
     hi: [u16; 256],
-    /// Per count, the largest background (1/1024 count) it is particle
-    /// against, once a query has needed it; [`UNKNOWN`] before.
-    last_pass: [Cell<u32>; 256],
+    /// Per count, the background (1/1024 count) it is particle below,
+    /// once a query has needed it; [`UNKNOWN`] before.
+    bound: [Cell<u32>; 256],
 }
 
-/// A [`Thresholds::last_pass`] not found yet (no background reaches it:
-/// they are below 2^18).
+/// A [`Thresholds::bound`] not found yet. Bounds are at most
+/// [`ALWAYS`].
 const UNKNOWN: u32 = u32::MAX;
+
+/// The bound of a count that is particle against every background in the
+/// tables' range (and any the core makes: they are below 2^18).
+const ALWAYS: u32 = u32::MAX - 1;
 
 impl Thresholds {
     /// Builds the tables for `p` (about 800 exact tests).
@@ -118,7 +125,7 @@ impl Thresholds {
         let mut t = Thresholds {
             lo: [256; 256],
             hi: [256; 256],
-            last_pass: core::array::from_fn(|_| Cell::new(UNKNOWN)),
+            bound: core::array::from_fn(|_| Cell::new(UNKNOWN)),
         };
         let mut c = 0u16;
         let mut smallest = |b_q10: u32| -> u16 {
@@ -142,23 +149,37 @@ impl Thresholds {
         self.lo[((b_q10 >> B_FRAC_BITS) as usize).min(255)]
     }
 
-    /// Same answer as [`is_particle`].
+    /// Same answer as [`is_particle`] (for backgrounds below 2^18, 256
+    /// counts: every one the core makes).
     #[inline]
     pub fn is_particle(&self, c: u8, b_q10: u32, p: &Params) -> bool {
-        let f = ((b_q10 >> B_FRAC_BITS) as usize).min(255);
+        let cell = &self.bound[usize::from(c)];
+        let mut bound = cell.get();
+        if bound == UNKNOWN {
+            bound = self.find_bound(c, p);
+            cell.set(bound);
+        }
+        b_q10 < bound
+    }
+
+    /// The background count `c` is particle below: it passes at the start
+    /// of the last bin `f` with `lo[f] ≤ c` (so at every smaller
+    /// background) and fails from the next bin on; within bin `f` it
+    /// passes to the end when `c ≥ hi[f]`, else up to where
+    /// [`last_passing`] finds.
+    #[cold]
+    fn find_bound(&self, c: u8, p: &Params) -> u32 {
         let c16 = u16::from(c);
-        if c16 < self.lo[f] {
-            false
-        } else if c16 >= self.hi[f] {
-            true
+        let bins = self.lo.partition_point(|&lo| lo <= c16);
+        let Some(f) = bins.checked_sub(1) else {
+            return 0;
+        };
+        if c16 < self.hi[f] {
+            last_passing(c, f as u32, p) + 1
+        } else if f == 255 {
+            ALWAYS
         } else {
-            let cell = &self.last_pass[usize::from(c)];
-            let mut last = cell.get();
-            if last == UNKNOWN {
-                last = last_passing(c, f as u32, p);
-                cell.set(last);
-            }
-            b_q10 <= last
+            ((f + 1) as u32) << B_FRAC_BITS
         }
     }
 }
@@ -296,6 +317,15 @@ mod tests {
             for c in 0..=255u8 {
                 for b_q10 in (0..256 * 1024).step_by(389) {
                     assert_eq!(th.is_particle(c, b_q10, p), is_particle(c, b_q10, p));
+                }
+                // Each count's bound is where the exact test turns.
+                let bound = th.bound[usize::from(c)].get();
+                assert!(bound <= ALWAYS, "{c}");
+                if bound > 0 {
+                    assert!(is_particle(c, (bound - 1).min(256 * 1024 - 1), p), "{c}");
+                }
+                if bound < 256 * 1024 {
+                    assert!(!is_particle(c, bound, p), "{c} {bound}");
                 }
             }
             // Every background of the bins where a count turns, asked in
