@@ -183,29 +183,26 @@ const ROUND: usize = if cfg!(target_arch = "x86_64") { 16 } else { 8 };
 
 /// The flat table indices of [`ROUND`] pixels (class bytes `cb`, counts
 /// `ct`, both `ROUND` long): the class byte's level field above the count,
-/// so below [`PX_TABLE`]. On x86-64 built as one SSE2 mask and two byte
-/// interleaves (−2.4 instructions per pixel of the frame against a
-/// shift, an OR and an address add per pixel).
+/// so below [`PX_TABLE`]. Built as one SSE2 mask and two byte interleaves
+/// (−2.4 instructions per pixel of the frame against a shift, an OR and
+/// an address add per pixel; on a Cortex-M4 the per-pixel form is the
+/// cheaper one).
+#[cfg(target_arch = "x86_64")]
 #[inline(always)]
 fn px_indices(cb: &[u8], ct: &[u8]) -> [u16; ROUND] {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use wide::u8x16;
-        let load = |s: &[u8]| {
-            let mut a = [0u8; 16];
-            a.copy_from_slice(&s[..16]);
-            u8x16::new(a)
-        };
-        let (l, t) = (load(cb) & u8x16::splat(LEVEL_MASK), load(ct));
-        let lo: [u16; 8] = bytemuck::cast(u8x16::unpack_low(t, l).to_array());
-        let hi: [u16; 8] = bytemuck::cast(u8x16::unpack_high(t, l).to_array());
-        let mut idx = [0u16; ROUND];
-        idx[..8].copy_from_slice(&lo);
-        idx[8..].copy_from_slice(&hi);
-        idx
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    core::array::from_fn(|q| u16::from_le_bytes([ct[q], cb[q] & LEVEL_MASK]))
+    use wide::u8x16;
+    let load = |s: &[u8]| {
+        let mut a = [0u8; 16];
+        a.copy_from_slice(&s[..16]);
+        u8x16::new(a)
+    };
+    let (l, t) = (load(cb) & u8x16::splat(LEVEL_MASK), load(ct));
+    let lo: [u16; 8] = bytemuck::cast(u8x16::unpack_low(t, l).to_array());
+    let hi: [u16; 8] = bytemuck::cast(u8x16::unpack_high(t, l).to_array());
+    let mut idx = [0u16; ROUND];
+    idx[..8].copy_from_slice(&lo);
+    idx[8..].copy_from_slice(&hi);
+    idx
 }
 
 fn strip<G: Gray>(
@@ -275,9 +272,13 @@ fn strip<G: Gray>(
         outs.chunks_exact_mut(ROUND),
     );
     for ((cb, ct), o) in c8.by_ref().zip(t8.by_ref()).zip(o8.by_ref()) {
-        let idx = px_indices(cb, ct);
-        for (o, &i) in o.iter_mut().zip(&idx) {
+        #[cfg(target_arch = "x86_64")]
+        for (o, &i) in o.iter_mut().zip(&px_indices(cb, ct)) {
             *o = px_tables[usize::from(i)];
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        for q in 0..ROUND {
+            o[q] = px(cb[q], ct[q]);
         }
     }
     let tail = c8.remainder().iter().zip(t8.remainder());
