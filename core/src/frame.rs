@@ -18,7 +18,7 @@ use crate::context::Ctx;
 use crate::error::Error;
 use crate::gray::Gray;
 use crate::history::History;
-use crate::integrate::{adapt_region, region_table};
+use crate::integrate::{adapt_region, own_bits, region_table};
 use crate::label::{label, LabelStats};
 use crate::motion::Motion;
 use crate::params::{Params, MAX_LEVELS};
@@ -328,13 +328,20 @@ fn strip<G: Gray>(
         let reg = adapt_region(ctx, ws, s0, rows, idx);
         stats.regions_out += 1;
         stats.n_star_sum += u64::from(reg.n_star);
-        let id = idx as u16 + 1;
         region_table(&reg, p, fs, &mut gray[0]);
-        for r in reg.row0.max(r_lo)..reg.row1.min(r_hi) {
-            for c in usize::from(reg.col0)..usize::from(reg.col1) {
-                let i = usize::from(r) * width + c;
-                if ws.labels[i] == id {
-                    let g = gray[0][usize::from(ws.c_t[i])];
+        // Its pixels as `adapt_region` left them (no label reads over the
+        // box: a third of the box was not the region's).
+        let (j0, j1) = (
+            usize::from(reg.col0) / 64,
+            usize::from(reg.col1.max(1) - 1) / 64,
+        );
+        for r in usize::from(reg.row0.max(r_lo))..usize::from(reg.row1.min(r_hi)) {
+            for j in j0..=j1 {
+                let mut m = own_bits(ws, r, j);
+                while m != 0 {
+                    let i = r * width + 64 * j + m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    let g = gray[0][usize::from(ws.c_t.get(i).copied().unwrap_or(0))];
                     if let Some(o) = out.get_mut(usize::from(s0) * width + i) {
                         *o = G::from_level(g);
                     }

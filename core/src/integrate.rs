@@ -558,6 +558,15 @@ pub(crate) fn adapt_region(
     }
 }
 
+/// After [`adapt_region`]: that region's pixels in word `j` of strip row
+/// `r` (mask plane 1 as the call left it; rows of the region's box).
+#[inline]
+pub(crate) fn own_bits(ws: &Workspace<'_>, r: usize, j: usize) -> u64 {
+    let wpr = crate::plane::words_per_row(ws.sizes.width);
+    let plane = usize::from(ws.sizes.rows) * wpr;
+    ws.masks.get(plane + r * wpr + j).copied().unwrap_or(0)
+}
+
 /// [`adapt_region`] with `word(plane, tick, cell)`; `plain` when that is
 /// the plane's word `cell.at`; `HALF` (plain only): per-tick sums over
 /// `u32` halves ([`HALVES`]).
