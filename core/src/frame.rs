@@ -178,6 +178,9 @@ fn rows_with<G: Gray>(
     Ok(stats)
 }
 
+/// Bits of a native word.
+const WORD: usize = usize::BITS as usize;
+
 /// Pixels per round of the output pass.
 const ROUND: usize = if cfg!(target_arch = "x86_64") { 16 } else { 8 };
 
@@ -337,13 +340,19 @@ fn strip<G: Gray>(
         );
         for r in usize::from(reg.row0.max(r_lo))..usize::from(reg.row1.min(r_hi)) {
             for j in j0..=j1 {
-                let mut m = own_bits(ws, r, j);
-                while m != 0 {
-                    let i = r * width + 64 * j + m.trailing_zeros() as usize;
-                    m &= m - 1;
-                    let g = gray[0][usize::from(ws.c_t.get(i).copied().unwrap_or(0))];
-                    if let Some(o) = out.get_mut(usize::from(s0) * width + i) {
-                        *o = G::from_level(g);
+                let bits = own_bits(ws, r, j);
+                // In native words: on a 32-bit core a `u64`'s bit scan is
+                // several instructions a bit.
+                for h in 0..64 / WORD {
+                    let mut m = (bits >> (h * WORD)) as usize;
+                    let base = r * width + 64 * j + h * WORD;
+                    while m != 0 {
+                        let i = base + m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        let g = gray[0][usize::from(ws.c_t.get(i).copied().unwrap_or(0))];
+                        if let Some(o) = out.get_mut(usize::from(s0) * width + i) {
+                            *o = G::from_level(g);
+                        }
                     }
                 }
             }
