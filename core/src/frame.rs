@@ -178,9 +178,6 @@ fn rows_with<G: Gray>(
     Ok(stats)
 }
 
-/// Bits of a native word.
-const WORD: usize = usize::BITS as usize;
-
 /// Pixels per round of the output pass.
 const ROUND: usize = if cfg!(target_arch = "x86_64") { 16 } else { 8 };
 
@@ -343,9 +340,9 @@ fn strip<G: Gray>(
                 let bits = own_bits(ws, r, j);
                 // In native words: on a 32-bit core a `u64`'s bit scan is
                 // several instructions a bit.
-                for h in 0..64 / WORD {
-                    let mut m = (bits >> (h * WORD)) as usize;
-                    let base = r * width + 64 * j + h * WORD;
+                for h in 0..64 / slices::WORD {
+                    let mut m = (bits >> (h * slices::WORD)) as usize;
+                    let base = r * width + 64 * j + h * slices::WORD;
                     while m != 0 {
                         let i = base + m.trailing_zeros() as usize;
                         m &= m - 1;

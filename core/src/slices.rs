@@ -209,6 +209,11 @@ pub fn bytes8(c: &Counter, g: u32) -> [u8; 8] {
     spread(bytes, at, cfg!(target_pointer_width = "32"))
 }
 
+/// Bits of a native word: loops over a word's set bits take it in halves
+/// of this size on a 32-bit core, where a `u64` bit scan is several
+/// instructions.
+pub(crate) const WORD: usize = usize::BITS as usize;
+
 /// The counts of all 64 pixels, one per byte (byte `i` is pixel `i`).
 /// On x86-64 an SSE2 transpose (hand-written: no crate transposes bit
 /// matrices in `no_std`): three rounds of byte interleaves put each byte
