@@ -604,16 +604,10 @@ fn adapt_with<const HALF: bool>(
     // with this one (only they are read, not the whole bounding box).
     for r in rr0..rr1 {
         for j in b.j0..=b.j1 {
-            let mut m = any[r * wpr + j];
-            let mut own = 0u64;
-            while m != 0 {
-                let bit = m.trailing_zeros();
-                m &= m - 1;
-                if ws.labels.get(r * width + 64 * j + bit as usize) == Some(&id) {
-                    own |= 1 << bit;
-                }
-            }
-            regm[r * wpr + j] = own;
+            let base = r * width + 64 * j;
+            regm[r * wpr + j] = slices::select(any[r * wpr + j], |bit| {
+                ws.labels.get(base + bit as usize) == Some(&id)
+            });
         }
     }
     // Ring: region dilated by 2 px (Chebyshev), minus every region pixel.

@@ -214,6 +214,38 @@ pub fn bytes8(c: &Counter, g: u32) -> [u8; 8] {
 /// instructions.
 pub(crate) const WORD: usize = usize::BITS as usize;
 
+/// The bits `i` of `m` for which `keep(i)` holds, asked in increasing
+/// order, scanned in native words ([`WORD`]).
+#[inline(always)]
+pub(crate) fn select(m: u64, mut keep: impl FnMut(u32) -> bool) -> u64 {
+    let mut out = 0u64;
+    #[cfg(target_pointer_width = "64")]
+    {
+        let mut x = m;
+        while x != 0 {
+            let b = x.trailing_zeros();
+            x &= x - 1;
+            if keep(b) {
+                out |= 1 << b;
+            }
+        }
+    }
+    #[cfg(not(target_pointer_width = "64"))]
+    for h in 0..64 / WORD {
+        let mut x = (m >> (h * WORD)) as usize;
+        let mut kept = 0usize;
+        while x != 0 {
+            let b = x.trailing_zeros();
+            x &= x - 1;
+            if keep((h * WORD) as u32 + b) {
+                kept |= 1 << b;
+            }
+        }
+        out |= (kept as u64) << (h * WORD);
+    }
+    out
+}
+
 /// The counts of all 64 pixels, one per byte (byte `i` is pixel `i`).
 /// On x86-64 an SSE2 transpose (hand-written: no crate transposes bit
 /// matrices in `no_std`): three rounds of byte interleaves put each byte
