@@ -985,7 +985,7 @@ fn test_plain(
 /// (saturated at this level, or left at the last level), at their count.
 fn background_rest(
     c: &Counter,
-    mut left: u64,
+    left: u64,
     base: usize,
     class_bg: u8,
     class: &mut [u8],
@@ -995,35 +995,62 @@ fn background_rest(
         return;
     }
     let bg8 = u64::from(class_bg) * 0x0101_0101_0101_0101;
-    while left != 0 {
-        let g = left.trailing_zeros() / 8;
-        let bytes = slices::bytes8(c, g);
-        let grp = ((left >> (8 * g)) & 0xff) as usize;
-        let at = base + 8 * g as usize;
-        left &= !(0xffu64 << (8 * g));
-        let group = (class.get_mut(at..at + 8), c_t.get_mut(at..at + 8));
-        if let (Some(cl), Some(ct)) = group {
-            // The group's eight bytes at once, its pixels' bytes replaced
-            // (a byte mask from the group's bits).
-            let m = slices::SPREAD[grp] * 0xff;
-            let blend = |old: &mut [u8], new: u64| {
-                let mut o = [0u8; 8];
-                o.copy_from_slice(old);
-                let v = (u64::from_le_bytes(o) & !m) | (new & m);
-                old.copy_from_slice(&v.to_le_bytes());
-            };
-            blend(cl, bg8);
-            blend(ct, u64::from_le_bytes(bytes));
-        } else {
-            // The buffer's last pixels: one at a time.
-            let mut m = grp;
-            while m != 0 {
-                let q = m.trailing_zeros() as usize;
-                m &= m - 1;
-                if let (Some(cl), Some(ct)) = (class.get_mut(at + q), c_t.get_mut(at + q)) {
-                    *cl = class_bg;
-                    *ct = bytes[q];
-                }
+    // Byte groups found in native words (a `u64` scan and a shift by a
+    // variable amount are several instructions each on a 32-bit core).
+    for h in 0..64 / slices::WORD {
+        let mut x = (left >> (h * slices::WORD)) as usize;
+        while x != 0 {
+            let gh = x.trailing_zeros() / 8;
+            let grp = (x >> (8 * gh)) & 0xff;
+            x &= !(0xff << (8 * gh));
+            group_rest(
+                c,
+                (h * slices::WORD / 8) as u32 + gh,
+                grp,
+                base,
+                (class_bg, bg8),
+                class,
+                c_t,
+            );
+        }
+    }
+}
+
+/// [`background_rest`] of the pixels `grp` of byte group `g`.
+#[inline(always)]
+fn group_rest(
+    c: &Counter,
+    g: u32,
+    grp: usize,
+    base: usize,
+    (class_bg, bg8): (u8, u64),
+    class: &mut [u8],
+    c_t: &mut [u8],
+) {
+    let bytes = slices::bytes8(c, g);
+    let at = base + 8 * g as usize;
+    let group = (class.get_mut(at..at + 8), c_t.get_mut(at..at + 8));
+    if let (Some(cl), Some(ct)) = group {
+        // The group's eight bytes at once, its pixels' bytes replaced
+        // (a byte mask from the group's bits).
+        let m = slices::SPREAD[grp] * 0xff;
+        let blend = |old: &mut [u8], new: u64| {
+            let mut o = [0u8; 8];
+            o.copy_from_slice(old);
+            let v = (u64::from_le_bytes(o) & !m) | (new & m);
+            old.copy_from_slice(&v.to_le_bytes());
+        };
+        blend(cl, bg8);
+        blend(ct, u64::from_le_bytes(bytes));
+    } else {
+        // The buffer's last pixels: one at a time.
+        let mut m = grp;
+        while m != 0 {
+            let q = m.trailing_zeros() as usize;
+            m &= m - 1;
+            if let (Some(cl), Some(ct)) = (class.get_mut(at + q), c_t.get_mut(at + q)) {
+                *cl = class_bg;
+                *ct = bytes[q];
             }
         }
     }
