@@ -184,7 +184,7 @@ const ROUND: usize = if cfg!(target_arch = "x86_64") { 16 } else { 8 };
 /// The flat table indices of [`ROUND`] pixels (class bytes `cb`, counts
 /// `ct`, both `ROUND` long): the class byte's level field above the count,
 /// so below [`PX_TABLE`]. Built as one SSE2 mask and two byte interleaves
-/// (−2.4 instructions per pixel of the frame against a shift, an OR and
+/// (−4.9 instructions per pixel of the frame against a shift, an OR and
 /// an address add per pixel; on a Cortex-M4 the per-pixel form is the
 /// cheaper one).
 #[cfg(target_arch = "x86_64")]

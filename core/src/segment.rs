@@ -1059,7 +1059,7 @@ fn group_rest(
 /// [`background_rest`] of a word with pixels in at least three byte
 /// groups, on x86-64: all 64 counts read at once ([`slices::bytes64`])
 /// and the class and count bytes written sixteen at a time through byte
-/// masks (SSE2), −4 instructions per pixel of the frame against a byte
+/// masks (SSE2), −2.2 instructions per pixel of the frame against a byte
 /// group at a time (most such words are the last level's, nearly full).
 /// False (nothing written) for fewer groups, a word past the buffers'
 /// end, or another target.

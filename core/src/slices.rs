@@ -256,7 +256,7 @@ pub(crate) fn select(m: u64, mut keep: impl FnMut(u32) -> bool) -> u64 {
 /// matrices in `no_std`): three rounds of byte interleaves put each byte
 /// group's 8×8 bit block in one `u64` lane (byte `b` from plane `b`), and
 /// three rounds of masked swaps transpose each block (Hacker's Delight,
-/// 7-3), about 90 operations for the 64 pixels against about 290 for
+/// 7-3), about 125 instructions for the 64 pixels against about 290 for
 /// eight [`bytes8`]. Elsewhere eight [`bytes8`].
 #[inline]
 pub fn bytes64(c: &Counter) -> [u8; 64] {
