@@ -337,21 +337,14 @@ fn strip<G: Gray>(
         );
         for r in usize::from(reg.row0.max(r_lo))..usize::from(reg.row1.min(r_hi)) {
             for j in j0..=j1 {
-                let bits = own_bits(ws, r, j);
-                // In native words: on a 32-bit core a `u64`'s bit scan is
-                // several instructions a bit.
-                for h in 0..64 / slices::WORD {
-                    let mut m = (bits >> (h * slices::WORD)) as usize;
-                    let base = r * width + 64 * j + h * slices::WORD;
-                    while m != 0 {
-                        let i = base + m.trailing_zeros() as usize;
-                        m &= m - 1;
-                        let g = gray[0][usize::from(ws.c_t.get(i).copied().unwrap_or(0))];
-                        if let Some(o) = out.get_mut(usize::from(s0) * width + i) {
-                            *o = G::from_level(g);
-                        }
+                let base = r * width + 64 * j;
+                slices::for_each_bit(own_bits(ws, r, j), |b| {
+                    let i = base + b as usize;
+                    let g = gray[0][usize::from(ws.c_t.get(i).copied().unwrap_or(0))];
+                    if let Some(o) = out.get_mut(usize::from(s0) * width + i) {
+                        *o = G::from_level(g);
                     }
-                }
+                });
             }
         }
     }

@@ -991,6 +991,7 @@ fn background_rest(
     class: &mut [u8],
     c_t: &mut [u8],
 ) {
+    #[cfg(target_arch = "x86_64")]
     if whole_word(c, left, base, class_bg, class, c_t) {
         return;
     }
@@ -1061,8 +1062,9 @@ fn group_rest(
 /// and the class and count bytes written sixteen at a time through byte
 /// masks (SSE2), −2.2 instructions per pixel of the frame against a byte
 /// group at a time (most such words are the last level's, nearly full).
-/// False (nothing written) for fewer groups, a word past the buffers'
-/// end, or another target.
+/// False (nothing written) for fewer groups or a word past the buffers'
+/// end.
+#[cfg(target_arch = "x86_64")]
 #[inline]
 fn whole_word(
     c: &Counter,
@@ -1072,45 +1074,37 @@ fn whole_word(
     class: &mut [u8],
     c_t: &mut [u8],
 ) -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use wide::u8x16;
-        let groups = (left | left >> 1 | left >> 2 | left >> 3) & 0x1111_1111_1111_1111;
-        let groups = (groups | groups >> 4) & 0x0101_0101_0101_0101;
-        let ends = (class.get_mut(base..base + 64), c_t.get_mut(base..base + 64));
-        let (true, (Some(cl), Some(ct))) = (groups.count_ones() >= 3, ends) else {
-            return false;
-        };
-        let counts = slices::bytes64(c);
-        const SEL: [u8; 16] = [1, 2, 4, 8, 16, 32, 64, 128, 1, 2, 4, 8, 16, 32, 64, 128];
-        let sel = u8x16::new(SEL);
-        let bg = u8x16::splat(class_bg);
-        let load = |s: &[u8]| {
-            let mut a = [0u8; 16];
-            a.copy_from_slice(s);
-            u8x16::new(a)
-        };
-        let chunks = cl.chunks_exact_mut(16).zip(ct.chunks_exact_mut(16));
-        for (k, ((cl, ct), n)) in chunks.zip(counts.chunks_exact(16)).enumerate() {
-            let bits = (left >> (16 * k)) as u16;
-            if bits == 0 {
-                continue;
-            }
-            let [lo, hi] = bits.to_le_bytes();
-            let spread = u8x16::new([
-                lo, lo, lo, lo, lo, lo, lo, lo, hi, hi, hi, hi, hi, hi, hi, hi,
-            ]);
-            let m = (spread & sel).simd_eq(sel);
-            cl.copy_from_slice(&m.bitselect(bg, load(cl)).to_array());
-            ct.copy_from_slice(&m.bitselect(load(n), load(ct)).to_array());
+    use wide::u8x16;
+    let groups = (left | left >> 1 | left >> 2 | left >> 3) & 0x1111_1111_1111_1111;
+    let groups = (groups | groups >> 4) & 0x0101_0101_0101_0101;
+    let ends = (class.get_mut(base..base + 64), c_t.get_mut(base..base + 64));
+    let (true, (Some(cl), Some(ct))) = (groups.count_ones() >= 3, ends) else {
+        return false;
+    };
+    let counts = slices::bytes64(c);
+    const SEL: [u8; 16] = [1, 2, 4, 8, 16, 32, 64, 128, 1, 2, 4, 8, 16, 32, 64, 128];
+    let sel = u8x16::new(SEL);
+    let bg = u8x16::splat(class_bg);
+    let load = |s: &[u8]| {
+        let mut a = [0u8; 16];
+        a.copy_from_slice(s);
+        u8x16::new(a)
+    };
+    let chunks = cl.chunks_exact_mut(16).zip(ct.chunks_exact_mut(16));
+    for (k, ((cl, ct), n)) in chunks.zip(counts.chunks_exact(16)).enumerate() {
+        let bits = (left >> (16 * k)) as u16;
+        if bits == 0 {
+            continue;
         }
-        true
+        let [lo, hi] = bits.to_le_bytes();
+        let spread = u8x16::new([
+            lo, lo, lo, lo, lo, lo, lo, lo, hi, hi, hi, hi, hi, hi, hi, hi,
+        ]);
+        let m = (spread & sel).simd_eq(sel);
+        cl.copy_from_slice(&m.bitselect(bg, load(cl)).to_array());
+        ct.copy_from_slice(&m.bitselect(load(n), load(ct)).to_array());
     }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        let _ = (c, left, base, class_bg, class, c_t);
-        false
-    }
+    true
 }
 
 /// The bit-sliced counter of word `w` (zero past the buffer). After

@@ -251,6 +251,19 @@ pub(crate) fn select(m: u64, mut keep: impl FnMut(u32) -> bool) -> u64 {
     out
 }
 
+/// Calls `f(i)` for each set bit `i` of `m`, in increasing order, scanned
+/// in native words ([`WORD`]).
+#[inline(always)]
+pub(crate) fn for_each_bit(m: u64, mut f: impl FnMut(u32)) {
+    for h in 0..64 / WORD {
+        let mut x = (m >> (h * WORD)) as usize;
+        while x != 0 {
+            f((h * WORD) as u32 + x.trailing_zeros());
+            x &= x - 1;
+        }
+    }
+}
+
 /// The counts of all 64 pixels, one per byte (byte `i` is pixel `i`).
 /// On x86-64 an SSE2 transpose (hand-written: no crate transposes bit
 /// matrices in `no_std`): three rounds of byte interleaves put each byte
@@ -392,14 +405,9 @@ mod tests {
     fn a_whole_counter_reads_back_pixel_by_pixel() {
         // Random planes (xorshift), then planes with one bit, one pixel,
         // all ones: each pixel's byte is its count read bit by bit.
-        let mut x = 0x9E37_79B9_7F4A_7C15u64;
-        let mut next = || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            x
-        };
-        let mut cases: [Counter; 300] = core::array::from_fn(|_| core::array::from_fn(|_| next()));
+        let mut rnd = crate::testing::rng(0x9E37_79B9_7F4A_7C15);
+        let mut cases: [Counter; 300] =
+            core::array::from_fn(|_| core::array::from_fn(|_| rnd(u64::MAX)));
         for (k, c) in cases.iter_mut().enumerate().take(64) {
             *c = [0; 8];
             c[k % 8] = 1 << k;
