@@ -457,14 +457,60 @@ fn add_group(group: &[&[u64]], counts: &mut [u64], fresh: bool) {
             slices::csa(&mut a, x0);
             slices::csa(&mut b, x1);
         }
-        let (a, b) = (a.map(|v| v.to_array()), b.map(|v| v.to_array()));
-        for (i, c) in out.chunks_exact_mut(8).enumerate() {
-            let s = if i < 2 { &a } else { &b };
-            let l = i % 2;
-            flush(c, [s[0][l], s[1][l], s[2][l], s[3][l]], fresh);
-        }
+        // Words 0, 1 are `a`'s lanes, 2, 3 `b`'s.
+        const _: () = assert!(BLOCK == 4);
+        let (lo, hi) = out.split_at_mut(16);
+        flush_pair(lo, a, fresh);
+        flush_pair(hi, b, fresh);
     }
     add_words(group, blocks * BLOCK, rest, fresh);
+}
+
+/// [`flush`] of two neighbouring words' counters (`c`: 16 words, the
+/// first word's 8 planes then the second's) from a vector nibble whose
+/// lanes are the two words: one vector full adder per plane instead of
+/// two scalar ones (the flushes were two fifths of the counting).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn flush_pair(c: &mut [u64], s: [wide::u64x2; 4], fresh: bool) {
+    use wide::u64x2;
+    let Ok(c) = <&mut [u64; 16]>::try_from(c) else {
+        return;
+    };
+    let put = |c: &mut [u64; 16], p: usize, v: u64x2| {
+        let [x, y] = v.to_array();
+        c[p] = x;
+        c[8 + p] = y;
+    };
+    if fresh {
+        for (p, &v) in s.iter().enumerate() {
+            put(c, p, v);
+        }
+        for p in 4..8 {
+            put(c, p, u64x2::ZERO);
+        }
+        return;
+    }
+    let any = (s[0] | s[1] | s[2] | s[3]).to_array();
+    if any[0] | any[1] == 0 {
+        return;
+    }
+    let mut carry = u64x2::ZERO;
+    for (p, &v) in s.iter().enumerate() {
+        let cb = u64x2::new([c[p], c[8 + p]]);
+        let x = cb ^ v;
+        put(c, p, x ^ carry);
+        carry = (cb & v) | (carry & x);
+    }
+    for p in 4..8 {
+        let k = carry.to_array();
+        if k[0] | k[1] == 0 {
+            break;
+        }
+        let cb = u64x2::new([c[p], c[8 + p]]);
+        put(c, p, cb ^ carry);
+        carry &= cb;
+    }
 }
 
 /// Adds a carry-save nibble to a word's counter (`c`, 8 words), or sets
