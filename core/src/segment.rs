@@ -636,6 +636,15 @@ impl Level<'_> {
     fn b_low(&self, j: usize, width: usize) -> u32 {
         let a = (128 * j + 17) >> 5;
         let e = ((2 * (64 * j + 63).min(width - 1) + 17) >> 5) + 1;
+        // A whole word blends tiles 4j ..= 4j + 5: a fixed six, compared
+        // without a loop.
+        if e == a + 5 {
+            if let Some(t) = self.bg.get(a..a + 6) {
+                if let Ok(&[t0, t1, t2, t3, t4, t5]) = <&[u32; 6]>::try_from(t) {
+                    return 32 * t0.min(t1).min(t2).min(t3).min(t4).min(t5);
+                }
+            }
+        }
         let tiles = self.bg.get(a..=e).unwrap_or_default();
         32 * tiles.iter().copied().min().unwrap_or(0)
     }
