@@ -140,6 +140,22 @@ impl<'a> History<'a> {
         matches!((self.oldest(), self.newest()), (Some(o), Some(n)) if tick >= o && tick <= n)
     }
 
+    /// The planes of ticks `t0..t0 + n` side by side (plane `i` at words
+    /// `i·len..(i + 1)·len`, `len` a plane's words), when every one is held
+    /// and their slots do not wrap around the ring; else `None`.
+    pub(crate) fn run(&self, t0: u32, n: u32) -> Option<&[u64]> {
+        let last = t0.checked_add(n.checked_sub(1)?)?;
+        if !self.holds(t0) || !self.holds(last) {
+            return None;
+        }
+        let s = t0 % u32::from(self.depth);
+        if s + n > u32::from(self.depth) {
+            return None;
+        }
+        let len = self.slot_len();
+        self.buf.get(s as usize * len..(s + n) as usize * len)
+    }
+
     /// Words of band row `row` (0-based in the band) at `tick`; an empty
     /// slice when the tick is not held or the row is outside the band.
     #[inline]

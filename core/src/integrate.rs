@@ -23,7 +23,7 @@ use crate::params::Params;
 use crate::region::Region;
 use crate::slices::{self, Counter};
 use crate::state::Workspace;
-use crate::window::Window;
+use crate::window::{Span, Window};
 
 /// The two integers that fix a region's SNR at one window, up to a positive
 /// factor shared by all windows of that region:
@@ -253,8 +253,7 @@ fn variance_approx(b: u64, nrf: f32, p: &Params) -> f32 {
 /// half ([`narrowed`]), counted by [`POP8`] lookups.
 #[inline(always)]
 fn sum_cells<const N: usize, const RING_ONLY: bool, const HALF: bool, const NARROW: bool>(
-    planes: &[&[u64]],
-    start: u32,
+    span: &Span<'_>,
     (word, plain): (&impl Fn(&[u64], u32, &Cell) -> u64, bool),
     cells: &[Cell],
     ps: &mut [u32; 256],
@@ -273,9 +272,10 @@ fn sum_cells<const N: usize, const RING_ONLY: bool, const HALF: bool, const NARR
     // and the choice between the windowed and the per-cell reads made once
     // per batch, not per tick: the per-tick overhead was half the work of
     // a small batch.
+    let start = span.start;
+    let planes = span.planes();
     let n = planes.len().min(255);
     let planes = &planes[..n];
-    let sums = ps[1..=n].iter_mut().zip(pb[1..=n].iter_mut());
     if plain {
         // The window's end checked once, so its length is known in the
         // loop; a batch whose window would wrap reads its cells one by one.
@@ -283,6 +283,30 @@ fn sum_cells<const N: usize, const RING_ONLY: bool, const HALF: bool, const NARR
             .checked_add(NEAR)
             .filter(|_| near)
             .map(|end| (base, end, &offs));
+        let runs = span.runs();
+        if let (Some(window), true) = (window, runs.stride > 0) {
+            // The held planes run by run, stepping a pointer (the ticks
+            // not held add nothing).
+            for &(o, run) in &runs.runs {
+                let (Some(s), Some(b)) = (ps.get_mut(1 + o..=n), pb.get_mut(1 + o..=n)) else {
+                    continue;
+                };
+                let sums = s.iter_mut().zip(b.iter_mut());
+                if HALF {
+                    run_sums::<u32, N, RING_ONLY, NARROW>(
+                        run,
+                        2 * runs.stride,
+                        cells,
+                        window,
+                        sums,
+                    );
+                } else {
+                    run_sums::<u64, N, RING_ONLY, false>(run, runs.stride, cells, window, sums);
+                }
+            }
+            return;
+        }
+        let sums = ps[1..=n].iter_mut().zip(pb[1..=n].iter_mut());
         if HALF {
             plain_sums::<u32, N, RING_ONLY, NARROW>(planes, cells, window, sums);
         } else {
@@ -290,6 +314,7 @@ fn sum_cells<const N: usize, const RING_ONLY: bool, const HALF: bool, const NARR
         }
         return;
     }
+    let sums = ps[1..=n].iter_mut().zip(pb[1..=n].iter_mut());
     for (i, (plane, (s, b))) in planes.iter().zip(sums).enumerate() {
         let t = start + i as u32;
         let (mut hs, mut hb) = (0u32, 0u32);
@@ -341,6 +366,72 @@ impl Lane for u32 {
     }
 }
 
+/// Adds a cell's spikes in lane `w` to the tick's sums `(region, ring)`.
+#[inline(always)]
+fn add_cell<W: Lane, const RING_ONLY: bool, const NARROW: bool>(
+    (hs, hb): &mut (u32, u32),
+    w: W,
+    c: &Cell,
+) {
+    if NARROW {
+        // The cell's byte of the half, looked up.
+        let x = w.low32() >> (c.sh & 31);
+        *hb += u32::from(POP8[usize::from(x as u8 & c.ring as u8)]);
+        if !RING_ONLY {
+            *hs += u32::from(POP8[usize::from(x as u8 & c.reg as u8)]);
+        }
+        return;
+    }
+    *hb += (w & W::mask(c.ring)).ones();
+    if !RING_ONLY {
+        *hs += (w & W::mask(c.reg)).ones();
+    }
+}
+
+/// A tick's sums of `cells` read one by one from `plane` (lanes `W`).
+#[inline(always)]
+fn cell_by_cell<W: Lane, const N: usize, const RING_ONLY: bool, const NARROW: bool>(
+    h: &mut (u32, u32),
+    plane: &[W],
+    cells: &[Cell; N],
+) {
+    for c in cells {
+        add_cell::<W, RING_ONLY, NARROW>(h, plane.get(c.at).copied().unwrap_or_else(W::zeroed), c);
+    }
+}
+
+/// A tick's sums of `cells` read through one `NEAR`-lane window of
+/// `plane` (first lane `base`, end `end`, each cell's offset in `offs`),
+/// or one by one where the plane does not hold the window.
+#[inline(always)]
+fn window_sums<W: Lane, const N: usize, const RING_ONLY: bool, const NARROW: bool>(
+    h: &mut (u32, u32),
+    plane: &[W],
+    cells: &[Cell; N],
+    (base, end, offs): (usize, usize, &[usize; N]),
+) {
+    match plane
+        .get(base..end)
+        .and_then(|s| <&[W; NEAR]>::try_from(s).ok())
+    {
+        Some(win) => {
+            for (c, &o) in cells.iter().zip(offs) {
+                add_cell::<W, RING_ONLY, NARROW>(h, win[o % NEAR], c);
+            }
+        }
+        None => cell_by_cell::<W, N, RING_ONLY, NARROW>(h, plane, cells),
+    }
+}
+
+/// Adds a tick's sums `h` to its entries `(s, b)`.
+#[inline(always)]
+fn put<const RING_ONLY: bool>((s, b): (&mut u32, &mut u32), h: (u32, u32)) {
+    if !RING_ONLY {
+        *s += h.0;
+    }
+    *b += h.1;
+}
+
 /// [`sum_cells`] of plain cells, the planes read as lanes `W` (`at`
 /// indexes them): through one `NEAR`-lane `window` (first lane, end and
 /// each cell's offset) when the batch has one, else cell by cell.
@@ -351,55 +442,33 @@ fn plain_sums<'a, W: Lane, const N: usize, const RING_ONLY: bool, const NARROW: 
     window: Option<(usize, usize, &[usize; N])>,
     sums: impl Iterator<Item = (&'a mut u32, &'a mut u32)>,
 ) {
-    let add = |(hs, hb): &mut (u32, u32), w: W, c: &Cell| {
-        if NARROW {
-            // The cell's byte of the half, looked up.
-            let x = w.low32() >> (c.sh & 31);
-            *hb += u32::from(POP8[usize::from(x as u8 & c.ring as u8)]);
-            if !RING_ONLY {
-                *hs += u32::from(POP8[usize::from(x as u8 & c.reg as u8)]);
-            }
-            return;
-        }
-        *hb += (w & W::mask(c.ring)).ones();
-        if !RING_ONLY {
-            *hs += (w & W::mask(c.reg)).ones();
-        }
-    };
-    let cell_by_cell = |h: &mut (u32, u32), plane: &[W]| {
-        for c in cells {
-            add(h, plane.get(c.at).copied().unwrap_or_else(W::zeroed), c);
-        }
-    };
-    let put = |(s, b): (&mut u32, &mut u32), h: (u32, u32)| {
-        if !RING_ONLY {
-            *s += h.0;
-        }
-        *b += h.1;
-    };
-    let Some((base, end, offs)) = window else {
-        for (plane, sb) in planes.iter().zip(sums) {
-            let mut h = (0, 0);
-            cell_by_cell(&mut h, bytemuck::cast_slice(plane));
-            put(sb, h);
-        }
-        return;
-    };
     for (plane, sb) in planes.iter().zip(sums) {
         let plane: &[W] = bytemuck::cast_slice(plane);
         let mut h = (0, 0);
-        match plane
-            .get(base..end)
-            .and_then(|s| <&[W; NEAR]>::try_from(s).ok())
-        {
-            Some(win) => {
-                for (c, &o) in cells.iter().zip(offs) {
-                    add(&mut h, win[o % NEAR], c);
-                }
-            }
-            None => cell_by_cell(&mut h, plane),
+        match window {
+            Some(window) => window_sums::<W, N, RING_ONLY, NARROW>(&mut h, plane, cells, window),
+            None => cell_by_cell::<W, N, RING_ONLY, NARROW>(&mut h, plane, cells),
         }
-        put(sb, h);
+        put::<RING_ONLY>(sb, h);
+    }
+}
+
+/// [`plain_sums`] through a batch's `window` over one run of planes side
+/// by side ([`crate::window::Runs`]), `stride` lanes `W` each: the loop
+/// steps a pointer instead of reading each plane's slice.
+#[inline(always)]
+fn run_sums<'a, W: Lane, const N: usize, const RING_ONLY: bool, const NARROW: bool>(
+    run: &[u64],
+    stride: usize,
+    cells: &[Cell; N],
+    window: (usize, usize, &[usize; N]),
+    sums: impl Iterator<Item = (&'a mut u32, &'a mut u32)>,
+) {
+    let lanes: &[W] = bytemuck::cast_slice(run);
+    for (plane, sb) in lanes.chunks_exact(stride.max(1)).zip(sums) {
+        let mut h = (0, 0);
+        window_sums::<W, N, RING_ONLY, NARROW>(&mut h, plane, cells, window);
+        put::<RING_ONLY>(sb, h);
     }
 }
 
@@ -408,15 +477,14 @@ fn plain_sums<'a, W: Lane, const N: usize, const RING_ONLY: bool, const NARROW: 
 /// fours, twos and ones. `RING_ONLY`: the cells have no region pixels, so
 /// only the ring's sums are taken (one popcount per cell and tick).
 fn sum_all<const RING_ONLY: bool, const HALF: bool>(
-    planes: &[&[u64]],
-    start: u32,
+    span: &Span<'_>,
     word: (&impl Fn(&[u64], u32, &Cell) -> u64, bool),
     cells: &mut [Cell],
     ps: &mut [u32; 256],
     pb: &mut [u32; 256],
 ) {
     if !(HALF && word.1) {
-        return sum_kind::<RING_ONLY, HALF, false>(planes, start, word, cells, ps, pb);
+        return sum_kind::<RING_ONLY, HALF, false>(span, word, cells, ps, pb);
     }
     // Narrow halves first, then the others (the sums do not depend on
     // the cells' order).
@@ -428,8 +496,8 @@ fn sum_all<const RING_ONLY: bool, const HALF: bool>(
         }
     }
     let (narrow, wide) = cells.split_at(k);
-    sum_kind::<RING_ONLY, true, true>(planes, start, word, narrow, ps, pb);
-    sum_kind::<RING_ONLY, true, false>(planes, start, word, wide, ps, pb);
+    sum_kind::<RING_ONLY, true, true>(span, word, narrow, ps, pb);
+    sum_kind::<RING_ONLY, true, false>(span, word, wide, ps, pb);
 }
 
 /// [`sum_all`] of cells of one kind (`NARROW`: all narrow halves).
@@ -437,8 +505,7 @@ fn sum_all<const RING_ONLY: bool, const HALF: bool>(
 /// instructions per pixel more; kept apart, the Cortex-M4's 2.7 more.
 #[cfg_attr(target_pointer_width = "64", inline(never))]
 fn sum_kind<const RING_ONLY: bool, const HALF: bool, const NARROW: bool>(
-    planes: &[&[u64]],
-    start: u32,
+    span: &Span<'_>,
     word: (&impl Fn(&[u64], u32, &Cell) -> u64, bool),
     cells: &[Cell],
     ps: &mut [u32; 256],
@@ -451,7 +518,7 @@ fn sum_kind<const RING_ONLY: bool, const HALF: bool, const NARROW: bool>(
     macro_rules! batches {
         ($($n:literal),*) => {$(
             while rest.len() >= $n {
-                sum_cells::<$n, RING_ONLY, HALF, NARROW>(planes, start, word, &rest[..$n], ps, pb);
+                sum_cells::<$n, RING_ONLY, HALF, NARROW>(span, word, &rest[..$n], ps, pb);
                 rest = &rest[$n..];
             }
         )*};
@@ -707,20 +774,20 @@ fn adapt_with<const HALF: bool>(
             for cell in parts(cell, HALF).into_iter().flatten() {
                 if cell.reg == 0 {
                     if rings.push(cell).is_err() {
-                        sum_all::<true, HALF>(planes, span.start, w, &mut rings, &mut ps, &mut pb);
+                        sum_all::<true, HALF>(span, w, &mut rings, &mut ps, &mut pb);
                         rings.clear();
                         rings.push(cell).ok();
                     }
                 } else if cells.push(cell).is_err() {
-                    sum_all::<false, HALF>(planes, span.start, w, &mut cells, &mut ps, &mut pb);
+                    sum_all::<false, HALF>(span, w, &mut cells, &mut ps, &mut pb);
                     cells.clear();
                     cells.push(cell).ok();
                 }
             }
         }
     }
-    sum_all::<false, HALF>(planes, span.start, w, &mut cells, &mut ps, &mut pb);
-    sum_all::<true, HALF>(planes, span.start, w, &mut rings, &mut ps, &mut pb);
+    sum_all::<false, HALF>(span, w, &mut cells, &mut ps, &mut pb);
+    sum_all::<true, HALF>(span, w, &mut rings, &mut ps, &mut pb);
     // ps[i + 1] = spikes of ticks span.start .. span.start + i + 1
     let n = planes.len().min(255);
     let (mut rs, mut rb) = (0u32, 0u32);
@@ -946,6 +1013,7 @@ pub fn region_table(reg: &Region, p: &Params, full_scale: u16, out: &mut [u16; 2
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::history::History;
 
     /// The search as SPEC 5 reads it: every doubling window, then every
     /// integer of [n/2, 2n] in order, by the exact comparison alone.
@@ -1236,6 +1304,25 @@ mod tests {
                 })
                 .collect();
             let refs: std::vec::Vec<&[u64]> = planes.iter().map(|p| p.as_slice()).collect();
+            // The planes also in a history's ring (512 x 50 px, 400 words
+            // a plane) of their number's depth, after `extra` empty ones
+            // so that the ring wraps.
+            let extra = rnd(ticks as u64) as usize;
+            let (wd, ht, depth) = (512u16, 50u16, ticks as u16);
+            let mut hbuf = std::vec![0u64; History::words_needed(wd, ht, depth).unwrap()];
+            let mut hist = History::new(&mut hbuf, wd, ht, 0, ht, depth).unwrap();
+            let empty = std::vec![0u64; words];
+            for p in std::iter::repeat_n(&empty, extra).chain(&planes) {
+                let bytes: std::vec::Vec<u8> = p.iter().flat_map(|w| w.to_le_bytes()).collect();
+                hist.push(&crate::plane::PlaneView::new(&bytes, wd, ht).unwrap())
+                    .unwrap();
+            }
+            let held = Window {
+                start: extra as u32,
+                len: depth,
+                nominal: depth,
+            };
+            assert_eq!(Span::new(&hist, held).planes(), &refs[..]);
             let n = 1 + rnd(40) as usize;
             let spread = if case % 2 == 0 { 40 } else { words as u64 };
             // Narrow masks (a byte's span anywhere, across the halves'
@@ -1284,16 +1371,25 @@ mod tests {
                 }
                 let (mut regs, mut rings): (std::vec::Vec<Cell>, std::vec::Vec<Cell>) =
                     parts.iter().partition(|c| c.reg != 0);
-                let (mut ps, mut pb) = ([0u32; 256], [0u32; 256]);
                 let w = (&word, true);
-                if half {
-                    sum_all::<false, true>(&refs, 0, w, &mut regs, &mut ps, &mut pb);
-                    sum_all::<true, true>(&refs, 0, w, &mut rings, &mut ps, &mut pb);
-                } else {
-                    sum_all::<false, false>(&refs, 0, w, &mut regs, &mut ps, &mut pb);
-                    sum_all::<true, false>(&refs, 0, w, &mut rings, &mut ps, &mut pb);
+                // The planes as slices, and as a history's ring (runs of
+                // slots, wrapping where `extra` planes came first).
+                for span in [Span::from_planes(0, &refs), Span::new(&hist, held)] {
+                    let (mut ps, mut pb) = ([0u32; 256], [0u32; 256]);
+                    if half {
+                        sum_all::<false, true>(&span, w, &mut regs, &mut ps, &mut pb);
+                        sum_all::<true, true>(&span, w, &mut rings, &mut ps, &mut pb);
+                    } else {
+                        sum_all::<false, false>(&span, w, &mut regs, &mut ps, &mut pb);
+                        sum_all::<true, false>(&span, w, &mut rings, &mut ps, &mut pb);
+                    }
+                    let kind = if span.runs().stride > 0 {
+                        "runs"
+                    } else {
+                        "slices"
+                    };
+                    assert_eq!((ps, pb), (es, eb), "case {case}, halves {half}, {kind}");
                 }
-                assert_eq!((ps, pb), (es, eb), "case {case}, halves {half}");
             }
         }
         // The halves took the narrow path often.

@@ -67,6 +67,55 @@ pub struct Span<'h> {
     /// First tick.
     pub start: u32,
     planes: heapless::Vec<&'h [u64], 256>,
+    runs: Runs<'h>,
+}
+
+/// The held planes of a [`Span`] as they lie in the history's ring: at
+/// most two runs of consecutive slots, each `(offset of its first plane
+/// in the span, its planes side by side)`, every plane `stride` words.
+/// A loop over a run's planes steps a pointer by `stride` instead of
+/// reading each plane's slice (issue 18: the regions' per-tick sums).
+/// Empty when the runs would not be exactly the held planes.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct Runs<'h> {
+    pub(crate) runs: [(usize, &'h [u64]); 2],
+    /// Words per plane (at least 1 where there is a run).
+    pub(crate) stride: usize,
+}
+
+impl<'h> Runs<'h> {
+    /// The runs of `planes` (ticks from `start`), or none.
+    fn new(hist: &'h History<'_>, start: u32, planes: &[&'h [u64]]) -> Runs<'h> {
+        let Some(a) = planes.iter().position(|p| !p.is_empty()) else {
+            return Runs::default();
+        };
+        let e = planes.len() - planes.iter().rev().position(|p| !p.is_empty()).unwrap_or(0);
+        let stride = planes[a].len();
+        let n = (e - a) as u32;
+        let depth = u32::from(hist.depth());
+        let Some(t0) = start.checked_add(a as u32).filter(|_| depth > 0) else {
+            return Runs::default();
+        };
+        let first = n.min(depth - t0 % depth);
+        let mut runs = [(a, &[][..]), (a + first as usize, &[][..])];
+        let second = t0.saturating_add(first);
+        for (i, (t, k)) in [(t0, first), (second, n - first)].into_iter().enumerate() {
+            if k == 0 {
+                continue;
+            }
+            match hist.run(t, k) {
+                Some(r) => runs[i].1 = r,
+                None => return Runs::default(),
+            }
+        }
+        // Exactly the held planes, each `stride` words (a hole or a plane
+        // of another length would be summed wrongly).
+        let held = planes[a..e].iter().all(|p| p.len() == stride);
+        if !held || runs[0].1.len() + runs[1].1.len() != (e - a) * stride {
+            return Runs::default();
+        }
+        Runs { runs, stride }
+    }
 }
 
 impl<'h> Span<'h> {
@@ -78,10 +127,28 @@ impl<'h> Span<'h> {
                 break;
             }
         }
+        let runs = Runs::new(hist, win.start, &planes);
         Span {
             start: win.start,
             planes,
+            runs,
         }
+    }
+
+    /// A span of `planes` from tick `start`, without runs (its sums read
+    /// plane by plane).
+    #[cfg(test)]
+    pub(crate) fn from_planes(start: u32, planes: &[&'h [u64]]) -> Span<'h> {
+        Span {
+            start,
+            planes: planes.iter().copied().take(256).collect(),
+            runs: Runs::default(),
+        }
+    }
+
+    /// The held planes as runs of ring slots ([`Runs`]).
+    pub(crate) fn runs(&self) -> &Runs<'h> {
+        &self.runs
     }
 
     /// The planes of ticks `a..e` (clipped to the span).
@@ -373,5 +440,43 @@ mod tests {
         assert_eq!(out[2 * 72 + 65], 64); // spikes at 8 and 12: isi 4
         assert_eq!(out[0], 255); // isi 1
         assert_eq!(out[1], 16); // no spikes: isi = n_max = 16
+    }
+
+    /// A span's runs are its held planes in order, whatever the ring's
+    /// wrap and the window's clipping: every window of a history of
+    /// depth 8 over 3..21 pushed planes (tick `t` has pixel `t` set).
+    #[test]
+    fn span_runs_are_the_held_planes() {
+        let (w, h) = (64u16, 1u16);
+        for pushed in 3..21u32 {
+            let mut buf = [0u64; 8];
+            let mut hist = History::new(&mut buf, w, h, 0, 1, 8).unwrap();
+            for t in 0..pushed {
+                let bytes = (1u64 << t).to_le_bytes();
+                hist.push(&PlaneView::new(&bytes, w, h).unwrap()).unwrap();
+            }
+            for start in 0..pushed + 4 {
+                for len in 0..12u16 {
+                    let win = Window {
+                        start,
+                        len,
+                        nominal: len,
+                    };
+                    let span = Span::new(&hist, win);
+                    let runs = span.runs();
+                    let mut from_runs = std::vec![None; span.planes().len()];
+                    for &(o, run) in &runs.runs {
+                        for (i, p) in run.chunks_exact(runs.stride.max(1)).enumerate() {
+                            from_runs[o + i] = Some(p[0]);
+                        }
+                    }
+                    let want: std::vec::Vec<_> =
+                        span.planes().iter().map(|p| p.first().copied()).collect();
+                    assert_eq!(from_runs, want, "pushed {pushed}, window {start}+{len}");
+                    let held = want.iter().filter(|p| p.is_some()).count();
+                    assert_eq!(runs.stride, usize::from(held > 0));
+                }
+            }
+        }
     }
 }
