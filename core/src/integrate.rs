@@ -196,6 +196,11 @@ impl Scored {
     #[cold]
     #[inline(never)]
     fn greater_exact(&self, o: &Scored, np: u32, nr: u32, p: &Params) -> bool {
+        // The same sums (a tick without spikes between two windows): the
+        // same SNR. The usual near tie, settled without the products.
+        if (self.s, self.b) == (o.s, o.b) {
+            return false;
+        }
         let (a, b) = (
             snr_terms(self.s, self.b, np, nr, p),
             snr_terms(o.s, o.b, np, nr, p),
