@@ -153,13 +153,21 @@ impl Thresholds {
     /// counts: every one the core makes).
     #[inline]
     pub fn is_particle(&self, c: u8, b_q10: u32, p: &Params) -> bool {
+        b_q10 < self.bound(c, p)
+    }
+
+    /// The background (1/1024 count) count `c` is particle below:
+    /// [`Thresholds::is_particle`]`(c, b)` ⟺ `b < bound(c)`. Found on first
+    /// use, then kept.
+    #[inline]
+    pub fn bound(&self, c: u8, p: &Params) -> u32 {
         let cell = &self.bound[usize::from(c)];
         let mut bound = cell.get();
         if bound == UNKNOWN {
             bound = self.find_bound(c, p);
             cell.set(bound);
         }
-        b_q10 < bound
+        bound
     }
 
     /// The background count `c` is particle below: it passes at the start

@@ -634,6 +634,14 @@ impl Level<'_> {
     /// tile centres, so its least value is that of a tile it blends.
     #[inline]
     fn b_low(&self, j: usize, width: usize) -> u32 {
+        self.b_range(j, width).0
+    }
+
+    /// The lowest and the highest background of the columns of word `j`
+    /// ([`Level::b_low`]): every [`Level::b_at`] of the word lies between
+    /// them. `(0, u32::MAX)` if the row does not hold the word's tiles.
+    #[inline]
+    fn b_range(&self, j: usize, width: usize) -> (u32, u32) {
         let a = (128 * j + 17) >> 5;
         let e = ((2 * (64 * j + 63).min(width - 1) + 17) >> 5) + 1;
         // A whole word blends tiles 4j ..= 4j + 5: a fixed six, compared
@@ -641,12 +649,20 @@ impl Level<'_> {
         if e == a + 5 {
             if let Some(t) = self.bg.get(a..a + 6) {
                 if let Ok(&[t0, t1, t2, t3, t4, t5]) = <&[u32; 6]>::try_from(t) {
-                    return 32 * t0.min(t1).min(t2).min(t3).min(t4).min(t5);
+                    let lo = t0.min(t1).min(t2).min(t3).min(t4).min(t5);
+                    let hi = t0.max(t1).max(t2).max(t3).max(t4).max(t5);
+                    return (32 * lo, 32 * hi);
                 }
             }
         }
-        let tiles = self.bg.get(a..=e).unwrap_or_default();
-        32 * tiles.iter().copied().min().unwrap_or(0)
+        match self.bg.get(a..=e) {
+            Some(tiles) if !tiles.is_empty() => {
+                let lo = tiles.iter().copied().min().unwrap_or(0);
+                let hi = tiles.iter().copied().max().unwrap_or(0);
+                (32 * lo, 32 * hi)
+            }
+            _ => (0, u32::MAX),
+        }
     }
 }
 
@@ -958,7 +974,8 @@ fn words_plain(
         let c = counter(ws.counts, w);
         let jw = w - r * wpr;
         let base = r * width + 64 * jw;
-        let tp = u32::from(th.min_count(lv.b_low(jw, width)));
+        let range = lv.b_range(jw, width);
+        let tp = u32::from(th.min_count(range.0));
         let maybe = a0 & slices::at_least_live(c, tp, lv.live);
         let sat = a0 & !maybe & slices::at_least_live(c, lv.sat_c, lv.live);
         let mut done = 0u64;
@@ -975,7 +992,7 @@ fn words_plain(
             maybe,
             lv,
             (th, p),
-            64 * jw,
+            (64 * jw, range),
             (class.unwrap_or_default(), c_t.unwrap_or_default()),
         );
         stats.particle_pixels += part_bits.count_ones();
@@ -991,17 +1008,18 @@ fn words_plain(
 }
 
 /// The plain particle test of the candidates `cand` of a word (counters
-/// `c`, first column `x0`; `class` and `c_t` from its first pixel): a
-/// byte group's counts read out of the bit planes once, each candidate
-/// tested against the background at its column; particles and saturated
-/// pixels get their class byte and count. Returns both as bits. Kept apart
-/// from the compensated test so its loop holds only what it needs.
+/// `c`, first column `x0`, backgrounds within `(lo, hi)` ([`Level::b_range`]);
+/// `class` and `c_t` from its first pixel): a byte group's counts read
+/// out of the bit planes once, each candidate tested against the
+/// background at its column; particles and saturated pixels get their
+/// class byte and count. Returns both as bits. Kept apart from the
+/// compensated test so its loop holds only what it needs.
 fn test_plain(
     c: &Counter,
     cand: u64,
     lv: &Level<'_>,
     (th, p): (&Thresholds, &Params),
-    x0: usize,
+    (x0, (lo, hi)): (usize, (u32, u32)),
     (class, c_t): (&mut [u8], &mut [u8]),
 ) -> (u64, u64) {
     let (mut part, mut sat) = (0u64, 0u64);
@@ -1016,7 +1034,12 @@ fn test_plain(
             m &= m - 1;
             let i = (h * slices::WORD) as u32 + b;
             let cp = counts.count(i);
-            let decided = if th.is_particle(cp, lv.b_at(x0 + i as usize), p) {
+            // Particle exactly below the count's bound: a bound above the
+            // word's highest background or at most its lowest decides
+            // without the column's background.
+            let bound = th.bound(cp, p);
+            let particle = bound > hi || (bound > lo && lv.b_at(x0 + i as usize) < bound);
+            let decided = if particle {
                 ph |= 1 << b;
                 lv.decided.0
             } else if u32::from(cp) >= lv.sat_c {
