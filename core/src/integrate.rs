@@ -696,11 +696,13 @@ fn adapt_with<const HALF: bool>(
     let (regm, rest) = rest.split_at_mut(plane);
     let ring = &mut rest[..plane];
     // Region bits: of the pixels some region took ("any"), those labelled
-    // with this one (only they are read, not the whole bounding box).
+    // with this one (only they are read, not the whole bounding box). A
+    // run of a row's "any" pixels is connected, so all of one region: its
+    // first pixel's label answers for it.
     for r in rr0..rr1 {
         for j in b.j0..=b.j1 {
             let base = r * width + 64 * j;
-            regm[r * wpr + j] = slices::select(any[r * wpr + j], |bit| {
+            regm[r * wpr + j] = slices::select_runs(any[r * wpr + j], |bit| {
                 ws.labels.get(base + bit as usize) == Some(&id)
             });
         }

@@ -219,32 +219,30 @@ pub fn bytes8(c: &Counter, g: u32) -> [u8; 8] {
 /// instructions.
 pub(crate) const WORD: usize = usize::BITS as usize;
 
-/// The bits `i` of `m` for which `keep(i)` holds, asked in increasing
-/// order, scanned in native words ([`WORD`]).
+/// The runs of set bits of `m` (within a native word, [`WORD`]) whose
+/// first bit `i` has `keep(i)`, asked in increasing order: for a mask
+/// whose runs each share one answer (a row's pixels of one region), one
+/// question per run instead of one per bit.
 #[inline(always)]
-pub(crate) fn select(m: u64, mut keep: impl FnMut(u32) -> bool) -> u64 {
+pub(crate) fn select_runs(m: u64, mut keep: impl FnMut(u32) -> bool) -> u64 {
     let mut out = 0u64;
-    #[cfg(target_pointer_width = "64")]
-    {
-        let mut x = m;
-        while x != 0 {
-            let b = x.trailing_zeros();
-            x &= x - 1;
-            if keep(b) {
-                out |= 1 << b;
-            }
-        }
-    }
-    #[cfg(not(target_pointer_width = "64"))]
     for h in 0..64 / WORD {
         let mut x = (m >> (h * WORD)) as usize;
         let mut kept = 0usize;
         while x != 0 {
-            let b = x.trailing_zeros();
-            x &= x - 1;
-            if keep((h * WORD) as u32 + b) {
-                kept |= 1 << b;
+            let s = x.trailing_zeros();
+            // The run's length: the ones from `s` up (all of them when
+            // the word is all ones).
+            let len = (!(x >> s)).trailing_zeros();
+            let run = if len as usize >= WORD {
+                usize::MAX
+            } else {
+                ((1usize << len) - 1) << s
+            };
+            if keep((h * WORD) as u32 + s) {
+                kept |= run;
             }
+            x &= !run;
         }
         out |= (kept as u64) << (h * WORD);
     }
@@ -400,6 +398,58 @@ pub fn low_bits(n: usize) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Runs selected by their first bit equal bits selected one by one
+    /// when every run shares one answer: random masks (runs of every
+    /// length, across the halves' boundary, a word all ones) with a
+    /// random answer per run.
+    #[test]
+    fn runs_select_like_their_bits() {
+        let mut rnd = crate::testing::rng(0x2545_f491_4f6c_dd1d);
+        let mut masks: std::vec::Vec<u64> = (0..2000)
+            .map(|i| match i % 4 {
+                0 => rnd(u64::MAX),
+                1 => rnd(u64::MAX) & rnd(u64::MAX),
+                2 => rnd(u64::MAX) | rnd(u64::MAX),
+                _ => low_bits(rnd(65) as usize) << rnd(64),
+            })
+            .collect();
+        masks.extend([
+            0,
+            u64::MAX,
+            1,
+            1 << 63,
+            0xffff_ffff_0000_0000,
+            0x0000_0001_8000_0000,
+        ]);
+        for m in masks {
+            // A run's answer: a label per bit, the same along each run.
+            let mut label = [0u64; 64];
+            let mut cur = rnd(u64::MAX);
+            for (i, l) in label.iter_mut().enumerate() {
+                if i == 0 || (m >> (i - 1)) & 1 == 0 {
+                    cur = rnd(2);
+                }
+                *l = cur;
+            }
+            let mut asked = 0u32;
+            let got = select_runs(m, |i| {
+                asked += 1;
+                label[i as usize] == 1
+            });
+            let want = (0..64).fold(0u64, |w, i| {
+                w | (u64::from((m >> i) & 1 == 1 && label[i] == 1) << i)
+            });
+            assert_eq!(got, want, "{m:#x}");
+            // One question per run (a run across the halves is two on a
+            // 32-bit core).
+            let runs = (m & !(m << 1)).count_ones();
+            assert!(
+                asked >= runs && asked <= runs + 1,
+                "{m:#x}: {asked} for {runs}"
+            );
+        }
+    }
 
     #[test]
     fn a_whole_counter_reads_back_pixel_by_pixel() {
