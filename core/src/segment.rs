@@ -977,28 +977,36 @@ fn words_plain(
         let range = lv.b_range(jw, width);
         let tp = u32::from(th.min_count(range.0));
         let maybe = a0 & slices::at_least_live(c, tp, lv.live);
-        let sat = a0 & !maybe & slices::at_least_live(c, lv.sat_c, lv.live);
+        // The rest saturate or wait (no compare when there is no rest).
+        let rest = a0 & !maybe;
+        let sat = if rest == 0 {
+            0
+        } else {
+            rest & slices::at_least_live(c, lv.sat_c, lv.live)
+        };
         let mut done = 0u64;
         if sat != 0 {
             background_rest(c, sat, base, lv.decided.1, ws.class, ws.c_t);
             stats.saturated_pixels += sat.count_ones();
             done = sat;
         }
-        let end = base + 64;
-        let class = ws.class.get_mut(base..end.min(ws.class.len()));
-        let c_t = ws.c_t.get_mut(base..end.min(ws.c_t.len()));
-        let (part_bits, sat) = test_plain(
-            c,
-            maybe,
-            lv,
-            (th, p),
-            (64 * jw, range),
-            (class.unwrap_or_default(), c_t.unwrap_or_default()),
-        );
-        stats.particle_pixels += part_bits.count_ones();
-        stats.saturated_pixels += sat.count_ones();
-        ws.masks[words + w] |= part_bits;
-        done |= part_bits | sat;
+        if maybe != 0 {
+            let end = base + 64;
+            let class = ws.class.get_mut(base..end.min(ws.class.len()));
+            let c_t = ws.c_t.get_mut(base..end.min(ws.c_t.len()));
+            let (part_bits, sat) = test_plain(
+                c,
+                maybe,
+                lv,
+                (th, p),
+                (64 * jw, range),
+                (class.unwrap_or_default(), c_t.unwrap_or_default()),
+            );
+            stats.particle_pixels += part_bits.count_ones();
+            stats.saturated_pixels += sat.count_ones();
+            ws.masks[words + w] |= part_bits;
+            done |= part_bits | sat;
+        }
         if lv.last {
             background_rest(c, a & !done, base, lv.decided.1, ws.class, ws.c_t);
             done = a;
