@@ -140,20 +140,25 @@ impl<'a> History<'a> {
         matches!((self.oldest(), self.newest()), (Some(o), Some(n)) if tick >= o && tick <= n)
     }
 
-    /// The planes of ticks `t0..t0 + n` side by side (plane `i` at words
-    /// `i·len..(i + 1)·len`, `len` a plane's words), when every one is held
-    /// and their slots do not wrap around the ring; else `None`.
-    pub(crate) fn run(&self, t0: u32, n: u32) -> Option<&[u64]> {
+    /// The planes of ticks `t0..t0 + n` as they lie in the ring: at most
+    /// two runs of consecutive slots, each its planes side by side (plane
+    /// `i` at words `i·len..(i + 1)·len`, `len` a plane's words), the first
+    /// holding the ticks up to the ring's end and the second, empty unless
+    /// the ticks wrap, the rest. `None` unless every tick is held.
+    pub(crate) fn runs(&self, t0: u32, n: u32) -> Option<[&[u64]; 2]> {
         let last = t0.checked_add(n.checked_sub(1)?)?;
         if !self.holds(t0) || !self.holds(last) {
             return None;
         }
-        let s = t0 % u32::from(self.depth);
-        if s + n > u32::from(self.depth) {
+        let depth = u32::from(self.depth);
+        if depth == 0 {
             return None;
         }
+        let s = t0 % depth;
+        let first = n.min(depth - s);
         let len = self.slot_len();
-        self.buf.get(s as usize * len..(s + n) as usize * len)
+        let slots = |a: u32, k: u32| self.buf.get(a as usize * len..(a + k) as usize * len);
+        Some([slots(s, first)?, slots(0, n - first)?])
     }
 
     /// Words of band row `row` (0-based in the band) at `tick`; an empty

@@ -629,16 +629,10 @@ impl Level<'_> {
         }
     }
 
-    /// The lowest background of the columns of word `j` (`width` px in
-    /// all), 1/1024 count: the background is piecewise linear between the
-    /// tile centres, so its least value is that of a tile it blends.
-    #[inline]
-    fn b_low(&self, j: usize, width: usize) -> u32 {
-        self.b_range(j, width).0
-    }
-
     /// The lowest and the highest background of the columns of word `j`
-    /// ([`Level::b_low`]): every [`Level::b_at`] of the word lies between
+    /// (`width` px in all), 1/1024 count: the background is piecewise
+    /// linear between the tile centres, so its extremes are those of the
+    /// tiles it blends, and every [`Level::b_at`] of the word lies between
     /// them. `(0, u32::MAX)` if the row does not hold the word's tiles.
     #[inline]
     fn b_range(&self, j: usize, width: usize) -> (u32, u32) {
@@ -900,7 +894,7 @@ pub(crate) fn segment(
                 // background (so above the word's lowest, the floor only
                 // raises it); saturation reads the plain counts. Only those
                 // pixels are read and tested.
-                let t = lv.b_low(jw, width) >> B_FRAC_BITS;
+                let t = lv.b_range(jw, width).0 >> B_FRAC_BITS;
                 let row = &ws.mc[base..(base + 64).min(r * width + width)];
                 let mut above = 0u64;
                 for (q, &v) in row.iter().enumerate() {

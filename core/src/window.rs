@@ -91,23 +91,13 @@ impl<'h> Runs<'h> {
         };
         let e = planes.len() - planes.iter().rev().position(|p| !p.is_empty()).unwrap_or(0);
         let stride = planes[a].len();
-        let n = (e - a) as u32;
-        let depth = u32::from(hist.depth());
-        let Some(t0) = start.checked_add(a as u32).filter(|_| depth > 0) else {
+        let Some(t0) = start.checked_add(a as u32) else {
             return Runs::default();
         };
-        let first = n.min(depth - t0 % depth);
-        let mut runs = [(a, &[][..]), (a + first as usize, &[][..])];
-        let second = t0.saturating_add(first);
-        for (i, (t, k)) in [(t0, first), (second, n - first)].into_iter().enumerate() {
-            if k == 0 {
-                continue;
-            }
-            match hist.run(t, k) {
-                Some(r) => runs[i].1 = r,
-                None => return Runs::default(),
-            }
-        }
+        let Some([r0, r1]) = hist.runs(t0, (e - a) as u32) else {
+            return Runs::default();
+        };
+        let runs = [(a, r0), (a + r0.len() / stride.max(1), r1)];
         // Exactly the held planes, each `stride` words (a hole or a plane
         // of another length would be summed wrongly).
         let held = planes[a..e].iter().all(|p| p.len() == stride);
