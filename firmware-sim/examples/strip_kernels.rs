@@ -16,7 +16,7 @@ use std::convert::Infallible;
 use spiv_core::buffers::SidecarBuf;
 use spiv_core::sidecar::{Config, Probe, Sidecar, SidecarError};
 use spiv_core::wire::sender::{Link, Slot};
-use spiv_core::wire::{frame_crc, CRC};
+use spiv_core::wire::{crc32, frame_crc};
 
 const W: u16 = 128;
 const H: u16 = 64;
@@ -75,7 +75,7 @@ fn main() -> Result<(), SidecarError<Infallible>> {
         s.frames,
         s.messages,
         s.bytes,
-        CRC.checksum(&link.0),
+        crc32(&link.0),
         crcs.0.join(",")
     );
     Ok(())

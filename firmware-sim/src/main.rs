@@ -10,7 +10,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use clap::Parser;
-use spiv_core::wire::{frame_crc, Encoding, CRC};
+use spiv_core::wire::{crc32, frame_crc, Encoding};
 use spiv_core::Method;
 use spiv_firmware_sim::downlink::ControlStream;
 use spiv_firmware_sim::firmware::{
@@ -392,10 +392,7 @@ fn run(a: &Args) -> Result<(), Error> {
     if a.checksum {
         let stream = shared.0.borrow();
         let frames: Vec<u32> = kept.iter().map(|f| frame_crc(&f.data)).collect();
-        println!(
-            "{}",
-            checksum_line(&counters, CRC.checksum(&stream), &frames)
-        );
+        println!("{}", checksum_line(&counters, crc32(&stream), &frames));
         return Ok(());
     }
     if !a.quiet {

@@ -1,7 +1,7 @@
 //! The payloads that are not samples: the frame end (pairing, method,
 //! checksum) and the firmware's status counters.
 
-use super::{WireError, CRC};
+use super::{Crc32, WireError};
 use crate::method::Method;
 
 /// Payload of [`super::Kind::FrameEnd`] (20 bytes): which pair the frame belongs
@@ -133,7 +133,7 @@ impl Status {
 pub fn frame_crc<G: crate::gray::Gray>(samples: &[G]) -> u32 {
     // 64 samples' bytes per update: the tables take 16 bytes a step, and
     // two bytes per call would leave them the byte-at-a-time tail.
-    let mut d = CRC.digest();
+    let mut d = Crc32::new();
     let mut bytes = [0u8; 128];
     for chunk in samples.chunks(64) {
         for (b, s) in bytes.chunks_exact_mut(2).zip(chunk) {

@@ -34,16 +34,16 @@
 
 pub mod codec;
 pub mod control;
+pub mod crc;
 pub mod header;
 pub mod message;
 pub mod sender;
 pub mod stream;
 
+pub use crc::{crc32, Crc32};
 pub use header::Header;
 pub use message::{frame_crc, FrameEnd, Status};
 pub use stream::{encode_message, Decoder, DecoderState, DecoderStats, Message};
-
-use crc::{Crc, Table, CRC_32_ISO_HDLC};
 
 /// `"SP"`.
 pub const MAGIC: u16 = 0x5053;
@@ -60,20 +60,6 @@ pub const MAX_PAYLOAD: usize = 16 * 1024;
 pub const MAX_MESSAGE: usize = HEADER_LEN + MAX_PAYLOAD + CRC_LEN;
 /// Largest message on the wire: COBS overhead and the delimiter included.
 pub const MAX_ENCODED: usize = cobs::max_encoding_length(MAX_MESSAGE) + 1;
-
-/// The CRC tables: slice-by-16 on 64-bit hosts (16 KiB, built at compile
-/// time), where the byte-at-a-time table cost about 6 instructions per
-/// byte and sending a frame 9 % more; the byte table on 32-bit MCUs,
-/// where the Cortex-M4 sends in the same count either way (measured with
-/// `firmware-sim/cost.sh`) and the flash is better kept.
-#[cfg(target_pointer_width = "64")]
-type CrcTable = Table<16>;
-#[cfg(not(target_pointer_width = "64"))]
-type CrcTable = Table<1>;
-
-/// The CRC of the link: CRC-32/ISO-HDLC, as zlib's `crc32` (a `static`,
-/// so the image holds its tables once).
-pub static CRC: Crc<u32, CrcTable> = Crc::<u32, CrcTable>::new(&CRC_32_ISO_HDLC);
 
 /// What a message carries.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -223,11 +209,6 @@ mod tests {
             encoding: Encoding::Raw8,
             payload_len: 0,
         }
-    }
-
-    #[test]
-    fn crc_is_zlibs() {
-        assert_eq!(CRC.checksum(b"123456789"), 0xCBF4_3926);
     }
 
     #[test]

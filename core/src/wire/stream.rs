@@ -2,7 +2,7 @@
 //! stream [`Decoder`] that takes bytes in any chunking and resynchronises on
 //! the next delimiter.
 
-use super::{Header, WireError, CRC, CRC_LEN, HEADER_LEN, MAX_PAYLOAD};
+use super::{crc32, Crc32, Header, WireError, CRC_LEN, HEADER_LEN, MAX_PAYLOAD};
 
 /// Frames one message into `out`: COBS of header, payload and CRC, then the
 /// `0x00` delimiter. Returns the bytes written (at most [`MAX_ENCODED`]).
@@ -14,7 +14,7 @@ pub fn encode_message(header: &Header, payload: &[u8], out: &mut [u8]) -> Result
     let mut h = *header;
     h.payload_len = payload.len() as u32;
     let hb = h.to_bytes();
-    let mut digest = CRC.digest();
+    let mut digest = Crc32::new();
     digest.update(&hb);
     digest.update(payload);
     let crc = digest.finalize().to_le_bytes();
@@ -192,7 +192,7 @@ fn validate(chunk: &mut [u8]) -> Result<(Header, usize), WireError> {
     }
     let (body, crc) = msg.split_at(n - CRC_LEN);
     let want = u32::from_le_bytes([crc[0], crc[1], crc[2], crc[3]]);
-    if CRC.checksum(body) != want {
+    if crc32(body) != want {
         return Err(WireError::Crc);
     }
     let header = Header::parse(body)?;
