@@ -83,12 +83,26 @@ impl<'a> BitWriter<'a> {
         // 32-bit push; everything else (rare) takes `rice_long`.
         if len <= ESCAPE {
             // q ones and a zero, then the k low bits, in one push (almost
-            // always; wider words cost a 32-bit core more than a second put).
-            let ones = ((1u32 << q) - 1) << (k + 1);
-            let low = z & ((1u32 << k) - 1);
-            self.push(ones | low, len)
+            // always; wider words cost a 32-bit core more than a second put):
+            // the ones are 2^len − 2^(k+1) and the low bits z − q·2^k, so
+            // the code is 2^len + z − (q + 2)·2^k (len ≤ 24, no overflow),
+            // two shifts fewer than building the ones and the mask.
+            self.push((1u32 << len) + z - ((q + 2) << k), len)
         } else {
             self.rice_long(z, k)
+        }
+    }
+
+    /// [`BitWriter::rice`] with `k = 0`, the adaptive coder's most common
+    /// parameter on suppressed frames: `z` ones and a zero, without the
+    /// shifts by `k` (issue 18: sending is a third of the firmware
+    /// simulator's run).
+    #[inline(always)]
+    pub(super) fn rice0(&mut self, z: u32) -> Result<(), WireError> {
+        if z < ESCAPE {
+            self.push((2u32 << z) - 2, z + 1)
+        } else {
+            self.rice_long(z, 0)
         }
     }
 

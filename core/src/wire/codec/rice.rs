@@ -39,7 +39,12 @@ impl Adapt {
 
     #[inline]
     fn update(&mut self, z: u32) {
-        self.a = self.a.saturating_add(z);
+        // No overflow: a coded value is below 2^21 (a quotient under
+        // ESCAPE with k ≤ 16, or an escaped ESCAPE_BITS value; the
+        // encoders' residuals of 16-bit levels are below 2^18), and A is
+        // halved every 64 of them, so A < 2^28. (Saturating cost the
+        // encoder two instructions per sample.)
+        self.a = self.a.wrapping_add(z);
         self.n += 1;
         if self.n >= 64 {
             self.a >>= 1;
@@ -49,7 +54,12 @@ impl Adapt {
 
     #[inline(always)]
     pub(super) fn put(&mut self, w: &mut BitWriter<'_>, z: u32) -> Result<(), WireError> {
-        w.rice(z, self.k())?;
+        // k is 0 exactly when N ≥ A (`k`): that case without the shifts.
+        if self.n >= self.a {
+            w.rice0(z)?;
+        } else {
+            w.rice(z, self.k())?;
+        }
         self.update(z);
         Ok(())
     }
