@@ -27,6 +27,7 @@
 //! |---|---|
 //! | [`header`] | the 30-byte message header |
 //! | [`stream`] | COBS framing with CRC, and the stream decoder |
+//! | [`crc`] | the link's CRC-32 ([`Crc32`], [`crc32`]) |
 //! | [`message`] | the frame-end and status payloads, the frame checksum |
 //! | [`control`] | the downlink's control payload: predicted motion, window caps |
 //! | [`codec`] | tile codecs: raw, lossless Rice, lossy sparse |
