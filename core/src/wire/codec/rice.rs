@@ -39,11 +39,12 @@ impl Adapt {
 
     #[inline]
     fn update(&mut self, z: u32) {
-        // No overflow: a coded value is below 2^21 (a quotient under
-        // ESCAPE with k ≤ 16, or an escaped ESCAPE_BITS value; the
-        // encoders' residuals of 16-bit levels are below 2^18), and A is
-        // halved every 64 of them, so A < 2^28. (Saturating cost the
-        // encoder two instructions per sample.)
+        // No overflow: every value the code can carry is below 2^21 (a
+        // quotient under ESCAPE with k ≤ 16, or an ESCAPE_BITS escape;
+        // the decoder reads nothing larger), and A is halved every 64
+        // values, so A < 2^28. Were it ever to wrap, encoder and decoder
+        // update with the same values and stay in step. (Saturating cost
+        // the encoder two instructions per sample.)
         self.a = self.a.wrapping_add(z);
         self.n += 1;
         if self.n >= 64 {
