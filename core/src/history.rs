@@ -10,7 +10,7 @@
 //! of 128 planes), in a caller-supplied slice.
 
 use crate::error::Error;
-use crate::plane::{words_per_row, PlaneView};
+use crate::plane::{le_words, words_per_row, PlaneView};
 
 /// Ring of spike planes over stored rows `row0..row0+rows`. Ticks count
 /// planes from 0 at the first push.
@@ -91,12 +91,11 @@ impl<'a> History<'a> {
                 *w = u64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]);
             }
         } else if width % 8 == 0 {
-            // Byte-aligned rows (the host's 400-px sensor): a row's whole
-            // words straight from its bytes and its last word from the
-            // bytes left, in this loop; through `PlaneView::row_words`, a
-            // call per row with its checks and a `memcpy` of the tail,
-            // ingest cost 0.41 x86 instructions per pixel and plane (here
-            // 0.066), a twentieth of the firmware simulator's run.
+            // Byte-aligned rows (the host's 400-px sensor) in this loop:
+            // through `PlaneView::row_words`, a call per row with its
+            // checks and a `memcpy` of the tail, ingest cost 0.41 x86
+            // instructions per pixel and plane (here 0.056), a twentieth
+            // of the firmware simulator's run.
             let row_bytes = width / 8;
             let start = usize::from(row0) * row_bytes;
             let src = plane
@@ -104,17 +103,7 @@ impl<'a> History<'a> {
                 .get(start..start + row_bytes * (slot.len() / wpr.max(1)));
             let rows = slot.chunks_exact_mut(wpr);
             for (out, bytes) in rows.zip(src.unwrap_or(&[]).chunks_exact(row_bytes)) {
-                let mut words = bytes.chunks_exact(8);
-                let mut dst = out.iter_mut();
-                // Chunks first: `zip` must not take an output word it
-                // cannot fill.
-                for (c, w) in (&mut words).zip(&mut dst) {
-                    *w = u64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]);
-                }
-                let tail = words.remainder();
-                if let Some(w) = dst.next() {
-                    *w = tail.iter().rev().fold(0, |a, &b| a << 8 | u64::from(b));
-                }
+                le_words(bytes, out);
             }
         } else {
             for (i, row_words) in slot.chunks_exact_mut(wpr).enumerate() {

@@ -26,6 +26,25 @@ pub const fn words_per_row(width: u16) -> usize {
     (width as usize).div_ceil(64)
 }
 
+/// The little-endian words of `bytes` into `out` (as many as it holds),
+/// the last from the bytes left over, zero above them: a byte-aligned
+/// row's words ([`PlaneView::row_words`], and `History::push` in its own
+/// loop over a band's rows, where a call per row and a `memcpy` of the
+/// tail had cost most of the ingest).
+#[inline]
+pub(crate) fn le_words(bytes: &[u8], out: &mut [u64]) {
+    let mut chunks = bytes.chunks_exact(8);
+    let mut dst = out.iter_mut();
+    // Chunks first: `zip` must not take an output word it cannot fill.
+    for (c, w) in (&mut chunks).zip(&mut dst) {
+        *w = u64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]);
+    }
+    let rest = chunks.remainder();
+    if let Some(w) = dst.next().filter(|_| !rest.is_empty()) {
+        *w = rest.iter().rev().fold(0, |a, &b| a << 8 | u64::from(b));
+    }
+}
+
 impl<'a> PlaneView<'a> {
     /// Views `bytes` as one plane of `width × height` pixels.
     pub fn new(bytes: &'a [u8], width: u16, height: u16) -> Result<Self, Error> {
@@ -92,18 +111,7 @@ impl<'a> PlaneView<'a> {
         if shift == 0 {
             // Byte-aligned rows (any width that is a multiple of 8): whole
             // words straight from the bytes, the tail word padded with zeros.
-            let mut chunks = src.chunks_exact(8);
-            let mut dst = out.iter_mut();
-            // Chunks first: `zip` must not take an output word it cannot fill.
-            for (c, w) in (&mut chunks).zip(&mut dst) {
-                *w = u64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]);
-            }
-            let rest = chunks.remainder();
-            if let Some(w) = dst.next().filter(|_| !rest.is_empty()) {
-                let mut buf = [0u8; 8];
-                buf[..rest.len()].copy_from_slice(rest);
-                *w = u64::from_le_bytes(buf);
-            }
+            le_words(src, out);
             if width % 64 != 0 {
                 if let Some(w) = out.get_mut(wpr - 1) {
                     *w &= (1u64 << (width % 64)) - 1;

@@ -131,8 +131,9 @@ impl Status {
 
 /// CRC-32 of frame samples as little-endian u16 (the [`FrameEnd`] check).
 pub fn frame_crc<G: crate::gray::Gray>(samples: &[G]) -> u32 {
-    // 64 samples' bytes per update: the tables take 16 bytes a step, and
-    // two bytes per call would leave them the byte-at-a-time tail.
+    // 64 samples' bytes per update: the CRC takes 16 bytes a step (the
+    // tables) or 64 (the host's folding), and two bytes per call would
+    // leave it the byte-at-a-time tail.
     let mut d = Crc32::new();
     let mut bytes = [0u8; 128];
     for chunk in samples.chunks(64) {
