@@ -141,6 +141,8 @@ def simulate(
     shift: Optional[Tuple[float, float]] = None,
     spacing: Optional[float] = None,
     out: Optional[_Path] = None,
+    speed: Optional[float] = None,
+    flow_seed: Optional[int] = None,
 ) -> Simulation:
     """A simulated recording, as `spiv simulate`.
 

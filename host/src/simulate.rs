@@ -36,6 +36,12 @@ pub struct SimulateRequest {
     pub shift: Option<(f64, f64)>,
     /// Minimum particle spacing, px (0..=64).
     pub spacing: Option<f64>,
+    /// Top speed of the shear flows and the vortex array, px/tick
+    /// (0..=64).
+    pub speed: Option<f64>,
+    /// Seed of the turbulence field and of the vortex array's offset and
+    /// drift direction.
+    pub flow_seed: Option<u64>,
 }
 
 impl SimulateRequest {
@@ -50,6 +56,8 @@ impl SimulateRequest {
             dt: None,
             shift: None,
             spacing: None,
+            speed: None,
+            flow_seed: None,
         }
     }
 
@@ -94,12 +102,38 @@ impl SimulateRequest {
             }
             p.min_spacing = s;
         }
+        if let Some(u) = self.speed {
+            let has_speed = matches!(
+                kind,
+                SceneKind::PaperLinear
+                    | SceneKind::PaperQuadratic
+                    | SceneKind::PaperLog
+                    | SceneKind::Blasius
+                    | SceneKind::VortexArray
+            );
+            if !has_speed {
+                return bad(format!(
+                    "--speed applies to the shear scenes and vortex-array, not {}",
+                    self.scene
+                ));
+            }
+            if !(u.is_finite() && (0.0..=64.0).contains(&u)) {
+                return bad(format!("--speed {u}: expected 0..=64 px/tick"));
+            }
+            p.top_speed = u;
+        }
+        if let Some(f) = self.flow_seed {
+            p.flow_seed = f;
+        }
         if self.ticks == Some(0) || self.ticks.is_some_and(|t| t > 1_000_000) {
             return bad("--ticks must be in 1..=1000000".into());
         }
         // Turbulence particles are integrated, not moved in closed form:
         // their tracks are kept for at most this many ticks.
-        let integrated = matches!(kind, SceneKind::Turbulence | SceneKind::LargeShift);
+        let integrated = matches!(
+            kind,
+            SceneKind::Turbulence | SceneKind::LargeShift | SceneKind::VortexArray
+        );
         if integrated && self.ticks.is_some_and(|t| t > MAX_TURBULENCE_TICKS) {
             return bad(format!(
                 "--ticks must be in 1..={MAX_TURBULENCE_TICKS} for the {} scene",

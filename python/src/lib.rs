@@ -426,10 +426,13 @@ fn dense<'py>(
 }
 
 /// A simulated recording (the same as `spiv simulate`): `scene` is
-/// "paper-linear", "paper-quadratic", "paper-log", "blasius", "uniform" or
-/// "vortex"; `width`, `height` px; `ticks` planes; `dt` the pair's
-/// separation, ticks; `shift` the uniform scene's (u, v) px per pair;
-/// `spacing` the minimum particle spacing, px; `out` a folder to also
+/// "paper-linear", "paper-quadratic", "paper-log", "blasius", "uniform",
+/// "vortex", "turbulence", "large-shift" or "vortex-array"; `width`,
+/// `height` px; `ticks` planes; `dt` the pair's separation, ticks; `shift`
+/// the uniform scene's (u, v) px per pair; `spacing` the minimum particle
+/// spacing, px; `speed` the top speed of the shear scenes and the vortex
+/// array, px/tick; `flow_seed` the seed of a turbulence field or of the
+/// vortex array's offset and drift; `out` a folder to also
 /// write `spiv simulate`'s files to (spikes.dat, scene.json, frame_a.png,
 /// frame_b.png, truth.csv, truth.flo, profile.csv).
 ///
@@ -440,7 +443,7 @@ fn dense<'py>(
 /// `truth.csv` (px per pair, v down), and `truth_dense`, `u, v` per pixel
 /// `float32 (height, width)` (`truth.flo`).
 #[pyfunction]
-#[pyo3(signature = (scene="paper-linear", seed=1, width=None, height=None, ticks=None, dt=None, shift=None, spacing=None, out=None))]
+#[pyo3(signature = (scene="paper-linear", seed=1, width=None, height=None, ticks=None, dt=None, shift=None, spacing=None, out=None, speed=None, flow_seed=None))]
 #[allow(clippy::too_many_arguments)]
 fn simulate<'py>(
     py: Python<'py>,
@@ -453,6 +456,8 @@ fn simulate<'py>(
     shift: Option<(f64, f64)>,
     spacing: Option<f64>,
     out: Option<PathBuf>,
+    speed: Option<f64>,
+    flow_seed: Option<u64>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let req = SimulateRequest {
         scene: scene.into(),
@@ -463,6 +468,8 @@ fn simulate<'py>(
         dt,
         shift,
         spacing,
+        speed,
+        flow_seed,
     }
     .request()
     .map_err(|e| SpivError::new_err(e.0))?;

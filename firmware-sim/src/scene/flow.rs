@@ -51,11 +51,16 @@ pub enum Flow {
     /// over `period` px in both directions (every k a multiple of
     /// 2π/period), with a Kolmogorov-like spectrum ([`turbulence_modes`]).
     /// Particles are advected by RK4 (steps of [`RK4_STEP`] ticks).
+    /// A uniform `drift` adds to the modes (an array of Taylor–Green
+    /// vortices carried along, [`taylor_green_modes`]).
     Turbulence {
         /// Period of the field in x and rows, px.
         period: f64,
         /// The modes.
         modes: Vec<Mode>,
+        /// Uniform velocity added everywhere, px/tick (right, down).
+        #[serde(default)]
+        drift: (f64, f64),
     },
     /// Lamb–Oseen vortex: v_θ(r) = Γ/(2πr)·(1 − exp(−r²/rc²)).
     Vortex {
@@ -134,6 +139,7 @@ pub fn turbulence_modes(
     let probe = Flow::Turbulence {
         period,
         modes: modes.clone(),
+        drift: (0.0, 0.0),
     };
     // The fastest point on a 1-px lattice over one period.
     let cells = period.ceil().max(1.0) as usize;
@@ -149,6 +155,31 @@ pub fn turbulence_modes(
         m.amp *= scale;
     }
     modes
+}
+
+/// The two modes of an array of Taylor–Green vortices of `cell` px (half a
+/// wavelength: neighbouring cells turn opposite ways) whose fastest point
+/// moves `speed` px/tick: ψ = (U/k)·sin(k(x + x0))·sin(k(row + y0)), k =
+/// π/`cell`, so u = U·sin(k(x + x0))·cos(k(row + y0)) and v = −U·cos(k(x +
+/// x0))·sin(k(row + y0)), written as ½(U/k)·[cos(k(x + x0) − k(row + y0)) −
+/// cos(k(x + x0) + k(row + y0))]. Periodic over any multiple of 2·`cell`.
+pub fn taylor_green_modes(cell: f64, speed: f64, (x0, y0): (f64, f64)) -> Vec<Mode> {
+    let k = std::f64::consts::PI / cell.max(1.0);
+    let a = 0.5 * speed / k;
+    vec![
+        Mode {
+            kx: k,
+            ky: -k,
+            amp: a,
+            phase: k * (x0 - y0),
+        },
+        Mode {
+            kx: k,
+            ky: k,
+            amp: -a,
+            phase: k * (x0 + y0),
+        },
+    ]
 }
 
 /// Blasius solution `f'(η)` on η ∈ [0, 10], step 0.01, with `f''(0)`.
@@ -278,8 +309,8 @@ impl Flow {
     /// The velocity at `(x, row)`, px/tick (right, down).
     pub fn velocity(&self, x: f64, row: f64) -> (f64, f64) {
         match self {
-            Flow::Turbulence { modes, .. } => {
-                let (mut u, mut v) = (0.0, 0.0);
+            Flow::Turbulence { modes, drift, .. } => {
+                let (mut u, mut v) = *drift;
                 for m in modes {
                     let s = (m.kx * x + m.ky * row + m.phase).sin() * m.amp;
                     u -= m.ky * s;
@@ -393,6 +424,32 @@ mod tests {
         Flow::Turbulence {
             period: 320.0,
             modes: turbulence_modes(1, 320.0, 16.0, 256.0, 64, 25.0 / 21.0),
+            drift: (0.0, 0.0),
+        }
+    }
+
+    /// The Taylor–Green modes give the closed form, turn opposite ways in
+    /// neighbouring cells, and carry the drift.
+    #[test]
+    fn taylor_green_array_is_the_closed_form_plus_drift() {
+        let (cell, speed, off) = (128.0, 0.3, (17.0, -40.0));
+        let f = Flow::Turbulence {
+            period: 512.0,
+            modes: taylor_green_modes(cell, speed, off),
+            drift: (0.1, -0.05),
+        };
+        let k = std::f64::consts::PI / cell;
+        for (x, r) in [(3.0, 5.0), (100.5, 211.0), (300.0, 17.25), (511.0, 480.0)] {
+            let (u, v) = f.velocity(x, r);
+            let (sx, cx) = (k * (x + off.0)).sin_cos();
+            let (sy, cy) = (k * (r + off.1)).sin_cos();
+            assert!((u - (0.1 + speed * sx * cy)).abs() < 1e-12, "u at {x},{r}");
+            assert!(
+                (v - (-0.05 - speed * cx * sy)).abs() < 1e-12,
+                "v at {x},{r}"
+            );
+            let (u2, v2) = f.velocity(x + 512.0, r - 512.0);
+            assert!((u - u2).abs() < 1e-9 && (v - v2).abs() < 1e-9);
         }
     }
 

@@ -37,6 +37,9 @@ pub enum SceneKind {
     Turbulence,
     /// Large smooth eddies (32 to 128 px) moving up to 40 px per pair.
     LargeShift,
+    /// An array of Taylor–Green vortices carried by a uniform drift over the
+    /// glare band (beyond the paper; issue 44): a 2-D flow with glare.
+    VortexArray,
 }
 
 /// A scene name that is none of [`SceneKind::ALL`].
@@ -46,7 +49,7 @@ pub struct UnknownScene(pub String);
 
 impl SceneKind {
     /// Every scene, by name.
-    pub const ALL: [(&'static str, SceneKind); 8] = [
+    pub const ALL: [(&'static str, SceneKind); 9] = [
         ("paper-linear", SceneKind::PaperLinear),
         ("paper-quadratic", SceneKind::PaperQuadratic),
         ("paper-log", SceneKind::PaperLog),
@@ -55,6 +58,7 @@ impl SceneKind {
         ("vortex", SceneKind::Vortex),
         ("turbulence", SceneKind::Turbulence),
         ("large-shift", SceneKind::LargeShift),
+        ("vortex-array", SceneKind::VortexArray),
     ];
 
     /// The scene of a name, if any.
@@ -134,6 +138,13 @@ pub struct SceneParams {
     /// particles).
     #[serde(default = "default_flow_seed")]
     pub flow_seed: u64,
+    /// Vortex array: the side of one vortex cell, px.
+    #[serde(default = "default_cell")]
+    pub cell: f64,
+    /// Vortex array: the drift's speed as a fraction of `top_speed` (its
+    /// direction and the array's offset come from `flow_seed`).
+    #[serde(default = "default_drift")]
+    pub drift: f64,
 }
 
 fn default_eddies() -> (f64, f64) {
@@ -147,6 +158,12 @@ fn default_max_shift() -> f64 {
 }
 fn default_flow_seed() -> u64 {
     1
+}
+fn default_cell() -> f64 {
+    128.0
+}
+fn default_drift() -> f64 {
+    0.4
 }
 
 impl SceneParams {
@@ -172,6 +189,8 @@ impl SceneParams {
             modes: default_modes(),
             max_shift: default_max_shift(),
             flow_seed: default_flow_seed(),
+            cell: default_cell(),
+            drift: default_drift(),
         };
         // Turbulence: the spike-flow datasets' layout (256×256 px, pairs
         // 21 ticks apart), no glare, dense seeding for small eddies.
@@ -206,6 +225,15 @@ impl SceneParams {
                 max_shift: 40.0,
                 ..turbulent
             },
+            // The vortices at 0.3 px/tick (1 px/tick is the fast variant),
+            // pairs 10 ticks apart, over the default glare band.
+            SceneKind::VortexArray => SceneParams {
+                width: 256,
+                height: 256,
+                top_speed: 0.3,
+                pair_dt: 10,
+                ..base
+            },
         }
     }
 
@@ -214,7 +242,12 @@ impl SceneParams {
     /// to 32.
     pub fn period(&self) -> f64 {
         let side = f64::from(self.width.max(self.height)) + 64.0;
-        (side / 32.0).ceil() * 32.0
+        let unit = match self.kind {
+            // The array repeats every two cells.
+            SceneKind::VortexArray => 2.0 * self.cell.max(1.0),
+            _ => 32.0,
+        };
+        (side / unit).ceil() * unit
     }
 
     /// The flow this scene moves its particles with.
@@ -243,6 +276,7 @@ impl SceneParams {
                 let dt = f64::from(self.pair_dt.max(1));
                 Flow::Turbulence {
                     period,
+                    drift: (0.0, 0.0),
                     modes: flow::turbulence_modes(
                         self.flow_seed,
                         period,
@@ -251,6 +285,20 @@ impl SceneParams {
                         self.modes,
                         self.max_shift / dt,
                     ),
+                }
+            }
+            SceneKind::VortexArray => {
+                // Offset and drift direction from the flow's seed.
+                let mut rng = ChaCha8Rng::seed_from_u64(self.flow_seed);
+                let tau = 2.0 * std::f64::consts::PI;
+                let cell = self.cell.max(1.0);
+                let off = (rng.gen::<f64>() * 2.0 * cell, rng.gen::<f64>() * 2.0 * cell);
+                let a = rng.gen::<f64>() * tau;
+                let d = self.drift * self.top_speed;
+                Flow::Turbulence {
+                    period: self.period(),
+                    modes: flow::taylor_green_modes(cell, self.top_speed, off),
+                    drift: (d * a.cos(), d * a.sin()),
                 }
             }
             SceneKind::Vortex => {
@@ -661,6 +709,41 @@ mod tests {
         };
         let (n0, n1) = (inside(0.0), inside(59.0));
         assert!((n1 - n0).abs() < 0.15 * n0, "{n0} then {n1} in a quarter");
+    }
+
+    /// The vortex array is a 2-D flow over the glare band: both components
+    /// move, the field repeats over its period, its fastest point is the
+    /// vortices' speed plus the drift, and the flow seed moves the array
+    /// and turns the drift.
+    #[test]
+    fn vortex_array_is_two_dimensional_and_seeded_by_its_flow_seed() {
+        let p = SceneParams::new(SceneKind::VortexArray);
+        assert_eq!((p.width, p.height, p.pair_dt), (256, 256, 10));
+        assert!(p.glare_peak > 0.6);
+        assert_eq!(p.period(), 512.0);
+        let f = p.flow();
+        let (mut umax, mut vmax, mut top) = (0.0f64, 0.0f64, 0.0f64);
+        for i in 0..64 {
+            for j in 0..64 {
+                let (u, v) = f.velocity(4.0 * j as f64, 4.0 * i as f64);
+                umax = umax.max(u.abs());
+                vmax = vmax.max(v.abs());
+                top = top.max(u.hypot(v));
+                let (u2, v2) = f.velocity(4.0 * j as f64 + 512.0, 4.0 * i as f64);
+                assert!((u - u2).abs() < 1e-9 && (v - v2).abs() < 1e-9);
+            }
+        }
+        assert!(umax > 0.2 && vmax > 0.2, "{umax} {vmax}");
+        assert!(top <= 0.3 * 1.4 + 1e-9 && top > 0.3, "{top}");
+        let other = SceneParams {
+            flow_seed: 2,
+            ..p.clone()
+        }
+        .flow();
+        assert_ne!(f, other);
+        let s = Scene::new(p, 1, 160);
+        let (ok, all) = s.density_reached;
+        assert!(ok as f64 >= 0.95 * all as f64, "{ok}/{all}");
     }
 
     #[test]

@@ -12,7 +12,7 @@ use super::CliError;
 /// Simulate a scene: spikes.dat, scene.json, frame_a.png, frame_b.png, truth.csv, truth.flo (dense), profile.csv.
 #[derive(Debug, Args)]
 pub struct SimulateArgs {
-    /// Scene: paper-linear, paper-quadratic, paper-log, blasius, uniform, vortex, turbulence, large-shift.
+    /// Scene: paper-linear, paper-quadratic, paper-log, blasius, uniform, vortex, turbulence, large-shift, vortex-array.
     #[arg(long, default_value = "paper-linear")]
     scene: String,
     /// Output folder (created if missing).
@@ -39,6 +39,13 @@ pub struct SimulateArgs {
     /// Minimum particle spacing, px (the paper used 15).
     #[arg(long)]
     spacing: Option<f64>,
+    /// Top speed of the shear scenes and the vortex array, px/tick.
+    #[arg(long)]
+    speed: Option<f64>,
+    /// Seed of the turbulence field, or of the vortex array's offset and
+    /// drift direction.
+    #[arg(long)]
+    flow_seed: Option<u64>,
 }
 
 /// Runs it.
@@ -61,6 +68,8 @@ pub fn run(a: &SimulateArgs) -> Result<(), CliError> {
         dt: a.dt,
         shift,
         spacing: a.spacing,
+        speed: a.speed,
+        flow_seed: a.flow_seed,
     }
     .request()
     .map_err(|e| CliError::Usage(e.0))?;
