@@ -75,42 +75,96 @@ pub fn write_vectors(path: &Path, vectors: &[Vector]) -> Result<(), FormatError>
     std::fs::write(path, s).map_err(io_err(path))
 }
 
-/// Writes a vector field with each vector's confidence after `flag`:
-/// `peak_ratio` (the correlation peak over the next highest, 0 where no
-/// peak) and `correlation` (the normalised correlation at the peak, −1..1,
-/// 0 where none), one `(peak_ratio, correlation)` per vector. Readers of
-/// `x,y,u,v,flag` ignore the extra columns.
-pub fn write_vectors_scored(
+/// An extra column of a vector field: its header name, one value per
+/// vector, and the decimals it is written with (non-finite values are
+/// written `inf`, `-inf` or `nan`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Column<'a> {
+    /// Header name.
+    pub name: &'a str,
+    /// One value per vector.
+    pub values: Vec<f64>,
+    /// Decimals written.
+    pub decimals: usize,
+}
+
+/// Writes a vector field with extra columns after `flag` (readers of
+/// `x,y,u,v,flag` ignore them); each column holds one value per vector.
+pub fn write_vectors_with(
     path: &Path,
     vectors: &[Vector],
-    scores: &[(f64, f64)],
+    extra: &[Column<'_>],
 ) -> Result<(), FormatError> {
-    if scores.len() != vectors.len() {
+    if let Some(c) = extra.iter().find(|c| c.values.len() != vectors.len()) {
         return Err(FormatError::Parse {
             path: path.to_path_buf(),
-            msg: format!("{} scores for {} vectors", scores.len(), vectors.len()),
+            msg: format!(
+                "{} {} values for {} vectors",
+                c.values.len(),
+                c.name,
+                vectors.len()
+            ),
         });
     }
-    let mut s = String::from("x,y,u,v,flag,peak_ratio,correlation\n");
-    for (v, &(ratio, corr)) in vectors.iter().zip(scores) {
+    let mut s = String::from("x,y,u,v,flag");
+    for c in extra {
+        let _ = write!(s, ",{}", c.name);
+    }
+    s.push('\n');
+    for (i, v) in vectors.iter().enumerate() {
         let (u, vv) = if v.state.is_measured() {
             (v.u, v.v)
         } else {
             (0.0, 0.0)
         };
-        let _ = writeln!(
-            s,
-            "{},{},{:.6},{:.6},{},{:.4},{:.4}",
-            v.x,
-            v.y,
-            u,
-            vv,
-            v.state.flag(),
-            ratio,
-            corr
-        );
+        let _ = write!(s, "{},{},{:.6},{:.6},{}", v.x, v.y, u, vv, v.state.flag());
+        for c in extra {
+            let _ = write!(s, ",{:.*}", c.decimals, c.values[i]);
+        }
+        s.push('\n');
     }
     std::fs::write(path, s).map_err(io_err(path))
+}
+
+/// Writes a vector field with each vector's confidence after `flag`:
+/// `peak_ratio` (the correlation peak over the next highest, 0 where no
+/// peak) and `correlation` (the normalised correlation at the peak, −1..1,
+/// 0 where none), one `(peak_ratio, correlation)` per vector.
+pub fn write_vectors_scored(
+    path: &Path,
+    vectors: &[Vector],
+    scores: &[(f64, f64)],
+) -> Result<(), FormatError> {
+    let col = |name, f: fn(&(f64, f64)) -> f64| Column {
+        name,
+        values: scores.iter().map(f).collect(),
+        decimals: 4,
+    };
+    write_vectors_with(
+        path,
+        vectors,
+        &[col("peak_ratio", |s| s.0), col("correlation", |s| s.1)],
+    )
+}
+
+/// Writes a vector field with each vector's standard uncertainty after
+/// `flag`: `sigma_u`, `sigma_v` in the units of `u` and `v` (`inf` where
+/// the vector was not measured).
+pub fn write_vectors_uncertain(
+    path: &Path,
+    vectors: &[Vector],
+    sigma: &[(f64, f64)],
+) -> Result<(), FormatError> {
+    let col = |name, f: fn(&(f64, f64)) -> f64| Column {
+        name,
+        values: sigma.iter().map(f).collect(),
+        decimals: 6,
+    };
+    write_vectors_with(
+        path,
+        vectors,
+        &[col("sigma_u", |s| s.0), col("sigma_v", |s| s.1)],
+    )
 }
 
 /// Reads a vector field (extra columns after `flag` are ignored).
@@ -200,5 +254,11 @@ mod tests {
             (0.0, 0.0, State::Invalid)
         );
         assert!(write_vectors_scored(&p, &vs, &[(1.0, 1.0)]).is_err());
+        write_vectors_uncertain(&p, &vs, &[(0.05, 0.07), (f64::INFINITY, f64::INFINITY)]).unwrap();
+        let text = std::fs::read_to_string(&p).unwrap();
+        assert!(text.starts_with("x,y,u,v,flag,sigma_u,sigma_v\n"), "{text}");
+        assert!(text.contains(",0,0.050000,0.070000\n"), "{text}");
+        assert!(text.contains(",2,inf,inf\n"), "{text}");
+        assert_eq!(read_vectors(&p).unwrap()[0], vs[0]);
     }
 }

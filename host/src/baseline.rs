@@ -190,6 +190,7 @@ mod tests {
             state: Array2::from_elem((ny, nx), State::Valid),
             peak_ratio: Array2::from_elem((ny, nx), 2.0),
             peak_height: Array2::from_elem((ny, nx), 0.5),
+            sigma: Array2::from_elem((ny, nx), (0.1, 0.1)),
         }
     }
 

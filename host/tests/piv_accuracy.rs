@@ -187,6 +187,7 @@ fn a_predicted_field_measures_beyond_the_quarter_rule() {
         state: ndarray::Array2::from_elem((ny, nx), State::Valid),
         peak_ratio: ndarray::Array2::zeros((ny, nx)),
         peak_height: ndarray::Array2::zeros((ny, nx)),
+        sigma: ndarray::Array2::from_elem((ny, nx), (0.1, 0.1)),
     };
     let f = piv_predicted(&pr.a, &pr.b, None, &s, Some(&guess)).expect("piv");
     let e = errors(&f, &pr);

@@ -67,6 +67,12 @@ pub struct Scratch {
 }
 
 impl Scratch {
+    /// The raw correlation plane [`plane`] left (row-major n×n, lag 0 at
+    /// index 0).
+    pub fn plane(&self) -> &[f32] {
+        &self.c
+    }
+
     /// Buffers for `plan`'s size.
     pub fn new(plan: &Plan) -> Scratch {
         let n2 = plan.n * plan.n;
@@ -110,6 +116,9 @@ pub struct Peak {
     /// The peak's width, px: the larger of its Gaussian σ along x and y
     /// (infinite on a plateau).
     pub width: f64,
+    /// Standard uncertainty of `dx` and `dy` from the correlation
+    /// statistics ([`uncertainty`]), px.
+    pub sigma: (f64, f64),
 }
 
 /// A window is flat (no signal: all-zero, clipped, masked) when its
@@ -122,12 +131,37 @@ const FLAT: f64 = 1e-3;
 /// Each window is made zero-mean over its unmasked pixels (masked pixels are
 /// set to the mean, so they add nothing) on its way into the FFT buffer; the
 /// correlation is normalised by both energies. Sub-pixel: 3-point Gaussian per axis, the 3-point parabola
-/// where a value is not positive, 0 where neither has a maximum.
+/// where a value is not positive, 0 where neither has a maximum. The
+/// peak's uncertainty comes from the windows' own pixels ([`spread`]).
 ///
 /// The loops over the window are written so that the compiler vectorises
 /// them (independent lane accumulators, no index arithmetic per sample):
 /// at 32×32 px the scalar versions cost three times the FFTs.
 pub fn correlate(plan: &Plan, s: &mut Scratch, method: Subpixel) -> Result<Peak, NoPeak> {
+    let p = plane(plan, s)?;
+    let (mut peak, at) = locate(plan.n, &s.c, p.norm, method)?;
+    let (su, sv) = spread(s, plan.n, at, p.means);
+    peak.sigma = peak_uncertainty(plan.n, &s.c, p.norm, at, (su * p.direct, sv * p.direct));
+    Ok(peak)
+}
+
+/// What [`plane`] leaves besides the raw correlation in `Scratch::c`.
+#[derive(Debug, Clone, Copy)]
+pub struct PlaneScale {
+    /// The raw correlation times this is the normalised one.
+    pub norm: f64,
+    /// The direct sums of [`spread`] times this are normalised likewise
+    /// (the FFT's correlation carries a factor n² they do not).
+    pub direct: f64,
+    /// The windows' means over their unmasked pixels.
+    pub means: (f32, f32),
+}
+
+/// The raw cyclic cross-correlation of the windows in `s.a` and `s.b`
+/// into `s.c` (lag 0 at index 0), each window zero-mean over its
+/// unmasked pixels; [`NoPeak::NoSignal`] when a window is flat or mostly
+/// masked.
+pub fn plane(plan: &Plan, s: &mut Scratch) -> Result<PlaneScale, NoPeak> {
     let n = plan.n;
     let (ma, mb, k) = means(&mut s.a, &mut s.b, &s.masked);
     let (ea, eb) = fill_z(&mut s.z, &s.a, &s.b, ma as f32, mb as f32);
@@ -164,9 +198,25 @@ pub fn correlate(plan: &Plan, s: &mut Scratch, method: Subpixel) -> Result<Peak,
     plan.inv.process_with_scratch(&mut s.z, &mut s.fft);
     transpose(&s.z, &mut s.t, n);
     plan.inv.process_with_scratch(&mut s.t, &mut s.fft);
-    let best_raw = real_parts_max(&s.t, &mut s.c);
-    let cp = &s.c;
+    real_parts(&s.t, &mut s.c);
     let norm = 1.0 / (n2 * (ea * eb).sqrt());
+    Ok(PlaneScale {
+        norm,
+        direct: n2 * norm,
+        means: (ma as f32, mb as f32),
+    })
+}
+
+/// The peak of the `n × n` cyclic correlation `cp` (raw; times `norm` it is
+/// normalised) and its integer lag `(row, column)`: position, normalised
+/// height, peak ratio and width; its uncertainty is left at zero.
+pub fn locate(
+    n: usize,
+    cp: &[f32],
+    norm: f64,
+    method: Subpixel,
+) -> Result<(Peak, (usize, usize)), NoPeak> {
+    let best_raw = max_of(cp, f32::NEG_INFINITY);
     let best = f64::from(best_raw) * norm;
     if !best.is_finite() || best <= 0.0 {
         return Err(NoPeak::NoPeak);
@@ -232,13 +282,114 @@ pub fn correlate(plan: &Plan, s: &mut Scratch, method: Subpixel) -> Result<Peak,
         best,
         c(bi, bj + 1),
     ));
-    Ok(Peak {
-        dx: wrap(bj) + sx,
-        dy: wrap(bi) + sy,
-        height: best,
-        ratio,
-        width,
-    })
+    Ok((
+        Peak {
+            dx: wrap(bj) + sx,
+            dy: wrap(bi) + sy,
+            height: best,
+            ratio,
+            width,
+            sigma: (0.0, 0.0),
+        },
+        (bi, bj),
+    ))
+}
+
+/// The standard uncertainty (x, y), px, of the peak at lag `(bi, bj)` of
+/// the raw correlation `cp` (times `norm` normalised) when the asymmetry
+/// about it has standard deviation `sd` (x, y; normalised).
+pub fn peak_uncertainty(
+    n: usize,
+    cp: &[f32],
+    norm: f64,
+    (bi, bj): (usize, usize),
+    sd: (f64, f64),
+) -> (f64, f64) {
+    let c = |i: usize, j: usize| f64::from(cp[(i % n) * n + (j % n)]) * norm;
+    let best = c(bi, bj);
+    (
+        uncertainty(c(bi, bj + n - 1), best, c(bi, bj + 1), sd.0),
+        uncertainty(c(bi + n - 1, bj), best, c(bi + 1, bj), sd.1),
+    )
+}
+
+/// The standard deviation of the correlation's asymmetry about the peak at
+/// lag `p = (bi, bj)` along x and along y, from the pixels' own
+/// contributions (Wieneke 2015, "PIV uncertainty quantification from
+/// correlation statistics"): the pair of neighbouring pixels `x`, `x + e`
+/// adds `a(x)·b(x + p + e)` to the correlation one step past the peak and
+/// `a(x + e)·b(x + p)` one step before it. Where the two windows match
+/// (after deformation: the same particles at the same places) the two are
+/// equal; noise and unmatched particles make them differ, and the spread
+/// of the differences `Δ(x)` over the window is how far they can tilt the
+/// peak. Neighbouring pixels' differences are not independent (a particle
+/// image spans several), so the variance sums `Δ(x)·Δ(x')` over each
+/// pixel's 3 × 3 neighbourhood (never below the sum of squares). Raw
+/// units: the caller normalises as it normalises the correlation. Lags are
+/// cyclic, as the FFT's.
+pub fn spread(s: &Scratch, n: usize, (bi, bj): (usize, usize), (ma, mb): (f32, f32)) -> (f64, f64) {
+    let a0 = |i: usize, j: usize| s.a[(i % n) * n + (j % n)] - ma;
+    let b0 = |i: usize, j: usize| s.b[(i % n) * n + (j % n)] - mb;
+    let masked = |i: usize, j: usize| {
+        s.masked
+            .get((i % n) * n + (j % n))
+            .copied()
+            .unwrap_or(false)
+    };
+    let mut dx = vec![0f32; n * n];
+    let mut dy = vec![0f32; n * n];
+    for i in 0..n {
+        for j in 0..n {
+            if masked(i, j) {
+                continue;
+            }
+            let (pi, pj) = (i + bi, j + bj);
+            if !masked(i, j + 1) {
+                dx[i * n + j] = a0(i, j) * b0(pi, pj + 1) - a0(i, j + 1) * b0(pi, pj);
+            }
+            if !masked(i + 1, j) {
+                dy[i * n + j] = a0(i, j) * b0(pi + 1, pj) - a0(i + 1, j) * b0(pi, pj);
+            }
+        }
+    }
+    let var = |d: &[f32]| -> f64 {
+        let (mut own, mut near) = (0.0f64, 0.0f64);
+        for i in 0..n {
+            for j in 0..n {
+                let v = f64::from(d[i * n + j]);
+                if v == 0.0 {
+                    continue;
+                }
+                own += v * v;
+                // The forward half of the 3 × 3 neighbourhood, each pair
+                // counted twice.
+                for (di, dj) in [(0isize, 1isize), (1, -1), (1, 0), (1, 1)] {
+                    let (k, l) = (i as isize + di, j as isize + dj);
+                    if k < n as isize && l >= 0 && l < n as isize {
+                        near += 2.0 * v * f64::from(d[k as usize * n + l as usize]);
+                    }
+                }
+            }
+        }
+        (own + near).max(own)
+    };
+    (var(&dx).sqrt(), var(&dy).sqrt())
+}
+
+/// The standard uncertainty, px, of the 3-point Gaussian peak position
+/// between `cm` (at −1), `c0` and `cp` (at +1) when the asymmetry `cp −
+/// cm` has standard deviation `sd` (normalised as the correlation):
+/// half the change of the estimate as the neighbours move by ±`sd`/2 in
+/// opposite directions (Wieneke 2015). At most one pixel: beyond that
+/// the peak itself is in question, which validation judges.
+pub fn uncertainty(cm: f64, c0: f64, cp: f64, sd: f64) -> f64 {
+    if !(sd.is_finite() && sd >= 0.0) {
+        return 1.0;
+    }
+    let h = 0.5 * sd;
+    let hi = subpixel(cm - h, c0, cp + h);
+    let lo = subpixel(cm + h, c0, cp - h);
+    (0.5 * (hi - lo).abs()).min(1.0)
 }
 
 /// conj(A)·B at one frequency from Z = FFT(a + i·b) there and W at −k.
@@ -340,25 +491,11 @@ fn fill_z(z: &mut [Complex32], a: &[f32], b: &[f32], ma: f32, mb: f32) -> (f64, 
     (sum(ea) + ta, sum(eb) + tb)
 }
 
-/// Copies the real parts of `t` into `c` and returns their maximum (NaNs
-/// ignored), in 8 lanes.
-fn real_parts_max(t: &[Complex32], c: &mut [f32]) -> f32 {
-    let mut acc = [f32::NEG_INFINITY; 8];
-    let mut cc = c.chunks_exact_mut(8);
-    let mut tc = t.chunks_exact(8);
-    for (cs, ts) in (&mut cc).zip(&mut tc) {
-        for l in 0..8 {
-            let v = ts[l].re;
-            cs[l] = v;
-            acc[l] = if v > acc[l] { v } else { acc[l] };
-        }
-    }
-    let mut m = acc.iter().fold(f32::NEG_INFINITY, |m, &x| m.max(x));
-    for (cv, tv) in cc.into_remainder().iter_mut().zip(tc.remainder()) {
+/// Copies the real parts of `t` into `c`.
+fn real_parts(t: &[Complex32], c: &mut [f32]) {
+    for (cv, tv) in c.iter_mut().zip(t) {
         *cv = tv.re;
-        m = m.max(tv.re);
     }
-    m
 }
 
 fn transpose(src: &[Complex32], dst: &mut [Complex32], n: usize) {

@@ -471,6 +471,8 @@ pub fn fill(field: &mut super::Field, flow: &Flow) {
             field.u[[r, c]] = u;
             field.v[[r, c]] = v;
             field.state[[r, c]] = super::State::Replaced;
+            // The dense stage has no correlation statistics: unknown.
+            field.sigma[[r, c]] = super::NO_SIGMA;
         }
     }
 }

@@ -261,6 +261,12 @@ pub struct Field {
     pub peak_ratio: Array2<f64>,
     /// Normalised correlation at the peak of the last pass (0 where none).
     pub peak_height: Array2<f64>,
+    /// Standard uncertainty of each vector's (u, v), px: from the
+    /// correlation statistics of the last pass where it measured the
+    /// vector ([`correlate::uncertainty`]), from the neighbours where it
+    /// replaced it ([`validate::replaced_uncertainty`]); infinite where
+    /// invalid.
+    pub sigma: Array2<(f64, f64)>,
 }
 
 impl Field {
@@ -302,6 +308,11 @@ impl Field {
         deform::dense(&self.grid, &u, &v, h, w)
     }
 
+    /// Whether the field is usable ([`usable`]).
+    pub fn usable(&self) -> bool {
+        2 * self.counts().0 >= self.grid.len().max(1)
+    }
+
     /// Counts of (valid, replaced, invalid) vectors.
     pub fn counts(&self) -> (usize, usize, usize) {
         let mut n = (0, 0, 0);
@@ -314,6 +325,14 @@ impl Field {
         }
         n
     }
+}
+
+/// The one rule for whether a field measured the flow well enough to
+/// predict it or to count as a measurement: at least half of its vectors
+/// valid (passed every test on their own).
+pub fn usable(vectors: &[Vector]) -> bool {
+    let valid = vectors.iter().filter(|v| v.state == State::Valid).count();
+    2 * valid >= vectors.len().max(1)
 }
 
 /// Reads a PNG/TIFF/BMP, 8- or 16-bit gray (colour is converted), as gray
@@ -379,91 +398,130 @@ pub fn piv_predicted(
     s: &Settings,
     initial: Option<&Field>,
 ) -> Result<Field, PivError> {
-    if a.dim() != b.dim() {
-        let ((ha, wa), (hb, wb)) = (a.dim(), b.dim());
-        return Err(PivError::SizeMismatch(wa, ha, wb, hb));
-    }
-    if let Some(m) = mask {
-        if m.dim() != a.dim() {
-            return Err(PivError::MaskSize(
-                m.dim().1,
-                m.dim().0,
-                a.dim().1,
-                a.dim().0,
-            ));
+    piv_ensemble(&[(a, b)], mask, s, initial)
+}
+
+/// Ensemble PIV (Meinhart, Wereley & Santiago 2000): several pairs of the
+/// same flow, each pair `(a, b)` the same displacement apart, measured as
+/// one. Every window's correlation planes of all pairs are summed before
+/// the peak is found, so particles too sparse or too dim for any one pair
+/// add up to one strong peak; the passes, validation and replacement are
+/// [`piv_predicted`]'s, each pass deforming every pair by the same field.
+/// Clipped areas of any image are left out of every pair. One pair is
+/// plain PIV.
+pub fn piv_ensemble(
+    pairs: &[(&Array2<f32>, &Array2<f32>)],
+    mask: Option<&Array2<bool>>,
+    s: &Settings,
+    initial: Option<&Field>,
+) -> Result<Field, PivError> {
+    let Some(&(a0, _)) = pairs.first() else {
+        return Err(PivError::Settings("no image pair given".into()));
+    };
+    let dim = a0.dim();
+    for (a, b) in pairs.iter().flat_map(|(a, b)| [(a0, *a), (a0, *b)]) {
+        if a.dim() != b.dim() {
+            let ((ha, wa), (hb, wb)) = (a.dim(), b.dim());
+            return Err(PivError::SizeMismatch(wa, ha, wb, hb));
         }
     }
-    check(s, a.dim())?;
-    let (h, w) = a.dim();
+    if let Some(m) = mask {
+        if m.dim() != dim {
+            return Err(PivError::MaskSize(m.dim().1, m.dim().0, dim.1, dim.0));
+        }
+    }
+    check(s, dim)?;
+    let (h, w) = dim;
     // Pixels every pass leaves out: the user's mask and clipped pixels of
-    // either raw image (a clipped area is large next to a residual
+    // any raw image (a clipped area is large next to a residual
     // displacement, so its undeformed outline serves every pass).
-    let (la, lb) = (s.clip.level(a), s.clip.level(b));
     let grow = 3 * (s.highpass.max(0.0).round() as usize);
-    let (ca, cb) = rayon::join(
-        || filter::clipped_areas(a, la, grow),
-        || filter::clipped_areas(b, lb, grow),
-    );
-    let base = (mask.is_some() || ca.is_some() || cb.is_some()).then(|| {
+    let clipped: Vec<Array2<bool>> = pairs
+        .par_iter()
+        .flat_map_iter(|&(a, b)| [a, b])
+        .filter_map(|img| filter::clipped_areas(img, s.clip.level(img), grow))
+        .collect();
+    let base = (mask.is_some() || !clipped.is_empty()).then(|| {
         let mut ex = mask
             .cloned()
             .unwrap_or_else(|| Array2::from_elem((h, w), false));
-        for c in [&ca, &cb].into_iter().flatten() {
+        for c in &clipped {
             ex.zip_mut_with(c, |e, &c| *e |= c);
         }
         ex
     });
-    // The dense fallback works on the raw images (their high-pass removes
-    // the particles' own low frequencies, which guide its coarse levels:
-    // turbulence EPE 2.4 px raw, 5.0 px high-passed).
-    let raw = (a, b);
-    let (fa, fb);
-    let (a, b) = if s.highpass > 0.0 {
-        (fa, fb) = rayon::join(
-            || filter::highpass(a, s.highpass),
-            || filter::highpass(b, s.highpass),
-        );
-        (&fa, &fb)
+    // The dense fallback works on the first pair's raw images (their
+    // high-pass removes the particles' own low frequencies, which guide
+    // its coarse levels: turbulence EPE 2.4 px raw, 5.0 px high-passed).
+    let raw = pairs[0];
+    let filtered: Vec<(Array2<f32>, Array2<f32>)> = if s.highpass > 0.0 {
+        pairs
+            .par_iter()
+            .map(|&(a, b)| {
+                (
+                    filter::highpass(a, s.highpass),
+                    filter::highpass(b, s.highpass),
+                )
+            })
+            .collect()
     } else {
-        (a, b)
+        Vec::new()
+    };
+    let images: Vec<(&Array2<f32>, &Array2<f32>)> = if filtered.is_empty() {
+        pairs.to_vec()
+    } else {
+        filtered.iter().map(|(a, b)| (a, b)).collect()
     };
     let mut prev: Option<(Field, f64)> = None;
     let mut predictor: Option<Field> = initial.cloned();
     // The last field that passed (any grid): what a failed last pass
     // degrades to.
     let mut good: Option<Field> = None;
-    let resamplers = (s.windows.len() > 1 || initial.is_some()).then(|| {
-        rayon::join(
-            || resample::Resampler::new(a, s.interp),
-            || resample::Resampler::new(b, s.interp),
-        )
-    });
+    let resamplers: Option<Vec<(resample::Resampler, resample::Resampler)>> =
+        (s.windows.len() > 1 || initial.is_some()).then(|| {
+            images
+                .par_iter()
+                .map(|&(a, b)| {
+                    (
+                        resample::Resampler::new(a, s.interp),
+                        resample::Resampler::new(b, s.interp),
+                    )
+                })
+                .collect()
+        });
     // One pass of `size`-px windows correlated over `search`-px areas of
     // B, on the images deformed by `by` (or as they are).
     let run = |by: Option<&Field>, rung: Rung| -> Result<(Field, f64), PivError> {
         let size = rung.size;
         let step = s.step(size);
         let grid = Grid::new(w, h, size, step).ok_or(PivError::TooSmall(w, h, size))?;
-        let (pa, pb, pred, outside) = match by {
-            None => (None, None, None, base.clone()),
+        let (deformed, pred, outside) = match by {
+            None => (Vec::new(), None, base.clone()),
             Some(f) => {
                 let (du, dv) = f.predictor(h, w);
-                let (ra, rb) = match &resamplers {
-                    Some(r) => (&r.0, &r.1),
-                    None => {
-                        return Err(PivError::Settings("internal: no resampler".into()));
-                    }
+                let Some(rs) = &resamplers else {
+                    return Err(PivError::Settings("internal: no resampler".into()));
                 };
-                let (da, db, mut outside) = deform::deform(ra, rb, &du, &dv);
-                if let Some(m) = &base {
-                    outside.zip_mut_with(m, |o, &m| *o |= m);
+                let mut outside = base.clone();
+                let mut deformed = Vec::with_capacity(rs.len());
+                for (ra, rb) in rs {
+                    let (da, db, out) = deform::deform(ra, rb, &du, &dv);
+                    match &mut outside {
+                        Some(o) => o.zip_mut_with(&out, |o, &x| *o |= x),
+                        None => outside = Some(out),
+                    }
+                    deformed.push((da, db));
                 }
-                (Some(da), Some(db), Some((du, dv)), Some(outside))
+                (deformed, Some((du, dv)), outside)
             }
         };
-        let (ia, ib) = (pa.as_ref().unwrap_or(a), pb.as_ref().unwrap_or(b));
+        let now: Vec<(&Array2<f32>, &Array2<f32>)> = if deformed.is_empty() {
+            images.clone()
+        } else {
+            deformed.iter().map(|(a, b)| (a, b)).collect()
+        };
         let excluded = outside.as_ref().or(mask);
-        Ok(pass((ia, ib), mask, excluded, grid, rung, pred.as_ref(), s))
+        Ok(pass(&now, mask, excluded, grid, rung, pred.as_ref(), s))
     };
     // Once a rescue needed the neighbours to judge weak peaks, so do the
     // passes after it: the frames' peaks do not grow stronger.
@@ -553,9 +611,13 @@ pub fn piv_predicted(
             *u = 0.0;
             *v = 0.0;
         }
+        field.sigma.fill(NO_SIGMA);
     }
     Ok(field)
 }
+
+/// The uncertainty of a vector that was not measured, px.
+pub const NO_SIGMA: (f64, f64) = (f64::INFINITY, f64::INFINITY);
 
 /// A pass on the images deformed by a field (or as they are), giving its
 /// field and support.
@@ -670,6 +732,8 @@ fn degrade_to(field: &mut Field, from: &Field, h: usize, w: usize) {
                 field.v[[r, c]] = 0.0;
                 field.state[[r, c]] = State::Invalid;
             }
+            // A coarser pass's value at this window: no statistics of its own.
+            field.sigma[[r, c]] = NO_SIGMA;
         }
     }
 }
@@ -680,7 +744,7 @@ fn degrade_to(field: &mut Field, from: &Field, h: usize, w: usize) {
 /// the correlation leaves out (the mask and, after deformation, pixels with
 /// no data).
 fn pass(
-    (a, b): (&Array2<f32>, &Array2<f32>),
+    pairs: &[(&Array2<f32>, &Array2<f32>)],
     mask: Option<&Array2<bool>>,
     excluded: Option<&Array2<bool>>,
     grid: Grid,
@@ -695,7 +759,7 @@ fn pass(
     } else {
         s.validation.min_peak_ratio
     };
-    let (h, w) = a.dim();
+    let (h, w) = pairs[0].0.dim();
     // An extended search area (`search` > n, the caller checked it fits
     // the image): B's `search`-px area around the window, A's window at
     // its place inside it, the rest of A at the window's mean (zero after
@@ -708,20 +772,19 @@ fn pass(
     let plan = Plan::new(search);
     let wide = (rung.recheck && pred.is_none() && search == n && 2 * n <= w.min(h))
         .then(|| Plan::new(2 * n));
-    let results: Vec<(f64, f64, f64, f64, Option<NoPeak>)> = (0..grid.len())
+    let results: Vec<(f64, f64, f64, f64, Option<NoPeak>, (f64, f64))> = (0..grid.len())
         .into_par_iter()
         .map_init(
-            || (Scratch::new(&plan), None::<Scratch>),
+            || (Ensemble::new(&plan), None::<Ensemble>),
             |(sc, wide_sc), k| {
                 let (r, c) = (k / grid.nx, k % grid.nx);
                 let (x0, y0) = grid.origin(r, c);
                 let (xc, yc) = (x0 + n / 2, y0 + n / 2);
                 if mask.is_some_and(|m| m[[yc.min(m.dim().0 - 1), xc.min(m.dim().1 - 1)]]) {
-                    return (0.0, 0.0, 0.0, 0.0, Some(NoPeak::NoSignal));
+                    return (0.0, 0.0, 0.0, 0.0, Some(NoPeak::NoSignal), NO_SIGMA);
                 }
                 let region = Region {
-                    a,
-                    b,
+                    pairs,
                     excluded,
                     origin: (x0, y0),
                     n,
@@ -736,7 +799,7 @@ fn pass(
                 // area holds every particle of the window).
                 if let (Ok(p), Some(plan2)) = (&peak, wide.as_ref()) {
                     if p.dx.hypot(p.dy) > n as f64 / 4.0 {
-                        let sc2 = wide_sc.get_or_insert_with(|| Scratch::new(plan2));
+                        let sc2 = wide_sc.get_or_insert_with(|| Ensemble::new(plan2));
                         if let Ok(q) = region.correlate(plan2, sc2, s.subpixel) {
                             let differs = (q.dx - p.dx).hypot(q.dy - p.dy) > 1.0;
                             if differs && q.ratio > p.ratio && q.width <= MAX_PEAK_WIDTH {
@@ -762,9 +825,14 @@ fn pass(
                     // After deformation the residual must be small: a
                     // correction beyond a quarter window means the
                     // predictor was wrong here, so the peak is not trusted.
-                    Ok(p) if pred.is_some() && p.dx.hypot(p.dy) > n as f64 / 4.0 => {
-                        (pu + p.dx, pv + p.dy, 0.0, p.height, Some(NoPeak::NoPeak))
-                    }
+                    Ok(p) if pred.is_some() && p.dx.hypot(p.dy) > n as f64 / 4.0 => (
+                        pu + p.dx,
+                        pv + p.dy,
+                        0.0,
+                        p.height,
+                        Some(NoPeak::NoPeak),
+                        NO_SIGMA,
+                    ),
                     // A ridge (a streak's correlation, flat along the
                     // streak) has no position to measure: where the peak
                     // ratio is judged by the neighbours, a cluster of
@@ -776,9 +844,10 @@ fn pass(
                         p.ratio,
                         p.height,
                         Some(NoPeak::NoPeak),
+                        NO_SIGMA,
                     ),
-                    Ok(p) => (pu + p.dx, pv + p.dy, p.ratio, p.height, None),
-                    Err(e) => (pu, pv, 0.0, 0.0, Some(e)),
+                    Ok(p) => (pu + p.dx, pv + p.dy, p.ratio, p.height, None, p.sigma),
+                    Err(e) => (pu, pv, 0.0, 0.0, Some(e), NO_SIGMA),
                 }
             },
         )
@@ -790,12 +859,14 @@ fn pass(
     let mut height = Array2::zeros(shape);
     let mut state = Array2::from_elem(shape, State::Valid);
     let mut replaceable = Array2::from_elem(shape, true);
-    for (k, (du, dv, pr, ph, err)) in results.into_iter().enumerate() {
+    let mut sigma = Array2::from_elem(shape, NO_SIGMA);
+    for (k, (du, dv, pr, ph, err, sg)) in results.into_iter().enumerate() {
         let idx = [k / grid.nx, k % grid.nx];
         u[idx] = du;
         v[idx] = dv;
         ratio[idx] = pr;
         height[idx] = ph;
+        sigma[idx] = sg;
         match err {
             Some(NoPeak::NoSignal) => {
                 state[idx] = State::Invalid;
@@ -831,6 +902,7 @@ fn pass(
         &replaceable,
         s.replace_iterations,
     );
+    validate::replaced_uncertainty(&u, &v, &state, &mut sigma);
     if rung.relaxed {
         // Weak peaks the neighbours confirm are used (they deform the next
         // pass and are reported) but never called valid: valid keeps
@@ -851,14 +923,14 @@ fn pass(
         state,
         peak_ratio: ratio,
         peak_height: height,
+        sigma,
     };
     (field, support)
 }
 
-/// One window of a pass: where it sits in the (possibly deformed) images.
+/// One window of a pass: where it sits in the (possibly deformed) pairs.
 struct Region<'i> {
-    a: &'i Array2<f32>,
-    b: &'i Array2<f32>,
+    pairs: &'i [(&'i Array2<f32>, &'i Array2<f32>)],
     /// Pixels the correlation leaves out.
     excluded: Option<&'i Array2<bool>>,
     /// Top-left pixel of the window, (x, y).
@@ -867,17 +939,81 @@ struct Region<'i> {
     n: usize,
 }
 
+/// A thread's buffers for one window size: the correlation scratch and
+/// the sum of an ensemble's correlation planes.
+struct Ensemble {
+    sc: Scratch,
+    sum: Vec<f32>,
+}
+
+impl Ensemble {
+    fn new(plan: &Plan) -> Ensemble {
+        Ensemble {
+            sc: Scratch::new(plan),
+            sum: vec![0.0; plan.size() * plan.size()],
+        }
+    }
+}
+
 impl Region<'_> {
-    /// Correlates the window of A with the area of B of `plan`'s side
-    /// around it (the window itself when that equals `n`; larger areas
-    /// must fit the image): the displacement of B relative to A, px.
+    /// Correlates the window of each A with the area of its B of `plan`'s
+    /// side around it (the window itself when that equals `n`; larger
+    /// areas must fit the image): the displacement of B relative to A,
+    /// px. One pair is [`correlate`]; several sum their normalised planes
+    /// (pairs whose windows have no signal add nothing), and the peak's
+    /// uncertainty adds the pairs' variances.
     fn correlate(
         &self,
         plan: &Plan,
-        sc: &mut Scratch,
+        en: &mut Ensemble,
         method: Subpixel,
     ) -> Result<correlate::Peak, NoPeak> {
-        let (a, b, excluded, n) = (self.a, self.b, self.excluded, self.n);
+        if let [(a, b)] = self.pairs {
+            self.fill(a, b, plan, &mut en.sc);
+            return correlate(plan, &mut en.sc, method);
+        }
+        let n = plan.size();
+        en.sum.fill(0.0);
+        let mut used = 0usize;
+        for (a, b) in self.pairs {
+            self.fill(a, b, plan, &mut en.sc);
+            match correlate::plane(plan, &mut en.sc) {
+                Ok(p) => {
+                    let k = p.norm as f32;
+                    for (t, &c) in en.sum.iter_mut().zip(en.sc.plane()) {
+                        *t += c * k;
+                    }
+                    used += 1;
+                }
+                Err(NoPeak::NoSignal) => continue,
+                Err(e) => return Err(e),
+            }
+        }
+        if used == 0 {
+            return Err(NoPeak::NoSignal);
+        }
+        let norm = 1.0 / used as f64;
+        let (mut peak, at) = correlate::locate(n, &en.sum, norm, method)?;
+        // The asymmetry's variance over the pairs, each normalised as its
+        // plane entered the sum.
+        let (mut vu, mut vv) = (0.0, 0.0);
+        for (a, b) in self.pairs {
+            self.fill(a, b, plan, &mut en.sc);
+            if let Ok(p) = correlate::plane(plan, &mut en.sc) {
+                let (su, sv) = correlate::spread(&en.sc, n, at, p.means);
+                vu += (su * p.direct).powi(2);
+                vv += (sv * p.direct).powi(2);
+            }
+        }
+        let sd = (vu.sqrt() * norm, vv.sqrt() * norm);
+        peak.sigma = correlate::peak_uncertainty(n, &en.sum, norm, at, sd);
+        Ok(peak)
+    }
+
+    /// Copies the window of `a` and the searched area of `b` (and their
+    /// excluded pixels) into the scratch buffers.
+    fn fill(&self, a: &Array2<f32>, b: &Array2<f32>, plan: &Plan, sc: &mut Scratch) {
+        let (excluded, n) = (self.excluded, self.n);
         let (x0, y0) = self.origin;
         let (h, w) = a.dim();
         let search = plan.size();
@@ -927,7 +1063,6 @@ impl Region<'_> {
         if search > n {
             pad_outside(&mut sc.a, &sc.masked, search, (x0 - bx, y0 - by), n);
         }
-        correlate(plan, sc, method)
     }
 }
 

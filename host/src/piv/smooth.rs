@@ -126,6 +126,7 @@ mod tests {
             state: Array2::from_elem((ny, nx), State::Valid),
             peak_ratio: Array2::zeros((ny, nx)),
             peak_height: Array2::zeros((ny, nx)),
+            sigma: Array2::from_elem((ny, nx), (0.1, 0.1)),
         }
     }
 

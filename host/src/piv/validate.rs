@@ -341,6 +341,55 @@ pub fn replace(
     }
 }
 
+/// The uncertainty of every replaced vector, px, from its neighbours: the
+/// root of the mean of their squared uncertainties plus the spread of their
+/// values about the replacement (what a neighbour fit cannot know of the
+/// window itself), over the measured vectors of its 3 × 3 neighbourhood;
+/// infinite where it has none. Invalid vectors get infinite uncertainty;
+/// valid ones keep theirs.
+pub fn replaced_uncertainty(
+    u: &Array2<f64>,
+    v: &Array2<f64>,
+    state: &Array2<State>,
+    sigma: &mut Array2<(f64, f64)>,
+) {
+    let (ny, nx) = u.dim();
+    let mut out = sigma.clone();
+    for r in 0..ny {
+        for c in 0..nx {
+            match state[[r, c]] {
+                State::Valid => continue,
+                State::Invalid => {
+                    out[[r, c]] = (f64::INFINITY, f64::INFINITY);
+                    continue;
+                }
+                State::Replaced => {}
+            }
+            let (mut n, mut su, mut sv) = (0usize, 0.0f64, 0.0f64);
+            for rr in r.saturating_sub(1)..(r + 2).min(ny) {
+                for cc in c.saturating_sub(1)..(c + 2).min(nx) {
+                    if (rr, cc) == (r, c) || state[[rr, cc]] != State::Valid {
+                        continue;
+                    }
+                    let (a, b) = sigma[[rr, cc]];
+                    if !(a.is_finite() && b.is_finite()) {
+                        continue;
+                    }
+                    n += 1;
+                    su += a * a + (u[[rr, cc]] - u[[r, c]]).powi(2);
+                    sv += b * b + (v[[rr, cc]] - v[[r, c]]).powi(2);
+                }
+            }
+            out[[r, c]] = if n == 0 {
+                (f64::INFINITY, f64::INFINITY)
+            } else {
+                ((su / n as f64).sqrt(), (sv / n as f64).sqrt())
+            };
+        }
+    }
+    *sigma = out;
+}
+
 /// `u`, `v` with every vector that was not measured (invalid, including
 /// windows without signal: masked, clipped, empty) filled from the
 /// measured ones as [`replace`] fills, growing outwards until none is
