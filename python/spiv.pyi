@@ -164,9 +164,14 @@ class Flow(TypedDict):
     u: _F64
     v: _F64
     flags: npt.NDArray[np.uint8]
+    sigma_u: _F64
+    sigma_v: _F64
     mean_u: _F64
     mean_v: _F64
     mean_flags: npt.NDArray[np.uint8]
+    mean_sigma_u: _F64
+    mean_sigma_v: _F64
+    mean_pairs: npt.NDArray[np.uint32]
     mean_dense_u: npt.NDArray[np.float32]  # only with dense=True
     mean_dense_v: npt.NDArray[np.float32]
 
@@ -192,6 +197,9 @@ def flow(
     (default 4*dt); start, end: ticks. method: "mc" (motion-compensated, the default),
     "adaptive" or "tfp". window: ticks. dwell_cap: px, or None for off.
     windows: PIV passes, px. dense: also the dense stage per pair, averaged.
-    Returns per-pair u, v, flags (pairs, ny, nx), the grid x, y (ny, nx), each
-    pair's ticks and method, the mean field, and with dense the mean dense field.
+    Returns per-pair u, v, flags and uncertainties sigma_u, sigma_v (px per pair,
+    inf where invalid) (pairs, ny, nx), the grid x, y (ny, nx), each pair's ticks
+    and method, the robust mean field (per node the median of the valid vectors,
+    its uncertainty and mean_pairs, the count of valid vectors), and with dense
+    the mean dense field.
     """

@@ -1,42 +1,50 @@
 //! `spiv flow`: the main job on any spike recording (a Vidar `.dat` or a
-//! `.npz` capture): frame pairs through the core at a fixed schedule, PIV on
-//! each, with the flow predicted so long windows do not blur. No window
-//! needs hand-tuning.
+//! `.npz` capture): a field per pair at a fixed schedule, and their
+//! robust mean. No window needs hand-tuning.
 //!
-//! - `mc` (the default, beyond the paper; issue 14): motion-compensated
-//!   adaptive frames. PIV of the TFP pair (window 8) at the same ticks
-//!   predicts each row's velocity, the core refines it from the spikes by
-//!   contrast maximisation, and the core counts every particle along its
-//!   path (`crate::predict`); the compensated pair's own field then
-//!   predicts it once more (`predict::ROUNDS`).
+//! - `mc` (the default, beyond the paper): the time ladder
+//!   ([`crate::motion::ladder`]). Around each pair's midpoint the
+//!   recording's own planes measure the flow: disjoint frames of the
+//!   spikes' innovation, compensated along the motion known so far, at
+//!   separations growing from 4 ticks as long as the flow and the recording
+//!   allow; each vector keeps the most certain measurement and its
+//!   uncertainty, per pair (`dt` ticks).
 //! - `adaptive` with a dwell cap (SPEC 5): a time-resolved loop; the field
 //!   of the previous pair predicts each 32-row band's fastest particle, and
 //!   the band's adaptive window is capped so it blurs by at most the budget.
-//!   The first pair — and any pair after one whose PIV found less than half
-//!   its vectors valid — is bootstrapped from a TFP pair. Without a cap:
-//!   the paper's algorithm, one n_max everywhere.
+//!   The first pair — and any pair after one whose field is not usable
+//!   ([`crate::piv::Field::usable`]) — is bootstrapped from a TFP pair.
+//!   Without a cap: the paper's algorithm, one n_max everywhere.
 //! - `tfp`, `tfi`: the baselines.
 //!
-//! Memory is bounded by the frames, not the recording: a `.dat` is read
-//! window by window (only the planes a frame needs), a `.npz` capture is
-//! held packed (at most `spiv_formats::MAX_NPZ_SAMPLES` samples).
+//! A pair that measured nothing says so: its vectors are invalid, with no
+//! uncertainty. Memory is bounded by the frames and the ladder's stretch
+//! of planes, not by the recording: a `.dat` is read window by window, a
+//! `.npz` capture is held packed (at most `spiv_formats::MAX_NPZ_SAMPLES`
+//! samples).
 
 use std::path::Path;
 
+use ndarray::Array2;
 use spiv_core::{Method, Params};
 use spiv_formats::capture::Capture;
 use spiv_formats::dat::DatReader;
+use spiv_formats::grid::Grid;
 use spiv_formats::npz::read_npz_spikes;
 use spiv_formats::{FormatError, State, Vector};
 
 use crate::dwell::{adaptive_banded, caps_for};
-use crate::piv::{piv, to_f32, PivError, Settings};
-use crate::predict::{compensated_frame, row_velocities};
+use crate::motion::ladder::{self, LadderSettings, Rung};
+use crate::motion::Innovation;
+use crate::piv::{piv, to_f32, Field, PivError, Settings, NO_SIGMA};
 use crate::reconstruct::{frame_from_planes, FileOptions, Planes, ReconstructError};
-use spiv_core::motion::Refine;
 
-/// The TFP window of the bootstrap pair, ticks.
+/// The TFP window of the dwell cap's bootstrap pair, ticks.
 pub const BOOTSTRAP_WINDOW: u16 = 8;
+
+/// The dwell cap's default blur budget, px: a particle's image may move this
+/// far within its window.
+pub const DWELL_CAP: f64 = 8.0;
 
 /// Everything `spiv flow` can refuse.
 #[derive(Debug, thiserror::Error)]
@@ -116,11 +124,30 @@ impl Recording {
         })
     }
 
+    /// A recording held in memory: `planes` packed as the sensor stores them
+    /// (bottom-up, `width × height` bits each), pairs `dt` ticks apart.
+    pub fn simulated(width: u16, height: u16, planes: Vec<u8>, dt: u32) -> Recording {
+        let pb = (usize::from(width) * usize::from(height) / 8).max(1);
+        Recording {
+            width,
+            height,
+            planes: (planes.len() / pb) as u64,
+            flip: true,
+            crop_width: width,
+            meta_dt: Some(dt),
+            source: Source::Memory(planes),
+        }
+    }
+
     /// The planes a window of `window` ticks centred on `k` needs (clipped
     /// at the recording's ends).
     pub fn around(&mut self, k: u64, window: u16) -> Result<Planes, FlowError> {
-        let first = k.saturating_sub(u64::from(window / 2));
-        let n = u64::from(window).min(self.planes.saturating_sub(first));
+        self.stretch(k.saturating_sub(u64::from(window / 2)), u64::from(window))
+    }
+
+    /// The planes `first..first + n` (clipped at the recording's end).
+    pub fn stretch(&mut self, first: u64, n: u64) -> Result<Planes, FlowError> {
+        let n = n.min(self.planes.saturating_sub(first));
         let data = match &mut self.source {
             Source::Dat(r) => r.read_range(first, n)?,
             Source::Memory(all) => {
@@ -159,47 +186,74 @@ pub struct FlowOptions {
     pub start: u64,
     /// No frame at or after this tick.
     pub end: u64,
+    /// No pair starts after this tick (the default schedule of
+    /// motion-compensated pairs: every pair's ladder reaches its longest
+    /// rung).
+    pub last_start: Option<u64>,
     /// Core parameters (`n_max` is set from `window`).
     pub core: Params,
     /// PIV settings of TFP, TFI and adaptive pairs (and of the TFP pairs
-    /// that predict motion).
+    /// that bootstrap the dwell cap).
     pub piv: Settings,
-    /// PIV settings of motion-compensated pairs (more passes: their
-    /// deformation converges where glare hides a window's lower particles).
-    pub mc_piv: Settings,
+    /// The time ladder of motion-compensated pairs.
+    pub ladder: LadderSettings,
     /// Also run the dense stage on every pair ([`crate::piv::dense`]) and
     /// average it into [`FlowOutcome::mean_dense`].
     pub dense: bool,
-    /// Motion-compensated pairs: the wide baseline's separation in pair
-    /// separations ([`crate::baseline`]; `None` or below 2: none). A pair
-    /// whose wide frames' windows do not fit the recording keeps its own
-    /// field.
-    pub wide: Option<u32>,
 }
 
 impl FlowOptions {
     /// The defaults for `rec` with pairs `dt` ticks apart: motion-compensated
-    /// adaptive frames (`mc`), n_max 128, one pair
-    /// every `4·dt` ticks from the first tick whose window is whole (or, on
-    /// a recording too short for that, the first pair as central as it
-    /// fits), to the end, spike-frame PIV settings.
+    /// (`mc`, the time ladder), one pair every `4·dt` ticks over the stretch
+    /// where every pair's ladder reaches its longest rung (on a recording
+    /// too short for that, one pair at its centre) — see
+    /// [`FlowOptions::schedule`].
     pub fn new(rec: &Recording, dt: u32) -> FlowOptions {
         let core = Params::default();
-        let last = rec.planes.saturating_sub(1 + u64::from(dt));
-        FlowOptions {
+        let mut o = FlowOptions {
             method: Method::Mc,
             window: core.n_max,
-            dwell_cap: Some(8.0),
+            dwell_cap: Some(DWELL_CAP),
             dt,
             every: dt.saturating_mul(4),
-            start: u64::from(core.n_max / 2).min(last / 2),
+            start: 0,
             end: rec.planes,
+            last_start: None,
             core,
             piv: Settings::for_spike_frames(),
-            mc_piv: Settings::for_compensated_frames(),
+            ladder: LadderSettings::default(),
             dense: false,
-            wide: Some(crate::baseline::SEPARATION),
+        };
+        o.schedule(rec.planes);
+        o
+    }
+
+    /// Sets the default first pair (and, for motion-compensated pairs, the
+    /// last) for a recording of `planes` planes. Motion-compensated: the
+    /// pairs whose midpoint has the ladder's longest separation of planes
+    /// on both sides, so that no pair is measured from fewer planes than
+    /// another; on a recording too short for one, the central pair.
+    /// Otherwise: from tick `n_max/2`, where the first window is whole (or
+    /// as central as a short recording allows), to the end.
+    pub fn schedule(&mut self, planes: u64) {
+        let dt = u64::from(self.dt);
+        let last = planes.saturating_sub(1 + dt);
+        if self.method != Method::Mc {
+            self.start = u64::from(self.core.n_max / 2).min(last / 2);
+            self.last_start = None;
+            return;
         }
+        let reach = u64::from(self.ladder.separations.iter().copied().max().unwrap_or(0));
+        // A pair at `ka` has its midpoint at ka + ⌈dt/2⌉.
+        let half = dt.div_ceil(2);
+        let (first_mid, last_mid) = (reach, planes.saturating_sub(reach));
+        let mid = if first_mid <= last_mid {
+            first_mid
+        } else {
+            planes / 2
+        };
+        self.start = mid.saturating_sub(half).min(last);
+        self.last_start = Some(last_mid.max(mid).saturating_sub(half).max(self.start));
     }
 
     /// The pairs' first ticks.
@@ -207,11 +261,19 @@ impl FlowOptions {
         let every = u64::from(self.every.max(1));
         let mut out = Vec::new();
         let mut k = self.start;
-        while k + u64::from(self.dt) < self.end {
+        while k + u64::from(self.dt) < self.end && self.last_start.is_none_or(|l| k <= l) {
             out.push(k);
             k += every;
         }
         out
+    }
+
+    /// The PIV settings whose grid the pairs' fields live on.
+    pub fn grid_settings(&self) -> &Settings {
+        match self.method {
+            Method::Mc => &self.ladder.piv,
+            _ => &self.piv,
+        }
     }
 }
 
@@ -234,16 +296,13 @@ pub struct FlowRequest {
     /// TFP window or adaptive/TFI n_max, ticks (default 8 TFP, else 128).
     pub window: Option<u16>,
     /// Adaptive: blur budget of the window caps, px (`None`: the paper's
-    /// algorithm, one n_max everywhere). Default 8.
+    /// algorithm, one n_max everywhere). Default [`DWELL_CAP`].
     pub dwell_cap: Option<f64>,
     /// PIV window side of each pass, px (default: 64,32,32, and
-    /// 64,32,32,32,32 for motion-compensated pairs).
+    /// 64,32,32,32,32,32,32 for motion-compensated pairs).
     pub windows: Option<Vec<usize>>,
     /// Run the dense stage on every pair and average it.
     pub dense: bool,
-    /// Motion-compensated pairs: the wide baseline's separation in pair
-    /// separations (default [`crate::baseline::SEPARATION`]; `None`: off).
-    pub wide: Option<u32>,
 }
 
 impl Default for FlowRequest {
@@ -255,10 +314,9 @@ impl Default for FlowRequest {
             end: None,
             method: Method::Mc,
             window: None,
-            dwell_cap: Some(8.0),
+            dwell_cap: Some(DWELL_CAP),
             windows: None,
             dense: false,
-            wide: Some(crate::baseline::SEPARATION),
         }
     }
 }
@@ -294,21 +352,17 @@ impl FlowRequest {
         });
         o.dwell_cap = self.dwell_cap;
         o.every = self.every.unwrap_or(o.every);
-        o.start = self.start.unwrap_or(o.start);
         o.end = self.end.unwrap_or(o.end).min(rec.planes);
+        o.schedule(o.end);
+        if let Some(s) = self.start {
+            o.start = s;
+            o.last_start = None;
+        }
         if let Some(w) = &self.windows {
             o.piv.windows = w.clone();
-            o.mc_piv.windows = w.clone();
+            o.ladder.piv.windows = w.clone();
         }
         o.dense = self.dense;
-        if let Some(s) = self.wide {
-            if !(2..=64).contains(&s) {
-                return Err(FlowError::Schedule(format!(
-                    "--wide {s}: expected 2..=64 pair separations, or off"
-                )));
-            }
-        }
-        o.wide = self.wide;
         Ok(o)
     }
 }
@@ -316,26 +370,30 @@ impl FlowRequest {
 /// One pair's result.
 #[derive(Debug, Clone)]
 pub struct PairResult {
-    /// How its frames were made: the method asked for, or `Adaptive` where
-    /// `Mc` had no flow to predict from (fewer than half of the TFP pair's
-    /// vectors valid).
+    /// How its frames were made.
     pub method: Method,
     /// The pair's frame ticks.
     pub ticks: [u64; 2],
-    /// The field (upright, row-major on the PIV grid).
+    /// The field in px per pair (upright, row-major on the PIV grid).
     pub vectors: Vec<Vector>,
+    /// Each vector's standard uncertainty (u, v), px per pair (infinite
+    /// where invalid).
+    pub sigma: Vec<(f64, f64)>,
     /// Window caps per 32-row band the pair's adaptive frames used (empty:
     /// none).
     pub caps: Vec<u16>,
     /// The caps came from a TFP pair at the same ticks, not from the
     /// previous pair.
     pub bootstrapped: bool,
-    /// What the core's tables could not hold in the pair's compensated
-    /// frames (left as background).
+    /// What the core's tables could not hold in the pair's frames (left
+    /// as background).
     pub lost: LabelLoss,
-    /// The wide pair's frame ticks, when one measured the field
-    /// ([`crate::baseline`]).
-    pub wide: Option<[u64; 2]>,
+    /// Motion-compensated pairs: the rungs of the time ladder, shortest
+    /// first.
+    pub rungs: Vec<Rung>,
+    /// Motion-compensated pairs: the separation (ticks) of the rung each
+    /// vector came from (0: replaced or invalid).
+    pub separation: Vec<u32>,
 }
 
 /// Particles a frame lost to the core's full tables: they are rendered as
@@ -376,6 +434,23 @@ impl PairResult {
         let n = |s: State| self.vectors.iter().filter(|v| v.state == s).count();
         (n(State::Valid), n(State::Replaced), n(State::Invalid))
     }
+
+    /// Whether the pair measured anything (a valid vector).
+    pub fn measured(&self) -> bool {
+        self.vectors.iter().any(|v| v.state == State::Valid)
+    }
+}
+
+/// The robust mean of the pairs' fields.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MeanField {
+    /// Per node the median over pairs of the valid vectors (u and v each),
+    /// valid; invalid where no pair measured the node.
+    pub vectors: Vec<Vector>,
+    /// The median's standard uncertainty, px per pair ([`median_sigma`]).
+    pub sigma: Vec<(f64, f64)>,
+    /// Pairs whose valid vector entered each node.
+    pub pairs: Vec<u32>,
 }
 
 /// Everything a run produced.
@@ -389,13 +464,15 @@ pub struct FlowOutcome {
     pub size: (u16, u16),
     /// Gray level of full scale of those frames.
     pub full_scale: u16,
+    /// The grid of every pair's field.
+    pub grid: Grid,
     /// With [`FlowOptions::dense`]: the mean over pairs of the dense stage's
     /// field (px per pair, v down, upright).
     pub mean_dense: Option<spiv_formats::dense::DenseField>,
 }
 
 impl FlowOutcome {
-    /// What the core's full tables lost over all pairs.
+    /// What the core's tables lost over all pairs.
     pub fn lost(&self) -> LabelLoss {
         let mut l = LabelLoss::default();
         for p in &self.pairs {
@@ -404,55 +481,97 @@ impl FlowOutcome {
         l
     }
 
-    /// The mean field over pairs: per grid node the mean of the measured
-    /// (valid or replaced) vectors, invalid where no pair measured it.
-    pub fn mean_field(&self) -> Vec<Vector> {
+    /// The robust mean over pairs: per node the median of the valid
+    /// vectors, their count and the median's uncertainty.
+    pub fn mean(&self) -> MeanField {
         let Some(first) = self.pairs.first() else {
-            return Vec::new();
+            return MeanField {
+                vectors: Vec::new(),
+                sigma: Vec::new(),
+                pairs: Vec::new(),
+            };
         };
-        first
-            .vectors
-            .iter()
-            .enumerate()
-            .map(|(i, v0)| {
-                let (mut u, mut v, mut n) = (0.0, 0.0, 0usize);
-                for p in &self.pairs {
-                    if let Some(x) = p.vectors.get(i).filter(|x| x.state.is_measured()) {
-                        u += x.u;
-                        v += x.v;
-                        n += 1;
-                    }
-                }
-                let state = if n > 0 { State::Valid } else { State::Invalid };
-                let n = n.max(1) as f64;
-                Vector {
-                    u: u / n,
-                    v: v / n,
-                    state,
-                    ..*v0
-                }
-            })
-            .collect()
+        let mut out = MeanField {
+            vectors: Vec::with_capacity(first.vectors.len()),
+            sigma: Vec::with_capacity(first.vectors.len()),
+            pairs: Vec::with_capacity(first.vectors.len()),
+        };
+        for (i, v0) in first.vectors.iter().enumerate() {
+            let valid: Vec<Measure> = self
+                .pairs
+                .iter()
+                .filter_map(|p| {
+                    let v = p.vectors.get(i).filter(|v| v.state == State::Valid)?;
+                    Some((v.u, v.v, p.sigma.get(i).copied().unwrap_or(NO_SIGMA)))
+                })
+                .collect();
+            let n = valid.len();
+            let (u, v, state) = if n == 0 {
+                (0.0, 0.0, State::Invalid)
+            } else {
+                let us: Vec<f64> = valid.iter().map(|x| x.0).collect();
+                let vs: Vec<f64> = valid.iter().map(|x| x.1).collect();
+                (median(&us), median(&vs), State::Valid)
+            };
+            out.vectors.push(Vector { u, v, state, ..*v0 });
+            out.sigma.push(median_sigma(&valid));
+            out.pairs.push(n as u32);
+        }
+        out
+    }
+
+    /// The mean field's vectors ([`FlowOutcome::mean`]).
+    pub fn mean_field(&self) -> Vec<Vector> {
+        self.mean().vectors
     }
 }
 
-/// Both frames of a motion-compensated pair at `ticks`, counted along
-/// `vel` as the core refines it, and what their labelling lost.
-fn compensated_pair(
-    rec: &mut Recording,
-    ticks: [u64; 2],
-    core: &Params,
-    vel: &crate::predict::RowVelocities,
-) -> Result<([Vec<u16>; 2], LabelLoss), FlowError> {
-    let mut out = [Vec::new(), Vec::new()];
-    let mut lost = LabelLoss::default();
-    for (o, k) in out.iter_mut().zip(ticks) {
-        let pl = rec.around(k, core.n_max)?;
-        let (f, _, labels) = compensated_frame(&pl, k, core, vel, Some(Refine::default()))?;
-        *o = f;
-        lost.add(&labels);
+fn median(v: &[f64]) -> f64 {
+    crate::piv::validate::median(&mut v.to_vec())
+}
+
+/// A valid vector's `(u, v, (σu, σv))`.
+pub type Measure = (f64, f64, (f64, f64));
+
+/// The standard uncertainty of the median of `valid`: the larger of what
+/// the vectors' own uncertainties give (the median of them, over √n,
+/// times 1.2533, the median's efficiency) and what their scatter gives
+/// (1.4826 × the median absolute deviation, likewise); infinite with no
+/// vector.
+pub fn median_sigma(valid: &[Measure]) -> (f64, f64) {
+    let n = valid.len();
+    if n == 0 {
+        return NO_SIGMA;
     }
-    Ok((out, lost))
+    let k = 1.2533 / (n as f64).sqrt();
+    let one = |xs: Vec<f64>, own: Vec<f64>| {
+        let m = median(&xs);
+        let dev: Vec<f64> = xs.iter().map(|x| (x - m).abs()).collect();
+        k * median(&own).max(1.4826 * median(&dev))
+    };
+    (
+        one(
+            valid.iter().map(|x| x.0).collect(),
+            valid.iter().map(|x| x.2 .0).collect(),
+        ),
+        one(
+            valid.iter().map(|x| x.1).collect(),
+            valid.iter().map(|x| x.2 .1).collect(),
+        ),
+    )
+}
+
+/// A pair's field and how it was made, before it becomes a [`PairResult`].
+struct Measured {
+    method: Method,
+    field: Field,
+    frames: [Array2<f32>; 2],
+    caps: Vec<u16>,
+    bootstrapped: bool,
+    rungs: Vec<Rung>,
+    separation: Vec<u32>,
+    /// Ticks the frames' displacement spans (`dt` but for ladder frames).
+    frame_ticks: f64,
 }
 
 /// Runs the flow job over `rec`; `progress` is told (pairs done, pairs).
@@ -461,6 +580,51 @@ pub fn run_flow(
     opts: &FlowOptions,
     mut progress: impl FnMut(usize, usize),
 ) -> Result<FlowOutcome, FlowError> {
+    let ticks = check(rec, opts)?;
+    let core = Params {
+        n_max: opts.window.max(opts.core.n0),
+        ..opts.core
+    };
+    let (w, h) = (usize::from(rec.crop_width), usize::from(rec.height));
+    let grid = opts
+        .grid_settings()
+        .grid(w, h)
+        .ok_or(PivError::TooSmall(w, h, 32))?;
+    let mut prediction: Option<Field> = None;
+    let mut pairs = Vec::with_capacity(ticks.len());
+    let mut first_frames = None;
+    let mut dense = DenseSum::default();
+    for (i, &ka) in ticks.iter().enumerate() {
+        let kb = ka + u64::from(opts.dt);
+        let m = match (opts.method, opts.dwell_cap) {
+            (Method::Mc, _) => ladder_pair(rec, [ka, kb], opts)?,
+            (Method::Adaptive, Some(budget)) => {
+                capped_pair(rec, [ka, kb], opts, &core, budget, prediction.take())?
+            }
+            (m, _) => plain_pair(rec, [ka, kb], opts, &core, m)?,
+        };
+        if opts.dense {
+            dense.add(&m, f64::from(opts.dt));
+        }
+        prediction = m.field.usable().then(|| m.field.clone());
+        if first_frames.is_none() {
+            first_frames = Some(m.frames.clone().map(|f| gray(&f, core.full_scale)));
+        }
+        pairs.push(pair_result(m, [ka, kb]));
+        progress(i + 1, ticks.len());
+    }
+    Ok(FlowOutcome {
+        pairs,
+        first_frames: first_frames.unwrap_or_default(),
+        size: (rec.crop_width, rec.height),
+        full_scale: core.full_scale,
+        grid,
+        mean_dense: dense.mean(w, h),
+    })
+}
+
+/// The pairs' first ticks, once the options are known to fit `rec`.
+fn check(rec: &Recording, opts: &FlowOptions) -> Result<Vec<u64>, FlowError> {
     if !(1..=255).contains(&opts.window) {
         return Err(FlowError::Schedule(format!(
             "window {}: expected 1..=255 ticks",
@@ -480,171 +644,208 @@ pub fn run_flow(
             rec.planes, opts.start, opts.dt, opts.end
         )));
     }
-    let core = Params {
-        n_max: opts.window.max(opts.core.n0),
-        ..opts.core
+    Ok(ticks)
+}
+
+/// A motion-compensated pair: the time ladder around its midpoint, over
+/// the planes within the longest rung's reach that lie before `opts.end`.
+fn ladder_pair(
+    rec: &mut Recording,
+    [ka, kb]: [u64; 2],
+    opts: &FlowOptions,
+) -> Result<Measured, FlowError> {
+    let mid = (ka + kb).div_ceil(2);
+    let reach = u64::from(opts.ladder.separations.iter().copied().max().unwrap_or(0));
+    let first = mid.saturating_sub(reach);
+    let last = (mid + reach).min(opts.end);
+    let planes = rec.stretch(first, last.saturating_sub(first))?;
+    let inn = Innovation::of(&planes);
+    let dt = f64::from(opts.dt);
+    let m = ladder::measure(&inn, mid, dt, &opts.ladder)?;
+    let (frames, frame_ticks) = match m.frames {
+        Some(f) => (f.frames, f64::from(f.separation)),
+        None => {
+            let zero = Array2::zeros((inn.height, inn.width));
+            ([zero.clone(), zero], dt)
+        }
+    };
+    Ok(Measured {
+        method: Method::Mc,
+        separation: m.separation.iter().copied().collect(),
+        field: m.field,
+        frames,
+        caps: Vec::new(),
+        bootstrapped: false,
+        rungs: m.rungs,
+        frame_ticks,
+    })
+}
+
+/// An adaptive pair with its windows capped per band by `prediction` (the
+/// previous pair's usable field) or, without one, by the TFP pair at the
+/// same ticks.
+fn capped_pair(
+    rec: &mut Recording,
+    [ka, kb]: [u64; 2],
+    opts: &FlowOptions,
+    core: &Params,
+    budget: f64,
+    prediction: Option<Field>,
+) -> Result<Measured, FlowError> {
+    let (pred, bootstrapped) = match prediction {
+        Some(p) => (p, false),
+        None => {
+            let [a, b] = frames(rec, [ka, kb], Method::Tfp, BOOTSTRAP_WINDOW, core)?;
+            (piv(&a, &b, None, &opts.piv)?, true)
+        }
     };
     let dt = f64::from(opts.dt);
-    let (w, h) = (rec.crop_width, rec.height);
-    let (wu, hu) = (usize::from(w), usize::from(h));
-    let field_with = |a: &[u16], b: &[u16], s: &Settings| -> Result<Vec<Vector>, FlowError> {
-        Ok(piv(&to_f32(a, wu, hu), &to_f32(b, wu, hu), None, s)?.vectors())
-    };
-    let field = |a: &[u16], b: &[u16]| field_with(a, b, &opts.piv);
-    let mut prediction: Option<Vec<Vector>> = None;
-    let mut pairs = Vec::with_capacity(ticks.len());
-    let mut first_frames = None;
-    let mut dense_sum: Option<(Vec<f64>, Vec<f64>, usize)> = None;
-    for (i, &ka) in ticks.iter().enumerate() {
-        let kb = ka + u64::from(opts.dt);
-        let frames =
-            |rec: &mut Recording, method: Method, n: u16| -> Result<[Vec<u16>; 2], FlowError> {
-                let mut out = [Vec::new(), Vec::new()];
-                for (o, k) in out.iter_mut().zip([ka, kb]) {
-                    *o = frame_from_planes(&rec.around(k, n)?, k, method, n, &core)?.data;
-                }
-                Ok(out)
-            };
-        let mut made = opts.method;
-        let mut lost = LabelLoss::default();
-        // The compensated pair's last control, for its wide pair.
-        let mut mc_vel: Option<crate::predict::RowVelocities> = None;
-        let (pair, caps, bootstrapped) = match (opts.method, opts.dwell_cap) {
-            (Method::Adaptive, Some(budget)) => {
-                let (pred, boot) = match prediction.take() {
-                    Some(p) => (p, false),
-                    None => {
-                        let [a, b] = frames(rec, Method::Tfp, BOOTSTRAP_WINDOW)?;
-                        (field(&a, &b)?, true)
-                    }
-                };
-                let pa = rec.around(ka, core.n_max)?;
-                let caps = caps_for(&pa, &pred, dt, budget, &core);
-                let a = adaptive_banded(&pa, ka, &core, &caps)?;
-                let b = adaptive_banded(&rec.around(kb, core.n_max)?, kb, &core, &caps)?;
-                ([a, b], caps, boot)
-            }
-            (Method::Mc, _) => {
-                // Predicted by the TFP pair at the same ticks, every pair:
-                // chaining each pair's field into the next drifted in the
-                // glare rows (paper-linear, 11 pairs: glare RMAE 0.13/0.27
-                // against 0.03/0.09), while contrast maximisation makes the
-                // TFP prediction exact enough outside them.
-                let [a, b] = frames(rec, Method::Tfp, BOOTSTRAP_WINDOW)?;
-                let pred = field(&a, &b)?;
-                if !crate::predict::predicts(&pred) {
-                    // No flow to predict from (a TFP pair too dark or too
-                    // noisy for PIV): compensating a guess would move static
-                    // light into "particles". The plain adaptive frames,
-                    // capped by whatever the field says.
-                    let pa = rec.around(ka, core.n_max)?;
-                    let caps = caps_for(&pa, &pred, dt, 8.0, &core);
-                    let a = adaptive_banded(&pa, ka, &core, &caps)?;
-                    let b = adaptive_banded(&rec.around(kb, core.n_max)?, kb, &core, &caps)?;
-                    made = Method::Adaptive;
-                    ([a, b], caps, true)
-                } else {
-                    let mut out = [Vec::new(), Vec::new()];
-                    let mut pred = pred;
-                    // The TFP field, then the compensated pair's own
-                    // (`predict::ROUNDS`).
-                    for round in 0..crate::predict::ROUNDS {
-                        if round > 0 {
-                            let own = field_with(&out[0], &out[1], &opts.mc_piv)?;
-                            if !crate::predict::predicts(&own) {
-                                break;
-                            }
-                            pred = own;
-                        }
-                        let vel = row_velocities(&pred, rec.height, rec.flip, dt);
-                        (out, lost) = compensated_pair(rec, [ka, kb], &core, &vel)?;
-                        mc_vel = Some(vel);
-                    }
-                    (out, Vec::new(), true)
-                }
-            }
-            (m, _) => (frames(rec, m, opts.window)?, Vec::new(), false),
-        };
-        let settings = match made {
-            Method::Mc => &opts.mc_piv,
-            _ => &opts.piv,
-        };
-        let mut pair = pair;
-        let (mut fa, mut fb) = (to_f32(&pair[0], wu, hu), to_f32(&pair[1], wu, hu));
-        let mut f = piv(&fa, &fb, None, settings)?;
-        // The wide baseline: compensated frames s·dt apart centred on the
-        // pair, with the pair's last control, where their windows fit;
-        // their combined field predicts both pairs once more
-        // (`baseline::ROUNDS`).
-        let planes = rec.planes.min(opts.end);
-        let wide_ticks = match (made, &mc_vel, opts.wide.filter(|&s| s >= 2)) {
-            (Method::Mc, Some(_), Some(s)) => {
-                crate::baseline::ticks_within(ka, opts.dt, s, core.n_max, planes)
-                    .map(|(k0, k1)| (k0, k1, s))
-            }
-            _ => None,
-        };
-        let (vectors, wide) = match (wide_ticks, mc_vel) {
-            (Some((k0, k1, s)), Some(mut vel)) => {
-                let mut round = 0;
-                loop {
-                    let (wf, wide_lost) = compensated_pair(rec, [k0, k1], &core, &vel)?;
-                    let (wa, wb) = (to_f32(&wf[0], wu, hu), to_f32(&wf[1], wu, hu));
-                    let combined = crate::baseline::measure(&f, (&wa, &wb), s, settings)?;
-                    if round == crate::baseline::ROUNDS || !crate::predict::predicts(&combined) {
-                        lost.merge(wide_lost);
-                        break (combined, Some([k0, k1]));
-                    }
-                    round += 1;
-                    vel = row_velocities(&combined, rec.height, rec.flip, dt);
-                    (pair, lost) = compensated_pair(rec, [ka, kb], &core, &vel)?;
-                    (fa, fb) = (to_f32(&pair[0], wu, hu), to_f32(&pair[1], wu, hu));
-                    f = piv(&fa, &fb, None, settings)?;
-                }
-            }
-            _ => (f.vectors(), None),
-        };
-        if opts.dense {
-            let (flow, _) = crate::piv::dense::for_piv(&fa, &fb, &f);
-            let d = dense_sum.get_or_insert_with(|| (vec![0.0; wu * hu], vec![0.0; wu * hu], 0));
-            for (s, x) in d.0.iter_mut().zip(flow.u.iter()) {
-                *s += f64::from(*x);
-            }
-            for (s, x) in d.1.iter_mut().zip(flow.v.iter()) {
-                *s += f64::from(*x);
-            }
-            d.2 += 1;
-        }
-        let valid = vectors.iter().filter(|v| v.state == State::Valid).count();
-        // A pair that mostly failed predicts nothing: bootstrap again.
-        prediction = (2 * valid >= vectors.len()).then(|| vectors.clone());
-        if first_frames.is_none() {
-            first_frames = Some(pair);
-        }
-        pairs.push(PairResult {
-            method: made,
-            ticks: [ka, kb],
-            vectors,
-            caps,
-            bootstrapped,
-            lost,
-            wide,
-        });
-        progress(i + 1, ticks.len());
+    let pa = rec.around(ka, core.n_max)?;
+    let caps = caps_for(&pa, &pred.vectors(), dt, budget, core);
+    let a = adaptive_banded(&pa, ka, core, &caps)?;
+    let b = adaptive_banded(&rec.around(kb, core.n_max)?, kb, core, &caps)?;
+    let (w, h) = (usize::from(rec.crop_width), usize::from(rec.height));
+    let frames = [to_f32(&a, w, h), to_f32(&b, w, h)];
+    let field = piv(&frames[0], &frames[1], None, &opts.piv)?;
+    Ok(Measured {
+        method: Method::Adaptive,
+        field,
+        frames,
+        caps,
+        bootstrapped,
+        rungs: Vec::new(),
+        separation: Vec::new(),
+        frame_ticks: dt,
+    })
+}
+
+/// A pair of plain frames by `method` (TFP, TFI, adaptive with one n_max).
+fn plain_pair(
+    rec: &mut Recording,
+    ticks: [u64; 2],
+    opts: &FlowOptions,
+    core: &Params,
+    method: Method,
+) -> Result<Measured, FlowError> {
+    let frames = frames(rec, ticks, method, opts.window, core)?;
+    let field = piv(&frames[0], &frames[1], None, &opts.piv)?;
+    Ok(Measured {
+        method,
+        field,
+        frames,
+        caps: Vec::new(),
+        bootstrapped: false,
+        rungs: Vec::new(),
+        separation: Vec::new(),
+        frame_ticks: f64::from(opts.dt),
+    })
+}
+
+/// Both frames of a pair by `method` with window (or n_max) `n`.
+fn frames(
+    rec: &mut Recording,
+    ticks: [u64; 2],
+    method: Method,
+    n: u16,
+    core: &Params,
+) -> Result<[Array2<f32>; 2], FlowError> {
+    let (w, h) = (usize::from(rec.crop_width), usize::from(rec.height));
+    let mut out = [Array2::zeros((0, 0)), Array2::zeros((0, 0))];
+    for (o, k) in out.iter_mut().zip(ticks) {
+        let f = frame_from_planes(&rec.around(k, n)?, k, method, n, core)?;
+        *o = to_f32(&f.data, w, h);
     }
-    Ok(FlowOutcome {
-        pairs,
-        first_frames: first_frames.unwrap_or_default(),
-        size: (w, h),
-        full_scale: core.full_scale,
-        mean_dense: dense_sum.map(|(u, v, n)| {
+    Ok(out)
+}
+
+fn pair_result(m: Measured, ticks: [u64; 2]) -> PairResult {
+    PairResult {
+        method: m.method,
+        ticks,
+        vectors: m.field.vectors(),
+        sigma: m.field.sigma.iter().copied().collect(),
+        caps: m.caps,
+        bootstrapped: m.bootstrapped,
+        lost: LabelLoss::default(),
+        rungs: m.rungs,
+        separation: m.separation,
+    }
+}
+
+/// A frame as gray levels `0..=full_scale` for plots and images: its
+/// positive part scaled so its largest value is full scale.
+fn gray(f: &Array2<f32>, full_scale: u16) -> Vec<u16> {
+    let top = f.iter().copied().fold(0.0f32, f32::max);
+    let k = if top > 0.0 {
+        f32::from(full_scale) / top
+    } else {
+        0.0
+    };
+    f.iter()
+        .map(|&x| (x.max(0.0) * k).round().min(f32::from(full_scale)) as u16)
+        .collect()
+}
+
+/// The running sum of the pairs' dense fields.
+#[derive(Default)]
+struct DenseSum {
+    sum: Option<(Vec<f64>, Vec<f64>, usize)>,
+}
+
+impl DenseSum {
+    /// Adds the dense stage's field of `m`'s frames, in px per `dt` ticks.
+    fn add(&mut self, m: &Measured, dt: f64) {
+        let [a, b] = &m.frames;
+        let start = crate::motion::ladder::per_ticks(&m.field, m.frame_ticks / dt);
+        let (flow, _) = crate::piv::dense::for_piv(a, b, &start);
+        let k = dt / m.frame_ticks;
+        let n = a.len();
+        let d = self
+            .sum
+            .get_or_insert_with(|| (vec![0.0; n], vec![0.0; n], 0));
+        for (s, x) in d.0.iter_mut().zip(flow.u.iter()) {
+            *s += f64::from(*x) * k;
+        }
+        for (s, x) in d.1.iter_mut().zip(flow.v.iter()) {
+            *s += f64::from(*x) * k;
+        }
+        d.2 += 1;
+    }
+
+    fn mean(self, w: usize, h: usize) -> Option<spiv_formats::dense::DenseField> {
+        self.sum.map(|(u, v, n)| {
             let k = 1.0 / n.max(1) as f64;
             spiv_formats::dense::DenseField {
-                width: wu,
-                height: hu,
+                width: w,
+                height: h,
                 u: u.iter().map(|x| (x * k) as f32).collect(),
                 v: v.iter().map(|x| (x * k) as f32).collect(),
             }
-        }),
-    })
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_median_and_its_uncertainty() {
+        assert_eq!(median(&[3.0, 1.0, 2.0]), 2.0);
+        assert_eq!(median(&[4.0, 1.0, 2.0, 3.0]), 2.5);
+        assert_eq!(median_sigma(&[]), NO_SIGMA);
+        // Four agreeing vectors of σ 0.2: 1.2533·0.2/2.
+        let same = [(1.0, 2.0, (0.2, 0.2)); 4];
+        let (su, sv) = median_sigma(&same);
+        assert!((su - 0.125_33).abs() < 1e-9 && (sv - su).abs() < 1e-12);
+        // Scattered ones: their spread wins.
+        let spread = [
+            (0.0, 0.0, (0.01, 0.01)),
+            (1.0, 0.0, (0.01, 0.01)),
+            (2.0, 0.0, (0.01, 0.01)),
+        ];
+        let (su, sv) = median_sigma(&spread);
+        assert!((su - 1.2533 / 3f64.sqrt() * 1.4826).abs() < 1e-9, "{su}");
+        assert!((sv - 1.2533 / 3f64.sqrt() * 0.01).abs() < 1e-9, "{sv}");
+    }
 }

@@ -27,6 +27,7 @@ pub mod dwell;
 pub mod flow;
 pub mod link;
 pub mod metrics;
+pub mod motion;
 pub mod pipeline;
 pub mod piv;
 pub mod predict;

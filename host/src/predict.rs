@@ -35,12 +35,11 @@ pub const ROUNDS: usize = 4;
 /// Velocities per stored row, 1/4096 px per tick: `(vx, vy)`.
 pub type RowVelocities = (Vec<i16>, Vec<i16>);
 
-/// True when at least half of `field` was measured: the one rule for
-/// whether a PIV field can predict motion-compensated frames (below it,
-/// compensating a guess would move static light into "particles").
+/// Whether a PIV field can predict motion-compensated frames: the one rule
+/// for a usable field ([`crate::piv::usable`]; below it, compensating a
+/// guess would move static light into "particles").
 pub fn predicts(field: &[Vector]) -> bool {
-    let measured = field.iter().filter(|v| v.state.is_measured()).count();
-    2 * measured >= field.len()
+    crate::piv::usable(field)
 }
 
 /// The velocity of every stored row of an `h`-row frame from an upright

@@ -571,10 +571,7 @@ fn flow_writes_vectors_per_pair_the_mean_field_and_plots() {
     let out = tmp.path().join("flow");
     let dat = sim.join("spikes.dat");
     let msg = ok(&["flow", p(&dat), "--out", p(&out)]);
-    assert!(
-        msg.contains("128x96 px") && msg.contains("(mc 128)"),
-        "{msg}"
-    );
+    assert!(msg.contains("128x96 px") && msg.contains("(mc)"), "{msg}");
     for f in [
         "vectors_00000.csv",
         "mean.csv",
@@ -589,7 +586,16 @@ fn flow_writes_vectors_per_pair_the_mean_field_and_plots() {
     let s: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     assert_eq!(s["method"], "mc");
-    assert_eq!(s["pairs"][0]["bootstrapped"], true);
+    // The time ladder: its rungs, the first two uncompensated.
+    let rungs = s["pairs"][0]["rungs"].as_array().expect("rungs");
+    assert_eq!(rungs[0]["separation"], 4);
+    let mean = std::fs::read_to_string(out.join("mean.csv")).unwrap();
+    assert!(
+        mean.starts_with("x,y,u,v,flag,sigma_u,sigma_v,pairs\n"),
+        "{mean}"
+    );
+    let pair = std::fs::read_to_string(out.join("vectors_00000.csv")).unwrap();
+    assert!(pair.starts_with("x,y,u,v,flag,sigma_u,sigma_v\n"), "{pair}");
     let msg = ok(&["flow", p(&dat), "--out", p(&out), "--method", "adaptive"]);
     assert!(msg.contains("dwell cap 8 px"), "{msg}");
     // TFP, another schedule.
@@ -614,9 +620,4 @@ fn flow_writes_vectors_per_pair_the_mean_field_and_plots() {
     assert!(e.contains("no pair fits"), "{e}");
     let e = fails(&["flow", p(&dat), "--window", "0", "--out", p(&out)]);
     assert!(e.contains("window 0"), "{e}");
-    let e = fails(&["flow", p(&dat), "--wide", "1", "--out", p(&out)]);
-    assert!(e.contains("--wide 1"), "{e}");
-    let e = fails(&["flow", p(&dat), "--wide", "x", "--out", p(&out)]);
-    assert!(e.contains("--wide x"), "{e}");
-    ok(&["flow", p(&dat), "--wide", "off", "--out", p(&out)]);
 }

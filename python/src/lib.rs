@@ -314,6 +314,18 @@ fn field_arrays(vectors: &[Vector], grid: &Grid) -> FieldArrays {
     )
 }
 
+/// Per-vector uncertainties `(σu, σv)` as two `(ny, nx)` arrays (inf past
+/// the end).
+fn sigma_arrays(sigma: &[(f64, f64)], grid: &Grid) -> (Array2<f64>, Array2<f64>) {
+    let (ny, nx) = (grid.ny, grid.nx);
+    let at = |f: fn(&(f64, f64)) -> f64| {
+        Array2::from_shape_fn((ny, nx), |(r, c)| {
+            sigma.get(r * nx + c).map_or(f64::INFINITY, f)
+        })
+    };
+    (at(|s| s.0), at(|s| s.1))
+}
+
 /// PIV on an image pair (any numeric dtype, `(height, width)`), by the
 /// same code and defaults as `spiv piv`: multi-pass window deformation
 /// (`windows`, px, one pass each), `overlap` 0..=0.9, `mask` (nonzero
@@ -569,9 +581,13 @@ fn simulate<'py>(
 /// passes, px; `dense` also runs the dense stage on every pair.
 ///
 /// Returns a dict: `ticks` `int64 (pairs, 2)`, `methods` (each pair's),
-/// `x`, `y` `(ny, nx)`, `u`, `v`, `flags` `(pairs, ny, nx)`, and the mean
-/// field over pairs `mean_u`, `mean_v`, `mean_flags` `(ny, nx)`; with
-/// `dense`, `mean_dense_u`, `mean_dense_v` `float32 (height, width)`.
+/// `x`, `y` `(ny, nx)`, `u`, `v`, `flags`, and each vector's standard
+/// uncertainty `sigma_u`, `sigma_v` (px per pair, inf where invalid)
+/// `(pairs, ny, nx)`, and the robust mean field over pairs (per node the
+/// median of the valid vectors) `mean_u`, `mean_v`, `mean_flags`,
+/// `mean_sigma_u`, `mean_sigma_v` and `mean_pairs` (valid vectors per
+/// node) `(ny, nx)`; with `dense`, `mean_dense_u`, `mean_dense_v`
+/// `float32 (height, width)`.
 #[pyfunction]
 #[pyo3(signature = (path, dt=None, every=None, start=None, end=None, method="mc", window=None, dwell_cap=Some(8.0), windows=None, width=None, height=None, flip=true, strip_head=0, dense=false))]
 #[allow(clippy::too_many_arguments)]
@@ -602,7 +618,6 @@ fn flow<'py>(
         dwell_cap,
         windows,
         dense,
-        ..FlowRequest::default()
     };
     if width.is_some() != height.is_some() {
         return Err(SpivError::new_err("give both width and height, or neither"));
@@ -621,15 +636,7 @@ fn flow<'py>(
             let mut rec = Recording::open(&path, &fopts)?;
             let o = req.options(&rec, &path)?;
             let out = run_flow(&mut rec, &o, |_, _| {})?;
-            let (w, h) = out.size;
-            let settings = if o.method == Method::Mc {
-                &o.mc_piv
-            } else {
-                &o.piv
-            };
-            let grid = settings
-                .grid(usize::from(w), usize::from(h))
-                .ok_or_else(|| format!("{w}x{h} px: no PIV window fits"))?;
+            let grid = out.grid;
             Ok((out, grid))
         })
         .map_err(err)?;
@@ -638,6 +645,8 @@ fn flow<'py>(
     let mut us = Array3::<f64>::zeros((p, ny, nx));
     let mut vs = Array3::<f64>::zeros((p, ny, nx));
     let mut fs = Array3::<u8>::zeros((p, ny, nx));
+    let mut sus = Array3::<f64>::zeros((p, ny, nx));
+    let mut svs = Array3::<f64>::zeros((p, ny, nx));
     let mut ticks = Array2::<i64>::zeros((p, 2));
     let mut methods = Vec::with_capacity(p);
     for (i, pr) in out.pairs.iter().enumerate() {
@@ -645,12 +654,19 @@ fn flow<'py>(
         us.index_axis_mut(numpy::ndarray::Axis(0), i).assign(&u);
         vs.index_axis_mut(numpy::ndarray::Axis(0), i).assign(&v);
         fs.index_axis_mut(numpy::ndarray::Axis(0), i).assign(&f);
+        let (su, sv) = sigma_arrays(&pr.sigma, &grid_of);
+        sus.index_axis_mut(numpy::ndarray::Axis(0), i).assign(&su);
+        svs.index_axis_mut(numpy::ndarray::Axis(0), i).assign(&sv);
         ticks[[i, 0]] = pr.ticks[0] as i64;
         ticks[[i, 1]] = pr.ticks[1] as i64;
         methods.push(pr.method.name());
     }
-    let mean = out.mean_field();
-    let (x, y, mu, mv, mf) = field_arrays(&mean, &grid_of);
+    let mean = out.mean();
+    let (x, y, mu, mv, mf) = field_arrays(&mean.vectors, &grid_of);
+    let (msu, msv) = sigma_arrays(&mean.sigma, &grid_of);
+    let mpairs = Array2::from_shape_fn((ny, nx), |(r, c)| {
+        mean.pairs.get(r * nx + c).copied().unwrap_or(0)
+    });
     let d = PyDict::new(py);
     d.set_item("ticks", ticks.into_pyarray(py))?;
     d.set_item("methods", methods)?;
@@ -662,6 +678,11 @@ fn flow<'py>(
     d.set_item("mean_u", mu.into_pyarray(py))?;
     d.set_item("mean_v", mv.into_pyarray(py))?;
     d.set_item("mean_flags", mf.into_pyarray(py))?;
+    d.set_item("sigma_u", sus.into_pyarray(py))?;
+    d.set_item("sigma_v", svs.into_pyarray(py))?;
+    d.set_item("mean_sigma_u", msu.into_pyarray(py))?;
+    d.set_item("mean_sigma_v", msv.into_pyarray(py))?;
+    d.set_item("mean_pairs", mpairs.into_pyarray(py))?;
     if let Some(m) = out.mean_dense {
         let shape = |e: numpy::ndarray::ShapeError| SpivError::new_err(e.to_string());
         let (h, w) = (m.height, m.width);

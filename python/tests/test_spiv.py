@@ -14,7 +14,7 @@ import spiv
 def read_csv(path):
     with open(path) as f:
         rows = list(csv.DictReader(f))
-    keys = ("x", "y", "u", "v", "flag", "peak_ratio", "correlation")
+    keys = ("x", "y", "u", "v", "flag", "peak_ratio", "correlation", "sigma_u", "sigma_v", "pairs")
     cols = {k: np.array([float(r[k]) for r in rows]) for k in keys if k in rows[0]}
     return cols
 
@@ -145,6 +145,12 @@ def test_flow_gives_the_cli_mean_field(cli, tmp_path):
     np.testing.assert_allclose(got["mean_u"].ravel(), want["u"], atol=5.1e-7, rtol=0)
     np.testing.assert_allclose(got["mean_v"].ravel(), want["v"], atol=5.1e-7, rtol=0)
     assert np.abs(got["mean_u"][got["mean_flags"] == 0]).max() > 0.5  # it flows
+    # Every vector's uncertainty, as mean.csv's columns; finite where valid.
+    assert got["sigma_u"].shape == got["u"].shape == got["sigma_v"].shape
+    assert np.all(np.isfinite(got["sigma_u"][got["flags"] == 0]))
+    assert np.all(np.isinf(got["sigma_u"][got["flags"] == 2]))
+    np.testing.assert_allclose(got["mean_sigma_u"].ravel(), want["sigma_u"], atol=5.1e-7, rtol=0)
+    np.testing.assert_array_equal(got["mean_pairs"].ravel(), want["pairs"])
 
 
 def test_bad_input_raises_the_cli_message(cli, recording, tmp_path):

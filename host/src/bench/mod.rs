@@ -1,6 +1,8 @@
-//! The benchmarks' experiments (`spiv bench speed`, `spiv bench link`):
+//! The benchmarks' experiments (`spiv bench speed`, `link`, `turbulence`,
+//! `flows`):
 //! each returns its rows; the CLI prints them.
 
+pub mod flows;
 pub mod link;
 pub mod speed;
 pub mod turbulence;

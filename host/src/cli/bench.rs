@@ -1,6 +1,7 @@
-//! `spiv bench (paper | blasius | speed | link | turbulence)`: the paper's
-//! comparison over seeds, the Blasius validation, speed against error, the
-//! link, and PIV against eddies below the window.
+//! `spiv bench (paper | blasius | speed | link | turbulence | flows)`: the
+//! paper's comparison over seeds, the Blasius validation, speed against
+//! error, the link, PIV against eddies below the window, and `spiv flow`
+//! on every scene family.
 
 use std::path::{Path, PathBuf};
 
@@ -60,6 +61,26 @@ enum Which {
         #[arg(long)]
         json: Option<PathBuf>,
     },
+    /// Every scene family through `spiv flow` with its defaults against
+    /// the dense truth, beside the frame camera and TFP 8 through `spiv
+    /// piv`: EPE in glare and other rows, flagged share, uncertainty
+    /// coverage, dense EPE, time per pair.
+    Flows {
+        /// Seeds: "101-110" (the report's), "1-5" (tuning), or a list.
+        #[arg(long, default_value = "101-110")]
+        seeds: String,
+        /// Families (default: all), comma separated, e.g.
+        /// "vortex-array 0.3,turbulence".
+        #[arg(long, value_delimiter = ',')]
+        families: Option<Vec<String>>,
+        /// Also write every row as JSON.
+        #[arg(long)]
+        json: Option<PathBuf>,
+        /// Append every vector of `spiv flow` (errors, uncertainties) to
+        /// this CSV, for fitting an uncertainty model on tuning seeds.
+        #[arg(long)]
+        vectors: Option<PathBuf>,
+    },
 }
 
 /// Runs it.
@@ -74,7 +95,106 @@ pub fn run(a: &BenchArgs) -> Result<(), CliError> {
         Which::Speed { plot } => speed(plot),
         Which::Link(l) => super::bench_link::run(l),
         Which::Turbulence { seed, json } => turbulence(*seed, json.as_ref()),
+        Which::Flows {
+            seeds,
+            families,
+            json,
+            vectors,
+        } => flows(
+            seeds,
+            families.as_deref(),
+            json.as_ref(),
+            vectors.as_deref(),
+        ),
     }
+}
+
+/// Seeds from "A-B", "N" or "A,B,C": each 1..=1_000_000, at most 1000.
+fn parse_seeds(s: &str) -> Result<Vec<u64>, CliError> {
+    let bad = || CliError::Usage(format!("--seeds {s}: expected A-B, N or a list like 1,2,7"));
+    let num = |t: &str| t.trim().parse::<u64>().map_err(|_| bad());
+    let out: Vec<u64> = if let Some((a, b)) = s.split_once('-') {
+        let (a, b) = (num(a)?, num(b)?);
+        if a > b {
+            return Err(bad());
+        }
+        (a..=b).collect()
+    } else {
+        s.split(',').map(num).collect::<Result<_, _>>()?
+    };
+    if out.is_empty() || out.len() > 1000 || out.iter().any(|&x| x == 0 || x > 1_000_000) {
+        return Err(bad());
+    }
+    Ok(out)
+}
+
+fn flows(
+    seeds: &str,
+    only: Option<&[String]>,
+    json_out: Option<&PathBuf>,
+    vectors: Option<&Path>,
+) -> Result<(), CliError> {
+    use spiv_host::bench::flows::{families, family_rows, FlowsRow};
+    let seeds = parse_seeds(seeds)?;
+    let fams: Vec<_> = families()
+        .into_iter()
+        .filter(|f| only.is_none_or(|o| o.iter().any(|n| n.trim() == f.name)))
+        .collect();
+    if fams.is_empty() {
+        let names: Vec<String> = families().into_iter().map(|f| f.name).collect();
+        return Err(CliError::Usage(format!(
+            "--families: none of {}",
+            names.join(", ")
+        )));
+    }
+    let b = bar((fams.len() * seeds.len()) as u64, "recordings");
+    let mut rows: Vec<FlowsRow> = Vec::new();
+    for f in &fams {
+        for &seed in &seeds {
+            rows.extend(family_rows(f, seed, vectors).map_err(CliError::Job)?);
+            b.inc(1);
+        }
+    }
+    b.finish_and_clear();
+    println!(
+        "seeds {:?}; EPE px per pair of measured vectors (mean over seeds); coverage: error components within 1σ",
+        seeds
+    );
+    println!(
+        "{:<17} {:<13} {:>9} {:>9} {:>8} {:>9} {:>9} {:>10} {:>9}",
+        "family", "method", "glare", "other", "flagged", "coverage", "dense", "mean |d|", "ms/pair"
+    );
+    let mean = |xs: Vec<Option<f64>>| {
+        let v: Vec<f64> = xs.into_iter().flatten().collect();
+        (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+    };
+    let f3 = |x: Option<f64>| x.map_or("-".to_string(), |x| format!("{x:.3}"));
+    for f in &fams {
+        for method in ["frame camera", "TFP 8", "spiv flow"] {
+            let rs: Vec<&FlowsRow> = rows
+                .iter()
+                .filter(|r| r.family == f.name && r.method == method)
+                .collect();
+            println!(
+                "{:<17} {:<13} {:>9} {:>9} {:>7.1}% {:>9} {:>9} {:>10.2} {:>9.1}",
+                f.name,
+                method,
+                f3(mean(rs.iter().map(|r| r.glare).collect())),
+                f3(mean(rs.iter().map(|r| r.other).collect())),
+                100.0 * mean(rs.iter().map(|r| Some(r.flagged)).collect()).unwrap_or(0.0),
+                mean(rs.iter().map(|r| r.coverage).collect())
+                    .map_or("-".into(), |c| format!("{:.0}%", 100.0 * c)),
+                f3(mean(rs.iter().map(|r| r.dense).collect())),
+                mean(rs.iter().map(|r| Some(r.mean_truth)).collect()).unwrap_or(0.0),
+                mean(rs.iter().map(|r| Some(r.ms_per_pair)).collect()).unwrap_or(0.0),
+            );
+        }
+    }
+    if let Some(p) = json_out {
+        std::fs::write(p, serde_json::to_string_pretty(&rows).unwrap_or_default())
+            .map_err(|e| CliError::Usage(format!("{}: {e}", p.display())))?;
+    }
+    Ok(())
 }
 
 fn turbulence(seed: u64, json_out: Option<&PathBuf>) -> Result<(), CliError> {

@@ -4,20 +4,18 @@
 use std::path::PathBuf;
 
 use clap::Args;
-use serde_json::json;
 use spiv_formats::dat::DatOptions;
-use spiv_formats::image::write_levels;
-use spiv_formats::vectors::write_vectors;
 use spiv_host::flow::{run_flow, FlowRequest, Recording};
 use spiv_host::reconstruct::FileOptions;
-use spiv_host::report::plot;
+use spiv_host::report::flow::{write_flow, RunInfo};
 
 use super::reconstruct::method_parser;
 use super::{bar, parse_dwell_cap, CliError};
 
-/// Frame pairs through the core at a fixed schedule, PIV on each, the flow
-/// predicted (motion-compensated frames by default); one vectors CSV per
-/// pair, the mean field, plots.
+/// A field per pair at a fixed schedule, measured from the recording's
+/// own spikes around each pair (motion-compensated by default), and their
+/// robust mean; one vectors CSV per pair with each vector's uncertainty,
+/// the mean field, plots.
 #[derive(Debug, Args)]
 pub struct FlowArgs {
     /// The spike recording: a Vidar .dat or a .npz capture.
@@ -51,14 +49,8 @@ pub struct FlowArgs {
     /// for the paper's algorithm with one n_max everywhere.
     #[arg(long, default_value = "8")]
     dwell_cap: String,
-    /// Motion-compensated pairs: also measure over a wide baseline, a
-    /// second compensated pair this many pair separations apart centred on
-    /// the pair, kept per vector where the flow allows it; "off" for the
-    /// pair alone.
-    #[arg(long, default_value = "4")]
-    wide: String,
     /// PIV window side of each pass, px (default: 64,32,32, and
-    /// 64,32,32,32,32 for motion-compensated pairs).
+    /// 64,32,32,32,32,32,32 for motion-compensated pairs).
     #[arg(long, value_delimiter = ',')]
     windows: Option<Vec<usize>>,
     /// The file's rows are stored upright (some public simulators).
@@ -101,7 +93,6 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
         dwell_cap: parse_dwell_cap(&a.dwell_cap)?,
         windows: a.windows.clone(),
         dense: a.dense,
-        wide: parse_wide(&a.wide)?,
     }
     .options(&rec, &a.input)
     .map_err(flow_err)?;
@@ -112,95 +103,41 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
     let t0 = std::time::Instant::now();
     let out = run_flow(&mut rec, &o, |i, _| b.set_position(i as u64)).map_err(flow_err)?;
     b.finish_and_clear();
-    for (i, p) in out.pairs.iter().enumerate() {
-        write_vectors(&a.out.join(format!("vectors_{i:05}.csv")), &p.vectors)?;
+    let info = RunInfo {
+        input: &a.input,
+        planes: rec.planes,
+        seconds: t0.elapsed().as_secs_f64(),
+    };
+    write_flow(&a.out, &out, &o, info).map_err(|e| CliError::Usage(e.to_string()))?;
+    let (mut valid, mut all, mut empty) = (0, 0, 0);
+    for p in &out.pairs {
+        let (v, r, i) = p.counts();
+        valid += v;
+        all += v + r + i;
+        empty += usize::from(!p.measured());
     }
-    if let Some(d) = &out.mean_dense {
-        spiv_formats::dense::write_dense(&a.out.join("mean_dense.flo"), d)?;
-    }
-    let mean = out.mean_field();
-    write_vectors(&a.out.join("mean.csv"), &mean)?;
-    let (w, h) = out.size;
-    for (name, f) in ["pair_a.png", "pair_b.png"].iter().zip(&out.first_frames) {
-        write_levels(
-            &a.out.join(name),
-            u32::from(w),
-            u32::from(h),
-            f,
-            out.full_scale,
-        )?;
-    }
-    let plot_err = |e: plot::PlotError| CliError::Usage(e.to_string());
-    plot::vectors(
-        &a.out.join("mean_field.png"),
-        &out.first_frames[0],
-        u32::from(w),
-        u32::from(h),
-        out.full_scale,
-        &mean,
-        1.0,
-    )
-    .map_err(plot_err)?;
-    plot::vectors(
-        &a.out.join("pair_vectors.png"),
-        &out.first_frames[0],
-        u32::from(w),
-        u32::from(h),
-        out.full_scale,
-        &out.pairs[0].vectors,
-        1.0,
-    )
-    .map_err(plot_err)?;
-    let (mut valid, mut all) = (0, 0);
-    let per_pair: Vec<_> = out
-        .pairs
-        .iter()
-        .map(|p| {
-            let (v, r, i) = p.counts();
-            valid += v;
-            all += v + r + i;
-            json!({
-                "ticks": p.ticks,
-                "method": p.method.name(),
-                "valid": v, "replaced": r, "invalid": i,
-                "bootstrapped": p.bootstrapped,
-                "caps": p.caps,
-                "wide_ticks": p.wide,
-                "lost_to_full_tables": {"regions": p.lost.regions, "pixels": p.lost.pixels},
-            })
-        })
-        .collect();
-    let summary = json!({
-        "input": a.input.display().to_string(),
-        "width": w, "height": h, "planes": rec.planes,
-        "method": o.method.name(),
-        "window": o.window,
-        "dwell_cap_px": o.dwell_cap,
-        "wide_baseline": o.wide,
-        "dt_ticks": o.dt, "every_ticks": o.every,
-        "piv": o.piv,
-        "pairs": per_pair,
-    });
-    std::fs::write(
-        a.out.join("summary.json"),
-        serde_json::to_string_pretty(&summary).unwrap_or_default(),
-    )
-    .map_err(|e| CliError::Usage(format!("summary.json: {e}")))?;
     println!(
-        "{}: {w}x{h} px, {} planes; {} pair{} {} ticks apart every {} ({} {}{}): {valid}/{all} vectors valid; {:.2} s -> {}",
+        "{}: {}x{} px, {} planes; {} pair{} {} ticks apart every {} ({}{}): {valid}/{all} vectors valid{}; {:.2} s -> {}",
         a.input.display(),
+        out.size.0,
+        out.size.1,
         rec.planes,
         out.pairs.len(),
         if out.pairs.len() == 1 { "" } else { "s" },
         o.dt,
         o.every,
         o.method.name(),
-        o.window,
         match (o.method, o.dwell_cap) {
-            (spiv_core::Method::Adaptive, Some(c)) => format!(", dwell cap {c} px"),
-            _ => String::new(),
+            (spiv_core::Method::Adaptive, Some(c)) => format!(" {}, dwell cap {c} px", o.window),
+            (spiv_core::Method::Mc, _) => String::new(),
+            _ => format!(" {}", o.window),
         },
-        t0.elapsed().as_secs_f64(),
+        if empty > 0 {
+            format!(", {empty} pair(s) measured nothing")
+        } else {
+            String::new()
+        },
+        info.seconds,
         a.out.display()
     );
     let lost = out.lost();
@@ -221,16 +158,4 @@ fn flow_err(e: spiv_host::flow::FlowError) -> CliError {
         FlowError::Piv(p) => CliError::Piv(p),
         FlowError::Schedule(s) => CliError::Usage(s),
     }
-}
-
-/// `--wide`: a separation in pair separations, or "off".
-fn parse_wide(s: &str) -> Result<Option<u32>, CliError> {
-    if s.eq_ignore_ascii_case("off") {
-        return Ok(None);
-    }
-    s.parse::<u32>().map(Some).map_err(|_| {
-        CliError::Usage(format!(
-            "--wide {s}: expected a whole number 2..=64, or off"
-        ))
-    })
 }

@@ -310,7 +310,8 @@ impl Field {
 
     /// Whether the field is usable ([`usable`]).
     pub fn usable(&self) -> bool {
-        2 * self.counts().0 >= self.grid.len().max(1)
+        let (valid, replaced, _) = self.counts();
+        is_usable(valid, valid + replaced, self.grid.len())
     }
 
     /// Counts of (valid, replaced, invalid) vectors.
@@ -329,10 +330,18 @@ impl Field {
 
 /// The one rule for whether a field measured the flow well enough to
 /// predict it or to count as a measurement: at least half of its vectors
-/// valid (passed every test on their own).
+/// measured (valid or replaced) and at least a quarter valid (passed every
+/// test on their own, PIV's own support rule for a pass), so that the
+/// replaced ones are filled between measurements, not made up.
 pub fn usable(vectors: &[Vector]) -> bool {
     let valid = vectors.iter().filter(|v| v.state == State::Valid).count();
-    2 * valid >= vectors.len().max(1)
+    let measured = vectors.iter().filter(|v| v.state.is_measured()).count();
+    is_usable(valid, measured, vectors.len())
+}
+
+fn is_usable(valid: usize, measured: usize, all: usize) -> bool {
+    let all = all.max(1) as f64;
+    valid as f64 >= MIN_SUPPORT * all && 2 * measured >= all as usize
 }
 
 /// Reads a PNG/TIFF/BMP, 8- or 16-bit gray (colour is converted), as gray
@@ -772,7 +781,7 @@ fn pass(
     let plan = Plan::new(search);
     let wide = (rung.recheck && pred.is_none() && search == n && 2 * n <= w.min(h))
         .then(|| Plan::new(2 * n));
-    let results: Vec<(f64, f64, f64, f64, Option<NoPeak>, (f64, f64))> = (0..grid.len())
+    let results: Vec<WindowResult> = (0..grid.len())
         .into_par_iter()
         .map_init(
             || (Ensemble::new(&plan), None::<Ensemble>),
@@ -927,6 +936,10 @@ fn pass(
     };
     (field, support)
 }
+
+/// What one window of a pass found: displacement (u, v), peak ratio and
+/// height, why it has no peak (if so), and its uncertainty.
+type WindowResult = (f64, f64, f64, f64, Option<NoPeak>, (f64, f64));
 
 /// One window of a pass: where it sits in the (possibly deformed) pairs.
 struct Region<'i> {

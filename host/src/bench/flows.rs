@@ -1,0 +1,339 @@
+//! `spiv bench flows` (issue 44): every scene family through `spiv flow`
+//! with its defaults, against the dense truth, beside the frame camera and
+//! a TFP pair of the same spikes through `spiv piv`'s defaults.
+//!
+//! Every family's flow is steady, so each pair of a recording has the same
+//! truth: the displacement over the pair of the particle at each vector's
+//! centre halfway through ([`Scene::truth`]). Per family and seed it
+//! reports the end-point error (EPE, px per pair) of the measured (valid or
+//! replaced) vectors in the glare rows (centres within 2σ of the wall,
+//! SPEC 7; the bottom rows where a scene has no glare) and in the other
+//! rows, the share of vectors flagged invalid, the share of true error
+//! components within one standard uncertainty (valid vectors; the frame
+//! camera's and TFP's PIV report one too), the dense EPE (the field
+//! interpolated to every pixel, as optical-flow benchmarks score it) and the
+//! time per pair. Methods are tuned on seeds 1–5 and reported on seeds
+//! 101–110, which no tuning looks at.
+
+use std::time::Instant;
+
+use spiv_core::{Method, Params};
+use spiv_firmware_sim::scene::{Scene, SceneKind, SceneParams};
+use spiv_firmware_sim::simulation::{simulate_planes, Request};
+use spiv_formats::dense::DenseField;
+use spiv_formats::{State, Vector};
+
+use crate::flow::{run_flow, FlowOptions, Recording};
+use crate::pipeline::JobError;
+use crate::piv::options::PivOptions;
+use crate::piv::{deform, piv, to_f32, Field};
+use crate::reconstruct::{frame_from_planes, Planes};
+
+/// One family of scenes: a scene, its speed and the recording's length.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Family {
+    /// Name in the table.
+    pub name: String,
+    /// The scene.
+    pub scene: SceneKind,
+    /// Top speed, px/tick (`None`: the scene's default).
+    pub speed: Option<f64>,
+    /// Planes in the recording (the pair at its centre).
+    pub ticks: u32,
+}
+
+/// The families: the paper's three, Blasius, uniform, the Lamb–Oseen
+/// vortex, the turbulence and large-shift recordings as the third-party
+/// spike-flow sets hold them (62 planes, pairs 21 ticks apart), and the
+/// vortex array over glare at 0.3 and 1 px/tick.
+pub fn families() -> Vec<Family> {
+    let f = |name: &str, scene, speed, ticks| Family {
+        name: name.into(),
+        scene,
+        speed,
+        ticks,
+    };
+    vec![
+        f("paper-linear", SceneKind::PaperLinear, None, 300),
+        f("paper-quadratic", SceneKind::PaperQuadratic, None, 300),
+        f("paper-log", SceneKind::PaperLog, None, 300),
+        f("blasius", SceneKind::Blasius, None, 300),
+        f("uniform", SceneKind::Uniform, None, 300),
+        f("vortex", SceneKind::Vortex, None, 300),
+        f("turbulence", SceneKind::Turbulence, None, 62),
+        f("large-shift", SceneKind::LargeShift, None, 62),
+        f("vortex-array 0.3", SceneKind::VortexArray, Some(0.3), 160),
+        f("vortex-array 1.0", SceneKind::VortexArray, Some(1.0), 160),
+    ]
+}
+
+/// One method on one recording.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct FlowsRow {
+    /// Family.
+    pub family: String,
+    /// Seed of particles, noise and flow.
+    pub seed: u64,
+    /// "spiv flow", "frame camera" or "TFP 8".
+    pub method: String,
+    /// Mean EPE of the measured vectors in the glare rows, px per pair.
+    pub glare: Option<f64>,
+    /// Mean EPE of the measured vectors in the other rows, px per pair.
+    pub other: Option<f64>,
+    /// Share of vectors flagged invalid.
+    pub flagged: f64,
+    /// Share of error components within 1σ (valid vectors with a finite
+    /// uncertainty); `None` without any.
+    pub coverage: Option<f64>,
+    /// EPE of the field interpolated to every pixel, px per pair.
+    pub dense: Option<f64>,
+    /// Mean truth displacement over the vectors, px per pair.
+    pub mean_truth: f64,
+    /// Wall time per pair, ms.
+    pub ms_per_pair: f64,
+}
+
+/// Errors of a field against the truth.
+#[derive(Debug, Default)]
+struct Score {
+    glare: (f64, usize),
+    other: (f64, usize),
+    flagged: usize,
+    covered: (usize, usize),
+    truth: f64,
+    all: usize,
+}
+
+impl Score {
+    fn add(&mut self, scene: &Scene, dt: f64, vs: &[Vector], sigma: Option<&[(f64, f64)]>) {
+        let h = f64::from(scene.params.height);
+        let band = 2.0 * scene.params.glare_sigma;
+        let pts: Vec<(f64, f64)> = vs.iter().map(|v| (v.x, v.y)).collect();
+        for (k, (v, t)) in vs.iter().zip(scene.truth(&pts, dt)).enumerate() {
+            self.all += 1;
+            self.truth += t.2.hypot(t.3);
+            if !v.state.is_measured() {
+                self.flagged += 1;
+                continue;
+            }
+            let (eu, ev) = (v.u - t.2, v.v - t.3);
+            let slot = if h - 0.5 - v.y < band {
+                &mut self.glare
+            } else {
+                &mut self.other
+            };
+            slot.0 += eu.hypot(ev);
+            slot.1 += 1;
+            let s = sigma.and_then(|s| s.get(k)).copied();
+            if let (State::Valid, Some((su, sv))) = (v.state, s) {
+                if su.is_finite() && sv.is_finite() {
+                    self.covered.0 += usize::from(eu.abs() <= su) + usize::from(ev.abs() <= sv);
+                    self.covered.1 += 2;
+                }
+            }
+        }
+    }
+
+    fn row(&self, family: &str, seed: u64, method: &str, dense: Option<f64>, ms: f64) -> FlowsRow {
+        let mean = |(s, n): (f64, usize)| (n > 0).then(|| s / n as f64);
+        FlowsRow {
+            family: family.into(),
+            seed,
+            method: method.into(),
+            glare: mean(self.glare),
+            other: mean(self.other),
+            flagged: self.flagged as f64 / self.all.max(1) as f64,
+            coverage: (self.covered.1 > 0).then(|| self.covered.0 as f64 / self.covered.1 as f64),
+            dense,
+            mean_truth: self.truth / self.all.max(1) as f64,
+            ms_per_pair: ms,
+        }
+    }
+}
+
+/// The dense EPE of a field on `grid` (u, v, states as vectors), with
+/// unmeasured nodes taking their neighbours' values.
+fn dense_epe(f: &Field, truth: &DenseField) -> f64 {
+    let (h, w) = (truth.height, truth.width);
+    let (u, v) = crate::piv::validate::extended(&f.u, &f.v, &f.state);
+    let (du, dv) = deform::dense(&f.grid, &u, &v, h, w);
+    let d = DenseField {
+        width: w,
+        height: h,
+        u: du.iter().copied().collect(),
+        v: dv.iter().copied().collect(),
+    };
+    d.epe(truth, None).unwrap_or(f64::NAN)
+}
+
+/// The rows of one family and seed: `spiv flow` with its defaults, and the
+/// frame camera's and the TFP 8 pair's PIV (`spiv piv`'s defaults).
+/// With `vectors`, every vector of `spiv flow`'s pairs is appended there
+/// as a CSV line ([`dump`]).
+pub fn family_rows(
+    fam: &Family,
+    seed: u64,
+    vectors: Option<&std::path::Path>,
+) -> Result<Vec<FlowsRow>, JobError> {
+    let mut p = SceneParams::new(fam.scene);
+    if let Some(s) = fam.speed {
+        p.top_speed = s;
+    }
+    p.flow_seed = seed;
+    let mut req = Request::new(p.clone(), seed);
+    req.ticks = Some(fam.ticks);
+    let (data, sim) = simulate_planes(&req)?;
+    let (w, h) = (usize::from(p.width), usize::from(p.height));
+    let pair = sim.meta.capture.pair;
+    let dt = f64::from(pair[1] - pair[0]);
+    let truth = sim.scene.truth_dense(dt);
+    let mut rows = Vec::new();
+
+    let user = PivOptions::default().settings()?;
+    let cam = |f: &Vec<u16>| to_f32(f, w, h);
+    let planes = Planes::simulated(p.width, p.height, data.clone());
+    let tfp = |k: u32| -> Result<_, JobError> {
+        let f = frame_from_planes(&planes, u64::from(k), Method::Tfp, 8, &Params::default())?;
+        Ok(to_f32(&f.data, w, h))
+    };
+    for (name, a, b) in [
+        ("frame camera", cam(&sim.frames[0]), cam(&sim.frames[1])),
+        ("TFP 8", tfp(pair[0])?, tfp(pair[1])?),
+    ] {
+        let t0 = Instant::now();
+        let f = piv(&a, &b, None, &user)?;
+        let ms = t0.elapsed().as_secs_f64() * 1e3;
+        let mut s = Score::default();
+        let sigma: Vec<(f64, f64)> = f.sigma.iter().copied().collect();
+        s.add(&sim.scene, dt, &f.vectors(), Some(&sigma));
+        rows.push(s.row(&fam.name, seed, name, Some(dense_epe(&f, &truth)), ms));
+    }
+
+    let mut rec = Recording::simulated(p.width, p.height, data, pair[1] - pair[0]);
+    let opts = FlowOptions::new(&rec, pair[1] - pair[0]);
+    let t0 = Instant::now();
+    let out = run_flow(&mut rec, &opts, |_, _| {}).map_err(|e| match e {
+        crate::flow::FlowError::Piv(p) => JobError::Piv(p),
+        crate::flow::FlowError::Reconstruct(r) => JobError::Reconstruct(r),
+        crate::flow::FlowError::Format(f) => JobError::Format(f),
+        crate::flow::FlowError::Schedule(s) => JobError::Piv(crate::piv::PivError::Settings(s)),
+    })?;
+    let ms = t0.elapsed().as_secs_f64() * 1e3 / out.pairs.len().max(1) as f64;
+    if let Some(path) = vectors {
+        dump(path, fam, seed, &sim.scene, dt, &out)?;
+    }
+    let mut s = Score::default();
+    let mut dense = 0.0;
+    for pr in &out.pairs {
+        s.add(&sim.scene, dt, &pr.vectors, Some(&pr.sigma));
+        dense += dense_epe(&field_of(&out.grid, pr), &truth);
+    }
+    let dense = dense / out.pairs.len().max(1) as f64;
+    rows.push(s.row(&fam.name, seed, "spiv flow", Some(dense), ms));
+    Ok(rows)
+}
+
+/// A pair's vectors as a field on `grid`.
+fn field_of(grid: &crate::piv::Grid, pr: &crate::flow::PairResult) -> Field {
+    let shape = (grid.ny, grid.nx);
+    let at = |f: &dyn Fn(&Vector) -> f64| {
+        ndarray::Array2::from_shape_fn(shape, |(r, c)| {
+            pr.vectors.get(r * grid.nx + c).map_or(0.0, f)
+        })
+    };
+    Field {
+        grid: *grid,
+        u: at(&|v| v.u),
+        v: at(&|v| v.v),
+        state: ndarray::Array2::from_shape_fn(shape, |(r, c)| {
+            pr.vectors
+                .get(r * grid.nx + c)
+                .map_or(State::Invalid, |v| v.state)
+        }),
+        peak_ratio: ndarray::Array2::zeros(shape),
+        peak_height: ndarray::Array2::zeros(shape),
+        sigma: ndarray::Array2::from_shape_fn(shape, |(r, c)| {
+            pr.sigma
+                .get(r * grid.nx + c)
+                .copied()
+                .unwrap_or(crate::piv::NO_SIGMA)
+        }),
+    }
+}
+
+/// Appends every vector of every pair as a CSV line to `path` (no
+/// header): family, seed, pair, x, y, flag, error u and v, σu, σv, the
+/// field's discrete Laplacian in u and v (the sum of the four neighbours'
+/// differences, px), the separation of its rung, the truth's length, the
+/// measured u and v —
+/// the data an uncertainty model is fitted on (tuning seeds only).
+pub fn dump(
+    path: &std::path::Path,
+    fam: &Family,
+    seed: u64,
+    scene: &Scene,
+    dt: f64,
+    out: &crate::flow::FlowOutcome,
+) -> Result<(), JobError> {
+    use std::io::Write;
+    let mut f = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)
+        .map_err(spiv_formats::io_err(path))?;
+    let g = out.grid;
+    for (k, pr) in out.pairs.iter().enumerate() {
+        let at = |r: usize, c: usize| pr.vectors.get(r * g.nx + c);
+        for r in 0..g.ny {
+            for c in 0..g.nx {
+                let Some(v) = at(r, c) else { continue };
+                let t = scene.truth(&[(v.x, v.y)], dt)[0];
+                let lap = |f: &dyn Fn(&Vector) -> f64| {
+                    let mut l = 0.0;
+                    let mut n = 0;
+                    for (dr, dc) in [(0i64, 1i64), (0, -1), (1, 0), (-1, 0)] {
+                        let (rr, cc) = (r as i64 + dr, c as i64 + dc);
+                        if rr < 0 || cc < 0 || rr >= g.ny as i64 || cc >= g.nx as i64 {
+                            continue;
+                        }
+                        if let Some(w) = at(rr as usize, cc as usize) {
+                            if w.state.is_measured() {
+                                l += f(w) - f(v);
+                                n += 1;
+                            }
+                        }
+                    }
+                    if n > 0 {
+                        l * 4.0 / n as f64
+                    } else {
+                        0.0
+                    }
+                };
+                let (su, sv) = pr.sigma[r * g.nx + c];
+                let sep = pr.separation.get(r * g.nx + c).copied().unwrap_or(0);
+                writeln!(
+                    f,
+                    "{},{},{},{},{},{},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{},{:.3},{:.5},{:.5}",
+                    fam.name,
+                    seed,
+                    k,
+                    v.x,
+                    v.y,
+                    v.state.flag(),
+                    v.u - t.2,
+                    v.v - t.3,
+                    su,
+                    sv,
+                    lap(&|w| w.u),
+                    lap(&|w| w.v),
+                    sep,
+                    t.2.hypot(t.3),
+                    v.u,
+                    v.v
+                )
+                .map_err(spiv_formats::io_err(path))?;
+            }
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,512 @@
+//! The time ladder: a pair's flow measured from the spikes around it, over
+//! separations that grow as the motion becomes known.
+//!
+//! Rung `s` makes two compensated innovation frames
+//! ([`super::compensated`]) from adjacent, disjoint stretches of the
+//! recording — A from the `s` ticks before the pair's midpoint, B from the
+//! `s` ticks after — each showing the particles where they are at its own
+//! centre, `s` ticks apart, and PIV measures the displacement between them
+//! with the field known so far (its paths over `s`) as the predictor.
+//! Disjoint frames share no spike, so the measurement does not lean
+//! towards the prediction, and centred windows keep a prediction error a
+//! blur rather than a bias. The first rungs (4 and 8 ticks: little blur
+//! whatever the speed) are uncompensated and measured as one ensemble of
+//! the consecutive frames within 32 ticks of the midpoint
+//! ([`piv_ensemble`]), so particles too dim or sparse for one pair add
+//! up; without a measured motion no rung is longer
+//! ([`BOOTSTRAP_LONGEST`]). Each later rung doubles `s`, compensated
+//! along the field so far, so the frames gather more light and the same
+//! pixel error becomes a smaller velocity error. A vector of an
+//! uncompensated rung that the first usable compensated rung cannot
+//! confirm is dropped ([`unconfirmed`]).
+//!
+//! Every vector of every rung carries its uncertainty from the correlation
+//! statistics ([`crate::piv::correlate::uncertainty`]), scaled to the
+//! pair's `dt`; each grid node keeps the rung whose valid vector is the
+//! most certain. Where the flow curves or shears too much for a longer
+//! rung, its vectors fail validation or come out less certain, and the
+//! shorter rung stands. The ladder climbs while rungs fit the recording
+//! around the pair and each rung's field is usable; a node no rung measured is replaced from its neighbours or
+//! stays invalid.
+
+use ndarray::Array2;
+
+use rayon::prelude::*;
+
+use crate::piv::{
+    piv_ensemble, piv_predicted, validate, Field, PivError, Settings, State, NO_SIGMA,
+};
+
+use super::compensate::compensated_pair;
+use super::{compensated, Innovation, Velocity};
+
+/// Separations of the rungs, ticks, shortest first.
+pub const SEPARATIONS: [u32; 6] = [4, 8, 16, 32, 64, 128];
+
+/// Longest rung measured without an estimate of the motion, ticks: an
+/// uncompensated window blurs by the whole motion over it, so without a
+/// measured motion no window is longer (never the longest window on a
+/// guess).
+pub const BOOTSTRAP_LONGEST: u32 = 8;
+
+/// Ticks on each side of the midpoint whose uncompensated frames an
+/// unestimated rung sums as one ensemble.
+pub const BOOTSTRAP_REACH: u32 = 32;
+
+/// PIV windows of the unestimated rungs, px: its frames are short and
+/// noisy, and later rungs refine what it finds.
+pub const BOOTSTRAP_WINDOWS: [usize; 3] = [64, 32, 32];
+
+/// What the ladder does.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LadderSettings {
+    /// Separations tried, ticks, shortest first (each ≥ 2).
+    pub separations: Vec<u32>,
+    /// Longest rung tried before any rung measured, ticks.
+    pub bootstrap_longest: u32,
+    /// Ticks on each side of the midpoint an unestimated rung's ensemble
+    /// spans.
+    pub bootstrap_reach: u32,
+    /// PIV of every rung (the first, without a predictor, also tries the
+    /// rescue rungs).
+    pub piv: Settings,
+}
+
+impl Default for LadderSettings {
+    fn default() -> Self {
+        LadderSettings {
+            separations: SEPARATIONS.to_vec(),
+            bootstrap_longest: BOOTSTRAP_LONGEST,
+            bootstrap_reach: BOOTSTRAP_REACH,
+            piv: Settings {
+                clip: crate::piv::Clip::Off,
+                highpass: 0.0,
+                ..Settings::for_compensated_frames()
+            },
+        }
+    }
+}
+
+/// One rung as it went.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Rung {
+    /// Separation (and window), ticks.
+    pub separation: u32,
+    /// Valid, replaced and invalid vectors of its PIV.
+    pub counts: (usize, usize, usize),
+    /// Nodes whose kept vector came from this rung.
+    pub kept: usize,
+    /// Wall time of its frames and PIV, ms.
+    pub ms: f64,
+}
+
+/// A pair measured by the ladder.
+#[derive(Debug, Clone)]
+pub struct Measurement {
+    /// The field in px per `dt` ticks, each vector's uncertainty per `dt`
+    /// in `sigma`; all invalid when no rung fit or measured.
+    pub field: Field,
+    /// The separation (ticks) of the rung each vector came from; 0 where
+    /// it was replaced or is invalid.
+    pub separation: Array2<u32>,
+    /// The rungs climbed, shortest first.
+    pub rungs: Vec<Rung>,
+    /// The frames of the rung most vectors came from.
+    pub frames: Option<RungFrames>,
+}
+
+/// A rung's compensated frames (upright, in spikes).
+#[derive(Debug, Clone)]
+pub struct RungFrames {
+    /// The rung's separation, ticks.
+    pub separation: u32,
+    /// Frame A (before the midpoint) and B (after it).
+    pub frames: [Array2<f32>; 2],
+}
+
+/// Measures the flow at time `mid` (a tick boundary: A ends and B begins
+/// there) from `inn`, in px per `dt` ticks.
+pub fn measure(
+    inn: &Innovation,
+    mid: u64,
+    dt: f64,
+    cfg: &LadderSettings,
+) -> Result<Measurement, PivError> {
+    measure_from(inn, mid, dt, cfg, None)
+}
+
+/// [`measure`] starting from a predicted field instead of the unestimated
+/// rungs: `start` holds velocities per node (px per tick, on the grid of
+/// `cfg.piv`), and the ladder climbs from its first rung longer than
+/// [`LadderSettings::bootstrap_longest`], compensated and predicted by
+/// it. When that rung's vectors do not confirm the start ([`confirms`]),
+/// the start is dropped and the ladder climbs from its unestimated rungs
+/// as [`measure`] does; every kept vector's uncertainty includes its
+/// change from the estimate that predicted its rung.
+pub fn measure_from(
+    inn: &Innovation,
+    mid: u64,
+    dt: f64,
+    cfg: &LadderSettings,
+    start: Option<Field>,
+) -> Result<Measurement, PivError> {
+    let (w, h) = (inn.width, inn.height);
+    let span = inn.range();
+    // Velocities (px/tick) per node: the kept ones, and the estimate they
+    // make once validated and filled.
+    let mut best: Option<Field> = None;
+    let mut separation: Option<Array2<u32>> = None;
+    let predicted = start.is_some();
+    let mut estimate: Option<Field> = start;
+    let mut rungs: Vec<Rung> = Vec::new();
+    let mut frames: Option<RungFrames> = None;
+    // Per node, the kept vector's difference from the estimate that
+    // predicted its rung (px/tick).
+    let mut change: Option<Array2<(f64, f64)>> = None;
+    for &s in &cfg.separations {
+        let s64 = u64::from(s.max(2));
+        if mid < span.start + s64 || mid + s64 > span.end {
+            break;
+        }
+        if estimate.is_none() && s > cfg.bootstrap_longest {
+            break;
+        }
+        if predicted && s <= cfg.bootstrap_longest {
+            continue;
+        }
+        let sf = s64 as f64;
+        let t0 = std::time::Instant::now();
+        let (f, [a, b]) = match &estimate {
+            None => bootstrap_rung(inn, mid, s64, cfg)?,
+            Some(e) => compensated_rung(inn, mid, s64, e, cfg)?,
+        };
+        let ms = t0.elapsed().as_secs_f64() * 1e3;
+        let counts = f.counts();
+        let measured = f.usable();
+        let rung = per_tick(&f, sf);
+        if predicted && rungs.is_empty() {
+            if let Some(e) = &estimate {
+                if !confirms(&rung, e) {
+                    return measure_from(inn, mid, dt, cfg, None);
+                }
+            }
+        }
+        if estimate.is_some() && measured {
+            unconfirmed(&mut best, &separation, &rung, cfg.bootstrap_longest);
+        }
+        let kept = keep(&mut best, &mut separation, &rung, s);
+        changes(&mut change, &separation, &rung, estimate.as_ref(), s);
+        if rungs.iter().all(|r| r.kept < kept) {
+            frames = Some(RungFrames {
+                separation: s,
+                frames: [a, b],
+            });
+        }
+        rungs.push(Rung {
+            separation: s,
+            counts,
+            kept,
+            ms,
+        });
+        if !measured {
+            if estimate.is_some() {
+                break;
+            }
+            continue;
+        }
+        estimate = best.as_ref().map(|b| finished(b, dt));
+    }
+    let velocity = match best {
+        Some(mut b) => {
+            if let Some(c) = &change {
+                with_change(&mut b, c);
+            }
+            finished(&b, dt)
+        }
+        None => return nothing(w, h, cfg),
+    };
+    let field = flow_map(&velocity, &dense_velocity(&velocity, h, w), dt);
+    let mut separation = separation.unwrap_or_else(|| Array2::zeros(field.u.dim()));
+    for (s, st) in separation.iter_mut().zip(field.state.iter()) {
+        if *st != State::Valid {
+            *s = 0;
+        }
+    }
+    Ok(Measurement {
+        field,
+        separation,
+        rungs,
+        frames,
+    })
+}
+
+/// The measurement of a pair no rung fits: every vector of the grid
+/// invalid, with no uncertainty.
+fn nothing(w: usize, h: usize, cfg: &LadderSettings) -> Result<Measurement, PivError> {
+    let size = cfg.piv.windows.last().copied().unwrap_or(32);
+    let grid = cfg.piv.grid(w, h).ok_or(PivError::TooSmall(w, h, size))?;
+    let shape = (grid.ny, grid.nx);
+    Ok(Measurement {
+        field: Field {
+            grid,
+            u: Array2::zeros(shape),
+            v: Array2::zeros(shape),
+            state: Array2::from_elem(shape, State::Invalid),
+            peak_ratio: Array2::zeros(shape),
+            peak_height: Array2::zeros(shape),
+            sigma: Array2::from_elem(shape, NO_SIGMA),
+        },
+        separation: Array2::zeros(shape),
+        rungs: Vec::new(),
+        frames: None,
+    })
+}
+
+/// `f` with displacements and uncertainties times `k` (a field over `t`
+/// ticks as one over `k·t`).
+pub fn per_ticks(f: &Field, k: f64) -> Field {
+    let mut o = f.clone();
+    o.u.mapv_inplace(|x| x * k);
+    o.v.mapv_inplace(|x| x * k);
+    o.sigma.mapv_inplace(|(a, b)| (a * k, b * k));
+    o
+}
+
+/// Rung `s` without an estimate: the uncompensated frames of consecutive
+/// `s`-tick stretches within [`LadderSettings::bootstrap_reach`] of the
+/// midpoint, each with the next as a pair, measured as one ensemble
+/// ([`piv_ensemble`]: sparse or dim particles add up), with the rescue
+/// rungs; returns its field over `s` ticks and the pair around the
+/// midpoint.
+fn bootstrap_rung(
+    inn: &Innovation,
+    mid: u64,
+    s: u64,
+    cfg: &LadderSettings,
+) -> Result<(Field, [Array2<f32>; 2]), PivError> {
+    let span = inn.range();
+    let reach = u64::from(cfg.bootstrap_reach).max(s);
+    // Stretch starts from the first whole one within reach, aligned on mid.
+    let back = ((mid - span.start).min(reach) / s) * s;
+    let ahead = ((span.end - mid).min(reach) / s) * s;
+    let zero = Velocity::zero(inn.height, inn.width);
+    let starts: Vec<u64> = ((mid - back)..(mid + ahead)).step_by(s as usize).collect();
+    let frames: Vec<Array2<f32>> = starts
+        .par_iter()
+        .map(|&t| compensated(inn, t as f64 + s as f64 / 2.0, (t, s), &zero))
+        .collect();
+    let pairs: Vec<(&Array2<f32>, &Array2<f32>)> =
+        frames.windows(2).map(|p| (&p[0], &p[1])).collect();
+    let settings = Settings {
+        rescue: true,
+        windows: BOOTSTRAP_WINDOWS.to_vec(),
+        ..cfg.piv.clone()
+    };
+    let f = piv_ensemble(&pairs, None, &settings, None)?;
+    // The pair that meets at the midpoint.
+    let k = (back / s) as usize;
+    let centre = [frames[k - 1].clone(), frames[k].clone()];
+    Ok((f, centre))
+}
+
+/// Rung `s` with the estimate `e` (velocities per node): A from the `s`
+/// ticks before the midpoint and B from the `s` after, compensated along
+/// `e`'s paths, PIV predicted by `e`'s displacement over `s` along them.
+fn compensated_rung(
+    inn: &Innovation,
+    mid: u64,
+    s: u64,
+    e: &Field,
+    cfg: &LadderSettings,
+) -> Result<(Field, [Array2<f32>; 2]), PivError> {
+    let sf = s as f64;
+    let vel = dense_velocity(e, inn.height, inn.width);
+    let [a, b] = compensated_pair(inn, mid, s, &vel);
+    let init = flow_map(e, &vel, sf);
+    let settings = Settings {
+        rescue: false,
+        ..cfg.piv.clone()
+    };
+    let f = piv_predicted(&a, &b, None, &settings, Some(&init))?;
+    Ok((f, [a, b]))
+}
+
+/// The node velocities of `e` interpolated to every pixel of an `h × w`
+/// frame ([`Field::predictor`]: holes take their neighbours').
+fn dense_velocity(e: &Field, h: usize, w: usize) -> Velocity {
+    let (u, v) = e.predictor(h, w);
+    Velocity { u, v }
+}
+
+/// `e` (velocities per node) as displacements over `ticks` ticks along the
+/// paths through `vel`, `e`'s dense field, each node's uncertainty times
+/// `ticks`: a PIV predictor, or the result.
+fn flow_map(e: &Field, vel: &Velocity, ticks: f64) -> Field {
+    let mut o = e.clone();
+    for idx in ndarray::indices(e.u.dim()) {
+        let (x, y) = e.grid.centre(idx.0, idx.1);
+        let (du, dv) = vel.displacement((x, y), ticks);
+        o.u[idx] = du;
+        o.v[idx] = dv;
+        let (a, b) = e.sigma[idx];
+        o.sigma[idx] = (a * ticks, b * ticks);
+    }
+    o
+}
+
+/// The velocities a rung measured: each vector's displacement over `s`
+/// ticks divided by `s` (the chord of the particle's path, centred on the
+/// node: its velocity to second order in `s`), uncertainties likewise.
+/// Not the estimate plus PIV's residual: the predictor follows paths
+/// through the interpolated field, so the residual corrects the velocity
+/// averaged along the path, not at the node.
+fn per_tick(f: &Field, s: f64) -> Field {
+    per_ticks(f, 1.0 / s)
+}
+
+/// Keeps, per node, `f`'s valid vector where it is more certain than the
+/// one kept so far (the first rung starts the kept field); returns how
+/// many nodes took it.
+fn keep(best: &mut Option<Field>, sep: &mut Option<Array2<u32>>, f: &Field, s: u32) -> usize {
+    let certain = |(a, b): (f64, f64)| {
+        if a.is_finite() && b.is_finite() {
+            a.hypot(b)
+        } else {
+            f64::INFINITY
+        }
+    };
+    let b = best.get_or_insert_with(|| {
+        let mut e = f.clone();
+        e.state.fill(State::Invalid);
+        e.sigma.fill(NO_SIGMA);
+        e
+    });
+    let sp = sep.get_or_insert_with(|| Array2::zeros(f.u.dim()));
+    if b.grid != f.grid {
+        return 0;
+    }
+    let mut n = 0;
+    for idx in ndarray::indices(f.u.dim()) {
+        if f.state[idx] != State::Valid || certain(f.sigma[idx]) >= certain(b.sigma[idx]) {
+            continue;
+        }
+        b.u[idx] = f.u[idx];
+        b.v[idx] = f.v[idx];
+        b.state[idx] = State::Valid;
+        b.sigma[idx] = f.sigma[idx];
+        b.peak_ratio[idx] = f.peak_ratio[idx];
+        b.peak_height[idx] = f.peak_height[idx];
+        sp[idx] = s;
+        n += 1;
+    }
+    n
+}
+
+/// Largest median change, as a share of the median predicted speed, with
+/// which the first rung still confirms a given start.
+const START_CHANGE: f64 = 0.25;
+
+/// Change below which any start is confirmed, px/tick: the first rung's
+/// noise on a slow flow.
+const START_FLOOR: f64 = 0.02;
+
+/// Whether the first rung measured from a given start (`e`, px/tick)
+/// agrees with it: the median change over the rung's valid vectors is at
+/// most [`START_CHANGE`] of the median predicted speed plus
+/// [`START_FLOOR`]. A start twice the truth changes by half its speed,
+/// one with its sign flipped by twice it.
+fn confirms(rung: &Field, e: &Field) -> bool {
+    if rung.grid != e.grid {
+        return false;
+    }
+    let mut change = Vec::new();
+    let mut speed = Vec::new();
+    for idx in ndarray::indices(rung.u.dim()) {
+        if rung.state[idx] == State::Valid && e.state[idx] != State::Invalid {
+            change.push((rung.u[idx] - e.u[idx]).hypot(rung.v[idx] - e.v[idx]));
+            speed.push(e.u[idx].hypot(e.v[idx]));
+        }
+    }
+    if change.is_empty() {
+        return false;
+    }
+    validate::median(&mut change) <= START_CHANGE * validate::median(&mut speed) + START_FLOOR
+}
+
+/// Records, for each node whose kept vector came from rung `s` (`f`),
+/// how far it moved from the estimate that predicted the rung (the
+/// shorter rungs' kept field, validated and filled, or the given start):
+/// a rung twice as long reads the chord of a path twice as long, whose
+/// departure from the velocity at the node grows with the square of its
+/// length, so the step from the shorter rungs measures the model error of
+/// the longer one that the correlation statistics cannot see (and a
+/// wrong start shows as a large step).
+fn changes(
+    change: &mut Option<Array2<(f64, f64)>>,
+    sep: &Option<Array2<u32>>,
+    f: &Field,
+    previous: Option<&Field>,
+    s: u32,
+) {
+    let c = change.get_or_insert_with(|| Array2::from_elem(f.u.dim(), (0.0, 0.0)));
+    let (Some(sp), Some(p)) = (sep.as_ref(), previous) else {
+        return;
+    };
+    if p.grid != f.grid {
+        return;
+    }
+    for idx in ndarray::indices(f.u.dim()) {
+        if sp[idx] == s && p.state[idx] != State::Invalid {
+            c[idx] = (f.u[idx] - p.u[idx], f.v[idx] - p.v[idx]);
+        }
+    }
+}
+
+/// Adds each kept vector's change from the previous rung ([`changes`]) to
+/// its uncertainty, in quadrature.
+fn with_change(b: &mut Field, change: &Array2<(f64, f64)>) {
+    for (sg, &(cu, cv)) in b.sigma.iter_mut().zip(change.iter()) {
+        *sg = (sg.0.hypot(cu), sg.1.hypot(cv));
+    }
+}
+
+/// Drops the kept vectors that came from an unestimated rung (separation
+/// up to `longest`) where the usable compensated rung `f` found no valid
+/// vector: an ensemble of uncompensated frames can lock onto chance where
+/// its windows hold few particles (glare next to a corner: a cluster read
+/// 5 px per pair upwards with a peak ratio of 2), and the compensated rung
+/// that it predicted is the first independent look.
+fn unconfirmed(best: &mut Option<Field>, sep: &Option<Array2<u32>>, f: &Field, longest: u32) {
+    let (Some(b), Some(sp)) = (best.as_mut(), sep.as_ref()) else {
+        return;
+    };
+    if b.grid != f.grid {
+        return;
+    }
+    for idx in ndarray::indices(f.u.dim()) {
+        if sp[idx] <= longest && b.state[idx] == State::Valid && f.state[idx] != State::Valid {
+            b.state[idx] = State::Invalid;
+            b.sigma[idx] = NO_SIGMA;
+        }
+    }
+}
+
+/// The kept velocities validated as a whole (rungs disagree where one of
+/// them locked onto chance; the normalised median test judges them as
+/// displacements over `dt`, the scale its noise floor is set for) and
+/// their holes replaced from the neighbours, with their uncertainties.
+fn finished(kept: &Field, dt: f64) -> Field {
+    let mut f = kept.clone();
+    let v = Settings::default().validation;
+    let (du, dv) = (f.u.mapv(|x| x * dt), f.v.mapv(|x| x * dt));
+    validate::median_test(&du, &dv, &mut f.state, v.median_threshold, v.median_eps);
+    for (st, sg) in f.state.iter().zip(f.sigma.iter_mut()) {
+        if *st == State::Invalid {
+            *sg = NO_SIGMA;
+        }
+    }
+    let replaceable = Array2::from_elem(f.u.dim(), true);
+    validate::replace(&mut f.u, &mut f.v, &mut f.state, &replaceable, 4);
+    validate::replaced_uncertainty(&f.u, &f.v, &f.state, &mut f.sigma);
+    f
+}

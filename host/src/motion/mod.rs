@@ -1,0 +1,16 @@
+//! The host's motion estimate: a pair's 2-D flow measured from the spikes
+//! themselves, over as many planes as the recording holds around it.
+//!
+//! - [`spikes`]: the spikes as each pixel's innovation — spikes less what
+//!   its own static light predicts;
+//! - [`compensate`]: innovation summed along predicted paths;
+//! - [`ladder`]: disjoint compensated frames at growing separations, PIV
+//!   on each, the most certain vector per node.
+
+pub mod compensate;
+pub mod ladder;
+pub mod spikes;
+
+pub use compensate::{compensated, Velocity};
+pub use ladder::{measure, measure_from, LadderSettings, Measurement};
+pub use spikes::Innovation;
