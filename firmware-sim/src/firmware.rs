@@ -12,9 +12,8 @@
 use spiv_core::buffers::SidecarBuf;
 use spiv_core::downlink::DownlinkStats;
 use spiv_core::sidecar::{Probe, Sidecar, SidecarError};
-use spiv_core::wire::control::{control_header, encode_control, ControlHead, MAX_NODES};
+pub use spiv_core::wire::control::Control;
 use spiv_core::wire::sender::Slot;
-use spiv_core::wire::{encode_message, WireError};
 
 pub use spiv_core::sidecar::{capped_frame, Config, CAP_BAND};
 
@@ -351,139 +350,6 @@ impl<L: Link> Link for Faulty<L> {
             self.inner.send(&h)?;
         }
         self.inner.flush()
-    }
-}
-
-/// Why a driven run stopped.
-#[derive(Debug, thiserror::Error)]
-pub enum DriveError {
-    /// The firmware.
-    #[error(transparent)]
-    Firmware(#[from] FirmwareError),
-    /// The input.
-    #[error(transparent)]
-    Format(#[from] spiv_formats::FormatError),
-}
-
-/// Runs the firmware on a simulated scene, the planes streamed straight
-/// from the sensor into the loop (never stored). `req.ticks` is set from
-/// the schedule when `cfg.schedule.pairs` is given. Returns the firmware (its
-/// counters, link and kept frames) and the simulation (truth, frame camera).
-/// With a `downlink`, the firmware hears the host between planes.
-pub fn run_on_scene<L: Link>(
-    req: &crate::simulation::Request,
-    cfg: Config,
-    link: L,
-    keep: bool,
-    mut downlink: Option<&mut crate::downlink::ControlStream>,
-    progress: impl FnMut(u32, u32),
-) -> Result<(Firmware<L>, crate::simulation::Simulated), DriveError> {
-    let mut req = req.clone();
-    if let Some(p) = cfg.schedule.pairs {
-        req.ticks = Some(cfg.ticks_for(p).max(req.scene.pair_dt + 1));
-    }
-    let mut fw = Firmware::new(req.scene.width, req.scene.height, cfg, link)?;
-    if keep {
-        fw.keep = Some(Vec::new());
-    }
-    let mut failed: Option<FirmwareError> = None;
-    let sim = crate::simulation::simulate(&req, progress, |plane| {
-        if failed.is_some() || fw.done() {
-            return Ok(());
-        }
-        let heard = match downlink.as_deref_mut() {
-            Some(d) => d.before_plane(&mut fw),
-            None => Ok(()),
-        };
-        if let Err(e) = heard.and_then(|()| fw.push_plane(plane)) {
-            failed = Some(e);
-        }
-        Ok(())
-    })?;
-    if let Some(e) = failed {
-        return Err(e.into());
-    }
-    fw.finish()?;
-    Ok((fw, sim))
-}
-
-/// Runs the firmware on a `.dat` file, plane by plane (hearing the host
-/// between planes when given a `downlink`).
-#[allow(clippy::too_many_arguments)]
-pub fn run_on_dat<L: Link>(
-    path: &std::path::Path,
-    width: u16,
-    height: u16,
-    opts: spiv_formats::dat::DatOptions,
-    cfg: Config,
-    link: L,
-    keep: bool,
-    mut downlink: Option<&mut crate::downlink::ControlStream>,
-) -> Result<Firmware<L>, DriveError> {
-    let mut r = spiv_formats::dat::DatReader::open(path, width, height, opts)?;
-    let mut fw = Firmware::new(r.width(), r.height(), cfg, link)?;
-    if keep {
-        fw.keep = Some(Vec::new());
-    }
-    let mut plane = vec![0u8; r.out_plane_bytes()];
-    while !fw.done() && r.read_plane(&mut plane)? {
-        if let Some(d) = downlink.as_deref_mut() {
-            d.before_plane(&mut fw)?;
-        }
-        fw.push_plane(&plane)?;
-    }
-    fw.finish()?;
-    Ok(fw)
-}
-
-/// What the host tells the sidecar down the control link
-/// (`spiv_core::wire::control`): window caps per band, the predicted motion
-/// per row and a lower window limit.
-#[derive(Debug, Clone, Default, PartialEq, Eq)]
-pub struct Control {
-    /// Adaptive window limit per band of [`CAP_BAND`] upright rows (top
-    /// first, the camera's stored rows being bottom-up); empty: `n_max`
-    /// everywhere.
-    pub caps: Vec<u16>,
-    /// `Mc` frames: x and y velocity of each stored row, 1/4096 px per tick
-    /// (empty: none).
-    pub motion: (Vec<i16>, Vec<i16>),
-    /// Window limit, ticks; 0: the sidecar's own.
-    pub n_max: u16,
-}
-
-impl Control {
-    /// True when it tells nothing.
-    pub fn is_empty(&self) -> bool {
-        self.caps.is_empty() && self.motion.0.is_empty() && self.n_max == 0
-    }
-
-    /// The framed control message `seq` for a `width × height` sensor,
-    /// applying from pair `from_pair`. Rows beyond [`MAX_NODES`] are sent
-    /// as every `⌈rows / MAX_NODES⌉`-th row (the sidecar interpolates).
-    pub fn message(
-        &self,
-        from_pair: u32,
-        seq: u32,
-        width: u16,
-        height: u16,
-    ) -> Result<Vec<u8>, WireError> {
-        let (vx, vy) = &self.motion;
-        let rows = vx.len().min(vy.len());
-        let pitch = rows.div_ceil(MAX_NODES).max(1);
-        let nx: Vec<i16> = vx.iter().take(rows).step_by(pitch).copied().collect();
-        let ny: Vec<i16> = vy.iter().take(rows).step_by(pitch).copied().collect();
-        let head = ControlHead {
-            from_pair,
-            n_max: self.n_max,
-            pitch: u16::try_from(pitch).map_err(|_| WireError::Payload)?,
-        };
-        let mut payload = vec![0u8; spiv_core::wire::control::MAX_CONTROL_PAYLOAD];
-        let n = encode_control(&head, &nx, &ny, &self.caps, &mut payload)?;
-        let mut out = vec![0u8; spiv_core::wire::control::MAX_CONTROL_ENCODED];
-        let m = encode_message(&control_header(seq, width, height), &payload[..n], &mut out)?;
-        out.truncate(m);
-        Ok(out)
     }
 }
 

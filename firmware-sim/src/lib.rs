@@ -14,8 +14,8 @@
 //! light → sensor → packed spike planes → `spiv-core`.
 #![warn(missing_docs)]
 
-pub mod cli;
 pub mod downlink;
+pub mod drive;
 pub mod firmware;
 pub mod meta;
 pub mod scene;

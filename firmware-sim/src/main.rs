@@ -13,9 +13,8 @@ use clap::Parser;
 use spiv_core::wire::{crc32, frame_crc, Encoding};
 use spiv_core::Method;
 use spiv_firmware_sim::downlink::ControlStream;
-use spiv_firmware_sim::firmware::{
-    run_on_dat, run_on_scene, Config, Counters, DriveError, Faults, Faulty, Plain,
-};
+use spiv_firmware_sim::drive::{run_on_dat, run_on_scene, DriveError};
+use spiv_firmware_sim::firmware::{Config, Counters, Faults, Faulty, Plain};
 use spiv_firmware_sim::scene::{SceneKind, SceneParams, TICK_HZ};
 use spiv_firmware_sim::simulation::Request;
 use spiv_formats::capture::Capture;
@@ -147,7 +146,7 @@ enum Error {
 }
 
 fn main() {
-    let args: Args = spiv_firmware_sim::cli::parse_or_exit("spiv-firmware-sim");
+    let args: Args = spiv_args::parse_or_exit("spiv-firmware-sim");
     match run(&args) {
         Ok(()) => {}
         Err(Error::Drive(DriveError::Firmware(

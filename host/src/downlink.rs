@@ -11,8 +11,8 @@
 
 use std::io::Write;
 
+use spiv_core::wire::control::Control;
 use spiv_core::Params;
-use spiv_firmware_sim::firmware::Control;
 use spiv_formats::vectors::Vector;
 
 use crate::predict::{predicts, row_velocities};

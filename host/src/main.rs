@@ -31,8 +31,9 @@ enum Command {
     Bench(cli::bench::BenchArgs),
     /// Simulate a scene through the spike sensor and the frame camera.
     Simulate(cli::simulate::SimulateArgs),
-    /// The main job on any spike recording (.dat, .npz): motion-compensated
-    /// frame pairs through the core, PIV on each, vectors and plots.
+    /// The main job on any spike recording (.dat, .npz): each pair's flow
+    /// measured from the spikes around it (motion-compensated frames over
+    /// growing separations, PIV on each), vectors with uncertainties, plots.
     Flow(cli::flow::FlowArgs),
     /// Make one frame from a spike file at any tick (adaptive, TFP or TFI).
     Reconstruct(cli::reconstruct::ReconstructArgs),
@@ -43,7 +44,7 @@ enum Command {
 }
 
 fn main() {
-    let cli: Cli = spiv_firmware_sim::cli::parse_or_exit("spiv");
+    let cli: Cli = spiv_args::parse_or_exit("spiv");
     let result = match &cli.command {
         Command::Run(a) => cli::run::run(a),
         Command::Simulate(a) => cli::simulate::run(a),

@@ -318,7 +318,7 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
             if !crate::predict::predicts(&field) {
                 break;
             }
-            let control = spiv_firmware_sim::firmware::Control {
+            let control = spiv_core::wire::control::Control {
                 motion: crate::predict::row_velocities(&field, h, true, dt_ticks),
                 ..Default::default()
             };

@@ -11,7 +11,8 @@ use std::path::Path;
 use std::process::Stdio;
 
 use ndarray::Array2;
-use spiv_firmware_sim::firmware::{run_on_scene, Config, SentFrame};
+use spiv_firmware_sim::drive::run_on_scene;
+use spiv_firmware_sim::firmware::{Config, SentFrame};
 use spiv_firmware_sim::scene::{SceneKind, SceneParams};
 use spiv_firmware_sim::simulation::Request;
 use spiv_formats::image::read_gray;

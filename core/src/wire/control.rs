@@ -194,6 +194,60 @@ pub fn control_header(seq: u32, width: u16, height: u16) -> Header {
     }
 }
 
+/// What the host tells the sidecar down the control link
+/// (this module's message): window caps per band, the predicted motion
+/// per row and a lower window limit.
+#[cfg(feature = "std")]
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Control {
+    /// Adaptive window limit per band of [`crate::sidecar::CAP_BAND`] upright rows (top
+    /// first, the camera's stored rows being bottom-up); empty: `n_max`
+    /// everywhere.
+    pub caps: std::vec::Vec<u16>,
+    /// `Mc` frames: x and y velocity of each stored row, 1/4096 px per tick
+    /// (empty: none).
+    pub motion: (std::vec::Vec<i16>, std::vec::Vec<i16>),
+    /// Window limit, ticks; 0: the sidecar's own.
+    pub n_max: u16,
+}
+
+#[cfg(feature = "std")]
+impl Control {
+    /// True when it tells nothing.
+    pub fn is_empty(&self) -> bool {
+        self.caps.is_empty() && self.motion.0.is_empty() && self.n_max == 0
+    }
+
+    /// The framed control message `seq` for a `width × height` sensor,
+    /// applying from pair `from_pair`. Rows beyond [`MAX_NODES`] are sent
+    /// as every `⌈rows / MAX_NODES⌉`-th row (the sidecar interpolates).
+    pub fn message(
+        &self,
+        from_pair: u32,
+        seq: u32,
+        width: u16,
+        height: u16,
+    ) -> Result<std::vec::Vec<u8>, WireError> {
+        let (vx, vy) = &self.motion;
+        let rows = vx.len().min(vy.len());
+        let pitch = rows.div_ceil(MAX_NODES).max(1);
+        let nx: std::vec::Vec<i16> = vx.iter().take(rows).step_by(pitch).copied().collect();
+        let ny: std::vec::Vec<i16> = vy.iter().take(rows).step_by(pitch).copied().collect();
+        let head = ControlHead {
+            from_pair,
+            n_max: self.n_max,
+            pitch: u16::try_from(pitch).map_err(|_| WireError::Payload)?,
+        };
+        let mut payload = std::vec![0u8; MAX_CONTROL_PAYLOAD];
+        let n = encode_control(&head, &nx, &ny, &self.caps, &mut payload)?;
+        let mut out = std::vec![0u8; MAX_CONTROL_ENCODED];
+        let m =
+            super::encode_message(&control_header(seq, width, height), &payload[..n], &mut out)?;
+        out.truncate(m);
+        Ok(out)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

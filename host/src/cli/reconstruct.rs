@@ -19,7 +19,7 @@ pub fn method_parser() -> impl clap::builder::TypedValueParser<Value = Method> {
         PossibleValue::new("tfp").help("Spike count over a window"),
         PossibleValue::new("tfi").help("Inverse inter-spike interval"),
         PossibleValue::new("mc").help(
-            "Adaptive on motion-compensated counts (spiv flow: needs the closed loop's prediction)",
+            "Motion-compensated frames (spiv flow: the time ladder, which measures the motion from the spikes)",
         ),
     ])
     .try_map(|name| Method::from_name(&name).ok_or("unknown method"))

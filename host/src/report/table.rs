@@ -3,8 +3,6 @@
 
 use std::fmt::Write as _;
 
-use spiv_firmware_sim::scene::{PIXEL_MM, TICK_HZ};
-
 use crate::metrics::rmae_ratio;
 use crate::pipeline::{FrameKind, Job, Outcome};
 
@@ -24,7 +22,9 @@ pub fn run_table(o: &Outcome, job: &Job) -> String {
     let mut s = String::new();
     let m = &o.sim.meta;
     let dt = f64::from(m.capture.pair[1] - m.capture.pair[0]);
-    let to_ms = PIXEL_MM / 1000.0 / (dt / TICK_HZ);
+    // Pixel size and tick rate from the capture's metadata.
+    let tick_hz = m.capture.tick_hz;
+    let to_ms = m.capture.pixel_mm / 1000.0 / (dt / tick_hz);
     let g = &o.measured[0].glare;
     let r = &o.measured[0].rest;
     let _ = writeln!(
@@ -36,7 +36,7 @@ pub fn run_table(o: &Outcome, job: &Job) -> String {
         m.capture.height,
         m.capture.pair,
         dt,
-        dt / TICK_HZ * 1e3,
+        dt / tick_hz * 1e3,
         o.truth.iter().map(|v| v.u.abs()).fold(0.0, f64::max)
     );
     let _ = writeln!(

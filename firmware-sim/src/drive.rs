@@ -1,0 +1,88 @@
+//! Drivers: the simulated firmware run on a streamed scene or a `.dat`
+//! file, plane by plane, hearing the host's control messages between
+//! planes when given a downlink.
+
+use crate::downlink::ControlStream;
+use crate::firmware::{Config, Firmware, FirmwareError, Link};
+
+/// Why a driven run stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum DriveError {
+    /// The firmware.
+    #[error(transparent)]
+    Firmware(#[from] FirmwareError),
+    /// The input.
+    #[error(transparent)]
+    Format(#[from] spiv_formats::FormatError),
+}
+
+/// Runs the firmware on a simulated scene, the planes streamed straight
+/// from the sensor into the loop (never stored). `req.ticks` is set from
+/// the schedule when `cfg.schedule.pairs` is given. Returns the firmware (its
+/// counters, link and kept frames) and the simulation (truth, frame camera).
+/// With a `downlink`, the firmware hears the host between planes.
+pub fn run_on_scene<L: Link>(
+    req: &crate::simulation::Request,
+    cfg: Config,
+    link: L,
+    keep: bool,
+    mut downlink: Option<&mut ControlStream>,
+    progress: impl FnMut(u32, u32),
+) -> Result<(Firmware<L>, crate::simulation::Simulated), DriveError> {
+    let mut req = req.clone();
+    if let Some(p) = cfg.schedule.pairs {
+        req.ticks = Some(cfg.ticks_for(p).max(req.scene.pair_dt + 1));
+    }
+    let mut fw = Firmware::new(req.scene.width, req.scene.height, cfg, link)?;
+    if keep {
+        fw.keep = Some(Vec::new());
+    }
+    let mut failed: Option<FirmwareError> = None;
+    let sim = crate::simulation::simulate(&req, progress, |plane| {
+        if failed.is_some() || fw.done() {
+            return Ok(());
+        }
+        let heard = match downlink.as_deref_mut() {
+            Some(d) => d.before_plane(&mut fw),
+            None => Ok(()),
+        };
+        if let Err(e) = heard.and_then(|()| fw.push_plane(plane)) {
+            failed = Some(e);
+        }
+        Ok(())
+    })?;
+    if let Some(e) = failed {
+        return Err(e.into());
+    }
+    fw.finish()?;
+    Ok((fw, sim))
+}
+
+/// Runs the firmware on a `.dat` file, plane by plane (hearing the host
+/// between planes when given a `downlink`).
+#[allow(clippy::too_many_arguments)]
+pub fn run_on_dat<L: Link>(
+    path: &std::path::Path,
+    width: u16,
+    height: u16,
+    opts: spiv_formats::dat::DatOptions,
+    cfg: Config,
+    link: L,
+    keep: bool,
+    mut downlink: Option<&mut ControlStream>,
+) -> Result<Firmware<L>, DriveError> {
+    let mut r = spiv_formats::dat::DatReader::open(path, width, height, opts)?;
+    let mut fw = Firmware::new(r.width(), r.height(), cfg, link)?;
+    if keep {
+        fw.keep = Some(Vec::new());
+    }
+    let mut plane = vec![0u8; r.out_plane_bytes()];
+    while !fw.done() && r.read_plane(&mut plane)? {
+        if let Some(d) = downlink.as_deref_mut() {
+            d.before_plane(&mut fw)?;
+        }
+        fw.push_plane(&plane)?;
+    }
+    fw.finish()?;
+    Ok(fw)
+}
