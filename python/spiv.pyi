@@ -10,7 +10,7 @@ tools.transform_coordinates. Flags: 0 valid, 1 replaced from neighbours,
 """
 
 from os import PathLike
-from typing import Literal, Optional, Sequence, Tuple, TypedDict, Union, overload
+from typing import Dict, Literal, Optional, Sequence, Tuple, TypedDict, Union, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -203,3 +203,22 @@ def flow(
     its uncertainty and mean_pairs, the count of valid vectors), and with dense
     the mean dense field.
     """
+
+def receive(
+    file: Optional[_Path] = None,
+    tcp: Optional[str] = None,
+    windows: Optional[Sequence[int]] = (64, 32, 32),
+    control: Union[None, bool, _Path] = None,
+    out: Optional[_Path] = None,
+    max_frame: Tuple[int, int] = (8192, 8192),
+) -> Dict[str, int]:
+    """Frames from a sidecar, as `spiv receive`: a file of recorded messages or a
+    sidecar listening at tcp ("host:port"). windows: PIV passes (px) on every pair,
+    None for frames only. control: the live closed loop, each pair's measured motion
+    sent back on the TCP connection (True) or into a file or FIFO (a path). out:
+    every frame (PNG) and the vectors. Frames larger than max_frame are corrupt.
+    Returns the counts: bytes, messages, corrupted, lost_messages, late_messages,
+    frames, lost_frames, pairs, broken_pairs, truncated_tail, vectors, and with
+    control controls_sent, controls_with_motion, controls_failed.
+    """
+    ...

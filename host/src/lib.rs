@@ -26,6 +26,7 @@ pub mod downlink;
 pub mod dwell;
 pub mod flow;
 pub mod link;
+pub mod live;
 pub mod metrics;
 pub mod motion;
 pub mod pipeline;

@@ -29,8 +29,10 @@ use spiv_formats::grid::Grid;
 use spiv_formats::image::read_gray;
 use spiv_formats::{FormatError, Vector, MAX_FRAME_PIXELS};
 use spiv_host::flow::{run_flow, FlowError, FlowRequest, Recording};
+use spiv_host::live::{open_downlink, run_live, LiveError, LiveOptions};
 use spiv_host::piv::options::PivOptions;
 use spiv_host::piv::{piv as run_piv, PivError};
+use spiv_host::receive::{FrameLimit, Spec};
 use spiv_host::reconstruct::{frame_from_planes, FileOptions, Planes, ReconstructError};
 use spiv_host::simulate::SimulateRequest;
 
@@ -94,6 +96,18 @@ impl From<FlowError> for Failure {
             FlowError::Format(f) => f.into(),
             FlowError::Reconstruct(r) => r.into(),
             FlowError::Piv(p) => p.into(),
+            e => Failure::Value(e.to_string()),
+        }
+    }
+}
+
+impl From<LiveError> for Failure {
+    fn from(e: LiveError) -> Self {
+        match e {
+            LiveError::Format(f) => f.into(),
+            LiveError::Piv(p) => p.into(),
+            LiveError::Source(s) => Failure::Io(s.to_string()),
+            LiveError::Downlink(d) => Failure::Io(d.to_string()),
             e => Failure::Value(e.to_string()),
         }
     }
@@ -702,6 +716,93 @@ fn flow<'py>(
     Ok(d)
 }
 
+/// `spiv receive`: frames from a sidecar — a file of recorded messages
+/// (`file`) or a sidecar listening at `tcp` ("host:port") — with PIV on
+/// every pair (`windows`, px per pass; `None`: no PIV). With `control`,
+/// the live closed loop: each pair's measured motion goes back to the
+/// sidecar, on the TCP connection (`control=True`) or into a file or FIFO
+/// (`control="path"`). `out` receives every frame (PNG) and the vectors.
+/// Frames larger than `max_frame` (width, height) are counted as corrupt.
+///
+/// Returns a dict of counts: `bytes`, `messages`, `corrupted`,
+/// `lost_messages`, `late_messages`, `frames`, `lost_frames`, `pairs`,
+/// `broken_pairs`, `truncated_tail`, `vectors`, and with `control` also
+/// `controls_sent`, `controls_with_motion`, `controls_failed`.
+#[pyfunction]
+#[pyo3(signature = (file=None, tcp=None, windows=Some(vec![64, 32, 32]), control=None, out=None, max_frame=(8192, 8192)))]
+#[allow(clippy::too_many_arguments)]
+fn receive<'py>(
+    py: Python<'py>,
+    file: Option<PathBuf>,
+    tcp: Option<String>,
+    windows: Option<Vec<usize>>,
+    control: Option<&Bound<'py, PyAny>>,
+    out: Option<PathBuf>,
+    max_frame: (u16, u16),
+) -> PyResult<Bound<'py, PyDict>> {
+    let spec = match (file, tcp) {
+        (Some(f), None) => Spec::File(f),
+        (None, Some(t)) => Spec::Tcp(t),
+        _ => return Err(SpivError::new_err("give one of file or tcp")),
+    };
+    // control: None, True (back on the link) or a path.
+    let control: Option<Option<PathBuf>> = match control {
+        None => None,
+        Some(c) if c.is_instance_of::<pyo3::types::PyBool>() => {
+            if c.extract::<bool>()? {
+                Some(None)
+            } else {
+                None
+            }
+        }
+        Some(c) => Some(Some(c.extract::<PathBuf>()?)),
+    };
+    if control.is_some() && windows.is_none() {
+        return Err(SpivError::new_err("control needs PIV: give windows"));
+    }
+    let opts = LiveOptions {
+        max_frame: FrameLimit {
+            width: max_frame.0,
+            height: max_frame.1,
+        },
+        piv_windows: windows,
+        out,
+    };
+    let report = py
+        .detach(|| {
+            let mut source = spiv_host::receive::source::open(&spec)?;
+            let downlink = match &control {
+                None => None,
+                Some(path) => Some(open_downlink(source.as_ref(), path.as_deref())?),
+            };
+            run_live(source.as_mut(), &opts, downlink, |_| {})
+        })
+        .map_err(err)?;
+    let d = PyDict::new(py);
+    let r = report.received;
+    for (k, v) in [
+        ("bytes", r.bytes),
+        ("messages", r.messages),
+        ("corrupted", r.corrupted),
+        ("lost_messages", r.lost_messages),
+        ("late_messages", r.late_messages),
+        ("frames", r.frames),
+        ("lost_frames", r.lost_frames),
+        ("pairs", r.pairs),
+        ("broken_pairs", r.broken_pairs),
+        ("truncated_tail", r.truncated_tail),
+    ] {
+        d.set_item(k, v)?;
+    }
+    d.set_item("vectors", report.vectors)?;
+    if let Some(c) = report.downlink {
+        d.set_item("controls_sent", c.sent)?;
+        d.set_item("controls_with_motion", c.with_motion)?;
+        d.set_item("controls_failed", c.failed)?;
+    }
+    Ok(d)
+}
+
 /// spiv: particle image velocimetry with spike cameras.
 #[pymodule]
 fn spiv(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -714,5 +815,6 @@ fn spiv(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(dense, m)?)?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(flow, m)?)?;
+    m.add_function(wrap_pyfunction!(receive, m)?)?;
     Ok(())
 }

@@ -38,3 +38,22 @@ def recording(cli, tmp_path_factory):
     cli("simulate", "--scene", "uniform", "--shift", "2.0,1.0", "--width", "128",
         "--height", "128", "--seed", "3", "--out", d)
     return d
+
+
+@pytest.fixture(scope="session")
+def messages(tmp_path_factory):
+    """A file of wire messages from `spiv-firmware-sim` (uniform scene, 3
+    pairs): $SPIV_FIRMWARE_SIM_BIN, else built here (release)."""
+    exe = os.environ.get("SPIV_FIRMWARE_SIM_BIN")
+    if not exe:
+        subprocess.run(
+            ["cargo", "build", "--release", "-q", "-p", "spiv-firmware-sim"],
+            cwd=ROOT,
+            check=True,
+        )
+        target = pathlib.Path(os.environ.get("CARGO_TARGET_DIR", ROOT / "target"))
+        exe = str(target / "release" / "spiv-firmware-sim")
+    path = tmp_path_factory.mktemp("link") / "messages.bin"
+    subprocess.run([exe, "--scene", "uniform", "--pairs", "3", "--out", str(path)],
+                   capture_output=True, check=True)
+    return path

@@ -253,3 +253,28 @@ def test_dense_measures_turbulence_where_window_piv_cannot():
     assert (flags == 2).all()
     x, y, u1, v1, flags = spiv.piv(fa, fb)
     assert (flags == 1).sum() > 0.9 * flags.size
+
+
+def test_receive_closes_the_loop_as_the_cli_does(cli, messages, tmp_path):
+    import json
+    res = cli("receive", "--file", messages, "--piv", "--control", tmp_path / "cli.ctl", "--json")
+    want = json.loads(res.stdout)
+    got = spiv.receive(file=messages, control=tmp_path / "py.ctl", out=tmp_path / "out")
+    for k in ("bytes", "messages", "frames", "pairs", "lost_frames", "corrupted"):
+        assert got[k] == want[k], k
+    assert got["pairs"] == 3 and got["frames"] == 6
+    assert got["controls_sent"] == want["downlink"]["sent"] == 3
+    # The same control messages, byte for byte, and the vectors written.
+    assert (tmp_path / "py.ctl").read_bytes() == (tmp_path / "cli.ctl").read_bytes()
+    assert got["vectors"] > 0
+    assert len(list((tmp_path / "out").glob("vectors_*.csv"))) == 3
+    assert len(list((tmp_path / "out").glob("frame_*.png"))) == 6
+    # No PIV: frames only; a bad source says so.
+    plain = spiv.receive(file=messages, windows=None)
+    assert plain["vectors"] == 0 and plain["frames"] == 6
+    with pytest.raises(spiv.SpivError, match="one of file or tcp"):
+        spiv.receive()
+    with pytest.raises(spiv.SpivError, match="not spiv wire format"):
+        junk = tmp_path / "junk.bin"
+        junk.write_bytes(bytes(range(256)) * 4)
+        spiv.receive(file=junk)

@@ -33,6 +33,9 @@ pub enum CliError {
     /// Talking back to it.
     #[error(transparent)]
     Downlink(#[from] spiv_host::downlink::DownlinkError),
+    /// The live closed loop.
+    #[error(transparent)]
+    Live(#[from] spiv_host::live::LiveError),
     /// A bad option value.
     #[error("{0}")]
     Usage(String),

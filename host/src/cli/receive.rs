@@ -4,13 +4,9 @@ use std::path::PathBuf;
 
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use spiv_formats::image::write_levels;
-use spiv_formats::vectors::write_vectors;
-use spiv_host::downlink::{control_for, Downlink};
-use spiv_host::link::{receiver_settings, upright_f32};
-use spiv_host::piv::piv;
+use spiv_host::live::{open_downlink, run_live, LiveOptions};
 use spiv_host::receive::source::{open, parse_vid_pid};
-use spiv_host::receive::{receive, Event, FrameLimit, ReceivedFrame, Spec};
+use spiv_host::receive::{FrameLimit, Spec};
 
 use super::CliError;
 
@@ -68,93 +64,40 @@ pub fn run(a: &ReceiveArgs) -> Result<(), CliError> {
         Spec::Pipe
     };
     let mut source = open(&spec).map_err(|e| CliError::Usage(e.to_string()))?;
-    let mut downlink = match &a.control {
+    let downlink = match &a.control {
         None => None,
-        Some(Some(path)) => {
-            let f = std::fs::OpenOptions::new()
-                .write(true)
-                .create(true)
-                .truncate(true)
-                .open(path)
-                .map_err(|e| CliError::Usage(format!("--control {}: {e}", path.display())))?;
-            Some(Downlink::new(Box::new(f)))
-        }
-        Some(None) => match source.downlink() {
-            Some(out) => Some(Downlink::new(
-                out.map_err(|e| CliError::Usage(e.to_string()))?,
-            )),
-            None => {
-                return Err(CliError::Usage(format!(
-                    "--control: {} has no way back to the sidecar; give --control PATH",
-                    source.name()
-                )))
-            }
-        },
+        Some(path) => Some(open_downlink(source.as_ref(), path.as_deref())?),
     };
-    let core = spiv_core::Params::default();
-    if let Some(d) = &a.out {
-        std::fs::create_dir_all(d).map_err(|e| CliError::Usage(format!("{}: {e}", d.display())))?;
-    }
-    let settings = receiver_settings(a.windows.clone().unwrap_or_else(|| vec![64, 32, 32]));
-    // `--windows` sets the passes of both; the compensated pairs keep
-    // their own peak and resampling (as `spiv flow` does).
-    let mut mc_settings = spiv_host::piv::Settings::for_compensated_frames();
-    if let Some(w) = &a.windows {
-        mc_settings.windows = w.clone();
-    }
+    let opts = LiveOptions {
+        max_frame: a.max_frame,
+        piv_windows: a
+            .piv
+            .then(|| a.windows.clone().unwrap_or_else(|| vec![64, 32, 32])),
+        out: a.out.clone(),
+    };
     let bar = ProgressBar::new_spinner();
     bar.set_style(
         ProgressStyle::with_template("{spinner} receiving from {prefix}: {msg} {elapsed}")
             .unwrap_or_else(|_| ProgressStyle::default_spinner()),
     );
     bar.set_prefix(source.name());
-    let mut vectors = 0usize;
-    let report = receive::<CliError>(
-        source.as_mut(),
-        a.max_frame,
-        |e| {
-            match e {
-                Event::Frame(f) => {
-                    if let Some(d) = &a.out {
-                        save_frame(d, &f)?;
-                    }
-                }
-                Event::Pair(pair) => {
-                    if a.piv {
-                        let [fa, fb] = &*pair;
-                        let s = match fa.end.method {
-                            spiv_core::Method::Mc => &mc_settings,
-                            _ => &settings,
-                        };
-                        let field = piv(&upright_f32(fa), &upright_f32(fb), None, s)?;
-                        let v = field.vectors();
-                        vectors += v.len();
-                        if let Some(d) = downlink.as_mut() {
-                            d.send(&pair, &control_for(&pair, &v, None, &core))?;
-                        }
-                        if let Some(d) = &a.out {
-                            write_vectors(&d.join(format!("vectors_{:05}.csv", fa.end.pair)), &v)?;
-                        }
-                    }
-                }
-            }
-            Ok(())
-        },
-        |r| {
-            bar.set_message(format!(
-                "{} frames, {} pairs, {} bytes, {} lost, {} corrupted",
-                r.frames, r.pairs, r.bytes, r.lost_frames, r.corrupted
-            ));
-            bar.tick();
-        },
-    )?;
+    let live = run_live(source.as_mut(), &opts, downlink, |r| {
+        bar.set_message(format!(
+            "{} frames, {} pairs, {} bytes, {} lost, {} corrupted",
+            r.frames, r.pairs, r.bytes, r.lost_frames, r.corrupted
+        ));
+        bar.tick();
+    });
     bar.finish_and_clear();
+    let live = live?;
+    let report = live.received;
+    let vectors = live.vectors;
     if a.json {
         let mut v = serde_json::to_value(report).unwrap_or_default();
-        if let (Some(d), Some(m)) = (&downlink, v.as_object_mut()) {
+        if let (Some(d), Some(m)) = (live.downlink, v.as_object_mut()) {
             m.insert(
                 "downlink".into(),
-                serde_json::to_value(d.report).unwrap_or_default(),
+                serde_json::to_value(d).unwrap_or_default(),
             );
         }
         println!("{}", serde_json::to_string_pretty(&v).unwrap_or_default());
@@ -180,8 +123,7 @@ pub fn run(a: &ReceiveArgs) -> Result<(), CliError> {
                 String::new()
             }
         );
-        if let Some(d) = &downlink {
-            let r = d.report;
+        if let Some(r) = live.downlink {
             println!(
                 "sent {} controls ({} with motion){}",
                 r.sent,
@@ -194,22 +136,5 @@ pub fn run(a: &ReceiveArgs) -> Result<(), CliError> {
             );
         }
     }
-    if report.bytes > 0 && report.messages == 0 {
-        return Err(CliError::Usage(
-            "no valid message in the stream (not spiv wire format?)".into(),
-        ));
-    }
-    Ok(())
-}
-
-fn save_frame(dir: &std::path::Path, f: &ReceivedFrame) -> Result<(), CliError> {
-    let path = dir.join(format!(
-        "frame_{:05}_{}.png",
-        f.end.pair,
-        if f.end.member == 0 { "a" } else { "b" }
-    ));
-    let up = f.upright();
-    let (w, h) = (u32::from(f.width), u32::from(f.height));
-    write_levels(&path, w, h, &up, f.end.full_scale)?;
     Ok(())
 }

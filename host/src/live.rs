@@ -1,0 +1,167 @@
+//! The live closed loop: frames from a sidecar, PIV on every pair, and the
+//! measured motion sent back so that the sidecar compensates its next
+//! frames along it (sensor → core → wire → host → PIV → control →
+//! sidecar). `spiv receive` and the Python package run it.
+
+use std::path::{Path, PathBuf};
+
+use spiv_formats::image::write_levels;
+use spiv_formats::vectors::write_vectors;
+
+use crate::downlink::{control_for, Downlink, DownlinkError, DownlinkReport};
+use crate::link::{receiver_settings, upright_f32};
+use crate::piv::{piv, PivError, Settings};
+use crate::receive::source::{Source, SourceError};
+use crate::receive::{receive, Event, FrameLimit, ReceivedFrame, Report};
+
+/// Why the live loop stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum LiveError {
+    /// The source of the messages.
+    #[error(transparent)]
+    Source(#[from] SourceError),
+    /// PIV of a pair.
+    #[error(transparent)]
+    Piv(#[from] PivError),
+    /// A control message could not be made or sent.
+    #[error(transparent)]
+    Downlink(#[from] DownlinkError),
+    /// Writing a frame or the vectors.
+    #[error(transparent)]
+    Format(#[from] spiv_formats::FormatError),
+    /// The control messages have nowhere to go.
+    #[error("control: {0}")]
+    Control(String),
+    /// Bytes arrived but none of them made a message.
+    #[error("no valid message in the stream (not spiv wire format?)")]
+    NotWire,
+}
+
+/// What the loop does with what it receives.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LiveOptions {
+    /// Largest frame accepted (a larger or empty one is corrupt).
+    pub max_frame: FrameLimit,
+    /// PIV window side of each pass, px, when PIV runs on every pair
+    /// (`None`: no PIV). Plain pairs take [`receiver_settings`],
+    /// motion-compensated ones [`Settings::for_compensated_frames`] with
+    /// these passes.
+    pub piv_windows: Option<Vec<usize>>,
+    /// Folder for every frame (PNG, upright) and the vectors
+    /// (`vectors_NNNNN.csv`).
+    pub out: Option<PathBuf>,
+}
+
+/// What the loop received, measured and sent.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub struct LiveReport {
+    /// The receiver's counts.
+    pub received: Report,
+    /// Vectors measured over all pairs.
+    pub vectors: usize,
+    /// Control messages sent, when the loop was closed.
+    pub downlink: Option<DownlinkReport>,
+}
+
+/// Where the closed loop's control messages go: into `path` (a file or a
+/// FIFO that `spiv-firmware-sim --control` reads), or back on `source`'s
+/// own link (TCP, USB OUT) when `path` is `None`.
+pub fn open_downlink(source: &dyn Source, path: Option<&Path>) -> Result<Downlink, LiveError> {
+    match path {
+        Some(path) => {
+            let f = std::fs::OpenOptions::new()
+                .write(true)
+                .create(true)
+                .truncate(true)
+                .open(path)
+                .map_err(|e| LiveError::Control(format!("{}: {e}", path.display())))?;
+            Ok(Downlink::new(Box::new(f)))
+        }
+        None => match source.downlink() {
+            Some(out) => Ok(Downlink::new(out?)),
+            None => Err(LiveError::Control(format!(
+                "{} has no way back to the sidecar; give a path for the control messages",
+                source.name()
+            ))),
+        },
+    }
+}
+
+/// Receives from `source` until it ends; with `opts.piv_windows`, runs PIV
+/// on every pair and, with a `downlink`, sends the sidecar each pair's
+/// motion (window caps and the per-row prediction, [`control_for`]).
+/// `progress` sees the counts as they grow.
+pub fn run_live(
+    source: &mut dyn Source,
+    opts: &LiveOptions,
+    mut downlink: Option<Downlink>,
+    progress: impl FnMut(&Report),
+) -> Result<LiveReport, LiveError> {
+    let core = spiv_core::Params::default();
+    if let Some(d) = &opts.out {
+        std::fs::create_dir_all(d).map_err(spiv_formats::io_err(d))?;
+    }
+    let (plain, compensated) = match &opts.piv_windows {
+        Some(w) => {
+            let mut mc = Settings::for_compensated_frames();
+            mc.windows = w.clone();
+            (Some(receiver_settings(w.clone())), Some(mc))
+        }
+        None => (None, None),
+    };
+    let mut vectors = 0usize;
+    let received = receive::<LiveError>(
+        source,
+        opts.max_frame,
+        |e| {
+            match e {
+                Event::Frame(f) => {
+                    if let Some(d) = &opts.out {
+                        save_frame(d, &f)?;
+                    }
+                }
+                Event::Pair(pair) => {
+                    let [fa, fb] = &*pair;
+                    let s = match fa.end.method {
+                        spiv_core::Method::Mc => compensated.as_ref(),
+                        _ => plain.as_ref(),
+                    };
+                    if let Some(s) = s {
+                        let field = piv(&upright_f32(fa), &upright_f32(fb), None, s)?;
+                        let v = field.vectors();
+                        vectors += v.len();
+                        if let Some(d) = downlink.as_mut() {
+                            d.send(&pair, &control_for(&pair, &v, None, &core))?;
+                        }
+                        if let Some(d) = &opts.out {
+                            write_vectors(&d.join(format!("vectors_{:05}.csv", fa.end.pair)), &v)?;
+                        }
+                    }
+                }
+            }
+            Ok(())
+        },
+        progress,
+    )?;
+    if received.bytes > 0 && received.messages == 0 {
+        return Err(LiveError::NotWire);
+    }
+    Ok(LiveReport {
+        received,
+        vectors,
+        downlink: downlink.map(|d| d.report),
+    })
+}
+
+/// Writes a received frame as `frame_NNNNN_{a,b}.png`, upright.
+fn save_frame(dir: &Path, f: &ReceivedFrame) -> Result<(), LiveError> {
+    let path = dir.join(format!(
+        "frame_{:05}_{}.png",
+        f.end.pair,
+        if f.end.member == 0 { "a" } else { "b" }
+    ));
+    let up = f.upright();
+    let (w, h) = (u32::from(f.width), u32::from(f.height));
+    write_levels(&path, w, h, &up, f.end.full_scale)?;
+    Ok(())
+}
