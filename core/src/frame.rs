@@ -183,10 +183,9 @@ const ROUND: usize = if cfg!(target_arch = "x86_64") { 16 } else { 8 };
 
 /// The flat table indices of [`ROUND`] pixels (class bytes `cb`, counts
 /// `ct`, both `ROUND` long): the class byte's level field above the count,
-/// so below [`PX_TABLE`]. Built as one SSE2 mask and two byte interleaves
-/// (−4.9 instructions per pixel of the frame against a shift, an OR and
-/// an address add per pixel; on a Cortex-M4 the per-pixel form is the
-/// cheaper one).
+/// so below [`PX_TABLE`]. Built as one SSE2 mask and two byte interleaves,
+/// cheaper than a shift, an OR and an address add per pixel; on a
+/// Cortex-M4 the per-pixel form is the cheaper one.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 fn px_indices(cb: &[u8], ct: &[u8]) -> [u16; ROUND] {

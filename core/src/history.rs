@@ -83,19 +83,16 @@ impl<'a> History<'a> {
         let slot = self.slot_mut(tick);
         if width % 64 == 0 {
             // Rows of whole words: the band's bytes are its words, little-
-            // endian, back to back — one pass with no per-row work (the
-            // Cortex-M4 strip: 0.13 instead of 0.6 instructions per pixel).
+            // endian, back to back — one pass with no per-row work.
             let start = usize::from(row0) * width / 8;
             let src = plane.bytes().get(start..start + 8 * slot.len());
             for (w, c) in slot.iter_mut().zip(src.unwrap_or(&[]).chunks_exact(8)) {
                 *w = u64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]);
             }
         } else if width % 8 == 0 {
-            // Byte-aligned rows (the host's 400-px sensor) in this loop:
-            // through `PlaneView::row_words`, a call per row with its
-            // checks and a `memcpy` of the tail, ingest cost 0.41 x86
-            // instructions per pixel and plane (here 0.056), a twentieth
-            // of the firmware simulator's run.
+            // Byte-aligned rows (the host's 400-px sensor) in this loop,
+            // not through `PlaneView::row_words`, whose call per row, checks
+            // and `memcpy` of the tail would cost several times the copy.
             let row_bytes = width / 8;
             let start = usize::from(row0) * row_bytes;
             let src = plane

@@ -132,8 +132,8 @@ const POP8: [u8; 256] = {
 /// 10⁻⁵ of the larger are ordered by them — the `f32` error of a handful
 /// of roundings is below 10⁻⁶, so the order is the exact one — and all
 /// others by [`cmp_snr`], so the choice of n* is exact and the 256-bit
-/// products run only for near ties (issue 18: they were 40 instructions
-/// per pixel of every frame).
+/// products, a large share of a frame's cost were they run for every
+/// comparison, run only for near ties.
 #[derive(Debug, Clone, Copy)]
 struct Scored {
     s: u64,
@@ -391,8 +391,7 @@ fn add_cell<W: Lane, const RING_ONLY: bool, const NARROW: bool>(
 
 /// A tick's spikes under a region and under its ring. On 64-bit targets
 /// one `u64`, the region's in the low 32 bits and the ring's in the high
-/// ones: one add per tick and batch, one prefix pass (−1.7 x86
-/// instructions per pixel of the frame against two `u32` arrays). Neither
+/// ones: one add per tick and batch, one prefix pass. Neither
 /// half carries into the other: a strip's pixels (≤ 2^19) times 255 ticks
 /// is below 2^32, so every prefix and difference fits its half. On 32-bit
 /// targets, where a `u64` add is two, the pair side by side (the packed
@@ -491,10 +490,9 @@ fn plain_sums<'a, W: Lane, const RING_ONLY: bool, const NARROW: bool>(
 /// instead of reading each plane's slice, and the window's bounds are
 /// checked once, not per tick.
 ///
-/// Inlined on 64-bit targets (x86: 6 instructions per pixel of the frame
-/// fewer); on 32-bit ones called once per run: inlined, the loop over the
-/// two runs held its body twice, 40 kB more of the Cortex-M4's code for
-/// 1 % fewer instructions (one loop over both runs chained cost it 5 %
+/// Inlined on 64-bit targets; on 32-bit ones called once per run, since
+/// inlined the loop over the two runs holds its body twice: 40 kB more of
+/// the Cortex-M4's code for 1 % fewer instructions (one loop over both runs chained cost it 5 %
 /// more).
 #[cfg_attr(target_pointer_width = "64", inline(always))]
 #[cfg_attr(not(target_pointer_width = "64"), inline(never))]
@@ -572,8 +570,9 @@ fn sum_all<const RING_ONLY: bool, const HALF: bool>(
 }
 
 /// [`sum_all`] of cells of one kind (`NARROW`: all narrow halves).
-/// Measured: inlined into [`sum_all`], the host's sums cost 2.5
-/// instructions per pixel more; kept apart, the Cortex-M4's 2.7 more.
+/// Kept out of line on 64-bit targets, where inlining it into [`sum_all`]
+/// costs more than the call; left to the compiler on 32-bit ones, where
+/// inlining is the cheaper (`docs/embedded.md`).
 #[cfg_attr(target_pointer_width = "64", inline(never))]
 fn sum_kind<const RING_ONLY: bool, const HALF: bool, const NARROW: bool>(
     span: &Span<'_>,
@@ -816,8 +815,8 @@ fn adapt_with<const HALF: bool>(
     let mut pt = [Tick::default(); 256];
     // Cells with region pixels, and cells of ring pixels only (the rows
     // above and below a region: one popcount per tick instead of two).
-    // Not initialised until pushed (zeroing both arrays cost 0.6
-    // instructions per pixel of the frame).
+    // Not initialised until pushed: zeroing both arrays would cost more
+    // than the sums of a small frame.
     let mut cells = heapless::Vec::<Cell, CELLS>::new();
     let mut rings = heapless::Vec::<Cell, CELLS>::new();
     let planes = span.planes();

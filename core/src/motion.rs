@@ -32,7 +32,7 @@
 //! Rounding rule, the one definition both this module and the host's `f64`
 //! reference use: `round(v·Δt/4096) = ⌊(v·Δt + 2048)/4096⌋` (halves up).
 //!
-//! Why 1/4096 and not 1/256 (the unit until stop 33): where frames
+//! Why 1/4096 and not 1/256: where frames
 //! overlap in time, the compensated pair shares most of its spikes, and
 //! a shared spike moves between the two frames by exactly the predicted
 //! displacement; PIV of the pair reads about half way between the

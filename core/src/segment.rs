@@ -573,9 +573,8 @@ fn add_runs(group: &[&[u64]], counts: &mut [u64], fresh: bool) {
     add_words(group, runs * RUN, rest, fresh);
 }
 
-/// Words per run of [`add_runs`] (measured on the Cortex-M4: 2, 3, 4,
-/// 8 and 16 words cost 383.1, 374.4, 373.0, 380.8 and 378.0 instructions
-/// per pixel of the adaptive frame).
+/// Words per run of [`add_runs`]: the cheapest of 2, 3, 4, 8 and 16 on the
+/// Cortex-M4 (`firmware-sim/cost.sh`).
 #[cfg(any(test, not(target_arch = "x86_64")))]
 const RUN: usize = 4;
 
@@ -845,9 +844,8 @@ pub(crate) fn segment(
             let n_bg = bg_row.len();
             let cols = n_bg - 2;
             // The two tile rows as slices (both were just written by the
-            // medians, so they are in the buffer): a loop the compiler
-            // vectorises (per column with bounds checks it cost 6
-            // instructions per pixel of the frame).
+            // medians, so they are in the buffer): a loop without bounds
+            // checks, which the compiler vectorises.
             let t0 = ws.tiles.get(row_t0..row_t0 + cols).unwrap_or_default();
             let t1 = ws.tiles.get(row_t1..row_t1 + cols).unwrap_or_default();
             for ((b, &a), &c) in bg_row[1..n_bg - 1].iter_mut().zip(t0).zip(t1) {
@@ -1140,8 +1138,8 @@ fn group_rest(
 /// [`background_rest`] of a word with pixels in at least three byte
 /// groups, on x86-64: all 64 counts read at once ([`slices::bytes64`])
 /// and the class and count bytes written sixteen at a time through byte
-/// masks (SSE2), −2.2 instructions per pixel of the frame against a byte
-/// group at a time (most such words are the last level's, nearly full).
+/// masks (SSE2), cheaper than a byte group at a time for such words (most
+/// are the last level's, nearly full).
 /// False (nothing written) for fewer groups or a word past the buffers'
 /// end.
 #[cfg(target_arch = "x86_64")]

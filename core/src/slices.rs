@@ -316,8 +316,7 @@ pub fn bytes64(c: &Counter) -> [u8; 64] {
 /// bytes in memory order). `halves`: in two `u32`s — a byte of SPREAD is
 /// 0 or 1, so a shift by b < 8 never carries out of it and the halves
 /// shift apart, one 32-bit operation each (a `u64` shift is three on a
-/// 32-bit target; on a 64-bit one the split costs 8 instructions per
-/// pixel of the frame).
+/// 32-bit target; on a 64-bit one the split is the slower).
 #[inline(always)]
 fn spread(bytes: &[u8; 64], at: usize, halves: bool) -> [u8; 8] {
     if halves {

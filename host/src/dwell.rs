@@ -9,6 +9,14 @@ use spiv_formats::vectors::Vector;
 
 use crate::reconstruct::{Planes, ReconstructError};
 
+/// The default blur budget, px: a particle's image may move this far
+/// within its window (`spiv bench speed`: 6 and 16 px measured worse on
+/// paper-linear).
+pub const DWELL_CAP: f64 = 8.0;
+
+/// The default blur budget as the command line's `--dwell-cap` text.
+pub const DWELL_CAP_ARG: &str = "8";
+
 /// Rows per band of the capped adaptive reconstruction (the firmware's
 /// [`spiv_core::sidecar::CAP_BAND`]; margins are `Params::margin`).
 pub const BAND: usize = spiv_core::sidecar::CAP_BAND as usize;
@@ -75,4 +83,12 @@ pub fn band_caps(field: &[Vector], h: usize, dt: f64, budget: f64, core: &Params
             n.max(2.0 * f64::from(core.n0)).min(f64::from(core.n_max)) as u16
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn the_command_line_default_is_the_constant() {
+        assert_eq!(super::DWELL_CAP_ARG.parse::<f64>(), Ok(super::DWELL_CAP));
+    }
 }

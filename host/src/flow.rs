@@ -42,9 +42,7 @@ use crate::reconstruct::{frame_from_planes, FileOptions, Planes, ReconstructErro
 /// The TFP window of the dwell cap's bootstrap pair, ticks.
 pub const BOOTSTRAP_WINDOW: u16 = 8;
 
-/// The dwell cap's default blur budget, px: a particle's image may move this
-/// far within its window.
-pub const DWELL_CAP: f64 = 8.0;
+pub use crate::dwell::DWELL_CAP;
 
 /// Everything `spiv flow` can refuse.
 #[derive(Debug, thiserror::Error)]

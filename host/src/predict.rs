@@ -25,11 +25,8 @@ use crate::reconstruct::{Planes, ReconstructError};
 /// Measured (`spiv bench paper --seeds 30`, velocities in 1/4096 px/tick,
 /// glare rows of the wide baseline, linear / quadratic / log): two rounds
 /// 0.007 / 0.032 / 0.045, four 0.007 / 0.028 / 0.032, six or eight no
-/// better beyond the seeds' spread. (With velocities rounded to 1/256
-/// px/tick, four rounds helped too: quadratic 0.049 → 0.036 over 10
-/// seeds; an earlier session saw a third round change nothing, on the
-/// pair alone.) Live, the previous pair's field plays the later rounds'
-/// part.
+/// better beyond the seeds' spread. Live, the previous pair's field plays
+/// the later rounds' part.
 pub const ROUNDS: usize = 4;
 
 /// Velocities per stored row, 1/4096 px per tick: `(vx, vy)`.

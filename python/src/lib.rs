@@ -603,7 +603,7 @@ fn simulate<'py>(
 /// node) `(ny, nx)`; with `dense`, `mean_dense_u`, `mean_dense_v`
 /// `float32 (height, width)`.
 #[pyfunction]
-#[pyo3(signature = (path, dt=None, every=None, start=None, end=None, method="mc", window=None, dwell_cap=Some(8.0), windows=None, width=None, height=None, flip=true, strip_head=0, dense=false))]
+#[pyo3(signature = (path, dt=None, every=None, start=None, end=None, method="mc", window=None, dwell_cap=Some(spiv_host::dwell::DWELL_CAP), windows=None, width=None, height=None, flip=true, strip_head=0, dense=false))]
 #[allow(clippy::too_many_arguments)]
 fn flow<'py>(
     py: Python<'py>,

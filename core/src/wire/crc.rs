@@ -3,11 +3,9 @@
 //!
 //! On 64-bit hosts the `crc32fast` crate: with the `std` feature it picks
 //! the carry-less-multiply (PCLMULQDQ) folding at run time where the CPU
-//! has it, else slice-by-16 tables. The `crc` crate's slice-by-16 tables
-//! had cost about 8 x86 instructions per byte of a frame's samples, a
-//! fifth of the firmware simulator's sending (issue 18: its run in real
-//! time): the 400-plane run fell from 305.3 M to 296.0 M instructions.
-//! On 32-bit MCUs the `crc` crate's one 1 KiB table: the Cortex-M4 sends
+//! has it, else slice-by-16 tables, several times cheaper per byte than
+//! the `crc` crate's tables, which were a fifth of the firmware
+//! simulator's sending. On 32-bit MCUs the `crc` crate's one 1 KiB table: the Cortex-M4 sends
 //! in the same count with slice-by-16 (measured with
 //! `firmware-sim/cost.sh`) and the flash is better kept. Both compute the
 //! same function, tested against zlib's check value.

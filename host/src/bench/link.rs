@@ -338,7 +338,7 @@ mod tests {
             tolerance: 12,
             contrast: 4,
             contrast_mc: 2,
-            dwell_cap: Some(8.0),
+            dwell_cap: Some(crate::dwell::DWELL_CAP),
             frames: vec![LinkFrames::Adaptive, LinkFrames::Mc],
         };
         let rows = link_bench(&b, || {}).expect("link bench");

@@ -33,7 +33,7 @@ enum Which {
         json: Option<PathBuf>,
         /// Beyond the paper: cap adaptive windows to this blur, px, or "off"
         /// for the paper's algorithm (see `spiv run`).
-        #[arg(long, default_value = "8")]
+        #[arg(long, default_value = spiv_host::dwell::DWELL_CAP_ARG)]
         dwell_cap: String,
     },
     /// The Blasius boundary layer: measured u(y) against the solution.
@@ -328,7 +328,7 @@ fn blasius(seeds: u64) -> Result<(), CliError> {
     let mut u_pair = 0.0;
     for seed in 1..=seeds {
         let mut job = Job::new(SceneParams::new(SceneKind::Blasius), seed);
-        job.dwell_cap = Some(8.0);
+        job.dwell_cap = Some(spiv_host::dwell::DWELL_CAP);
         let o = run_job(&job, |_| {})?;
         let dt = f64::from(o.sim.meta.capture.pair[1] - o.sim.meta.capture.pair[0]);
         u_pair = job.request.scene.top_speed * dt;

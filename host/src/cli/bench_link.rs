@@ -32,7 +32,7 @@ pub struct LinkArgs {
     contrast_mc: u16,
     /// Adaptive window cap against streaks (as `spiv run --dwell-cap`), px
     /// of blur, or "off" for the paper's one n_max everywhere.
-    #[arg(long, default_value = "8")]
+    #[arg(long, default_value = spiv_host::dwell::DWELL_CAP_ARG)]
     dwell_cap: String,
     /// The frames to send: tfp (n = 8), adaptive (with the dwell cap) and
     /// mc (motion-compensated, with the control `spiv run` predicts).

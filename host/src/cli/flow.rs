@@ -47,7 +47,7 @@ pub struct FlowArgs {
     window: Option<u16>,
     /// Adaptive: blur budget of the closed-loop window caps, px, or "off"
     /// for the paper's algorithm with one n_max everywhere.
-    #[arg(long, default_value = "8")]
+    #[arg(long, default_value = spiv_host::dwell::DWELL_CAP_ARG)]
     dwell_cap: String,
     /// PIV window side of each pass, px (default: 64,32,32, and
     /// 64,32,32,32,32,32,32 for motion-compensated pairs).

@@ -31,7 +31,7 @@ pub struct RunArgs {
     /// Beyond the paper: cap each band's adaptive window so the fastest
     /// particle (from PIV on the TFP pair) blurs by at most this many px;
     /// "off" runs the paper's algorithm with one n_max everywhere.
-    #[arg(long, default_value = "8")]
+    #[arg(long, default_value = spiv_host::dwell::DWELL_CAP_ARG)]
     dwell_cap: String,
     /// How the sidecar codes frames on the wire: rice (lossless, default),
     /// context (lossless, context-modelled range coder), sparse (lossy:

@@ -43,8 +43,8 @@ impl Adapt {
         // quotient under ESCAPE with k ≤ 16, or an ESCAPE_BITS escape;
         // the decoder reads nothing larger), and A is halved every 64
         // values, so A < 2^28. Were it ever to wrap, encoder and decoder
-        // update with the same values and stay in step. (Saturating cost
-        // the encoder two instructions per sample.)
+        // update with the same values and stay in step, without the
+        // saturating add's cost per sample.
         self.a = self.a.wrapping_add(z);
         self.n += 1;
         if self.n >= 64 {
