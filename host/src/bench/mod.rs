@@ -1,8 +1,9 @@
-//! The benchmarks' experiments (`spiv bench speed`, `link`, `turbulence`,
-//! `flows`):
+//! The benchmarks' experiments (`spiv bench paper`, `blasius`, `speed`,
+//! `link`, `turbulence`, `flows`):
 //! each returns its rows; the CLI prints them.
 
 pub mod flows;
 pub mod link;
+pub mod paper;
 pub mod speed;
 pub mod turbulence;

@@ -6,10 +6,8 @@
 use std::path::{Path, PathBuf};
 
 use clap::{Args, Subcommand};
-use serde_json::json;
-use spiv_firmware_sim::scene::{SceneKind, SceneParams};
-use spiv_host::metrics::{mean_ci, rmae_ratio, MeanCi};
-use spiv_host::pipeline::{run as run_job, FrameKind, Job};
+use spiv_host::bench::paper::{blasius_bench, paper_bench, PAPER};
+use spiv_host::metrics::MeanCi;
 
 use super::{bar, CliError};
 use spiv_host::report::table::label;
@@ -238,42 +236,13 @@ fn paper(seeds: u64, json_out: Option<&PathBuf>, dwell_cap: Option<f64>) -> Resu
     if seeds == 0 || seeds > 1000 {
         return Err(CliError::Usage("--seeds must be in 1..=1000".into()));
     }
-    let scenes = [
-        (SceneKind::PaperLinear, 0.084, Some(8.594)),
-        (SceneKind::PaperQuadratic, 0.028, None),
-        (SceneKind::PaperLog, 0.113, None),
-    ];
-    let b = bar(seeds * scenes.len() as u64, "runs");
-    let mut report = Vec::new();
-    let mut tables = Vec::new();
-    for (kind, paper_rmae, paper_ratio) in scenes {
-        // [source][glare rmae, glare rmse, rest rmae, rest rmse]
-        let mut acc = vec![[Vec::new(), Vec::new(), Vec::new(), Vec::new()]; FrameKind::ALL.len()];
-        let mut ratios = vec![[Vec::new(), Vec::new()]; FrameKind::ALL.len() - 1];
-        for seed in 1..=seeds {
-            let mut job = Job::new(SceneParams::new(kind), seed);
-            job.dwell_cap = dwell_cap;
-            let o = run_job(&job, |_| {})?;
-            for (k, x) in o.measured.iter().enumerate() {
-                acc[k][0].push(x.glare.rmae);
-                acc[k][1].push(x.glare.rmse);
-                acc[k][2].push(x.rest.rmae);
-                acc[k][3].push(x.rest.rmse);
-            }
-            let f = &o.measured[0];
-            for (k, x) in o.measured[1..].iter().enumerate() {
-                ratios[k][0].push(rmae_ratio(f.glare.rmae, x.glare.rmae));
-                ratios[k][1].push(rmae_ratio(f.rest.rmae, x.rest.rmae));
-            }
-            b.inc(1);
-        }
-        tables.push((kind, paper_rmae, paper_ratio, acc, ratios));
-    }
+    let b = bar(seeds * PAPER.len() as u64, "runs");
+    let tables = paper_bench(seeds, dwell_cap, || b.inc(1))?;
     b.finish_and_clear();
-    for (kind, paper_rmae, paper_ratio, acc, ratios) in &tables {
+    for t in &tables {
         println!(
             "\n{} — {} seeds, mean ± 95 % CI; glare rows: vector rows within 2σ = 50 px of the wall; adaptive {}",
-            kind.name(),
+            t.scene.name(),
             seeds,
             dwell_cap.map_or("as in the paper (one n_max)".to_string(), |c| format!("with a dwell cap of {c} px"))
         );
@@ -281,38 +250,34 @@ fn paper(seeds: u64, json_out: Option<&PathBuf>, dwell_cap: Option<f64>) -> Resu
             "{:<20} | {:>15} {:>15} | {:>15} {:>15}",
             "frames", "glare RMAE", "glare RMSE px", "other RMAE", "other RMSE px"
         );
-        let mut rows = Vec::new();
-        for (k, s) in FrameKind::ALL.iter().enumerate() {
-            let m: Vec<MeanCi> = acc[k].iter().map(|v| mean_ci(v)).collect();
+        for r in &t.rows {
             println!(
                 "{:<20} | {:>15} {:>15} | {:>15} {:>15}",
-                label(*s, 8),
-                fmt(m[0]),
-                fmt(m[1]),
-                fmt(m[2]),
-                fmt(m[3])
+                label(r.source, 8),
+                fmt(r.glare_rmae),
+                fmt(r.glare_rmse),
+                fmt(r.rest_rmae),
+                fmt(r.rest_rmse)
             );
-            rows.push(json!({"source": s, "glare_rmae": m[0], "glare_rmse": m[1], "rest_rmae": m[2], "rest_rmse": m[3]}));
         }
-        for (k, s) in FrameKind::ALL[1..].iter().enumerate() {
-            let (g, r) = (mean_ci(&ratios[k][0]), mean_ci(&ratios[k][1]));
+        for r in &t.ratios {
             println!(
                 "{:<20} | {:>15} {:>15} | {:>15}",
-                format!("frame/{} RMAE", s.name()),
-                fmt(g),
+                format!("frame/{} RMAE", r.ratio.name()),
+                fmt(r.glare),
                 "",
-                fmt(r)
+                fmt(r.rest)
             );
-            rows.push(json!({"ratio": s, "glare": g, "rest": r}));
         }
         println!(
-            "paper (spike camera, glare rows): RMAE {paper_rmae}{}",
-            paper_ratio.map_or(String::new(), |r| format!(", frame/spike ratio {r}"))
+            "paper (spike camera, glare rows): RMAE {}{}",
+            t.paper_rmae,
+            t.paper_ratio
+                .map_or(String::new(), |r| format!(", frame/spike ratio {r}"))
         );
-        report.push(json!({"scene": kind.name(), "seeds": seeds, "paper_rmae": paper_rmae, "paper_ratio": paper_ratio, "rows": rows}));
     }
     if let Some(p) = json_out {
-        std::fs::write(p, serde_json::to_string_pretty(&report).unwrap_or_default())
+        std::fs::write(p, serde_json::to_string_pretty(&tables).unwrap_or_default())
             .map_err(|e| CliError::Usage(format!("{}: {e}", p.display())))?;
     }
     Ok(())
@@ -323,43 +288,18 @@ fn blasius(seeds: u64) -> Result<(), CliError> {
         return Err(CliError::Usage("--seeds must be in 1..=100".into()));
     }
     let b = bar(seeds, "runs");
-    let mut dev = vec![Vec::new(); FrameKind::ALL.len()];
-    let mut lost = [0usize; FrameKind::ALL.len()];
-    let mut u_pair = 0.0;
-    for seed in 1..=seeds {
-        let mut job = Job::new(SceneParams::new(SceneKind::Blasius), seed);
-        job.dwell_cap = Some(spiv_host::dwell::DWELL_CAP);
-        let o = run_job(&job, |_| {})?;
-        let dt = f64::from(o.sim.meta.capture.pair[1] - o.sim.meta.capture.pair[0]);
-        u_pair = job.request.scene.top_speed * dt;
-        for (k, x) in o.measured.iter().enumerate() {
-            let used: Vec<f64> = x
-                .rows
-                .iter()
-                .filter_map(|r| r.measured.map(|m| (m - r.truth).powi(2)))
-                .collect();
-            lost[k] += x.rows.iter().filter(|r| r.measured.is_none()).count();
-            // No measured row: undefined (NaN), not a perfect 0.
-            let rms = if used.is_empty() {
-                f64::NAN
-            } else {
-                (used.iter().sum::<f64>() / used.len() as f64).sqrt()
-            };
-            dev[k].push(100.0 * rms / u_pair);
-        }
-        b.inc(1);
-    }
+    let r = blasius_bench(seeds, || b.inc(1))?;
     b.finish_and_clear();
     println!(
         "blasius (400x800 px, U = {:.2} px per pair, δ99 = 730 px), {seeds} seed(s): RMS deviation of the row profile from the Blasius solution, % of U (target ≤ 2 %)",
-        u_pair
+        r.u_pair
     );
-    for (k, s) in FrameKind::ALL.iter().enumerate() {
+    for (k, dev, lost) in &r.rows {
         println!(
             "{:<20} {:>16} %   rows without a vector: {}",
-            label(*s, 8),
-            fmt(mean_ci(&dev[k])),
-            lost[k]
+            label(*k, 8),
+            fmt(*dev),
+            lost
         );
     }
     Ok(())
