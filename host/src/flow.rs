@@ -595,7 +595,7 @@ pub fn run_flow(
     for (i, &ka) in ticks.iter().enumerate() {
         let kb = ka + u64::from(opts.dt);
         let m = match (opts.method, opts.dwell_cap) {
-            (Method::Mc, _) => ladder_pair(rec, [ka, kb], opts)?,
+            (Method::Mc, _) => ladder_pair(rec, [ka, kb], opts, prediction.take())?,
             (Method::Adaptive, Some(budget)) => {
                 capped_pair(rec, [ka, kb], opts, &core, budget, prediction.take())?
             }
@@ -646,11 +646,14 @@ fn check(rec: &Recording, opts: &FlowOptions) -> Result<Vec<u64>, FlowError> {
 }
 
 /// A motion-compensated pair: the time ladder around its midpoint, over
-/// the planes within the longest rung's reach that lie before `opts.end`.
+/// the planes within the longest rung's reach that lie before `opts.end`,
+/// started from `prediction` (the previous pair's usable field, px per
+/// pair) when there is one.
 fn ladder_pair(
     rec: &mut Recording,
     [ka, kb]: [u64; 2],
     opts: &FlowOptions,
+    prediction: Option<Field>,
 ) -> Result<Measured, FlowError> {
     let mid = (ka + kb).div_ceil(2);
     let reach = u64::from(opts.ladder.separations.iter().copied().max().unwrap_or(0));
@@ -659,7 +662,11 @@ fn ladder_pair(
     let planes = rec.stretch(first, last.saturating_sub(first))?;
     let inn = Innovation::of(&planes);
     let dt = f64::from(opts.dt);
-    let m = ladder::measure(&inn, mid, dt, &opts.ladder)?;
+    // The previous pair's usable field, as velocities, starts the ladder
+    // past its unestimated rungs; the ladder drops it when its first rung
+    // does not confirm it.
+    let start = prediction.map(|p| ladder::per_ticks(&p, 1.0 / dt));
+    let m = ladder::measure_from(&inn, mid, dt, &opts.ladder, start)?;
     let (frames, frame_ticks) = match m.frames {
         Some(f) => (f.frames, f64::from(f.separation)),
         None => {
