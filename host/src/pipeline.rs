@@ -201,12 +201,63 @@ pub struct LinkSummary {
 pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> {
     let t0 = std::time::Instant::now();
     stage("simulating both cameras");
-    let p = &job.request.scene;
-    let (w, h) = (p.width, p.height);
     let (data, sim) = simulate_planes(&job.request)?;
     let t_sim = t0.elapsed().as_secs_f64() * 1e3;
 
     stage("sidecar: core and wire");
+    let (frames, link) = sidecar_frames(job, &sim, &data)?;
+    let t_rec = t0.elapsed().as_secs_f64() * 1e3 - t_sim;
+
+    stage("PIV on three pairs");
+    let (truth, measured) = measure_pairs(job, &sim, frames)?;
+    let t_piv = t0.elapsed().as_secs_f64() * 1e3 - t_sim - t_rec;
+    Ok(Outcome {
+        sim,
+        truth,
+        measured,
+        glare_limit: 2.0 * job.request.scene.glare_sigma,
+        stage_ms: [t_sim, t_rec, t_piv],
+        link,
+    })
+}
+
+/// The spike camera's pairs as the host received them (upright): TFP,
+/// adaptive, motion-compensated and its wide pair (`None` where the
+/// recording does not hold its windows), with the wide pair's separation.
+struct SpikeFrames {
+    tfp: [Vec<u16>; 2],
+    adaptive: [Vec<u16>; 2],
+    mc: [Vec<u16>; 2],
+    wide: Option<[Vec<u16>; 2]>,
+    wide_s: Option<u32>,
+}
+
+/// Whether every frame `t` received is the one the firmware sent.
+fn exact(t: &Transfer) -> bool {
+    t.pairs.iter().flatten().all(|r| {
+        t.sent
+            .iter()
+            .any(|s| s.frame_id == r.frame_id && s.data == r.data)
+    })
+}
+
+/// The first pair `t` received, upright; `what` names it in the error.
+fn upright(t: &Transfer, what: &'static str) -> Result<[Vec<u16>; 2], JobError> {
+    let [a, b] = t.pairs.first().ok_or(JobError::NoPair(what))?;
+    Ok([a.upright(), b.upright()])
+}
+
+/// Runs the sidecar firmware on the spikes for each kind of spike frames
+/// and carries them over the wire: the TFP and adaptive pairs (the
+/// adaptive windows capped by the dwell cap), then the motion-compensated
+/// pair predicted by the TFP pair's PIV, and its wide pair.
+fn sidecar_frames(
+    job: &Job,
+    sim: &Simulated,
+    data: &[u8],
+) -> Result<(SpikeFrames, LinkSummary), JobError> {
+    let p = &job.request.scene;
+    let (w, h) = (p.width, p.height);
     let [ka, kb] = sim.meta.capture.pair;
     let mut base = Config::new(ka, kb - ka);
     base.params = job.core;
@@ -214,45 +265,74 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
     base.encoding = job.encoding;
     base.lossy = job.lossy;
     let (caps, tfp_t) = match job.dwell_cap {
-        Some(budget) => dwell_caps(&data, w, h, &base, job.tfp_window, budget, &job.piv)?,
+        Some(budget) => dwell_caps(data, w, h, &base, job.tfp_window, budget, &job.piv)?,
         None => {
             let cfg = Config {
                 method: Method::Tfp,
                 tfp_window: job.tfp_window,
                 ..base
             };
-            (Vec::new(), transfer(&data, w, h, cfg, Vec::new())?)
+            (Vec::new(), transfer(data, w, h, cfg, Vec::new())?)
         }
     };
-    let ad_t = transfer(&data, w, h, base, caps)?;
-    let exact = |t: &Transfer| {
-        t.pairs.iter().flatten().all(|r| {
-            t.sent
-                .iter()
-                .any(|s| s.frame_id == r.frame_id && s.data == r.data)
-        })
-    };
+    let ad_t = transfer(data, w, h, base, caps)?;
+    let tfp = upright(&tfp_t, "TFP")?;
+    let adaptive = upright(&ad_t, "adaptive")?;
+    let mc = compensated(job, sim, data, base, &tfp, &adaptive)?;
     let link = LinkSummary {
         adaptive_bytes: ad_t.bytes,
         tfp_bytes: tfp_t.bytes,
-        mc_bytes: 0,
-        wide_bytes: 0,
+        mc_bytes: mc.pair_t.as_ref().map_or(0, |t| t.bytes),
+        wide_bytes: mc.wide_t.as_ref().map_or(0, |t| t.bytes),
         raw_bytes_per_period: u64::from(base.schedule.every) * u64::from(w) * u64::from(h) / 8,
-        lost_frames: ad_t.report.lost_frames + tfp_t.report.lost_frames,
-        bit_exact: exact(&ad_t) && exact(&tfp_t),
+        lost_frames: ad_t.report.lost_frames
+            + tfp_t.report.lost_frames
+            + mc.pair_t.as_ref().map_or(0, |t| t.report.lost_frames)
+            + mc.wide_t.as_ref().map_or(0, |t| t.report.lost_frames),
+        bit_exact: exact(&ad_t)
+            && exact(&tfp_t)
+            && mc.pair_t.as_ref().is_none_or(exact)
+            && mc.wide_t.as_ref().is_none_or(exact),
     };
-    let up = |t: &Transfer, what: &'static str| -> Result<[Vec<u16>; 2], JobError> {
-        let [a, b] = t.pairs.first().ok_or(JobError::NoPair(what))?;
-        Ok([a.upright(), b.upright()])
+    let frames = SpikeFrames {
+        tfp,
+        adaptive,
+        mc: mc.pair,
+        wide: mc.wide,
+        wide_s: mc.wide_s,
     };
-    let tfp = up(&tfp_t, "TFP")?;
-    let adaptive = up(&ad_t, "adaptive")?;
-    // Motion-compensated: the TFP pair's PIV predicts each row's velocity
-    // (as `spiv flow` does), sent to the sidecar as a control message on its
-    // downlink; the sidecar refines it from the spikes and sends the pair,
-    // whose own field predicts it once more. Without a usable field, the
-    // adaptive pair.
+    Ok((frames, link))
+}
+
+/// The motion-compensated pair and its wide pair, with what carried them.
+struct Compensated {
+    pair: [Vec<u16>; 2],
+    pair_t: Option<Transfer>,
+    wide: Option<[Vec<u16>; 2]>,
+    wide_t: Option<Transfer>,
+    wide_s: Option<u32>,
+}
+
+/// The motion-compensated pair: the TFP pair's PIV predicts each row's
+/// velocity (as `spiv flow` does), sent to the sidecar as a control
+/// message on its downlink; the sidecar refines it from the spikes and
+/// sends the pair, whose own field predicts it once more. Without a
+/// usable field, the adaptive pair. The wide pair takes the same control,
+/// frames `s·dt` apart centred on the pair (when the recording holds their
+/// windows), and the two measure together for [`baseline::ROUNDS`] more
+/// rounds, their combined field the next control.
+fn compensated(
+    job: &Job,
+    sim: &Simulated,
+    data: &[u8],
+    base: Config,
+    tfp: &[Vec<u16>; 2],
+    adaptive: &[Vec<u16>; 2],
+) -> Result<Compensated, JobError> {
+    let p = &job.request.scene;
+    let (w, h) = (p.width, p.height);
     let (wu, hu) = (usize::from(w), usize::from(h));
+    let [ka, kb] = sim.meta.capture.pair;
     let dt_ticks = f64::from(kb - ka);
     let pred = piv(
         &to_f32(&tfp[0], wu, hu),
@@ -265,99 +345,115 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
         refine: Some(Refine::default()),
         ..base
     };
-    let (mut mc, mut mc_t, control) =
-        match mc_transfer(&data, (w, h), cfg, &pred, dt_ticks, &job.mc_piv)? {
-            Some((c, t)) => (up(&t, "motion-compensated")?, Some(t), Some(c)),
-            None => (adaptive.clone(), None, None),
+    let Some((control, pair_t)) = mc_transfer(data, (w, h), cfg, &pred, dt_ticks, &job.mc_piv)?
+    else {
+        return Ok(Compensated {
+            pair: adaptive.clone(),
+            pair_t: None,
+            wide: None,
+            wide_t: None,
+            wide_s: job.wide.filter(|&s| s >= 2),
+        });
+    };
+    let mut out = Compensated {
+        pair: upright(&pair_t, "motion-compensated")?,
+        pair_t: Some(pair_t),
+        wide: None,
+        wide_t: None,
+        wide_s: job.wide.filter(|&s| s >= 2),
+    };
+    let Some((s, wcfg)) = out
+        .wide_s
+        .and_then(|s| wide_config(cfg, s, [ka, kb], job, sim).map(|c| (s, c)))
+    else {
+        return Ok(out);
+    };
+    let wt = transfer_with(data, w, h, wcfg, control)?;
+    out.wide = Some(upright(&wt, "wide-baseline")?);
+    out.wide_t = Some(wt);
+    for _ in 0..baseline::ROUNDS {
+        let Some(wp) = &out.wide else { break };
+        let narrow = piv(
+            &to_f32(&out.pair[0], wu, hu),
+            &to_f32(&out.pair[1], wu, hu),
+            None,
+            &job.mc_piv,
+        )?;
+        let (wa, wb) = (to_f32(&wp[0], wu, hu), to_f32(&wp[1], wu, hu));
+        let field = baseline::measure(&narrow, (&wa, &wb), s, &job.mc_piv)?;
+        if !crate::predict::predicts(&field) {
+            break;
+        }
+        let control = spiv_core::wire::control::Control {
+            motion: crate::predict::row_velocities(&field, h, true, dt_ticks),
+            ..Default::default()
         };
-    // The wide pair: the same control, frames s·dt apart centred on the
-    // pair (when the recording holds their windows).
-    let wide_s = job.wide.filter(|&s| s >= 2);
-    let wide_cfg = match (&control, wide_s) {
-        (Some(_), Some(s)) => {
-            let planes = sim.meta.capture.planes;
-            baseline::ticks_within(u64::from(ka), kb - ka, s, job.core.n_max, planes).map(
-                |(k0, k1)| {
-                    // Frame ticks are u32 on the sidecar: ticks_within
-                    // found both below ka + s·dt.
-                    let (k0, k1) = (k0 as u32, k1 as u32);
-                    let mut wcfg = Config {
-                        method: Method::Mc,
-                        ..cfg
-                    };
-                    wcfg.schedule.first = k0;
-                    wcfg.schedule.dt = k1 - k0;
-                    wcfg.schedule.every = (k1 - k0).saturating_mul(4);
-                    wcfg
-                },
-            )
-        }
-        _ => None,
-    };
-    let mut wide_t = match (&control, wide_cfg) {
-        (Some(control), Some(wcfg)) => Some(transfer_with(&data, w, h, wcfg, control.clone())?),
-        _ => None,
-    };
-    let mut wide = match &wide_t {
-        Some(t) => Some(up(t, "wide-baseline")?),
-        None => None,
-    };
-    // The pair and its wide pair measure together once more
-    // (`baseline::ROUNDS`): their combined field is the next control.
-    if let (Some(s), Some(wcfg)) = (wide_s, wide_cfg) {
-        for _ in 0..baseline::ROUNDS {
-            let Some(wp) = &wide else { break };
-            let narrow = piv(
-                &to_f32(&mc[0], wu, hu),
-                &to_f32(&mc[1], wu, hu),
-                None,
-                &job.mc_piv,
-            )?;
-            let (wa, wb) = (to_f32(&wp[0], wu, hu), to_f32(&wp[1], wu, hu));
-            let field = baseline::measure(&narrow, (&wa, &wb), s, &job.mc_piv)?;
-            if !crate::predict::predicts(&field) {
-                break;
-            }
-            let control = spiv_core::wire::control::Control {
-                motion: crate::predict::row_velocities(&field, h, true, dt_ticks),
-                ..Default::default()
-            };
-            let pair_cfg = Config {
-                method: Method::Mc,
-                ..cfg
-            };
-            let pair_t = transfer_with(&data, w, h, pair_cfg, control.clone())?;
-            let wt = transfer_with(&data, w, h, wcfg, control)?;
-            mc = up(&pair_t, "motion-compensated")?;
-            mc_t = Some(pair_t);
-            wide = Some(up(&wt, "wide-baseline")?);
-            wide_t = Some(wt);
-        }
+        let pair_cfg = Config {
+            method: Method::Mc,
+            ..cfg
+        };
+        let pair_t = transfer_with(data, w, h, pair_cfg, control.clone())?;
+        let wt = transfer_with(data, w, h, wcfg, control)?;
+        out.pair = upright(&pair_t, "motion-compensated")?;
+        out.pair_t = Some(pair_t);
+        out.wide = Some(upright(&wt, "wide-baseline")?);
+        out.wide_t = Some(wt);
     }
-    let link = LinkSummary {
-        lost_frames: link.lost_frames
-            + mc_t.as_ref().map_or(0, |t| t.report.lost_frames)
-            + wide_t.as_ref().map_or(0, |t| t.report.lost_frames),
-        bit_exact: link.bit_exact
-            && mc_t.as_ref().is_none_or(exact)
-            && wide_t.as_ref().is_none_or(exact),
-        mc_bytes: mc_t.as_ref().map_or(0, |t| t.bytes),
-        wide_bytes: wide_t.as_ref().map_or(0, |t| t.bytes),
-        ..link
-    };
-    let t_rec = t0.elapsed().as_secs_f64() * 1e3 - t_sim;
+    Ok(out)
+}
 
-    stage("PIV on three pairs");
+/// The sidecar's configuration of the wide pair `s·dt` apart centred on
+/// the pair `[ka, kb]`, when the recording holds its windows.
+fn wide_config(
+    cfg: Config,
+    s: u32,
+    [ka, kb]: [u32; 2],
+    job: &Job,
+    sim: &Simulated,
+) -> Option<Config> {
+    let planes = sim.meta.capture.planes;
+    baseline::ticks_within(u64::from(ka), kb - ka, s, job.core.n_max, planes).map(|(k0, k1)| {
+        // Frame ticks are u32 on the sidecar: ticks_within found both
+        // below ka + s·dt.
+        let (k0, k1) = (k0 as u32, k1 as u32);
+        let mut wcfg = Config {
+            method: Method::Mc,
+            ..cfg
+        };
+        wcfg.schedule.first = k0;
+        wcfg.schedule.dt = k1 - k0;
+        wcfg.schedule.every = (k1 - k0).saturating_mul(4);
+        wcfg
+    })
+}
+
+/// PIV on the frame camera's pair and each spike pair, against the truth
+/// on each field's grid: returns the truth on `job.piv`'s grid and every
+/// kind's measurement. The wide pair is measured with the compensated
+/// pair's field ([`baseline::measure`]), or is that field where there is
+/// no wide pair.
+fn measure_pairs(
+    job: &Job,
+    sim: &Simulated,
+    frames: SpikeFrames,
+) -> Result<(Vec<Vector>, Vec<Measured>), JobError> {
+    let p = &job.request.scene;
+    let (w, h) = (p.width, p.height);
+    let (wu, hu) = (usize::from(w), usize::from(h));
     let dt = f64::from(sim.meta.capture.pair[1] - sim.meta.capture.pair[0]);
     let truth = sim.scene.truth_vectors(&job.piv.centres(w, h), dt);
     let glare_limit = 2.0 * p.glare_sigma;
-    let cam_max = job.request.camera.max_dn();
-    let wide_pair = wide.clone().unwrap_or_else(|| mc.clone());
+    let has_wide = frames.wide.is_some();
+    let wide_pair = frames.wide.unwrap_or_else(|| frames.mc.clone());
     let pairs: [(FrameKind, [Vec<u16>; 2], u16); 5] = [
-        (FrameKind::Frame, sim.frames.clone(), cam_max),
-        (FrameKind::Tfp, tfp, job.core.full_scale),
-        (FrameKind::Adaptive, adaptive, job.core.full_scale),
-        (FrameKind::Mc, mc, job.core.full_scale),
+        (
+            FrameKind::Frame,
+            sim.frames.clone(),
+            job.request.camera.max_dn(),
+        ),
+        (FrameKind::Tfp, frames.tfp, job.core.full_scale),
+        (FrameKind::Adaptive, frames.adaptive, job.core.full_scale),
+        (FrameKind::Mc, frames.mc, job.core.full_scale),
         (FrameKind::McWide, wide_pair, job.core.full_scale),
     ];
     let mut measured: Vec<Measured> = Vec::new();
@@ -368,8 +464,8 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
             FrameKind::Mc | FrameKind::McWide => &job.mc_piv,
             _ => &job.piv,
         };
-        let (vectors, piv_ms) = match (source, &mc_field, wide_s) {
-            (FrameKind::McWide, Some((narrow, narrow_ms)), Some(s)) if wide.is_some() => {
+        let (vectors, piv_ms) = match (source, &mc_field, frames.wide_s) {
+            (FrameKind::McWide, Some((narrow, narrow_ms)), Some(s)) if has_wide => {
                 let (a, b) = (to_f32(&pair[0], wu, hu), to_f32(&pair[1], wu, hu));
                 let v = baseline::measure(narrow, (&a, &b), s, settings)?;
                 (v, narrow_ms + t.elapsed().as_secs_f64() * 1e3)
@@ -413,13 +509,5 @@ pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> 
             piv_ms,
         });
     }
-    let t_piv = t0.elapsed().as_secs_f64() * 1e3 - t_sim - t_rec;
-    Ok(Outcome {
-        sim,
-        truth,
-        measured,
-        glare_limit,
-        stage_ms: [t_sim, t_rec, t_piv],
-        link,
-    })
+    Ok((truth, measured))
 }
