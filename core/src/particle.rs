@@ -13,6 +13,24 @@ use core::cell::Cell;
 use crate::params::Params;
 use crate::q::B_FRAC_BITS;
 
+/// Both sides of the particle tests are multiplied by `2^SCALE·g`.
+const SCALE: u32 = 88;
+/// `(c − b)²` is in 1/2^20 counts² (counts in 1/2^[`B_FRAC_BITS`]): the
+/// left side's remaining shift.
+const LHS_SHIFT: u32 = SCALE - 2 * B_FRAC_BITS;
+/// The variance is multiplied by `k²`, in 1/2^16 (`KSig` is `U8F8`): the
+/// variance's own scale, `2^VAR_SHIFT·g`.
+const VAR_SHIFT: u32 = SCALE - 2 * KSIG_FRAC;
+const KSIG_FRAC: u32 = crate::q::KSig::FRAC_NBITS;
+/// `σ_fpn`'s fractional bits (`U0F16`).
+const SIGMA_FRAC: u32 = crate::q::Sigma::FRAC_NBITS;
+/// The quantisation term `1/4` at the variance's scale.
+const QUARTER_SHIFT: u32 = VAR_SHIFT - 2;
+/// `σ²·b²` is in 1/2^(32 + 20): the fixed-pattern term's remaining shift.
+const FPN_SHIFT: u32 = VAR_SHIFT - 2 * SIGMA_FRAC - 2 * B_FRAC_BITS;
+/// `b/g` times `g`: `b` in 1/2^10 counts, the Poisson term's shift.
+const POISSON_SHIFT: u32 = VAR_SHIFT - B_FRAC_BITS;
+
 /// The exact particle test `c > b ∧ (c − b)² > k²·(1/4 + σ²b² + b/g)` for a
 /// count `c` and a background `b = b_q10 / 1024`, evaluated in `u128` after
 /// multiplying both sides by `2^88·g` (saturating: a saturated right side is
@@ -28,10 +46,10 @@ pub fn is_particle(c: u8, b_q10: u32, p: &Params) -> bool {
     let g = u128::from(p.electrons_per_spike.max(1));
     let q = u128::from(p.k_sig.to_bits());
     let s = u128::from(p.sigma_fpn.to_bits());
-    let lhs = (d * d).saturating_mul(g << 68);
-    let var = (g << 70)
-        .saturating_add((g << 20).saturating_mul(s * s).saturating_mul(b * b))
-        .saturating_add(b << 62);
+    let lhs = (d * d).saturating_mul(g << LHS_SHIFT);
+    let var = (g << QUARTER_SHIFT)
+        .saturating_add((g << FPN_SHIFT).saturating_mul(s * s).saturating_mul(b * b))
+        .saturating_add(b << POISSON_SHIFT);
     lhs > var.saturating_mul(q * q)
 }
 
@@ -77,12 +95,16 @@ pub fn is_particle_compensated(c: u8, b_q10: u32, p: &Params, segs: u32) -> bool
     } else {
         sixth
     };
-    let lhs = (d * d).saturating_mul(g << 68).saturating_mul(6 * n);
+    let lhs = (d * d).saturating_mul(g << LHS_SHIFT).saturating_mul(6 * n);
     let var = quant
         .max(quarter)
-        .saturating_mul(g << 52)
-        .saturating_add((6 * (g << 20)).saturating_mul(s * s).saturating_mul(b * b))
-        .saturating_add((b << 62).saturating_mul(6 * n));
+        .saturating_mul(g << (VAR_SHIFT - 2 * B_FRAC_BITS))
+        .saturating_add(
+            (6 * (g << FPN_SHIFT))
+                .saturating_mul(s * s)
+                .saturating_mul(b * b),
+        )
+        .saturating_add((b << POISSON_SHIFT).saturating_mul(6 * n));
     lhs > var.saturating_mul(q * q)
 }
 

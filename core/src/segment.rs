@@ -25,6 +25,9 @@ use crate::slices::{self, low_bits, Counter};
 use crate::state::Workspace;
 use crate::window::{add_counts, Window};
 
+/// Tile columns a row can have: a row is at most 65535 px, tiles 16 px.
+const MAX_TILE_COLUMNS: usize = 4096;
+
 /// What a pixel is, stored in the high bits of its class byte; the low 4 bits
 /// hold the index of the level (window) at which it was decided.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -717,10 +720,10 @@ pub(crate) fn segment(
     if mc {
         ws.mc[..px].fill(0);
     }
-    // Row backgrounds per tile column (1/32 count), on the stack in blocks:
-    // a row is at most 4096 tile columns (65535 px).
-    let mut bg_row = [0u32; 4098];
-    let bg_row = &mut bg_row[..tiles.x.min(4096) + 2];
+    // Row backgrounds per tile column (1/32 count), on the stack, with a
+    // column past each end.
+    let mut bg_row = [0u32; MAX_TILE_COLUMNS + 2];
+    let bg_row = &mut bg_row[..tiles.x.min(MAX_TILE_COLUMNS) + 2];
     let mut prev: Option<Window> = None;
     for (j, &n) in levels.iter().enumerate().take(nlev) {
         let win = Window::in_history(hist, k, n);
