@@ -424,114 +424,39 @@ pub fn piv_ensemble(
     s: &Settings,
     initial: Option<&Field>,
 ) -> Result<Field, PivError> {
-    let Some(&(a0, _)) = pairs.first() else {
-        return Err(PivError::Settings("no image pair given".into()));
-    };
-    let dim = a0.dim();
-    for (a, b) in pairs.iter().flat_map(|(a, b)| [(a0, *a), (a0, *b)]) {
-        if a.dim() != b.dim() {
-            let ((ha, wa), (hb, wb)) = (a.dim(), b.dim());
-            return Err(PivError::SizeMismatch(wa, ha, wb, hb));
-        }
-    }
-    if let Some(m) = mask {
-        if m.dim() != dim {
-            return Err(PivError::MaskSize(m.dim().1, m.dim().0, dim.1, dim.0));
-        }
-    }
-    check(s, dim)?;
-    let (h, w) = dim;
-    // Pixels every pass leaves out: the user's mask and clipped pixels of
-    // any raw image (a clipped area is large next to a residual
-    // displacement, so its undeformed outline serves every pass).
-    let grow = 3 * (s.highpass.max(0.0).round() as usize);
-    let clipped: Vec<Array2<bool>> = pairs
-        .par_iter()
-        .flat_map_iter(|&(a, b)| [a, b])
-        .filter_map(|img| filter::clipped_areas(img, s.clip.level(img), grow))
-        .collect();
-    let base = (mask.is_some() || !clipped.is_empty()).then(|| {
-        let mut ex = mask
-            .cloned()
-            .unwrap_or_else(|| Array2::from_elem((h, w), false));
-        for c in &clipped {
-            ex.zip_mut_with(c, |e, &c| *e |= c);
-        }
-        ex
-    });
-    // The dense fallback works on the first pair's raw images (their
-    // high-pass removes the particles' own low frequencies, which guide
-    // its coarse levels: turbulence EPE 2.4 px raw, 5.0 px high-passed).
+    let (h, w) = checked_size(pairs, mask, s)?;
     let raw = pairs[0];
-    let filtered: Vec<(Array2<f32>, Array2<f32>)> = if s.highpass > 0.0 {
-        pairs
-            .par_iter()
-            .map(|&(a, b)| {
-                (
-                    filter::highpass(a, s.highpass),
-                    filter::highpass(b, s.highpass),
-                )
-            })
-            .collect()
-    } else {
-        Vec::new()
-    };
+    let filtered = prefiltered(pairs, s);
     let images: Vec<(&Array2<f32>, &Array2<f32>)> = if filtered.is_empty() {
         pairs.to_vec()
     } else {
         filtered.iter().map(|(a, b)| (a, b)).collect()
     };
+    let resamplers = (s.windows.len() > 1 || initial.is_some()).then(|| {
+        images
+            .par_iter()
+            .map(|&(a, b)| {
+                (
+                    resample::Resampler::new(a, s.interp),
+                    resample::Resampler::new(b, s.interp),
+                )
+            })
+            .collect()
+    });
+    let passes = Passes {
+        base: excluded_pixels(pairs, mask, s, (h, w)),
+        images,
+        resamplers,
+        mask,
+        s,
+        size: (h, w),
+    };
+    let run = |by: Option<&Field>, rung: Rung| passes.run(by, rung);
     let mut prev: Option<(Field, f64)> = None;
     let mut predictor: Option<Field> = initial.cloned();
     // The last field that passed (any grid): what a failed last pass
     // degrades to.
     let mut good: Option<Field> = None;
-    let resamplers: Option<Vec<(resample::Resampler, resample::Resampler)>> =
-        (s.windows.len() > 1 || initial.is_some()).then(|| {
-            images
-                .par_iter()
-                .map(|&(a, b)| {
-                    (
-                        resample::Resampler::new(a, s.interp),
-                        resample::Resampler::new(b, s.interp),
-                    )
-                })
-                .collect()
-        });
-    // One pass of `size`-px windows correlated over `search`-px areas of
-    // B, on the images deformed by `by` (or as they are).
-    let run = |by: Option<&Field>, rung: Rung| -> Result<(Field, f64), PivError> {
-        let size = rung.size;
-        let step = s.step(size);
-        let grid = Grid::new(w, h, size, step).ok_or(PivError::TooSmall(w, h, size))?;
-        let (deformed, pred, outside) = match by {
-            None => (Vec::new(), None, base.clone()),
-            Some(f) => {
-                let (du, dv) = f.predictor(h, w);
-                let Some(rs) = &resamplers else {
-                    return Err(PivError::Settings("internal: no resampler".into()));
-                };
-                let mut outside = base.clone();
-                let mut deformed = Vec::with_capacity(rs.len());
-                for (ra, rb) in rs {
-                    let (da, db, out) = deform::deform(ra, rb, &du, &dv);
-                    match &mut outside {
-                        Some(o) => o.zip_mut_with(&out, |o, &x| *o |= x),
-                        None => outside = Some(out),
-                    }
-                    deformed.push((da, db));
-                }
-                (deformed, Some((du, dv)), outside)
-            }
-        };
-        let now: Vec<(&Array2<f32>, &Array2<f32>)> = if deformed.is_empty() {
-            images.clone()
-        } else {
-            deformed.iter().map(|(a, b)| (a, b)).collect()
-        };
-        let excluded = outside.as_ref().or(mask);
-        Ok(pass(&now, mask, excluded, grid, rung, pred.as_ref(), s))
-    };
     // Once a rescue needed the neighbours to judge weak peaks, so do the
     // passes after it: the frames' peaks do not grow stronger.
     let mut relaxed = false;
@@ -590,26 +515,172 @@ pub fn piv_ensemble(
         weak = relaxed;
         prev = Some((field, support));
     }
-    let (mut field, support) = prev.ok_or_else(|| PivError::Settings("no windows given".into()))?;
+    let (field, support) = prev.ok_or_else(|| PivError::Settings("no windows given".into()))?;
+    Ok(concluded(field, support, weak, good.as_ref(), raw, s))
+}
+
+/// The images' size after checking that every image, and the mask, has
+/// the first image's size and that `s` fits it.
+fn checked_size(
+    pairs: &[(&Array2<f32>, &Array2<f32>)],
+    mask: Option<&Array2<bool>>,
+    s: &Settings,
+) -> Result<(usize, usize), PivError> {
+    let Some(&(a0, _)) = pairs.first() else {
+        return Err(PivError::Settings("no image pair given".into()));
+    };
+    let dim = a0.dim();
+    for (a, b) in pairs.iter().flat_map(|(a, b)| [(a0, *a), (a0, *b)]) {
+        if a.dim() != b.dim() {
+            let ((ha, wa), (hb, wb)) = (a.dim(), b.dim());
+            return Err(PivError::SizeMismatch(wa, ha, wb, hb));
+        }
+    }
+    if let Some(m) = mask {
+        if m.dim() != dim {
+            return Err(PivError::MaskSize(m.dim().1, m.dim().0, dim.1, dim.0));
+        }
+    }
+    check(s, dim)?;
+    Ok(dim)
+}
+
+/// Pixels every pass leaves out: the user's mask and clipped pixels of
+/// any raw image (a clipped area is large next to a residual
+/// displacement, so its undeformed outline serves every pass); `None`
+/// when there are none.
+fn excluded_pixels(
+    pairs: &[(&Array2<f32>, &Array2<f32>)],
+    mask: Option<&Array2<bool>>,
+    s: &Settings,
+    (h, w): (usize, usize),
+) -> Option<Array2<bool>> {
+    let grow = 3 * (s.highpass.max(0.0).round() as usize);
+    let clipped: Vec<Array2<bool>> = pairs
+        .par_iter()
+        .flat_map_iter(|&(a, b)| [a, b])
+        .filter_map(|img| filter::clipped_areas(img, s.clip.level(img), grow))
+        .collect();
+    (mask.is_some() || !clipped.is_empty()).then(|| {
+        let mut ex = mask
+            .cloned()
+            .unwrap_or_else(|| Array2::from_elem((h, w), false));
+        for c in &clipped {
+            ex.zip_mut_with(c, |e, &c| *e |= c);
+        }
+        ex
+    })
+}
+
+/// The pairs high-passed by `s.highpass` (empty when it is off: the
+/// passes then correlate the images as given).
+fn prefiltered(
+    pairs: &[(&Array2<f32>, &Array2<f32>)],
+    s: &Settings,
+) -> Vec<(Array2<f32>, Array2<f32>)> {
+    if s.highpass <= 0.0 {
+        return Vec::new();
+    }
+    pairs
+        .par_iter()
+        .map(|&(a, b)| {
+            (
+                filter::highpass(a, s.highpass),
+                filter::highpass(b, s.highpass),
+            )
+        })
+        .collect()
+}
+
+/// What every pass of one [`piv_ensemble`] call shares.
+struct Passes<'a> {
+    /// The pairs as correlated (high-passed or as given).
+    images: Vec<(&'a Array2<f32>, &'a Array2<f32>)>,
+    /// Their resamplers, when a pass deforms.
+    resamplers: Option<Vec<(resample::Resampler, resample::Resampler)>>,
+    /// Pixels every pass leaves out ([`excluded_pixels`]).
+    base: Option<Array2<bool>>,
+    /// The user's mask.
+    mask: Option<&'a Array2<bool>>,
+    s: &'a Settings,
+    /// Height and width, px.
+    size: (usize, usize),
+}
+
+impl Passes<'_> {
+    /// One pass of `rung.size`-px windows on the images deformed by `by`
+    /// (or as they are): its field and support.
+    fn run(&self, by: Option<&Field>, rung: Rung) -> Result<(Field, f64), PivError> {
+        let (h, w) = self.size;
+        let size = rung.size;
+        let step = self.s.step(size);
+        let grid = Grid::new(w, h, size, step).ok_or(PivError::TooSmall(w, h, size))?;
+        let (deformed, pred, outside) = match by {
+            None => (Vec::new(), None, self.base.clone()),
+            Some(f) => {
+                let (du, dv) = f.predictor(h, w);
+                let Some(rs) = &self.resamplers else {
+                    return Err(PivError::Settings("internal: no resampler".into()));
+                };
+                let mut outside = self.base.clone();
+                let mut deformed = Vec::with_capacity(rs.len());
+                for (ra, rb) in rs {
+                    let (da, db, out) = deform::deform(ra, rb, &du, &dv);
+                    match &mut outside {
+                        Some(o) => o.zip_mut_with(&out, |o, &x| *o |= x),
+                        None => outside = Some(out),
+                    }
+                    deformed.push((da, db));
+                }
+                (deformed, Some((du, dv)), outside)
+            }
+        };
+        let now: Vec<(&Array2<f32>, &Array2<f32>)> = if deformed.is_empty() {
+            self.images.clone()
+        } else {
+            deformed.iter().map(|(a, b)| (a, b)).collect()
+        };
+        let excluded = outside.as_ref().or(self.mask);
+        Ok(pass(
+            &now,
+            self.mask,
+            excluded,
+            grid,
+            rung,
+            pred.as_ref(),
+            self.s,
+        ))
+    }
+}
+
+/// The reported field from the last pass (`support`: the share of windows
+/// with signal that passed; `weak`: its peaks were judged by the
+/// neighbours). A last pass that failed as a whole, or stood only weakly,
+/// gives way to the dense stage on the first raw pair when
+/// `s.dense_fallback` is on (it measures below the window and beyond its
+/// quarter rule; its field at the grid is reported as replaced, windows
+/// without signal stay invalid); else to the last good pass's field
+/// (`good`, flagged replaced where windows have signal); else nothing is
+/// reported as measured — what passed its tests are chance matches
+/// (overlapping windows share particles, so two neighbours can agree by
+/// chance).
+fn concluded(
+    mut field: Field,
+    support: f64,
+    weak: bool,
+    good: Option<&Field>,
+    raw: (&Array2<f32>, &Array2<f32>),
+    s: &Settings,
+) -> Field {
+    let (h, w) = raw.0.dim();
     if (support < MIN_SUPPORT || weak) && s.dense_fallback {
-        // The last pass failed as a whole, or stood only with its peaks
-        // judged by the neighbours: the dense stage measures below the
-        // window and beyond its quarter rule (and measured better than a
-        // relaxed pass on spike frames: grid RMS 1.2–1.3 against 1.2–2.2
-        // px on TFP, 1.3–3.3 against 3.7–4.4 px on the paper's streaked
-        // adaptive frames, `examples/quarter_probe.rs`). Its field at the grid is
-        // reported as replaced (measured, not by correlation); windows
-        // without signal stay invalid.
+        // On raw images: their high-pass would remove the particles' own
+        // low frequencies, which guide the dense stage's coarse levels.
         let f = dense::dense_flow(raw.0, raw.1, None, &dense::DenseMode::Pyramid.settings());
         dense::fill(&mut field, &f);
-    } else if let (true, Some(g)) = (support < MIN_SUPPORT, &good) {
-        // The last pass failed, an earlier (coarser) one measured: its
-        // field at this grid, flagged replaced, where windows have signal.
+    } else if let (true, Some(g)) = (support < MIN_SUPPORT, good) {
         degrade_to(&mut field, g, h, w);
     } else if support < MIN_SUPPORT {
-        // The last pass failed as a whole: what passed its tests are chance
-        // matches (overlapping windows share particles, so two neighbours
-        // can agree by chance). Nothing is reported as measured.
         for ((st, u), v) in field
             .state
             .iter_mut()
@@ -622,7 +693,7 @@ pub fn piv_ensemble(
         }
         field.sigma.fill(NO_SIGMA);
     }
-    Ok(field)
+    field
 }
 
 /// The uncertainty of a vector that was not measured, px.
