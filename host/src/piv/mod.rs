@@ -833,105 +833,145 @@ fn pass(
     s: &Settings,
 ) -> (Field, f64) {
     let n = grid.size;
-    let search = rung.search;
-    let min_ratio = if rung.relaxed {
-        1.0
-    } else {
-        s.validation.min_peak_ratio
-    };
     let (h, w) = pairs[0].0.dim();
     // An extended search area (`search` > n, the caller checked it fits
     // the image): B's `search`-px area around the window, A's window at
     // its place inside it, the rest of A at the window's mean (zero after
     // the correlation removes the mean).
-    let search = if search > n && search <= w.min(h) {
-        search
+    let search = if rung.search > n && rung.search <= w.min(h) {
+        rung.search
     } else {
         n
     };
     let plan = Plan::new(search);
     let wide = (rung.recheck && pred.is_none() && search == n && 2 * n <= w.min(h))
         .then(|| Plan::new(2 * n));
+    let ctx = PassWindows {
+        pairs,
+        mask,
+        excluded,
+        grid: &grid,
+        plan: &plan,
+        wide: wide.as_ref(),
+        pred,
+        rung,
+        s,
+    };
     let results: Vec<WindowResult> = (0..grid.len())
         .into_par_iter()
         .map_init(
             || (Ensemble::new(&plan), None::<Ensemble>),
-            |(sc, wide_sc), k| {
-                let (r, c) = (k / grid.nx, k % grid.nx);
-                let (x0, y0) = grid.origin(r, c);
-                let (xc, yc) = (x0 + n / 2, y0 + n / 2);
-                if mask.is_some_and(|m| m[[yc.min(m.dim().0 - 1), xc.min(m.dim().1 - 1)]]) {
-                    return (0.0, 0.0, 0.0, 0.0, Some(NoPeak::NoSignal), NO_SIGMA);
-                }
-                let region = Region {
-                    pairs,
-                    excluded,
-                    origin: (x0, y0),
-                    n,
-                };
-                let mut peak = region.correlate(&plan, sc, s.subpixel);
-                // Undeformed, a peak beyond the quarter rule may be an
-                // alias (a displacement beyond half the window wraps
-                // around) or a match by chance: the window is measured
-                // again over an area twice its side, which sees it whole.
-                // The wider view wins only where it disagrees and its peak
-                // stands out more (an alias is a weak match; the wider
-                // area holds every particle of the window).
-                if let (Ok(p), Some(plan2)) = (&peak, wide.as_ref()) {
-                    if p.dx.hypot(p.dy) > n as f64 / 4.0 {
-                        let sc2 = wide_sc.get_or_insert_with(|| Ensemble::new(plan2));
-                        if let Ok(q) = region.correlate(plan2, sc2, s.subpixel) {
-                            let differs = (q.dx - p.dx).hypot(q.dy - p.dy) > 1.0;
-                            if differs && q.ratio > p.ratio && q.width <= MAX_PEAK_WIDTH {
-                                peak = Ok(q);
-                            }
-                        }
-                    }
-                }
-                let (pu, pv) = match pred {
-                    None => (0.0, 0.0),
-                    Some((du, dv)) => {
-                        // The predictor at the window centre (mean of the
-                        // central 2×2 for even windows).
-                        let (i1, j1) = (y0 + (n - 1) / 2, x0 + (n - 1) / 2);
-                        let (i2, j2) = (y0 + n / 2, x0 + n / 2);
-                        let m = |f: &Array2<f32>| {
-                            0.25 * f64::from(f[[i1, j1]] + f[[i1, j2]] + f[[i2, j1]] + f[[i2, j2]])
-                        };
-                        (m(du), m(dv))
-                    }
-                };
-                match peak {
-                    // After deformation the residual must be small: a
-                    // correction beyond a quarter window means the
-                    // predictor was wrong here, so the peak is not trusted.
-                    Ok(p) if pred.is_some() && p.dx.hypot(p.dy) > n as f64 / 4.0 => (
-                        pu + p.dx,
-                        pv + p.dy,
-                        0.0,
-                        p.height,
-                        Some(NoPeak::NoPeak),
-                        NO_SIGMA,
-                    ),
-                    // A ridge (a streak's correlation, flat along the
-                    // streak) has no position to measure: where the peak
-                    // ratio is judged by the neighbours, a cluster of
-                    // ridges would agree on wherever noise put their
-                    // maxima (near zero, next to a static glare).
-                    Ok(p) if rung.relaxed && p.width > MAX_PEAK_WIDTH => (
-                        pu + p.dx,
-                        pv + p.dy,
-                        p.ratio,
-                        p.height,
-                        Some(NoPeak::NoPeak),
-                        NO_SIGMA,
-                    ),
-                    Ok(p) => (pu + p.dx, pv + p.dy, p.ratio, p.height, None, p.sigma),
-                    Err(e) => (pu, pv, 0.0, 0.0, Some(e), NO_SIGMA),
-                }
-            },
+            |(sc, wide_sc), k| ctx.window(k, sc, wide_sc),
         )
         .collect();
+    assembled(grid, results, rung, s)
+}
+
+/// What a pass's windows share.
+struct PassWindows<'a> {
+    pairs: &'a [(&'a Array2<f32>, &'a Array2<f32>)],
+    mask: Option<&'a Array2<bool>>,
+    excluded: Option<&'a Array2<bool>>,
+    grid: &'a Grid,
+    plan: &'a Plan,
+    /// The plan of the area twice the window's side that re-checks peaks
+    /// beyond the quarter rule on undeformed images.
+    wide: Option<&'a Plan>,
+    pred: Option<&'a (Array2<f32>, Array2<f32>)>,
+    rung: Rung,
+    s: &'a Settings,
+}
+
+impl PassWindows<'_> {
+    /// Window `k` of the grid (row-major), with the scratch of this thread.
+    fn window(&self, k: usize, sc: &mut Ensemble, wide_sc: &mut Option<Ensemble>) -> WindowResult {
+        let (grid, n) = (self.grid, self.grid.size);
+        let (r, c) = (k / grid.nx, k % grid.nx);
+        let (x0, y0) = grid.origin(r, c);
+        let (xc, yc) = (x0 + n / 2, y0 + n / 2);
+        if self
+            .mask
+            .is_some_and(|m| m[[yc.min(m.dim().0 - 1), xc.min(m.dim().1 - 1)]])
+        {
+            return (0.0, 0.0, 0.0, 0.0, Some(NoPeak::NoSignal), NO_SIGMA);
+        }
+        let region = Region {
+            pairs: self.pairs,
+            excluded: self.excluded,
+            origin: (x0, y0),
+            n,
+        };
+        let mut peak = region.correlate(self.plan, sc, self.s.subpixel);
+        // Undeformed, a peak beyond the quarter rule may be an alias (a
+        // displacement beyond half the window wraps around) or a match by
+        // chance: the window is measured again over an area twice its
+        // side, which sees it whole. The wider view wins only where it
+        // disagrees and its peak stands out more (an alias is a weak
+        // match; the wider area holds every particle of the window).
+        if let (Ok(p), Some(plan2)) = (&peak, self.wide) {
+            if p.dx.hypot(p.dy) > n as f64 / 4.0 {
+                let sc2 = wide_sc.get_or_insert_with(|| Ensemble::new(plan2));
+                if let Ok(q) = region.correlate(plan2, sc2, self.s.subpixel) {
+                    let differs = (q.dx - p.dx).hypot(q.dy - p.dy) > 1.0;
+                    if differs && q.ratio > p.ratio && q.width <= MAX_PEAK_WIDTH {
+                        peak = Ok(q);
+                    }
+                }
+            }
+        }
+        let (pu, pv) = match self.pred {
+            None => (0.0, 0.0),
+            Some((du, dv)) => {
+                // The predictor at the window centre (mean of the central
+                // 2×2 for even windows).
+                let (i1, j1) = (y0 + (n - 1) / 2, x0 + (n - 1) / 2);
+                let (i2, j2) = (y0 + n / 2, x0 + n / 2);
+                let m = |f: &Array2<f32>| {
+                    0.25 * f64::from(f[[i1, j1]] + f[[i1, j2]] + f[[i2, j1]] + f[[i2, j2]])
+                };
+                (m(du), m(dv))
+            }
+        };
+        match peak {
+            // After deformation the residual must be small: a correction
+            // beyond a quarter window means the predictor was wrong here,
+            // so the peak is not trusted.
+            Ok(p) if self.pred.is_some() && p.dx.hypot(p.dy) > n as f64 / 4.0 => (
+                pu + p.dx,
+                pv + p.dy,
+                0.0,
+                p.height,
+                Some(NoPeak::NoPeak),
+                NO_SIGMA,
+            ),
+            // A ridge (a streak's correlation, flat along the streak) has
+            // no position to measure: where the peak ratio is judged by the
+            // neighbours, a cluster of ridges would agree on wherever noise
+            // put their maxima (near zero, next to a static glare).
+            Ok(p) if self.rung.relaxed && p.width > MAX_PEAK_WIDTH => (
+                pu + p.dx,
+                pv + p.dy,
+                p.ratio,
+                p.height,
+                Some(NoPeak::NoPeak),
+                NO_SIGMA,
+            ),
+            Ok(p) => (pu + p.dx, pv + p.dy, p.ratio, p.height, None, p.sigma),
+            Err(e) => (pu, pv, 0.0, 0.0, Some(e), NO_SIGMA),
+        }
+    }
+}
+
+/// A pass's field from its windows' results: states from the peaks and
+/// the peak ratio, the normalised median test (repeated on a relaxed
+/// rung), the share of windows with signal that passed (the support),
+/// replacement and the replaced vectors' uncertainties.
+fn assembled(grid: Grid, results: Vec<WindowResult>, rung: Rung, s: &Settings) -> (Field, f64) {
+    let min_ratio = if rung.relaxed {
+        1.0
+    } else {
+        s.validation.min_peak_ratio
+    };
     let shape = (grid.ny, grid.nx);
     let mut u = Array2::zeros(shape);
     let mut v = Array2::zeros(shape);
@@ -987,9 +1027,8 @@ fn pass(
         // Weak peaks the neighbours confirm are used (they deform the next
         // pass and are reported) but never called valid: valid keeps
         // meaning a peak that stands on its own and agrees with its
-        // neighbours. (Letting the strong ones of a relaxed pass stay
-        // valid passed clusters of vectors locked near zero on the
-        // paper's streaked adaptive frames, 9 px off in glare rows.)
+        // neighbours, so a relaxed pass cannot pass clusters of vectors
+        // locked near zero on streaked frames.
         for st in state.iter_mut() {
             if *st == State::Valid {
                 *st = State::Replaced;
