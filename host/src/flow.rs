@@ -36,6 +36,7 @@ use spiv_formats::{FormatError, State, Vector};
 use crate::dwell::{adaptive_banded, caps_for};
 use crate::motion::ladder::{self, LadderSettings, Rung};
 use crate::motion::Innovation;
+use crate::piv::validate::median;
 use crate::piv::{piv, to_f32, Field, PivError, Settings, NO_SIGMA};
 use crate::reconstruct::{frame_from_planes, FileOptions, Planes, ReconstructError};
 
@@ -507,9 +508,9 @@ impl FlowOutcome {
             let (u, v, state) = if n == 0 {
                 (0.0, 0.0, State::Invalid)
             } else {
-                let us: Vec<f64> = valid.iter().map(|x| x.0).collect();
-                let vs: Vec<f64> = valid.iter().map(|x| x.1).collect();
-                (median(&us), median(&vs), State::Valid)
+                let mut us: Vec<f64> = valid.iter().map(|x| x.0).collect();
+                let mut vs: Vec<f64> = valid.iter().map(|x| x.1).collect();
+                (median(&mut us), median(&mut vs), State::Valid)
             };
             out.vectors.push(Vector { u, v, state, ..*v0 });
             out.sigma.push(median_sigma(&valid));
@@ -522,10 +523,6 @@ impl FlowOutcome {
     pub fn mean_field(&self) -> Vec<Vector> {
         self.mean().vectors
     }
-}
-
-fn median(v: &[f64]) -> f64 {
-    crate::piv::validate::median(&mut v.to_vec())
 }
 
 /// A valid vector's `(u, v, (σu, σv))`.
@@ -542,10 +539,10 @@ pub fn median_sigma(valid: &[Measure]) -> (f64, f64) {
         return NO_SIGMA;
     }
     let k = 1.2533 / (n as f64).sqrt();
-    let one = |xs: Vec<f64>, own: Vec<f64>| {
-        let m = median(&xs);
-        let dev: Vec<f64> = xs.iter().map(|x| (x - m).abs()).collect();
-        k * median(&own).max(1.4826 * median(&dev))
+    let one = |mut xs: Vec<f64>, mut own: Vec<f64>| {
+        let m = median(&mut xs);
+        let mut dev: Vec<f64> = xs.iter().map(|x| (x - m).abs()).collect();
+        k * median(&mut own).max(1.4826 * median(&mut dev))
     };
     (
         one(
@@ -836,8 +833,8 @@ mod tests {
 
     #[test]
     fn the_median_and_its_uncertainty() {
-        assert_eq!(median(&[3.0, 1.0, 2.0]), 2.0);
-        assert_eq!(median(&[4.0, 1.0, 2.0, 3.0]), 2.5);
+        assert_eq!(median(&mut [3.0, 1.0, 2.0]), 2.0);
+        assert_eq!(median(&mut [4.0, 1.0, 2.0, 3.0]), 2.5);
         assert_eq!(median_sigma(&[]), NO_SIGMA);
         // Four agreeing vectors of σ 0.2: 1.2533·0.2/2.
         let same = [(1.0, 2.0, (0.2, 0.2)); 4];

@@ -479,7 +479,7 @@ const CHANGE: f64 = 0.25;
 const FLOOR: f64 = 0.015;
 
 /// Scales each kept vector's correlation uncertainty by [`CORRELATION`]
-/// and adds its change from the previous rung ([`changes`]) times
+/// and adds its change from the estimate that predicted its rung ([`changes`]) times
 /// [`CHANGE`] in quadrature. The constants were fitted on
 /// `spiv bench flows --seeds 1-3 --vectors` (every family but turbulence,
 /// whose errors no local model covers) for 60–76 % of error components
