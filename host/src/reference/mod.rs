@@ -205,51 +205,56 @@ pub fn adaptive_rows_compensated(
 /// The band and its rows' velocities, for a motion-compensated strip.
 type Compensation<'a> = Option<(&'a SpikeVolume, &'a [i16], &'a [i16])>;
 
-/// The algorithm on one strip whose first row is row `row0` of the band.
-fn strip_frame(
-    vol: &SpikeVolume,
+/// One strip's inputs: the strip, where it sits in the band, the frame's
+/// tick and parameters, and the compensation if any.
+struct Strip<'a> {
+    vol: &'a SpikeVolume,
     row0: usize,
     k: u32,
-    p: &Params,
-    fs: f64,
-    comp: Compensation<'_>,
-) -> RefFrame {
-    let (w, h) = (vol.width, vol.rows);
-    // The count a particle is judged and integrated by: plain, or
-    // compensated for its row's motion over the whole band.
-    let pcount = |n: u16, r: usize, c: usize| -> u32 {
-        match comp {
-            None => vol.count(k, n, r, c),
-            Some((band, vx, vy)) => {
-                let v = |a: &[i16]| a.get(row0 + r).copied().unwrap_or(0);
-                motion::compensated_count(band, k, n, (row0 + r, c), (v(vx), v(vy)))
-            }
+    p: &'a Params,
+    comp: Compensation<'a>,
+}
+
+/// Per pixel: the count, window and real window length that decided it.
+type Decided = Vec<(u32, u16, u32)>;
+
+impl Strip<'_> {
+    /// The velocity of strip row `r` (1/4096 px per tick), when compensated.
+    fn velocity(&self, r: usize) -> Option<(&SpikeVolume, (i16, i16))> {
+        self.comp.map(|(band, vx, vy)| {
+            let v = |a: &[i16]| a.get(self.row0 + r).copied().unwrap_or(0);
+            (band, (v(vx), v(vy)))
+        })
+    }
+
+    /// The count a particle is judged and integrated by: plain, or
+    /// compensated for its row's motion over the whole band.
+    fn pcount(&self, n: u16, r: usize, c: usize) -> u32 {
+        match self.velocity(r) {
+            None => self.vol.count(self.k, n, r, c),
+            Some((band, v)) => motion::compensated_count(band, self.k, n, (self.row0 + r, c), v),
         }
-    };
-    let (k_sig, beta, sigma, g) = params_f64(p);
-    let levels = levels(p);
-    // Classes, and for each decided pixel the count and window that decided it.
-    let mut class: Vec<Option<RefClass>> = vec![None; w * h];
-    let mut decided = vec![(0u32, 0u16, 0u32); w * h]; // (count, n, len)
-                                                       // Tiles y0..=y1 of the band (16 rows each from band row 0) meet the strip.
-    let (tile_y0, tile_y1) = (row0 / 16, (row0 + h.max(1) - 1) / 16);
-    let (tx, ty) = (w.div_ceil(16), tile_y1 - tile_y0 + 1);
-    for (j, &n) in levels.iter().enumerate() {
-        let (_, len) = vol.window(k, n);
-        let counts: Vec<u32> = (0..w * h).map(|i| vol.count(k, n, i / w, i % w)).collect();
-        let tested: Vec<u32> = match comp {
-            None => counts.clone(),
-            Some(_) => (0..w * h).map(|i| pcount(n, i / w, i % w)).collect(),
-        };
-        // Lower median of the non-particle counts of each 16×16 tile (its
-        // rows inside the strip).
+    }
+
+    /// Tiles `y0..=y1` of the band (16 rows each from band row 0) that meet
+    /// the strip.
+    fn tile_rows(&self) -> (usize, usize) {
+        let h = self.vol.rows;
+        (self.row0 / 16, (self.row0 + h.max(1) - 1) / 16)
+    }
+
+    /// The lower median of the non-particle `tested` counts of each 16×16
+    /// tile (its rows inside the strip; all its counts when every pixel is
+    /// a particle), `ty` tile rows of `tx`.
+    fn tile_medians(&self, tested: &[u32], class: &[Option<RefClass>]) -> Vec<f64> {
+        let (w, h) = (self.vol.width, self.vol.rows);
+        let (tile_y0, tile_y1) = self.tile_rows();
+        let (tx, ty) = (w.div_ceil(16), tile_y1 - tile_y0 + 1);
         let mut med = vec![0.0f64; tx * ty];
         for a in 0..ty {
             let band_r0 = 16 * (a + tile_y0);
-            let (lo, hi) = (
-                band_r0.max(row0) - row0,
-                (band_r0 + 16).min(row0 + h) - row0,
-            );
+            let lo = band_r0.max(self.row0) - self.row0;
+            let hi = (band_r0 + 16).min(self.row0 + h) - self.row0;
             for b in 0..tx {
                 let mut all = Vec::new();
                 let mut bg = Vec::new();
@@ -266,140 +271,121 @@ fn strip_frame(
                 med[a * tx + b] = f64::from(v[(v.len() - 1) / 2]);
             }
         }
-        // Bilinear between tile centres (16·t + 8), constant beyond the
-        // edges; `first` is the band tile index of local tile 0.
+        med
+    }
+
+    /// The background of pixel (r, c) from the tile medians: bilinear
+    /// between tile centres (16·t + 8), constant beyond the edges.
+    fn background(&self, med: &[f64], r: usize, c: usize) -> f64 {
+        let (tile_y0, tile_y1) = self.tile_rows();
+        let (tx, ty) = (self.vol.width.div_ceil(16), tile_y1 - tile_y0 + 1);
+        // `first` is the band tile index of local tile 0.
         let interp = |pos: f64, first: usize, tiles: usize| -> (usize, usize, f64) {
             let u = (pos - 8.0) / 16.0;
             let t0 = u.floor();
-            let f = u - t0;
             let (lo, hi) = (first as f64, (first + tiles - 1) as f64);
             let cl = |t: f64| (t.max(lo).min(hi) - lo) as usize;
-            (cl(t0), cl(t0 + 1.0), f)
+            (cl(t0), cl(t0 + 1.0), u - t0)
         };
-        let last = j + 1 == levels.len();
-        for r in 0..h {
-            // Compensated over a path of at least MIN_TRAVEL px, a particle
-            // must also stand out against the pixel's own plain count
-            // (static light gives the same count either way).
-            let floor = comp.is_some_and(|(band, vx, vy)| {
-                let v = |a: &[i16]| a.get(row0 + r).copied().unwrap_or(0);
-                motion::travel(band, k, n, (v(vx), v(vy)))
-                    >= i64::from(spiv_core::motion::MIN_TRAVEL)
-            });
-            // The pixels a compensated count sums: its noise.
-            let segs = comp.map_or(1, |(band, vx, vy)| {
-                let v = |a: &[i16]| a.get(row0 + r).copied().unwrap_or(0);
-                motion::positions(band, k, n, (v(vx), v(vy)))
-            });
-            for c in 0..w {
-                let i = r * w + c;
-                if class[i].is_some() {
-                    continue;
-                }
-                let (a0, a1, fy) = interp((row0 + r) as f64 + 0.5, tile_y0, ty);
-                let (b0, b1, fx) = interp(c as f64 + 0.5, 0, tx);
-                let m = |a: usize, b: usize| med[a * tx + b];
-                let bgd = (1.0 - fy) * ((1.0 - fx) * m(a0, b0) + fx * m(a0, b1))
-                    + fy * ((1.0 - fx) * m(a1, b0) + fx * m(a1, b1));
-                let cnt = f64::from(counts[i]);
-                let tc = f64::from(tested[i]);
-                let bgd = if floor { bgd.max(cnt) } else { bgd };
-                let particle = tc > bgd
-                    && (tc - bgd).powi(2)
-                        > k_sig * k_sig * compensated_variance(bgd, segs, sigma, g);
-                let saturated = len > 0 && cnt / f64::from(len) >= f64::from(p.n_fs) / f64::from(n);
-                if particle {
-                    class[i] = Some(RefClass::Particle(j as u8));
-                } else if saturated || last {
-                    class[i] = Some(RefClass::Background(j as u8));
-                }
-                if particle {
-                    decided[i] = (tested[i], n, len);
-                } else if class[i].is_some() {
-                    decided[i] = (counts[i], n, len);
-                }
-            }
-        }
+        let (a0, a1, fy) = interp((self.row0 + r) as f64 + 0.5, tile_y0, ty);
+        let (b0, b1, fx) = interp(c as f64 + 0.5, 0, tx);
+        let m = |a: usize, b: usize| med[a * tx + b];
+        (1.0 - fy) * ((1.0 - fx) * m(a0, b0) + fx * m(a0, b1))
+            + fy * ((1.0 - fx) * m(a1, b0) + fx * m(a1, b1))
     }
-    let class: Vec<RefClass> = class
-        .into_iter()
-        .map(|c| c.unwrap_or(RefClass::Background(0)))
-        .collect();
 
-    // Regions: 8-connected flood fill in raster order; under 3 px is noise.
-    let mut labels = vec![0u32; w * h];
-    let mut regions: Vec<Vec<usize>> = Vec::new();
-    let mut seen = vec![false; w * h];
-    for start in 0..w * h {
-        if seen[start] || !matches!(class[start], RefClass::Particle(_)) {
-            continue;
-        }
-        let mut stack = vec![start];
-        let mut pix = Vec::new();
-        seen[start] = true;
-        while let Some(i) = stack.pop() {
-            pix.push(i);
-            let (r, c) = ((i / w) as i64, (i % w) as i64);
-            for dr in -1..=1 {
-                for dc in -1..=1 {
-                    let (rr, cc) = (r + dr, c + dc);
-                    if rr < 0 || cc < 0 || rr >= h as i64 || cc >= w as i64 {
+    /// Segmentation over the levels n0, 2n0, …, n_max: each undecided
+    /// pixel is a particle when its tested count stands out of the
+    /// background by k_σ, background when saturated or at the last level.
+    fn classify(&self) -> (Vec<RefClass>, Decided) {
+        let (w, h) = (self.vol.width, self.vol.rows);
+        let (k_sig, _, sigma, g) = params_f64(self.p);
+        let levels = levels(self.p);
+        let mut class: Vec<Option<RefClass>> = vec![None; w * h];
+        let mut decided = vec![(0u32, 0u16, 0u32); w * h];
+        for (j, &n) in levels.iter().enumerate() {
+            let (_, len) = self.vol.window(self.k, n);
+            let counts: Vec<u32> = (0..w * h)
+                .map(|i| self.vol.count(self.k, n, i / w, i % w))
+                .collect();
+            let tested: Vec<u32> = match self.comp {
+                None => counts.clone(),
+                Some(_) => (0..w * h).map(|i| self.pcount(n, i / w, i % w)).collect(),
+            };
+            let med = self.tile_medians(&tested, &class);
+            let last = j + 1 == levels.len();
+            for r in 0..h {
+                // Compensated over a path of at least MIN_TRAVEL px, a
+                // particle must also stand out against the pixel's own
+                // plain count (static light gives the same count either
+                // way); a compensated count's noise is that of the pixels
+                // it sums.
+                let (floor, segs) = self.velocity(r).map_or((false, 1), |(band, v)| {
+                    (
+                        motion::travel(band, self.k, n, v)
+                            >= i64::from(spiv_core::motion::MIN_TRAVEL),
+                        motion::positions(band, self.k, n, v),
+                    )
+                });
+                for c in 0..w {
+                    let i = r * w + c;
+                    if class[i].is_some() {
                         continue;
                     }
-                    let q = rr as usize * w + cc as usize;
-                    if !seen[q] && matches!(class[q], RefClass::Particle(_)) {
-                        seen[q] = true;
-                        stack.push(q);
+                    let cnt = f64::from(counts[i]);
+                    let tc = f64::from(tested[i]);
+                    let bgd = self.background(&med, r, c);
+                    let bgd = if floor { bgd.max(cnt) } else { bgd };
+                    let particle = tc > bgd
+                        && (tc - bgd).powi(2)
+                            > k_sig * k_sig * compensated_variance(bgd, segs, sigma, g);
+                    let saturated =
+                        len > 0 && cnt / f64::from(len) >= f64::from(self.p.n_fs) / f64::from(n);
+                    if particle {
+                        class[i] = Some(RefClass::Particle(j as u8));
+                        decided[i] = (tested[i], n, len);
+                    } else if saturated || last {
+                        class[i] = Some(RefClass::Background(j as u8));
+                        decided[i] = (counts[i], n, len);
                     }
                 }
             }
         }
-        if pix.len() >= 3 {
-            regions.push(pix);
-        }
-    }
-    for (id, pix) in regions.iter().enumerate() {
-        for &i in pix {
-            labels[i] = id as u32 + 1;
-        }
+        let class = class
+            .into_iter()
+            .map(|c| c.unwrap_or(RefClass::Background(0)))
+            .collect();
+        (class, decided)
     }
 
-    // Particle pixels that no region took (noise regions under 3 px) are
-    // background: their segmentation stopped at detection, so they get
-    // their own saturation time here — the first level whose window rate
-    // reaches N_fs per n, else n_max — and are suppressed like background.
-    for i in 0..w * h {
-        if labels[i] != 0 || !matches!(class[i], RefClass::Particle(_)) {
-            continue;
-        }
-        for (j, &n) in levels.iter().enumerate() {
-            let (_, len) = vol.window(k, n);
-            let cnt = vol.count(k, n, i / w, i % w);
-            let saturated =
-                len > 0 && f64::from(cnt) / f64::from(len) >= f64::from(p.n_fs) / f64::from(n);
-            if saturated || j + 1 == levels.len() {
-                decided[i] = (cnt, n, len);
-                break;
+    /// Particle pixels that no region took (noise regions under 3 px) are
+    /// background: their segmentation stopped at detection, so they get
+    /// their own saturation time here — the first level whose window rate
+    /// reaches N_fs per n, else n_max — and are suppressed like background.
+    fn saturate_noise(&self, class: &[RefClass], labels: &[u32], decided: &mut Decided) {
+        let w = self.vol.width;
+        let levels = levels(self.p);
+        for (i, d) in decided.iter_mut().enumerate() {
+            if labels[i] != 0 || !matches!(class[i], RefClass::Particle(_)) {
+                continue;
+            }
+            for (j, &n) in levels.iter().enumerate() {
+                let (_, len) = self.vol.window(self.k, n);
+                let cnt = self.vol.count(self.k, n, i / w, i % w);
+                let saturated = len > 0
+                    && f64::from(cnt) / f64::from(len) >= f64::from(self.p.n_fs) / f64::from(n);
+                if saturated || j + 1 == levels.len() {
+                    *d = (cnt, n, len);
+                    break;
+                }
             }
         }
     }
 
-    // Background gray: FS·(c_t/len)·t/(β·N_fs).
-    let mut gray = vec![0.0f64; w * h];
-    for i in 0..w * h {
-        let (c, t, len) = decided[i];
-        gray[i] = if len == 0 {
-            0.0
-        } else {
-            (fs * f64::from(c) / f64::from(len) * f64::from(t) / (beta * f64::from(p.n_fs))).min(fs)
-        };
-    }
-
-    // Adaptive windows and region output.
-    let mut n_star = Vec::new();
-    for (id, pix) in regions.iter().enumerate() {
-        let id = id as u32 + 1;
-        let mut ring = Vec::new();
+    /// The background ring of region `id`: the pixels of no region within
+    /// 2 px (Chebyshev) of one of its pixels `pix`.
+    fn ring(&self, labels: &[u32], id: u32, pix: &[usize]) -> Vec<usize> {
+        let (w, h) = (self.vol.width, self.vol.rows);
         let (mut r0, mut r1, mut c0, mut c1) = (usize::MAX, 0, usize::MAX, 0);
         for &i in pix {
             r0 = r0.min(i / w);
@@ -407,6 +393,7 @@ fn strip_frame(
             c0 = c0.min(i % w);
             c1 = c1.max(i % w);
         }
+        let mut ring = Vec::new();
         for r in r0.saturating_sub(2)..=(r1 + 2).min(h - 1) {
             for c in c0.saturating_sub(2)..=(c1 + 2).min(w - 1) {
                 if labels[r * w + c] != 0 {
@@ -420,28 +407,29 @@ fn strip_frame(
                 }
             }
         }
-        let mean = |set: &[usize], n: u16| -> f64 {
-            if set.is_empty() {
-                return 0.0;
-            }
-            let s: u32 = set.iter().map(|&i| pcount(n, i / w, i % w)).sum();
-            f64::from(s) / set.len() as f64
-        };
+        ring
+    }
+
+    /// The adaptive window n* of region `pix` against its `ring`: the best
+    /// SNR over n = 1, 2, 4, …, n_max, then every n within a factor of 2
+    /// of that (the first on a tie).
+    fn region_window(&self, pix: &[usize], ring: &[usize]) -> u16 {
+        let (_, _, sigma, g) = params_f64(self.p);
         let snr = |n: u16| {
-            let (s, b) = (mean(pix, n), mean(&ring, n));
+            let (s, b) = (self.mean(pix, n), self.mean(ring, n));
             (s - b) / count_variance(b, sigma, g).sqrt()
         };
         let mut best = (1u16, snr(1));
         let mut n = 1u16;
-        while n < p.n_max {
-            n = (n * 2).min(p.n_max);
+        while n < self.p.n_max {
+            n = (n * 2).min(self.p.n_max);
             let v = snr(n);
             if v > best.1 {
                 best = (n, v);
             }
         }
         let lo = (best.0 / 2).max(1);
-        let hi = (best.0 * 2).min(p.n_max);
+        let hi = (best.0 * 2).min(self.p.n_max);
         let mut star = (lo, snr(lo));
         for m in lo + 1..=hi {
             let v = snr(m);
@@ -449,17 +437,34 @@ fn strip_frame(
                 star = (m, v);
             }
         }
-        let n = star.0;
-        n_star.push(n);
-        let b = mean(&ring, n);
+        star.0
+    }
+
+    /// The mean tested count of the pixels `set` over `n` ticks (0 for
+    /// none).
+    fn mean(&self, set: &[usize], n: u16) -> f64 {
+        let w = self.vol.width;
+        if set.is_empty() {
+            return 0.0;
+        }
+        let s: u32 = set.iter().map(|&i| self.pcount(n, i / w, i % w)).sum();
+        f64::from(s) / set.len() as f64
+    }
+
+    /// The gray levels of region `pix` integrated over `n` ticks: its
+    /// counts stretched from the ring's mean `b` (FS/β) to its brightest
+    /// pixel (FS).
+    fn region_gray(&self, pix: &[usize], b: f64, n: u16, fs: f64, gray: &mut [f64]) {
+        let w = self.vol.width;
+        let (_, beta, _, _) = params_f64(self.p);
         let cmax = pix
             .iter()
-            .map(|&i| pcount(n, i / w, i % w))
+            .map(|&i| self.pcount(n, i / w, i % w))
             .max()
             .unwrap_or(0);
         let lo_gray = fs / beta;
         for &i in pix {
-            let c = f64::from(pcount(n, i / w, i % w));
+            let c = f64::from(self.pcount(n, i / w, i % w));
             let den = f64::from(cmax) - b;
             gray[i] = if den <= 0.0 {
                 lo_gray.min(fs)
@@ -468,6 +473,90 @@ fn strip_frame(
                 (lo_gray + x * (fs - lo_gray)).clamp(0.0, fs)
             };
         }
+    }
+}
+
+/// Regions of `class`'s particle pixels: 8-connected flood fill in raster
+/// order; under 3 px is noise. Returns the label (region index + 1, 0 for
+/// none) of each pixel and each region's pixels.
+fn regions(class: &[RefClass], w: usize, h: usize) -> (Vec<u32>, Vec<Vec<usize>>) {
+    let mut labels = vec![0u32; w * h];
+    let mut regions: Vec<Vec<usize>> = Vec::new();
+    let mut seen = vec![false; w * h];
+    for start in 0..w * h {
+        if seen[start] || !matches!(class[start], RefClass::Particle(_)) {
+            continue;
+        }
+        let mut stack = vec![start];
+        let mut pix = Vec::new();
+        seen[start] = true;
+        while let Some(i) = stack.pop() {
+            pix.push(i);
+            let (r, c) = ((i / w) as i64, (i % w) as i64);
+            for (dr, dc) in (-1..=1).flat_map(|dr| (-1..=1).map(move |dc| (dr, dc))) {
+                let (rr, cc) = (r + dr, c + dc);
+                if rr < 0 || cc < 0 || rr >= h as i64 || cc >= w as i64 {
+                    continue;
+                }
+                let q = rr as usize * w + cc as usize;
+                if !seen[q] && matches!(class[q], RefClass::Particle(_)) {
+                    seen[q] = true;
+                    stack.push(q);
+                }
+            }
+        }
+        if pix.len() >= 3 {
+            regions.push(pix);
+        }
+    }
+    for (id, pix) in regions.iter().enumerate() {
+        for &i in pix {
+            labels[i] = id as u32 + 1;
+        }
+    }
+    (labels, regions)
+}
+
+/// The algorithm on one strip whose first row is row `row0` of the band:
+/// segmentation, regions, background gray FS·(c_t/len)·t/(β·N_fs), and
+/// each region integrated over its own window.
+fn strip_frame(
+    vol: &SpikeVolume,
+    row0: usize,
+    k: u32,
+    p: &Params,
+    fs: f64,
+    comp: Compensation<'_>,
+) -> RefFrame {
+    let s = Strip {
+        vol,
+        row0,
+        k,
+        p,
+        comp,
+    };
+    let (w, h) = (vol.width, vol.rows);
+    let (_, beta, _, _) = params_f64(p);
+    let (class, mut decided) = s.classify();
+    let (labels, regions) = regions(&class, w, h);
+    s.saturate_noise(&class, &labels, &mut decided);
+    let mut gray: Vec<f64> = decided
+        .iter()
+        .map(|&(c, t, len)| {
+            if len == 0 {
+                0.0
+            } else {
+                (fs * f64::from(c) / f64::from(len) * f64::from(t) / (beta * f64::from(p.n_fs)))
+                    .min(fs)
+            }
+        })
+        .collect();
+    let mut n_star = Vec::new();
+    for (id, pix) in regions.iter().enumerate() {
+        let ring = s.ring(&labels, id as u32 + 1, pix);
+        let n = s.region_window(pix, &ring);
+        n_star.push(n);
+        s.region_gray(pix, s.mean(&ring, n), n, fs, &mut gray);
     }
     RefFrame {
         class,
