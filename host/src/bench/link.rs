@@ -24,9 +24,11 @@ use spiv_firmware_sim::simulation::{simulate_planes, Request};
 use spiv_core::Method;
 use spiv_firmware_sim::firmware::Control;
 
-use crate::link::{mc_transfer, piv_pairs, tfp_field, transfer_with};
+use crate::link::{mc_transfer, piv_pairs, tfp_field, transfer_with, Transfer};
 use crate::metrics::{region_error, row_profile};
 use crate::pipeline::{Job, JobError};
+use crate::piv::Settings;
+use spiv_formats::vectors::Vector;
 
 /// What the link benchmark runs.
 #[derive(Debug, Clone, PartialEq)]
@@ -145,169 +147,250 @@ pub fn link_bench(b: &LinkBench, mut progress: impl FnMut()) -> Result<Vec<LinkR
         let nf = b.frames.len();
         let mut acc = vec![Acc::default(); b.every.len() * nf];
         let mut fallbacks = vec![0usize; nf];
-        let p = SceneParams::new(kind);
-        let (w, h, dt) = (p.width, p.height, p.pair_dt);
         for seed in 1..=b.seeds {
-            let job = Job::new(p.clone(), seed);
-            let mut base = Config::new(u32::from(job.core.n_max / 2), dt);
-            base.params = job.core;
-            base.schedule.pairs = Some(b.pairs);
-            base.lossy.tolerance = b.tolerance;
-            base.lossy.contrast = b.contrast;
-            base.lossy.contrast_mc = b.contrast_mc;
-            let max_every = b.every.iter().max().copied().unwrap_or(4) * dt;
-            let mut req = Request::new(p.clone(), seed);
-            let mut longest = base;
-            longest.schedule.every = max_every;
-            req.ticks = Some(longest.ticks_for(b.pairs));
-            let (planes, sim) = simulate_planes(&req)?;
-            let truth = sim
-                .scene
-                .truth_vectors(&job.piv.centres(w, h), f64::from(dt));
-            let mc_truth = sim
-                .scene
-                .truth_vectors(&job.mc_piv.centres(w, h), f64::from(dt));
-            // What the host tells the sidecar comes from a TFP pair sent
-            // through the link first, as the control link would carry it.
-            let (field, _) = tfp_field(&planes, w, h, &base, job.tfp_window, &job.piv)?;
-            let caps = match b.dwell_cap {
-                Some(budget) if !field.is_empty() => crate::dwell::band_caps(
-                    &field,
-                    usize::from(h),
-                    f64::from(dt),
-                    budget,
-                    &job.core,
-                ),
-                _ => Vec::new(),
-            };
-            let adaptive = Control {
-                caps,
-                ..Control::default()
-            };
+            let run = SeedRun::new(b, kind, seed)?;
             for (j, &frames) in b.frames.iter().enumerate() {
-                let (cfg, control, settings, truth) = match frames {
-                    LinkFrames::Tfp => (
-                        Config {
-                            method: Method::Tfp,
-                            tfp_window: job.tfp_window,
-                            ..base
-                        },
-                        Control::default(),
-                        &job.piv,
-                        &truth,
-                    ),
-                    LinkFrames::Adaptive => (base, adaptive.clone(), &job.piv, &truth),
-                    LinkFrames::Mc => {
-                        let mut one = Config {
-                            refine: Some(spiv_core::motion::Refine::default()),
-                            encoding: Encoding::Rice,
-                            ..base
-                        };
-                        one.schedule.pairs = Some(1);
-                        let dtf = f64::from(dt);
-                        match mc_transfer(&planes, (w, h), one, &field, dtf, &job.mc_piv)? {
-                            Some((control, _)) => (
-                                Config {
-                                    method: Method::Mc,
-                                    refine: one.refine,
-                                    ..base
-                                },
-                                control,
-                                &job.mc_piv,
-                                &mc_truth,
-                            ),
-                            None => {
-                                fallbacks[j] += 1;
-                                (base, adaptive.clone(), &job.piv, &truth)
-                            }
-                        }
+                let stream = match run.stream(frames)? {
+                    Some(s) => s,
+                    None => {
+                        fallbacks[j] += 1;
+                        run.adaptive_stream()
                     }
                 };
-                for (i, &f) in b.every.iter().enumerate() {
-                    let mut cfg = cfg;
-                    cfg.schedule.every = f * dt;
-                    let send = |encoding| {
-                        let cfg = Config { encoding, ..cfg };
-                        transfer_with(&planes, w, h, cfg, control.clone())
-                    };
-                    let rice = send(Encoding::Rice)?;
-                    let lossless = send(Encoding::Context)?;
-                    let sparse = send(Encoding::Sparse)?;
-                    let lossy = send(Encoding::SparseContext)?;
-                    let exact = |t: &crate::link::Transfer| {
-                        t.pairs.len() == b.pairs as usize
-                            && t.pairs.iter().flatten().all(|r| {
-                                t.sent
-                                    .iter()
-                                    .any(|s| s.frame_id == r.frame_id && s.data == r.data)
-                            })
-                    };
-                    // The two lossy codecs make the same decisions.
-                    let same = |a: &crate::link::Transfer, b: &crate::link::Transfer| {
-                        a.pairs.len() == b.pairs.len()
-                            && a.pairs
-                                .iter()
-                                .zip(&b.pairs)
-                                .all(|(x, y)| x.iter().zip(y).all(|(x, y)| x.data == y.data))
-                    };
-                    let e = &mut acc[j * b.every.len() + i];
-                    for (k, t) in [&rice, &lossless, &sparse, &lossy].into_iter().enumerate() {
-                        e.bytes[k] += t.bytes;
-                    }
-                    e.inexact |= !exact(&rice) || !exact(&lossless) || !same(&sparse, &lossy);
-                    e.pairs += lossless.pairs.len().min(lossy.pairs.len());
-                    for (mode, t) in [&lossless, &lossy].into_iter().enumerate() {
-                        for field in piv_pairs(&t.pairs, settings)? {
-                            // The paper's metric (Tables 1–2): the u(y)
-                            // profile of the valid vectors, a lost row
-                            // counting as 0.
-                            let rows = row_profile(&field, truth, f64::from(h));
-                            let r = region_error(&rows, |_| true);
-                            e.sq[mode] += r.rmse.powi(2) * r.rows as f64;
-                            e.n[mode] += r.rows;
-                            e.lost[mode] += r.lost;
-                        }
-                    }
-                }
+                run.measure(b, &stream, &mut acc[j * b.every.len()..])?;
             }
             progress();
         }
+        let p = SceneParams::new(kind);
         for (j, &frames) in b.frames.iter().enumerate() {
             for (i, &f) in b.every.iter().enumerate() {
                 let e = &acc[j * b.every.len() + i];
-                let npairs = (b.seeds * u64::from(b.pairs)) as f64;
-                let m = f * dt;
-                let raw = f64::from(m) * f64::from(w) * f64::from(h) / 8.0;
-                let (bl, by) = (e.bytes[1] as f64 / npairs, e.bytes[3] as f64 / npairs);
-                let samples = 2.0 * f64::from(w) * f64::from(h) * npairs;
-                let (rl, ry) = (
-                    (e.sq[0] / e.n[0] as f64).sqrt(),
-                    (e.sq[1] / e.n[1] as f64).sqrt(),
-                );
-                rows.push(LinkRow {
-                    scene: kind_name(kind),
-                    frames,
-                    fallbacks: fallbacks[j],
-                    every_dt: f,
-                    every_ticks: m,
-                    pairs: e.pairs,
-                    raw_bytes_per_pair: raw,
-                    lossless_bytes_per_pair: bl,
-                    lossless_reduction: raw / bl,
-                    lossy_bytes_per_pair: by,
-                    lossy_reduction: raw / by,
-                    bits_per_sample: e.bytes.map(|b| 8.0 * b as f64 / samples),
-                    rmse_lossless: rl,
-                    rmse_lossy: ry,
-                    lost_rows_lossless: e.lost[0],
-                    lost_rows_lossy: e.lost[1],
-                    added_error: ry / rl - 1.0,
-                    lossless_bit_exact: !e.inexact,
-                });
+                let mut row = e.row(b, (p.width, p.height), f * p.pair_dt);
+                row.scene = kind_name(kind);
+                row.frames = frames;
+                row.fallbacks = fallbacks[j];
+                row.every_dt = f;
+                rows.push(row);
             }
         }
     }
     Ok(rows)
+}
+
+/// One scene and seed, simulated for the longest M, with its truth and the
+/// TFP pair's field that predicts the control.
+struct SeedRun {
+    job: Job,
+    /// The base stream: adaptive, the benchmark's lossy settings.
+    base: Config,
+    planes: Vec<u8>,
+    size: (u16, u16),
+    dt: u32,
+    /// Truth at the grids of `job.piv` and `job.mc_piv`, px per pair.
+    truth: Vec<Vector>,
+    mc_truth: Vec<Vector>,
+    /// The TFP pair's field, received through the link.
+    field: Vec<Vector>,
+    /// The adaptive stream's control (its dwell caps).
+    adaptive: Control,
+}
+
+/// A stream to send: its configuration and control, and the PIV settings
+/// and truth that measure it.
+struct Stream<'a> {
+    cfg: Config,
+    control: Control,
+    settings: &'a Settings,
+    truth: &'a [Vector],
+}
+
+impl SeedRun {
+    fn new(b: &LinkBench, kind: SceneKind, seed: u64) -> Result<SeedRun, JobError> {
+        let p = SceneParams::new(kind);
+        let (w, h, dt) = (p.width, p.height, p.pair_dt);
+        let job = Job::new(p.clone(), seed);
+        let mut base = Config::new(u32::from(job.core.n_max / 2), dt);
+        base.params = job.core;
+        base.schedule.pairs = Some(b.pairs);
+        base.lossy.tolerance = b.tolerance;
+        base.lossy.contrast = b.contrast;
+        base.lossy.contrast_mc = b.contrast_mc;
+        let max_every = b.every.iter().max().copied().unwrap_or(4) * dt;
+        let mut req = Request::new(p, seed);
+        let mut longest = base;
+        longest.schedule.every = max_every;
+        req.ticks = Some(longest.ticks_for(b.pairs));
+        let (planes, sim) = simulate_planes(&req)?;
+        let truth_at = |s: &Settings| sim.scene.truth_vectors(&s.centres(w, h), f64::from(dt));
+        let (truth, mc_truth) = (truth_at(&job.piv), truth_at(&job.mc_piv));
+        // What the host tells the sidecar comes from a TFP pair sent
+        // through the link first, as the control link would carry it.
+        let (field, _) = tfp_field(&planes, w, h, &base, job.tfp_window, &job.piv)?;
+        let caps = match b.dwell_cap {
+            Some(budget) if !field.is_empty() => {
+                crate::dwell::band_caps(&field, usize::from(h), f64::from(dt), budget, &job.core)
+            }
+            _ => Vec::new(),
+        };
+        let adaptive = Control {
+            caps,
+            ..Control::default()
+        };
+        Ok(SeedRun {
+            job,
+            base,
+            planes,
+            size: (w, h),
+            dt,
+            truth,
+            mc_truth,
+            field,
+            adaptive,
+        })
+    }
+
+    /// Adaptive frames with the dwell caps.
+    fn adaptive_stream(&self) -> Stream<'_> {
+        Stream {
+            cfg: self.base,
+            control: self.adaptive.clone(),
+            settings: &self.job.piv,
+            truth: &self.truth,
+        }
+    }
+
+    /// The stream of `frames`; `None` for motion-compensated frames when
+    /// the TFP pair predicted nothing.
+    fn stream(&self, frames: LinkFrames) -> Result<Option<Stream<'_>>, JobError> {
+        let (job, base) = (&self.job, self.base);
+        let stream = match frames {
+            LinkFrames::Tfp => Stream {
+                cfg: Config {
+                    method: Method::Tfp,
+                    tfp_window: job.tfp_window,
+                    ..base
+                },
+                control: Control::default(),
+                settings: &job.piv,
+                truth: &self.truth,
+            },
+            LinkFrames::Adaptive => self.adaptive_stream(),
+            LinkFrames::Mc => {
+                let mut one = Config {
+                    refine: Some(spiv_core::motion::Refine::default()),
+                    encoding: Encoding::Rice,
+                    ..base
+                };
+                one.schedule.pairs = Some(1);
+                let dtf = f64::from(self.dt);
+                let predicted =
+                    mc_transfer(&self.planes, self.size, one, &self.field, dtf, &job.mc_piv)?;
+                let Some((control, _)) = predicted else {
+                    return Ok(None);
+                };
+                Stream {
+                    cfg: Config {
+                        method: Method::Mc,
+                        refine: one.refine,
+                        ..base
+                    },
+                    control,
+                    settings: &job.mc_piv,
+                    truth: &self.mc_truth,
+                }
+            }
+        };
+        Ok(Some(stream))
+    }
+
+    /// Sends `s` at every M of the benchmark with each coder, checks the
+    /// frames and adds bytes and the paper's metric (Tables 1–2: the u(y)
+    /// profile of the valid vectors, a lost row counting as 0) to `acc`,
+    /// one per M.
+    fn measure(&self, b: &LinkBench, s: &Stream<'_>, acc: &mut [Acc]) -> Result<(), JobError> {
+        let (w, h) = self.size;
+        for (&f, e) in b.every.iter().zip(acc.iter_mut()) {
+            let mut cfg = s.cfg;
+            cfg.schedule.every = f * self.dt;
+            let send = |encoding| {
+                let cfg = Config { encoding, ..cfg };
+                transfer_with(&self.planes, w, h, cfg, s.control.clone())
+            };
+            let rice = send(Encoding::Rice)?;
+            let lossless = send(Encoding::Context)?;
+            let sparse = send(Encoding::Sparse)?;
+            let lossy = send(Encoding::SparseContext)?;
+            for (k, t) in [&rice, &lossless, &sparse, &lossy].into_iter().enumerate() {
+                e.bytes[k] += t.bytes;
+            }
+            let exact = |t: &Transfer| delivered_as_made(t, b.pairs);
+            e.inexact |= !exact(&rice) || !exact(&lossless) || !same_frames(&sparse, &lossy);
+            e.pairs += lossless.pairs.len().min(lossy.pairs.len());
+            for (mode, t) in [&lossless, &lossy].into_iter().enumerate() {
+                for field in piv_pairs(&t.pairs, s.settings)? {
+                    let rows = row_profile(&field, s.truth, f64::from(h));
+                    let r = region_error(&rows, |_| true);
+                    e.sq[mode] += r.rmse.powi(2) * r.rows as f64;
+                    e.n[mode] += r.rows;
+                    e.lost[mode] += r.lost;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Whether all `pairs` pairs arrived, each frame as the firmware made it.
+fn delivered_as_made(t: &Transfer, pairs: u32) -> bool {
+    t.pairs.len() == pairs as usize
+        && t.pairs.iter().flatten().all(|r| {
+            t.sent
+                .iter()
+                .any(|s| s.frame_id == r.frame_id && s.data == r.data)
+        })
+}
+
+/// Whether two transfers delivered the same frames (the two lossy codecs
+/// make the same decisions).
+fn same_frames(a: &Transfer, b: &Transfer) -> bool {
+    a.pairs.len() == b.pairs.len()
+        && a.pairs
+            .iter()
+            .zip(&b.pairs)
+            .all(|(x, y)| x.iter().zip(y).all(|(x, y)| x.data == y.data))
+}
+
+impl Acc {
+    /// The row of these sums for a `w × h` scene at M = `m` ticks (the
+    /// scene, frames, fallbacks and M in dt left for the caller).
+    fn row(&self, b: &LinkBench, (w, h): (u16, u16), m: u32) -> LinkRow {
+        let npairs = (b.seeds * u64::from(b.pairs)) as f64;
+        let raw = f64::from(m) * f64::from(w) * f64::from(h) / 8.0;
+        let (bl, by) = (self.bytes[1] as f64 / npairs, self.bytes[3] as f64 / npairs);
+        let samples = 2.0 * f64::from(w) * f64::from(h) * npairs;
+        let rmse = |mode: usize| (self.sq[mode] / self.n[mode] as f64).sqrt();
+        let (rl, ry) = (rmse(0), rmse(1));
+        LinkRow {
+            scene: String::new(),
+            frames: LinkFrames::Tfp,
+            fallbacks: 0,
+            every_dt: 0,
+            every_ticks: m,
+            pairs: self.pairs,
+            raw_bytes_per_pair: raw,
+            lossless_bytes_per_pair: bl,
+            lossless_reduction: raw / bl,
+            lossy_bytes_per_pair: by,
+            lossy_reduction: raw / by,
+            bits_per_sample: self.bytes.map(|b| 8.0 * b as f64 / samples),
+            rmse_lossless: rl,
+            rmse_lossy: ry,
+            lost_rows_lossless: self.lost[0],
+            lost_rows_lossy: self.lost[1],
+            added_error: ry / rl - 1.0,
+            lossless_bit_exact: !self.inexact,
+        }
+    }
 }
 
 fn kind_name(k: SceneKind) -> String {
