@@ -23,6 +23,7 @@ use crate::label::{label, LabelStats};
 use crate::motion::Motion;
 use crate::params::{Params, MAX_LEVELS};
 use crate::particle::Thresholds;
+use crate::region::Region;
 use crate::segment::{counter, decode, pixel_saturation, segment, SegmentStats, LEVEL_MASK};
 use crate::slices;
 use crate::state::Workspace;
@@ -85,7 +86,7 @@ pub fn reconstruct_rows<G: Gray>(
 }
 
 /// Rows `rows.0..rows.1` of the motion-compensated adaptive frame at `k`
-/// (beyond the paper; issue 14): as [`reconstruct_rows`], but particles are
+/// (beyond the paper): as [`reconstruct_rows`], but particles are
 /// segmented, their windows n* chosen and their gray levels counted on
 /// counts compensated for `motion` (`crate::motion`: each plane shifted by
 /// the row's velocity times its distance from `k`), so a particle moving as
@@ -204,6 +205,10 @@ fn px_indices(cb: &[u8], ct: &[u8]) -> [u16; ROUND] {
     idx
 }
 
+/// One strip's frame: segmentation and labelling of strip rows `s0..s1`,
+/// then the output rows `e0..e1` (band rows): every pixel at its
+/// background gray, particle pixels no region took at their own
+/// saturation, and each region integrated over its own window.
 fn strip<G: Gray>(
     ctx: &Ctx<'_, '_>,
     ws: &mut Workspace<'_>,
@@ -212,6 +217,40 @@ fn strip<G: Gray>(
     out: &mut [G],
     stats: &mut FrameStats,
 ) {
+    let seg = segment(ctx, ws, s0, s1);
+    stats.segment.particle_pixels += seg.particle_pixels;
+    stats.segment.saturated_pixels += seg.saturated_pixels;
+    let lab = label(ws, s1 - s0);
+    stats.labels.regions += lab.regions;
+    stats.labels.noise_regions += lab.noise_regions;
+    stats.labels.overflow_regions += lab.overflow_regions;
+    stats.labels.dropped_pixels += lab.dropped_pixels;
+    let mut gray = backgrounds(ctx, ws, (s0, e0, e1), out);
+    loose_particles(ctx, ws, (s0, s1, e0, e1), out);
+    for idx in 0..lab.regions as usize {
+        let reg = ws.regions[idx];
+        if reg.row1 <= e0 - s0 || reg.row0 >= e1 - s0 {
+            continue;
+        }
+        let reg = adapt_region(ctx, ws, s0, s1 - s0, idx);
+        stats.regions_out += 1;
+        stats.n_star_sum += u64::from(reg.n_star);
+        region_table(&reg, ctx.p, ctx.fs, &mut gray);
+        region_out(ws, &reg, (s0, e0, e1), &gray, out);
+    }
+}
+
+/// Every output pixel (band rows `e0..e1` of the strip from `s0`) at its
+/// level's background gray; region pixels are overwritten later, and
+/// particle pixels no region took get their own saturation time
+/// ([`loose_particles`]). Returns a table the size of a level's, free for
+/// the regions'.
+fn backgrounds<G: Gray>(
+    ctx: &Ctx<'_, '_>,
+    ws: &Workspace<'_>,
+    (s0, e0, e1): (u16, u16, u16),
+    out: &mut [G],
+) -> [u16; 256] {
     let Ctx {
         hist,
         p,
@@ -221,40 +260,23 @@ fn strip<G: Gray>(
         ..
     } = *ctx;
     let width = usize::from(hist.width());
-    let rows = s1 - s0;
-    let seg = segment(ctx, ws, s0, s1);
-    stats.segment.particle_pixels += seg.particle_pixels;
-    stats.segment.saturated_pixels += seg.saturated_pixels;
-    let lab = label(ws, rows);
-    stats.labels.regions += lab.regions;
-    stats.labels.noise_regions += lab.noise_regions;
-    stats.labels.overflow_regions += lab.overflow_regions;
-    stats.labels.dropped_pixels += lab.dropped_pixels;
-    // Background, and particle pixels left outside any region: those are
-    // background too, at their own saturation time (see
-    // `segment::pixel_saturation`).
     let first = usize::from(e0 - s0) * width;
     let last = usize::from(e1 - s0) * width;
-    let out_base = usize::from(e0) * width;
     let nlev = levels.iter().take_while(|&&n| n != 0).count();
     // Each level's background gray per count (`background_gray` for its
-    // window), built by exact steps instead of a division per pixel.
-    let mut gray = [[0u16; 256]; MAX_LEVELS];
-    for (l, tbl) in gray.iter_mut().enumerate().take(nlev) {
-        background_table(levels[l], lens[l], p, fs, tbl);
-    }
-    // Every pixel at its level's background gray; region pixels are
-    // overwritten below, and particle pixels no region took get their own
-    // saturation time in the next pass. One flat table for every value of
-    // a class byte's level field (the levels past the frame's are zero),
-    // so a pixel's value is one indexed load without a bounds check.
+    // window), built by exact steps instead of a division per pixel, in
+    // one flat table for every value of a class byte's level field (the
+    // levels past the frame's are zero), so a pixel's value is one
+    // indexed load without a bounds check.
+    let mut tbl = [0u16; 256];
     let mut px_tables = [G::default(); PX_TABLE];
-    for (pt, tbl) in px_tables.chunks_exact_mut(256).zip(&gray).take(nlev) {
-        for (o, &g) in pt.iter_mut().zip(tbl) {
+    for (l, pt) in px_tables.chunks_exact_mut(256).enumerate().take(nlev) {
+        background_table(levels[l], lens[l], p, fs, &mut tbl);
+        for (o, &g) in pt.iter_mut().zip(&tbl) {
             *o = G::from_level(g);
         }
     }
-    let outs = out.get_mut(out_base..).unwrap_or_default();
+    let outs = out.get_mut(usize::from(e0) * width..).unwrap_or_default();
     let n = (last - first).min(outs.len());
     let (cls, cts, outs) = (
         &ws.class[first..first + n],
@@ -284,12 +306,33 @@ fn strip<G: Gray>(
     for ((&cb, &c), o) in tail.zip(o8.into_remainder()) {
         *o = px(cb, c);
     }
-    // "Any region" bits, for the rings: the particle pixels (mask plane 1,
-    // as the segmentation left it) that a region took. Written to plane
-    // 0 in increasing order, which only overwrites particle words already
-    // read. The others are background (see `segment::pixel_saturation`).
+    tbl
+}
+
+/// "Any region" bits, for the rings: the particle pixels (mask plane 1,
+/// as the segmentation left it) that a region took, written to plane 0
+/// in increasing order (which only overwrites particle words already
+/// read). The others, in output rows `e0..e1`, are background at their
+/// own saturation time (`segment::pixel_saturation`).
+fn loose_particles<G: Gray>(
+    ctx: &Ctx<'_, '_>,
+    ws: &mut Workspace<'_>,
+    (s0, s1, e0, e1): (u16, u16, u16, u16),
+    out: &mut [G],
+) {
+    let Ctx {
+        hist,
+        p,
+        levels,
+        fs,
+        ..
+    } = *ctx;
+    let width = usize::from(hist.width());
+    let (first, last) = (usize::from(e0 - s0) * width, usize::from(e1 - s0) * width);
+    let out_base = usize::from(e0) * width;
+    let nlev = levels.iter().take_while(|&&n| n != 0).count();
     let wpr = crate::plane::words_per_row(hist.width());
-    let words = usize::from(rows) * wpr;
+    let words = usize::from(s1 - s0) * wpr;
     for w in 0..words {
         let mut m = ws.masks[words + w];
         let base = (w / wpr) * width + 64 * (w % wpr);
@@ -318,33 +361,34 @@ fn strip<G: Gray>(
         }
         ws.masks[w] = any;
     }
+}
+
+/// Region `reg`'s pixels in output rows `e0..e1` at their gray over its
+/// window (`gray` per count), as [`adapt_region`] left them (no label
+/// reads over the box: a third of the box was not the region's).
+fn region_out<G: Gray>(
+    ws: &Workspace<'_>,
+    reg: &Region,
+    (s0, e0, e1): (u16, u16, u16),
+    gray: &[u16; 256],
+    out: &mut [G],
+) {
+    let width = usize::from(ws.sizes.width);
     let (r_lo, r_hi) = (e0 - s0, e1 - s0);
-    for idx in 0..lab.regions as usize {
-        let reg = ws.regions[idx];
-        if reg.row1 <= r_lo || reg.row0 >= r_hi {
-            continue;
-        }
-        let reg = adapt_region(ctx, ws, s0, rows, idx);
-        stats.regions_out += 1;
-        stats.n_star_sum += u64::from(reg.n_star);
-        region_table(&reg, p, fs, &mut gray[0]);
-        // Its pixels as `adapt_region` left them (no label reads over the
-        // box: a third of the box was not the region's).
-        let (j0, j1) = (
-            usize::from(reg.col0) / 64,
-            usize::from(reg.col1.max(1) - 1) / 64,
-        );
-        for r in usize::from(reg.row0.max(r_lo))..usize::from(reg.row1.min(r_hi)) {
-            for j in j0..=j1 {
-                let base = r * width + 64 * j;
-                slices::for_each_bit(own_bits(ws, r, j), |b| {
-                    let i = base + b as usize;
-                    let g = gray[0][usize::from(ws.c_t.get(i).copied().unwrap_or(0))];
-                    if let Some(o) = out.get_mut(usize::from(s0) * width + i) {
-                        *o = G::from_level(g);
-                    }
-                });
-            }
+    let (j0, j1) = (
+        usize::from(reg.col0) / 64,
+        usize::from(reg.col1.max(1) - 1) / 64,
+    );
+    for r in usize::from(reg.row0.max(r_lo))..usize::from(reg.row1.min(r_hi)) {
+        for j in j0..=j1 {
+            let base = r * width + 64 * j;
+            slices::for_each_bit(own_bits(ws, r, j), |b| {
+                let i = base + b as usize;
+                let g = gray[usize::from(ws.c_t.get(i).copied().unwrap_or(0))];
+                if let Some(o) = out.get_mut(usize::from(s0) * width + i) {
+                    *o = G::from_level(g);
+                }
+            });
         }
     }
 }

@@ -113,8 +113,8 @@ struct Cell {
 }
 
 /// `POP8[b]`: the set bits of byte `b`. Narrow cells' popcounts on
-/// 32-bit targets (issue 18: the Cortex-M4 has no popcount instruction,
-/// and a software one is about twelve; hand-written because `count_ones`
+/// 32-bit targets (the Cortex-M4 has no popcount instruction, and a
+/// software one is about twelve; hand-written because `count_ones`
 /// does not know the value is a byte).
 const POP8: [u8; 256] = {
     let mut t = [0u8; 256];
@@ -249,8 +249,8 @@ fn variance_approx(b: u64, nrf: f32, p: &Params) -> f32 {
 /// word is the plane's word `at`) and cells within [`NEAR`] words of the
 /// first (a region's rows, a few words each), each tick's words are read
 /// from one `NEAR`-word window of the plane: one bounds check per tick
-/// instead of one per cell (issue 18: the per-tick sums are the region
-/// stage's main cost).
+/// instead of one per cell (the per-tick sums are the region stage's
+/// main cost).
 ///
 /// `HALF` (plain cells only, [`HALVES`]): each cell is one `u32` half of
 /// a plane word — `at` indexes the plane read as `u32`s, the masks are in
@@ -616,8 +616,7 @@ const NEAR: usize = 64;
 /// Plain per-tick sums count `u32` halves of the plane words on 32-bit
 /// targets: there a `u64` popcount is two software popcounts of about ten
 /// instructions each, and a region's cell rarely has pixels in both
-/// halves, so a cell is split into the halves it uses (issue 18: the
-/// Cortex-M4's per-tick sums). On 64-bit targets a popcount is one
+/// halves, so a cell is split into the halves it uses. On 64-bit targets a popcount is one
 /// instruction and fewer, wider cells win.
 const HALVES: bool = cfg!(target_pointer_width = "32");
 
@@ -673,13 +672,26 @@ fn narrowed(c: Cell) -> Cell {
     }
 }
 
-/// Geometry of a region's neighbourhood in the strip.
+/// Geometry of a region's neighbourhood in the strip: strip rows
+/// `r0..r1` and words `j0..=j1` hold the region and its ring, rows
+/// `rr.0..rr.1` the region; `width` px and `wpr` words per strip row.
 #[derive(Debug, Clone, Copy)]
 struct Bounds {
     r0: usize,
     r1: usize,
     j0: usize,
     j1: usize,
+    rr: (usize, usize),
+    width: usize,
+    wpr: usize,
+}
+
+impl Bounds {
+    /// Whether strip row `r` holds region pixels.
+    #[inline(always)]
+    fn region_row(&self, r: usize) -> bool {
+        (self.rr.0..self.rr.1).contains(&r)
+    }
 }
 
 /// Finds n* of region `idx` of the strip whose row 0 is band row `s0`,
@@ -732,40 +744,98 @@ fn adapt_with<const HALF: bool>(
     plain: bool,
     word: impl Fn(&[u64], u32, &Cell) -> u64,
 ) -> Region {
-    let crate::context::Ctx {
-        hist, span, k, p, ..
-    } = *ctx;
+    let (hist, p) = (ctx.hist, ctx.p);
     let mut reg = ws.regions[idx];
-    let id = idx as u16 + 1;
     let width = usize::from(ws.sizes.width);
     let wpr = crate::plane::words_per_row(ws.sizes.width);
     let plane = usize::from(ws.sizes.rows) * wpr;
-    // The strip's first word in a band plane.
-    let band0 = usize::from(s0) * hist.words_per_row();
     let b = Bounds {
         r0: usize::from(reg.row0.saturating_sub(2)),
         r1: (usize::from(reg.row1) + 2).min(usize::from(strip_rows)),
         j0: usize::from(reg.col0.saturating_sub(2)) / 64,
         j1: ((usize::from(reg.col1) + 2).min(width) - 1) / 64,
+        rr: (usize::from(reg.row0), usize::from(reg.row1)),
+        width,
+        wpr,
     };
-    let (rr0, rr1) = (usize::from(reg.row0), usize::from(reg.row1));
-    let counts = &*ws.counts;
     let (any, rest) = ws.masks.split_at_mut(plane);
     let (regm, rest) = rest.split_at_mut(plane);
     let ring = &mut rest[..plane];
-    // Region bits: of the pixels some region took ("any"), those labelled
-    // with this one (only they are read, not the whole bounding box). A
-    // run of a row's "any" pixels is connected, so all of one region: its
-    // first pixel's label answers for it.
-    for r in rr0..rr1 {
+    region_words(ws.labels, any, regm, &b, idx as u16 + 1);
+    let nr = ring_words(any, regm, ring, &b);
+    // The row's predicted velocity.
+    let vel = |r: usize| {
+        ctx.motion
+            .map_or((0, 0), |m| m.at(s0.saturating_add(r as u16)))
+    };
+    // Cells of a word in the band planes (the strip's first word is
+    // `band0`).
+    let band0 = usize::from(s0) * hist.words_per_row();
+    let cell_at = |r: usize, j: usize| Cell {
+        r: r as u16,
+        j: j as u16,
+        at: band0 + r * wpr + j,
+        v: vel(r),
+        ..Cell::default()
+    };
+    let mut pt = [Tick::default(); 256];
+    tick_sums::<HALF>(
+        ctx.span,
+        (&word, plain),
+        (regm, ring),
+        &b,
+        &cell_at,
+        &mut pt,
+    );
+    // pt[i + 1] = spikes of ticks span.start .. span.start + i + 1
+    let n = ctx.span.planes().len().min(255);
+    tick_prefix(&mut pt[1..=n]);
+    let sums = |n: u16| -> (u64, u64) {
+        let (a, e) = ctx.wins.of(n);
+        tick_diff(pt[e], pt[a])
+    };
+    let star = search(&sums, p.n_max, reg.pixels, nr, p);
+    let (_, ring_sum) = sums(star);
+    let win = Window::in_history(hist, ctx.k, star);
+    let max_count = pixel_counts(
+        ctx,
+        (ws.counts, &mut *ws.c_t),
+        regm,
+        &b,
+        win,
+        (&word, &cell_at),
+    );
+    reg.n_star = star;
+    reg.win_len = win.len;
+    reg.ring_pixels = nr;
+    reg.ring_sum = ring_sum as u32;
+    reg.max_count = max_count;
+    ws.regions[idx] = reg;
+    reg
+}
+
+/// Region bits into `regm`: of the pixels some region took (`any`), those
+/// labelled `id` (only they are read, not the whole bounding box). A run
+/// of a row's "any" pixels is connected, so all of one region: its first
+/// pixel's label answers for it.
+#[inline(always)]
+fn region_words(labels: &[u16], any: &[u64], regm: &mut [u64], b: &Bounds, id: u16) {
+    let (width, wpr) = (b.width, b.wpr);
+    for r in b.rr.0..b.rr.1 {
         for j in b.j0..=b.j1 {
             let base = r * width + 64 * j;
             regm[r * wpr + j] = slices::select_runs(any[r * wpr + j], |bit| {
-                ws.labels.get(base + bit as usize) == Some(&id)
+                labels.get(base + bit as usize) == Some(&id)
             });
         }
     }
-    // Ring: region dilated by 2 px (Chebyshev), minus every region pixel.
+}
+
+/// The ring into `ring`: the region (`regm`) dilated by 2 px (Chebyshev),
+/// minus every region pixel (`any`). Returns its pixels.
+#[inline(always)]
+fn ring_words(any: &[u64], regm: &[u64], ring: &mut [u64], b: &Bounds) -> u32 {
+    let (width, wpr) = (b.width, b.wpr);
     let last_bits = if width % 64 == 0 {
         u64::MAX
     } else {
@@ -782,13 +852,7 @@ fn adapt_with<const HALF: bool>(
     for j in b.j0..=b.j1 {
         // Rows r − 2 ..= r + 2 dilated horizontally, each row once: the
         // vertical dilation is their OR.
-        let h = |rr: usize| {
-            if (rr0..rr1).contains(&rr) {
-                hdil(rr, j)
-            } else {
-                0
-            }
-        };
+        let h = |rr: usize| if b.region_row(rr) { hdil(rr, j) } else { 0 };
         let mut near = [0u64; 5];
         for (q, x) in near.iter_mut().enumerate().take(4) {
             *x = (b.r0 + q).checked_sub(2).map_or(0, h);
@@ -805,77 +869,87 @@ fn adapt_with<const HALF: bool>(
             nr += v.count_ones();
         }
     }
-    // Per-tick spike sums of region and ring over the n_max span, over the
-    // (row, word) cells where either has a pixel: a bounded batch of cells
-    // at a time on the stack, every tick of the span per batch.
-    let vel = |r: usize| {
-        ctx.motion
-            .map_or((0, 0), |m| m.at(s0.saturating_add(r as u16)))
-    };
-    let mut pt = [Tick::default(); 256];
+    nr
+}
+
+/// Per-tick spike sums of region and ring over the n_max span into `pt`,
+/// over the (row, word) cells where either has a pixel: a bounded batch
+/// of cells at a time on the stack, every tick of the span per batch.
+#[inline(always)]
+fn tick_sums<const HALF: bool>(
+    span: &Span<'_>,
+    w: (&impl Fn(&[u64], u32, &Cell) -> u64, bool),
+    (regm, ring): (&[u64], &[u64]),
+    b: &Bounds,
+    cell_at: &impl Fn(usize, usize) -> Cell,
+    pt: &mut [Tick; 256],
+) {
     // Cells with region pixels, and cells of ring pixels only (the rows
     // above and below a region: one popcount per tick instead of two).
     // Not initialised until pushed: zeroing both arrays would cost more
     // than the sums of a small frame.
     let mut cells = heapless::Vec::<Cell, CELLS>::new();
     let mut rings = heapless::Vec::<Cell, CELLS>::new();
-    let planes = span.planes();
-    let w = (&word, plain);
     for r in b.r0..b.r1 {
         for j in b.j0..=b.j1 {
-            let rg = if (rr0..rr1).contains(&r) {
-                regm[r * wpr + j]
+            let rg = if b.region_row(r) {
+                regm[r * b.wpr + j]
             } else {
                 0
             };
-            let rn = ring[r * wpr + j];
+            let rn = ring[r * b.wpr + j];
             if rg | rn == 0 {
                 continue;
             }
             let cell = Cell {
-                r: r as u16,
-                j: j as u16,
-                at: band0 + r * wpr + j,
-                v: vel(r),
                 ring: rn,
                 reg: rg,
-                ..Cell::default()
+                ..cell_at(r, j)
             };
             for cell in parts(cell, HALF).into_iter().flatten() {
                 if cell.reg == 0 {
                     if rings.push(cell).is_err() {
-                        sum_all::<true, HALF>(span, w, &mut rings, &mut pt);
+                        sum_all::<true, HALF>(span, w, &mut rings, pt);
                         rings.clear();
                         rings.push(cell).ok();
                     }
                 } else if cells.push(cell).is_err() {
-                    sum_all::<false, HALF>(span, w, &mut cells, &mut pt);
+                    sum_all::<false, HALF>(span, w, &mut cells, pt);
                     cells.clear();
                     cells.push(cell).ok();
                 }
             }
         }
     }
-    sum_all::<false, HALF>(span, w, &mut cells, &mut pt);
-    sum_all::<true, HALF>(span, w, &mut rings, &mut pt);
-    // pt[i + 1] = spikes of ticks span.start .. span.start + i + 1
-    let n = planes.len().min(255);
-    tick_prefix(&mut pt[1..=n]);
-    let sums = |n: u16| -> (u64, u64) {
-        let (a, e) = ctx.wins.of(n);
-        tick_diff(pt[e], pt[a])
-    };
-    let star = search(&sums, p.n_max, reg.pixels, nr, p);
-    // Per-pixel counts over n*: bit-sliced counters per word of the
-    // region, read back for its pixels.
-    let (_, ring_sum) = sums(star);
-    let win = Window::in_history(hist, k, star);
+    sum_all::<false, HALF>(span, w, &mut cells, pt);
+    sum_all::<true, HALF>(span, w, &mut rings, pt);
+}
+
+/// Each region pixel's count over n*'s window `win` into `c_t`:
+/// bit-sliced counters per word of the region (`regm`), read back for its
+/// pixels. Returns the largest.
+///
+/// Plain counts: the segmentation left every pixel's count over the
+/// whole span in its counters (`counts`; its last window is n_max's), so
+/// where n*'s window is the longer part of the span, a pixel's count is
+/// that minus its spikes outside the window (fewer ticks to add).
+#[inline(always)]
+fn pixel_counts(
+    ctx: &crate::context::Ctx<'_, '_>,
+    (counts, c_t): (&[u64], &mut [u8]),
+    regm: &[u64],
+    b: &Bounds,
+    win: Window,
+    (word, cell_at): (
+        &impl Fn(&[u64], u32, &Cell) -> u64,
+        &impl Fn(usize, usize) -> Cell,
+    ),
+) -> u8 {
+    let (span, p) = (ctx.span, ctx.p);
+    let (width, wpr) = (b.width, b.wpr);
+    let planes = span.planes();
     let wplanes = span.range(win.start, win.end());
     let t0 = win.start.max(span.start);
-    // Plain counts: the segmentation left every pixel's count over the
-    // whole span in its counters (its last window is n_max's), so where
-    // n*'s window is the longer part of the span, a pixel's count is that
-    // minus its spikes outside the window (fewer ticks to add).
     let lo = (win.start.saturating_sub(span.start) as usize).min(planes.len());
     let hi = (lo + wplanes.len()).min(planes.len());
     let whole = ctx.motion.is_none()
@@ -883,19 +957,13 @@ fn adapt_with<const HALF: bool>(
         && planes.len() - wplanes.len() < wplanes.len();
     let outside = |i: usize| if i < lo { i } else { i + (hi - lo) };
     let mut max_count = 0u8;
-    for r in rr0..rr1 {
+    for r in b.rr.0..b.rr.1 {
         for j in b.j0..=b.j1 {
             let mut m = regm[r * wpr + j];
             if m == 0 {
                 continue;
             }
-            let cell = Cell {
-                r: r as u16,
-                j: j as u16,
-                at: band0 + r * wpr + j,
-                v: vel(r),
-                ..Cell::default()
-            };
+            let cell = cell_at(r, j);
             let mut cnt = Counter::default();
             let all = if whole {
                 slices::add_fn(&mut cnt, planes.len() - wplanes.len(), |i| {
@@ -932,20 +1000,14 @@ fn adapt_with<const HALF: bool>(
                     group = (g, v);
                 }
                 let v = group.1[(bit % 8) as usize];
-                if let Some(x) = ws.c_t.get_mut(r * width + j * 64 + bit as usize) {
+                if let Some(x) = c_t.get_mut(r * width + j * 64 + bit as usize) {
                     *x = v;
                 }
                 max_count = max_count.max(v);
             }
         }
     }
-    reg.n_star = star;
-    reg.win_len = win.len;
-    reg.ring_pixels = nr;
-    reg.ring_sum = ring_sum as u32;
-    reg.max_count = max_count;
-    ws.regions[idx] = reg;
-    reg
+    max_count
 }
 
 /// n* of a region of `np` pixels with a ring of `nr`, given `sums(n)` =

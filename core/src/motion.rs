@@ -1,4 +1,4 @@
-//! Motion compensation (beyond the paper; issue 14): counting a pixel's
+//! Motion compensation (beyond the paper): counting a pixel's
 //! spikes along a particle's predicted path instead of at a fixed place,
 //! and refining the prediction from the spikes themselves.
 //!
@@ -306,7 +306,7 @@ pub fn refine(
         // Candidates measured so far in this band. One whose shifts equal
         // a measured one's at every tick of the window has its counts, so
         // its sum, and cannot beat it (a later one wins only when larger):
-        // it is skipped. Slow rows have many such (issue 18).
+        // it is skipped. Slow rows have many such.
         let mut seen: heapless::Vec<(i16, i16), 64> = heapless::Vec::new();
         while let Some((cx, cy)) = candidate(cfg, px, py, n) {
             n += 1;
@@ -360,7 +360,7 @@ pub fn refine(
 /// Adds the counts of band row `r` compensated for `(vx, vy)` to `row`,
 /// bit-sliced as the plain counts are (`window::add_words`).
 ///
-/// Each tick's shift is resolved once per row (issue 18): its source row
+/// Each tick's shift is resolved once per row: its source row
 /// (empty when the shift leaves the band), the word offset and the bit
 /// offset, so a shifted word is two loads and a funnel shift — the same
 /// words as [`shifted_word`].
@@ -501,8 +501,8 @@ struct SharpScratch<'p> {
 /// `rows.0..rows.1` of the squared counts compensated for `(vx, vy)` —
 /// the counts [`add_row`] makes, summed as squares straight from the bit
 /// planes ([`slices::sum_squares`]) without reading them back into bytes
-/// (issue 18: refine was four fifths of a compensated frame). Each tick's
-/// shift is resolved once for all rows.
+/// (byte counts would make refine most of a compensated frame's cost).
+/// Each tick's shift is resolved once for all rows.
 fn sharpness<'p>(
     scratch: &mut SharpScratch<'p>,
     span: &Span<'p>,

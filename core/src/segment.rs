@@ -25,8 +25,15 @@ use crate::slices::{self, low_bits, Counter};
 use crate::state::Workspace;
 use crate::window::{add_counts, Window};
 
-/// Tile columns a row can have: a row is at most 65535 px, tiles 16 px.
-const MAX_TILE_COLUMNS: usize = 4096;
+/// Side of the square tiles whose background medians the particle test
+/// blends, px. The bit-sliced medians ([`tile_medians_sliced`]) read a
+/// tile row as the 16-bit lanes of 64-px words, and tile geometry is
+/// computed in 1/32-tile units (`tile_pos`, [`padded_tile`]): both hold
+/// for 16 px only.
+pub(crate) const TILE: usize = 16;
+
+/// Tile columns a row can have: a row is at most 65535 px.
+const MAX_TILE_COLUMNS: usize = 65536 / TILE;
 
 /// What a pixel is, stored in the high bits of its class byte; the low 4 bits
 /// hold the index of the level (window) at which it was decided.
@@ -170,9 +177,9 @@ pub(crate) struct Tiles {
 impl Tiles {
     pub(crate) fn for_strip(width: u16, s0: u16, s1: u16) -> Tiles {
         Tiles {
-            x: usize::from(width).div_ceil(16),
-            y0: usize::from(s0) / 16,
-            y1: usize::from(s1.saturating_sub(1)) / 16,
+            x: usize::from(width).div_ceil(TILE),
+            y0: usize::from(s0) / TILE,
+            y1: usize::from(s1.saturating_sub(1)) / TILE,
         }
     }
 }
@@ -189,8 +196,8 @@ fn tile_medians_bytes(
     (r_lo, r_hi): (usize, usize),
 ) {
     for (tx, out) in tiles_out.iter_mut().enumerate() {
-        let c_lo = tx * 16;
-        let c_hi = (tx * 16 + 16).min(width);
+        let c_lo = tx * TILE;
+        let c_hi = (tx * TILE + TILE).min(width);
         let mut hist = [0u16; 256];
         let mut n = 0u32;
         for r in r_lo..r_hi {
@@ -594,6 +601,21 @@ fn add_words(group: &[&[u64]], j0: usize, counts: &mut [u64], fresh: bool) {
     }
 }
 
+/// Where column `x`'s centre lies among the padded tile columns of
+/// [`Level::bg`], 1/32 tile from the first pad's centre: `tile_pos` one
+/// tile to the right, (2x + 17)/32.
+#[inline(always)]
+fn padded_tile_32(x: usize) -> usize {
+    2 * x + 17
+}
+
+/// The padded tile column whose centre is at or left of column `x`'s: the
+/// first of the two tiles its background blends.
+#[inline(always)]
+fn padded_tile(x: usize) -> usize {
+    padded_tile_32(x) >> 5
+}
+
 /// One level's test of one strip row: what its pixels are tested against.
 struct Level<'a> {
     /// Row background of each tile column, 1/32 count (bilinear between
@@ -618,9 +640,7 @@ impl Level<'_> {
     /// nearest tile centres of the row.
     #[inline]
     fn b_at(&self, x: usize) -> u32 {
-        // `tile_pos` one tile to the right: pixel centre x + 0.5 is
-        // (2x + 17)/32 padded tiles from the first pad's centre.
-        let v = 2 * x + 17;
+        let v = padded_tile_32(x);
         let (t, f) = (v >> 5, (v & 31) as u32);
         // Both tiles at once, one bounds check: with the padding, t + 1 is
         // within the row for every column (a past-the-end read is 0, as
@@ -638,8 +658,8 @@ impl Level<'_> {
     /// them. `(0, u32::MAX)` if the row does not hold the word's tiles.
     #[inline]
     fn b_range(&self, j: usize, width: usize) -> (u32, u32) {
-        let a = (128 * j + 17) >> 5;
-        let e = ((2 * (64 * j + 63).min(width - 1) + 17) >> 5) + 1;
+        let a = padded_tile(64 * j);
+        let e = padded_tile((64 * j + 63).min(width - 1)) + 1;
         // A whole word blends tiles 4j ..= 4j + 5: a fixed six, compared
         // without a loop.
         if e == a + 5 {
@@ -695,68 +715,32 @@ pub(crate) fn segment(
 ) -> SegmentStats {
     let crate::context::Ctx {
         hist,
-        span,
         k,
         p,
         th,
         motion,
         ..
     } = *ctx;
-    let width = usize::from(ws.sizes.width);
-    let wpr = crate::plane::words_per_row(ws.sizes.width);
-    let rows = usize::from(s1 - s0);
-    let px = width * rows;
-    let words = rows * wpr;
-    let mc = motion.is_some() && ws.mc.len() >= px;
+    let g = StripGeometry::new(ws.sizes.width, s0, s1);
+    let mc = motion.is_some() && ws.mc.len() >= g.px;
     let (levels, nlev) = p.levels();
-    let tiles = Tiles::for_strip(ws.sizes.width, s0, s1);
     let mut stats = SegmentStats::default();
-    let (act, rest) = ws.masks.split_at_mut(words);
-    let part = &mut rest[..words];
+    let (act, rest) = ws.masks.split_at_mut(g.words);
     for (i, a) in act.iter_mut().enumerate() {
-        *a = low_bits(width - 64 * (i % wpr));
+        *a = low_bits(g.width - 64 * (i % g.wpr));
     }
-    part.fill(0);
+    rest[..g.words].fill(0);
     if mc {
-        ws.mc[..px].fill(0);
+        ws.mc[..g.px].fill(0);
     }
     // Row backgrounds per tile column (1/32 count), on the stack, with a
     // column past each end.
     let mut bg_row = [0u32; MAX_TILE_COLUMNS + 2];
-    let bg_row = &mut bg_row[..tiles.x.min(MAX_TILE_COLUMNS) + 2];
+    let bg_row = &mut bg_row[..g.tiles.x.min(MAX_TILE_COLUMNS) + 2];
     let mut prev: Option<Window> = None;
     for (j, &n) in levels.iter().enumerate().take(nlev) {
         let win = Window::in_history(hist, k, n);
-        // Windows are nested: add only the ticks the previous one lacked.
-        let added = match prev {
-            None => [(win.start, win.end()), (win.end(), win.end())],
-            Some(pw) => [(win.start, pw.start), (pw.end(), win.end())],
-        };
-        let [(a0, e0), (a1, e1)] = added;
-        add_sliced(
-            [span.range(a0, e0), span.range(a1, e1)],
-            wpr,
-            s0,
-            rows,
-            &mut ws.counts[..8 * words],
-            j == 0,
-        );
-        for (a, e) in added {
-            if let (true, Some(m)) = (mc, &motion) {
-                let planes = span.range(a, e);
-                let start = a.max(span.start);
-                add_compensated(
-                    planes,
-                    start,
-                    k,
-                    hist.width(),
-                    hist.rows(),
-                    (s0, s1),
-                    m,
-                    &mut ws.mc[..px],
-                );
-            }
-        }
+        add_level_counts(ctx, ws, &g, (prev, win), j == 0, mc);
         prev = Some(win);
         // c ≥ sat_c ⟺ c·n ≥ N_fs·len (the rate reaches N_fs/n).
         let sat_c = if win.len == 0 {
@@ -773,21 +757,14 @@ pub(crate) fn segment(
         // Tile rows whose medians this level has computed (rows ask for at
         // most two, in order).
         let mut have: [Option<usize>; 2] = [None, None];
-        let tile_rows = |ty: usize| {
-            let r = (
-                (ty * 16).max(usize::from(s0)),
-                (ty * 16 + 16).min(usize::from(s1)),
-            );
-            ((ty - tiles.y0) * tiles.x, r)
-        };
         if mc {
-            for ty in tiles.y0..=tiles.y1 {
-                let (row0, rr) = tile_rows(ty);
+            for ty in g.tiles.y0..=g.tiles.y1 {
+                let (row0, rr) = g.tile_rows(ty);
                 tile_medians_bytes(
-                    &ws.mc[..px],
-                    &ws.masks[words..2 * words],
-                    &mut ws.tiles[row0..row0 + tiles.x],
-                    (width, wpr),
+                    &ws.mc[..g.px],
+                    &ws.masks[g.words..2 * g.words],
+                    &mut ws.tiles[row0..row0 + g.tiles.x],
+                    (g.width, g.wpr),
                     s0,
                     rr,
                 );
@@ -795,46 +772,23 @@ pub(crate) fn segment(
         }
         // No particle counts below this, whatever the background.
         let t_any = sat_c.min(u32::from(th.min_count(0)));
-        for r in 0..rows {
+        for r in 0..g.rows {
             let br = s0 + r as u16;
-            let row_words = r * wpr..(r + 1) * wpr;
-            // Plain: which active pixels could change at all (a count of at
-            // least `t_any`), kept in mask plane 2; rows without any skip
-            // the tile medians. On the last level the others are decided
-            // here: background, at their count.
+            let tp = tile_pos(usize::from(br), g.tiles.y0, g.tiles.y1);
             if !mc {
-                let mut any = 0u64;
-                for w in row_words.clone() {
-                    let a = ws.masks[w];
-                    if a == 0 {
-                        ws.masks[2 * words + w] = 0;
-                        continue;
-                    }
-                    let c = counter(ws.counts, w);
-                    let a0 = a & slices::at_least_live(c, t_any, live);
-                    ws.masks[2 * words + w] = a0;
-                    any |= a0;
-                    if last && a0 != a {
-                        let base = r * width + 64 * (w - r * wpr);
-                        background_rest(c, a & !a0, base, decided.1, ws.class, ws.c_t);
-                        ws.masks[w] = a0;
-                    }
-                }
-                if any == 0 {
+                let bg_class = (decided.1, last);
+                if !plain_candidates(ws, &g, r, (t_any, live), bg_class) {
                     continue;
                 }
-            }
-            let (ty0, ty1, fy) = tile_pos(usize::from(br), tiles.y0, tiles.y1);
-            if !mc {
-                for ty in [ty0, ty1] {
+                for ty in [tp.0, tp.1] {
                     if !have.contains(&Some(ty)) {
-                        let (row0, rr) = tile_rows(ty);
+                        let (row0, rr) = g.tile_rows(ty);
                         tile_medians_sliced(
-                            &ws.counts[..8 * words],
+                            &ws.counts[..8 * g.words],
                             live,
-                            &ws.masks[words..2 * words],
-                            &mut ws.tiles[row0..row0 + tiles.x],
-                            (width, wpr),
+                            &ws.masks[g.words..2 * g.words],
+                            &mut ws.tiles[row0..row0 + g.tiles.x],
+                            (g.width, g.wpr),
                             s0,
                             rr,
                         );
@@ -842,33 +796,10 @@ pub(crate) fn segment(
                     }
                 }
             }
-            let (wy0, wy1) = (32 - fy, fy);
-            let (row_t0, row_t1) = ((ty0 - tiles.y0) * tiles.x, (ty1 - tiles.y0) * tiles.x);
-            let n_bg = bg_row.len();
-            let cols = n_bg - 2;
-            // The two tile rows as slices (both were just written by the
-            // medians, so they are in the buffer): a loop without bounds
-            // checks, which the compiler vectorises.
-            let t0 = ws.tiles.get(row_t0..row_t0 + cols).unwrap_or_default();
-            let t1 = ws.tiles.get(row_t1..row_t1 + cols).unwrap_or_default();
-            for ((b, &a), &c) in bg_row[1..n_bg - 1].iter_mut().zip(t0).zip(t1) {
-                *b = wy0 * u32::from(a) + wy1 * u32::from(c);
-            }
-            bg_row[0] = bg_row[1];
-            bg_row[n_bg - 1] = bg_row[n_bg - 2];
-            // Where the row moves, the pixel's own plain count is a floor
-            // of its background (docs above): all ones to keep it, else 0.
-            let floor: u32 = match (mc, &motion) {
-                (true, Some(m)) if travel(m.at(br), win.start, win.end(), k) >= MIN_TRAVEL => {
-                    u32::MAX
-                }
-                _ => 0,
-            };
-            // A compensated count sums this many pixels' spikes: its own
-            // noise model (1: the plain test, by the tables).
-            let segs = match (mc, &motion) {
-                (true, Some(m)) => positions(m.at(br), win.start, win.end(), k),
-                _ => 1,
+            row_backgrounds(ws.tiles, &g.tiles, tp, bg_row);
+            let (floor, segs) = match (mc, &motion) {
+                (true, Some(m)) => row_motion(m.at(br), win, k),
+                _ => (0, 1),
             };
             let lv = Level {
                 bg: bg_row,
@@ -878,71 +809,243 @@ pub(crate) fn segment(
                 last,
                 decided,
             };
-            if !mc {
-                words_plain(ws, &lv, (th, p), r, (width, wpr, words), &mut stats);
-                continue;
-            }
-            for w in row_words {
-                let a = ws.masks[w];
-                if a == 0 {
-                    continue;
-                }
-                let c = counter(ws.counts, w);
-                let jw = w - r * wpr;
-                let base = r * width + 64 * jw;
-                let mut done = 0u64;
-                // Compensated: a particle needs a tested count above the
-                // background (so above the word's lowest, the floor only
-                // raises it); saturation reads the plain counts. Only those
-                // pixels are read and tested.
-                let t = lv.b_range(jw, width).0 >> B_FRAC_BITS;
-                let row = &ws.mc[base..(base + 64).min(r * width + width)];
-                let mut above = 0u64;
-                for (q, &v) in row.iter().enumerate() {
-                    above |= u64::from(u32::from(v) > t) << q;
-                }
-                let cand = a & (above | slices::at_least_live(c, sat_c, live));
-                // Compensated candidates: a byte group's plain counts read
-                // out of the bit planes once.
-                let mut m = cand;
-                let mut counts = slices::Groups::new(c);
-                while m != 0 {
-                    let i = m.trailing_zeros();
-                    m &= m - 1;
-                    let x = 64 * jw + i as usize;
-                    let cp = counts.count(i);
-                    let tested = ws.mc[r * width + x];
-                    let b_q10 = lv.b_at(x).max((u32::from(cp) << B_FRAC_BITS) & lv.floor);
-                    let particle = if segs > 1 {
-                        is_particle_compensated(tested, b_q10, p, segs)
-                    } else {
-                        th.is_particle(tested, b_q10, p)
-                    };
-                    let at = base + i as usize;
-                    if particle {
-                        ws.class[at] = lv.decided.0;
-                        ws.c_t[at] = tested;
-                        stats.particle_pixels += 1;
-                        ws.masks[words + w] |= 1 << i;
-                        done |= 1 << i;
-                    } else if u32::from(cp) >= lv.sat_c {
-                        ws.class[at] = lv.decided.1;
-                        ws.c_t[at] = cp;
-                        stats.saturated_pixels += 1;
-                        done |= 1 << i;
-                    }
-                }
-                if lv.last {
-                    // The last level decides the rest: background, at their
-                    // count over n_max.
-                    background_rest(c, a & !done, base, lv.decided.1, ws.class, ws.c_t);
-                    done = a;
-                }
-                ws.masks[w] = a & !done;
+            if mc {
+                words_compensated(ws, &lv, (th, p, segs), r, &g, &mut stats);
+            } else {
+                words_plain(ws, &lv, (th, p), r, (g.width, g.wpr, g.words), &mut stats);
             }
         }
     }
     stats
+}
+
+/// The geometry of a strip's buffers: `rows` band rows from `s0` of
+/// `width` px, `wpr` words per row, `words` and `px` in all, and its tiles.
+struct StripGeometry {
+    s0: u16,
+    s1: u16,
+    width: usize,
+    wpr: usize,
+    rows: usize,
+    px: usize,
+    words: usize,
+    tiles: Tiles,
+}
+
+impl StripGeometry {
+    fn new(width: u16, s0: u16, s1: u16) -> StripGeometry {
+        let wpr = crate::plane::words_per_row(width);
+        let rows = usize::from(s1 - s0);
+        StripGeometry {
+            s0,
+            s1,
+            width: usize::from(width),
+            wpr,
+            rows,
+            px: usize::from(width) * rows,
+            words: rows * wpr,
+            tiles: Tiles::for_strip(width, s0, s1),
+        }
+    }
+
+    /// Tile row `ty`: its first entry in the tile buffer and the band rows
+    /// of the strip it covers.
+    fn tile_rows(&self, ty: usize) -> (usize, (usize, usize)) {
+        let rows = (
+            (ty * TILE).max(usize::from(self.s0)),
+            (ty * TILE + TILE).min(usize::from(self.s1)),
+        );
+        ((ty - self.tiles.y0) * self.tiles.x, rows)
+    }
+}
+
+/// Adds the ticks of level window `win` that the previous level's window
+/// (nested in it) lacked to the bit-sliced plain counts (`fresh`: the
+/// first level, which starts them), and, compensated (`mc`), to the
+/// motion-compensated byte counts.
+#[inline(always)]
+fn add_level_counts(
+    ctx: &crate::context::Ctx<'_, '_>,
+    ws: &mut Workspace<'_>,
+    g: &StripGeometry,
+    (prev, win): (Option<Window>, Window),
+    fresh: bool,
+    mc: bool,
+) {
+    let (hist, span) = (ctx.hist, ctx.span);
+    let added = match prev {
+        None => [(win.start, win.end()), (win.end(), win.end())],
+        Some(pw) => [(win.start, pw.start), (pw.end(), win.end())],
+    };
+    let [(a0, e0), (a1, e1)] = added;
+    add_sliced(
+        [span.range(a0, e0), span.range(a1, e1)],
+        g.wpr,
+        g.s0,
+        g.rows,
+        &mut ws.counts[..8 * g.words],
+        fresh,
+    );
+    let Some(m) = ctx.motion.filter(|_| mc) else {
+        return;
+    };
+    for (a, e) in added {
+        add_compensated(
+            span.range(a, e),
+            a.max(span.start),
+            ctx.k,
+            hist.width(),
+            hist.rows(),
+            (g.s0, g.s1),
+            &m,
+            &mut ws.mc[..g.px],
+        );
+    }
+}
+
+/// Plain counts: which active pixels of strip row `r` could change at all
+/// (a count of at least `t_any`, with `live` bit planes), kept in mask
+/// plane 2. On the last level (`bg.1`) the others are decided here:
+/// background (class byte `bg.0`) at their count. Whether any could.
+#[inline(always)]
+fn plain_candidates(
+    ws: &mut Workspace<'_>,
+    g: &StripGeometry,
+    r: usize,
+    (t_any, live): (u32, usize),
+    bg: (u8, bool),
+) -> bool {
+    let words = g.words;
+    let mut any = 0u64;
+    for w in r * g.wpr..(r + 1) * g.wpr {
+        let a = ws.masks[w];
+        if a == 0 {
+            ws.masks[2 * words + w] = 0;
+            continue;
+        }
+        let c = counter(ws.counts, w);
+        let a0 = a & slices::at_least_live(c, t_any, live);
+        ws.masks[2 * words + w] = a0;
+        any |= a0;
+        if bg.1 && a0 != a {
+            let base = r * g.width + 64 * (w - r * g.wpr);
+            background_rest(c, a & !a0, base, bg.0, ws.class, ws.c_t);
+            ws.masks[w] = a0;
+        }
+    }
+    any != 0
+}
+
+/// The row background per tile column of the band row whose [`tile_pos`]
+/// is `(ty0, ty1, fy)`, 1/32 count: bilinear between its two tile rows' medians (`tiles`, in the strip's
+/// tile buffer), with a copy of the first and the last column on either
+/// side ([`Level::bg`]).
+#[inline(always)]
+fn row_backgrounds(
+    tiles_buf: &[u8],
+    tiles: &Tiles,
+    (ty0, ty1, fy): (usize, usize, u32),
+    bg_row: &mut [u32],
+) {
+    let (wy0, wy1) = (32 - fy, fy);
+    let (row_t0, row_t1) = ((ty0 - tiles.y0) * tiles.x, (ty1 - tiles.y0) * tiles.x);
+    let n_bg = bg_row.len();
+    let cols = n_bg - 2;
+    // The two tile rows as slices: a loop without bounds checks, which the
+    // compiler vectorises.
+    let t0 = tiles_buf.get(row_t0..row_t0 + cols).unwrap_or_default();
+    let t1 = tiles_buf.get(row_t1..row_t1 + cols).unwrap_or_default();
+    for ((b, &a), &c) in bg_row[1..n_bg - 1].iter_mut().zip(t0).zip(t1) {
+        *b = wy0 * u32::from(a) + wy1 * u32::from(c);
+    }
+    bg_row[0] = bg_row[1];
+    bg_row[n_bg - 1] = bg_row[n_bg - 2];
+}
+
+/// A compensated row's test at level window `win` of the frame at `k`,
+/// for the row's velocity `v`: the floor mask ([`Level::floor`]: all ones
+/// where the motion moves anything within the window, [`travel`] ≥
+/// [`MIN_TRAVEL`]) and the pixels a compensated count sums ([`positions`],
+/// its noise model; 1 is the plain test).
+#[inline(always)]
+fn row_motion(v: (i16, i16), win: Window, k: u32) -> (u32, u32) {
+    let floor = if travel(v, win.start, win.end(), k) >= MIN_TRAVEL {
+        u32::MAX
+    } else {
+        0
+    };
+    (floor, positions(v, win.start, win.end(), k))
+}
+
+/// One level's compensated test of strip row `r`'s words: a particle
+/// needs a tested (compensated) count above the background (so above the
+/// word's lowest; the floor only raises it), with the noise of `segs`
+/// pixels; saturation reads the plain counts. Only those pixels are read
+/// and tested; on the last level the rest are background at their count.
+#[inline(always)]
+fn words_compensated(
+    ws: &mut Workspace<'_>,
+    lv: &Level<'_>,
+    (th, p, segs): (&Thresholds, &Params, u32),
+    r: usize,
+    g: &StripGeometry,
+    stats: &mut SegmentStats,
+) {
+    let (width, words) = (g.width, g.words);
+    for w in r * g.wpr..(r + 1) * g.wpr {
+        let a = ws.masks[w];
+        if a == 0 {
+            continue;
+        }
+        let c = counter(ws.counts, w);
+        let jw = w - r * g.wpr;
+        let base = r * width + 64 * jw;
+        let mut done = 0u64;
+        let t = lv.b_range(jw, width).0 >> B_FRAC_BITS;
+        let row = &ws.mc[base..(base + 64).min(r * width + width)];
+        let mut above = 0u64;
+        for (q, &v) in row.iter().enumerate() {
+            above |= u64::from(u32::from(v) > t) << q;
+        }
+        let cand = a & (above | slices::at_least_live(c, lv.sat_c, lv.live));
+        // Compensated candidates: a byte group's plain counts read out of
+        // the bit planes once.
+        let mut m = cand;
+        let mut counts = slices::Groups::new(c);
+        while m != 0 {
+            let i = m.trailing_zeros();
+            m &= m - 1;
+            let x = 64 * jw + i as usize;
+            let cp = counts.count(i);
+            let tested = ws.mc[r * width + x];
+            let b_q10 = lv.b_at(x).max((u32::from(cp) << B_FRAC_BITS) & lv.floor);
+            let particle = if segs > 1 {
+                is_particle_compensated(tested, b_q10, p, segs)
+            } else {
+                th.is_particle(tested, b_q10, p)
+            };
+            let at = base + i as usize;
+            if particle {
+                ws.class[at] = lv.decided.0;
+                ws.c_t[at] = tested;
+                stats.particle_pixels += 1;
+                ws.masks[words + w] |= 1 << i;
+                done |= 1 << i;
+            } else if u32::from(cp) >= lv.sat_c {
+                ws.class[at] = lv.decided.1;
+                ws.c_t[at] = cp;
+                stats.saturated_pixels += 1;
+                done |= 1 << i;
+            }
+        }
+        if lv.last {
+            // The last level decides the rest: background, at their count
+            // over n_max.
+            background_rest(c, a & !done, base, lv.decided.1, ws.class, ws.c_t);
+            done = a;
+        }
+        ws.masks[w] = a & !done;
+    }
 }
 
 /// One level's plain test of strip row `r`'s words (`width` px, `wpr`

@@ -3,7 +3,7 @@
 //! a spike plane is a handful of logic operations for 64 pixels, and so is
 //! asking which pixels count at least `t` — the segmentation asks that of
 //! every pixel at every level and reads bytes only for the few that
-//! answer yes (issue 18). An FPGA keeps its counters the same way.
+//! answer yes. An FPGA keeps its counters the same way.
 //!
 //! Hand-written (no crate does bit-sliced counters in `no_std`), exact,
 //! with counts below 256 (a window holds at most 255 ticks).

@@ -74,7 +74,7 @@ pub struct Span<'h> {
 /// most two runs of consecutive slots, each `(offset of its first plane
 /// in the span, its planes side by side)`, every plane `stride` words.
 /// A loop over a run's planes steps a pointer by `stride` instead of
-/// reading each plane's slice (issue 18: the regions' per-tick sums).
+/// reading each plane's slice (the regions' per-tick sums run on this).
 /// Empty when the runs would not be exactly the held planes.
 #[derive(Debug, Clone, Copy, Default)]
 pub(crate) struct Runs<'h> {

@@ -1,4 +1,4 @@
-//! The wide baseline (beyond the paper; issue 14): a spike camera can make
+//! The wide baseline (beyond the paper): a spike camera can make
 //! a frame at any tick, so slow rows need not be measured over the pair's
 //! `dt` alone. A second pair of motion-compensated frames `s·dt` apart,
 //! centred on the same tick as the pair, moves each particle `s` times as

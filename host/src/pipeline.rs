@@ -102,7 +102,7 @@ pub enum FrameKind {
     /// The adaptive reconstruction.
     Adaptive,
     /// The adaptive reconstruction on motion-compensated counts (beyond the
-    /// paper; issue 14): the TFP pair's PIV predicts each row's velocity,
+    /// paper): the TFP pair's PIV predicts each row's velocity,
     /// the sidecar refines it from the spikes and sends the pair through
     /// the wire (in process: the prediction is handed to the firmware as the
     /// control link will carry it).

@@ -1,5 +1,5 @@
-//! The prediction that motion-compensated frames need (beyond the paper;
-//! issue 14): a PIV field becomes a velocity per stored row, the core
+//! The prediction that motion-compensated frames need (beyond the paper):
+//! a PIV field becomes a velocity per stored row, the core
 //! refines it from the spikes by contrast maximisation
 //! (`spiv_core::motion::refine`), and the core counts each particle along
 //! its path (`spiv_core::reconstruct_compensated`).

@@ -1,4 +1,4 @@
-//! Never a confidently wrong field (issue 44): where `spiv flow` cannot
+//! Never a confidently wrong field: where `spiv flow` cannot
 //! measure — no particles, displacements beyond every window, a flow faster
 //! than its first rung reaches, a prediction that is wrong — it says so:
 //! every vector is invalid, or its error stays within its uncertainty.

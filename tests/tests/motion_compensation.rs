@@ -1,5 +1,5 @@
 //! Motion-compensated frames against the ground truth, and what a wrong
-//! prediction does to them (issue 14): on paper-linear seed 1, the core's
+//! prediction does to them: on paper-linear seed 1, the core's
 //! compensated adaptive frames (n_max 128 everywhere) from the true
 //! velocity, and from velocities 50 % too fast and 50 % too slow with the
 //! core's contrast-maximisation refinement, held to the row-profile RMAE of

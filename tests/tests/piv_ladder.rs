@@ -1,4 +1,4 @@
-//! PIV that degrades gracefully on spike frames (issue 17), against the
+//! PIV that degrades gracefully on spike frames, against the
 //! simulator's ground truth, on the pairs `spiv run` makes (frame camera,
 //! spike TFP n=8, the paper's adaptive with `spiv run`'s dwell caps, and
 //! motion-compensated) of the three paper profiles with their glare.

@@ -76,7 +76,7 @@ fn check(
         adaptive[1]
     );
     // Beyond the glare the compensated spike frames measure within 2x of
-    // the frame camera (issue 14's bound; 10x worse before compensation).
+    // the frame camera (10x worse without compensation).
     // The bound was 1.5x until the PIV predictor stopped interpolating
     // the clipped glare windows as zeros: that made the frame camera's
     // other rows 30-60 % better (RMSE 0.036 -> 0.024 px on the linear

@@ -45,7 +45,7 @@ pub enum Flow {
         /// px/tick, down.
         v: f64,
     },
-    /// Kinematic turbulence (beyond the paper; issue 17): a frozen,
+    /// Kinematic turbulence (beyond the paper): a frozen,
     /// divergence-free field of random Fourier modes of the stream function
     /// ψ = Σ a·cos(kx·x + ky·row + φ), u = ∂ψ/∂row, v = −∂ψ/∂x, periodic
     /// over `period` px in both directions (every k a multiple of

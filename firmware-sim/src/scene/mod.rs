@@ -33,12 +33,12 @@ pub enum SceneKind {
     /// Lamb–Oseen vortex, core radius H/8, peak 6 px per pair.
     Vortex,
     /// Kinematic turbulence: eddies from 8 to 128 px, up to 25 px per pair
-    /// (beyond the paper; issue 17).
+    /// (beyond the paper).
     Turbulence,
     /// Large smooth eddies (32 to 128 px) moving up to 40 px per pair.
     LargeShift,
     /// An array of Taylor–Green vortices carried by a uniform drift over the
-    /// glare band (beyond the paper; issue 44): a 2-D flow with glare.
+    /// glare band (beyond the paper): a 2-D flow with glare.
     VortexArray,
 }
 

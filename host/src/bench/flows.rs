@@ -1,4 +1,4 @@
-//! `spiv bench flows` (issue 44): every scene family through `spiv flow`
+//! `spiv bench flows`: every scene family through `spiv flow`
 //! with its defaults, against the dense truth, beside the frame camera and
 //! a TFP pair of the same spikes through `spiv piv`'s defaults.
 //!

@@ -1,4 +1,4 @@
-//! `spiv bench turbulence` (issue 17): window PIV and the dense stage on
+//! `spiv bench turbulence`: window PIV and the dense stage on
 //! the turbulence and large-shift scenes, for the frame camera's pair and
 //! the core's TFP pair of the same spikes, against the dense truth: mean
 //! end-point error (EPE), outliers, time. OpenPIV runs beside them in

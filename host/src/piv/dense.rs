@@ -1,4 +1,4 @@
-//! Dense refinement below the window size (issue 17): a variational optical
+//! Dense refinement below the window size: a variational optical
 //! flow for particle images — Horn & Schunck's brightness constancy and
 //! smoothness, solved coarse to fine on an image pyramid with symmetric
 //! warping (the flow is referenced to the pair's midpoint, as PIV and the

@@ -95,8 +95,8 @@ impl<'a> BitWriter<'a> {
 
     /// [`BitWriter::rice`] with `k = 0`, the adaptive coder's most common
     /// parameter on suppressed frames: `z` ones and a zero, without the
-    /// shifts by `k` (issue 18: sending is a third of the firmware
-    /// simulator's run).
+    /// shifts by `k` (sending is a large share of the firmware loop's
+    /// cost).
     #[inline(always)]
     pub(super) fn rice0(&mut self, z: u32) -> Result<(), WireError> {
         if z < ESCAPE {
