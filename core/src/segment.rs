@@ -758,17 +758,7 @@ pub(crate) fn segment(
         // most two, in order).
         let mut have: [Option<usize>; 2] = [None, None];
         if mc {
-            for ty in g.tiles.y0..=g.tiles.y1 {
-                let (row0, rr) = g.tile_rows(ty);
-                tile_medians_bytes(
-                    &ws.mc[..g.px],
-                    &ws.masks[g.words..2 * g.words],
-                    &mut ws.tiles[row0..row0 + g.tiles.x],
-                    (g.width, g.wpr),
-                    s0,
-                    rr,
-                );
-            }
+            compensated_tile_medians(ws, &g);
         }
         // No particle counts below this, whatever the background.
         let t_any = sat_c.min(u32::from(th.min_count(0)));
@@ -780,21 +770,7 @@ pub(crate) fn segment(
                 if !plain_candidates(ws, &g, r, (t_any, live), bg_class) {
                     continue;
                 }
-                for ty in [tp.0, tp.1] {
-                    if !have.contains(&Some(ty)) {
-                        let (row0, rr) = g.tile_rows(ty);
-                        tile_medians_sliced(
-                            &ws.counts[..8 * g.words],
-                            live,
-                            &ws.masks[g.words..2 * g.words],
-                            &mut ws.tiles[row0..row0 + g.tiles.x],
-                            (g.width, g.wpr),
-                            s0,
-                            rr,
-                        );
-                        have = [have[1], Some(ty)];
-                    }
-                }
+                plain_tile_medians(ws, &g, (tp.0, tp.1), live, &mut have);
             }
             row_backgrounds(ws.tiles, &g.tiles, tp, bg_row);
             let (floor, segs) = match (mc, &motion) {
@@ -856,6 +832,51 @@ impl StripGeometry {
             (ty * TILE + TILE).min(usize::from(self.s1)),
         );
         ((ty - self.tiles.y0) * self.tiles.x, rows)
+    }
+}
+
+/// The tile medians of every tile row of the strip from the compensated
+/// byte counts (`ws.mc`), particles left out.
+#[inline(always)]
+fn compensated_tile_medians(ws: &mut Workspace<'_>, g: &StripGeometry) {
+    for ty in g.tiles.y0..=g.tiles.y1 {
+        let (row0, rr) = g.tile_rows(ty);
+        tile_medians_bytes(
+            &ws.mc[..g.px],
+            &ws.masks[g.words..2 * g.words],
+            &mut ws.tiles[row0..row0 + g.tiles.x],
+            (g.width, g.wpr),
+            g.s0,
+            rr,
+        );
+    }
+}
+
+/// The tile medians of tile rows `ty0` and `ty1` from the bit-sliced
+/// plain counts (`live` planes), unless this level has them (`have`: the
+/// last two computed; rows ask for them in order).
+#[inline(always)]
+fn plain_tile_medians(
+    ws: &mut Workspace<'_>,
+    g: &StripGeometry,
+    (ty0, ty1): (usize, usize),
+    live: usize,
+    have: &mut [Option<usize>; 2],
+) {
+    for ty in [ty0, ty1] {
+        if !have.contains(&Some(ty)) {
+            let (row0, rr) = g.tile_rows(ty);
+            tile_medians_sliced(
+                &ws.counts[..8 * g.words],
+                live,
+                &ws.masks[g.words..2 * g.words],
+                &mut ws.tiles[row0..row0 + g.tiles.x],
+                (g.width, g.wpr),
+                g.s0,
+                rr,
+            );
+            *have = [have[1], Some(ty)];
+        }
     }
 }
 

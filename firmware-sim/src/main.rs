@@ -10,11 +10,14 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use clap::Parser;
+use spiv_core::downlink::DownlinkStats;
 use spiv_core::wire::{crc32, frame_crc, Encoding};
 use spiv_core::Method;
 use spiv_firmware_sim::downlink::ControlStream;
 use spiv_firmware_sim::drive::{run_on_dat, run_on_scene, DriveError};
-use spiv_firmware_sim::firmware::{Config, Counters, Faults, Faulty, Plain};
+use spiv_firmware_sim::firmware::{
+    Config, Counters, FaultCounts, Faults, Faulty, Plain, SentFrame,
+};
 use spiv_firmware_sim::scene::{SceneKind, SceneParams, TICK_HZ};
 use spiv_firmware_sim::simulation::Request;
 use spiv_formats::capture::Capture;
@@ -320,118 +323,143 @@ fn run(a: &Args) -> Result<(), Error> {
     };
     let t0 = Instant::now();
     let shared = Shared::default();
-    let kept;
-    let heard;
     if a.method == "mc" && a.tcp.is_none() && a.control.is_none() && !a.quiet && !a.checksum {
         eprintln!(
             "spiv-firmware-sim: --method mc without a downlink (--tcp or --control): the paper's adaptive frames"
         );
     }
-    let (counters, width, height, tick_hz, fault_counts) = if let Some(name) = &a.scene {
-        let kind = SceneKind::parse(name).map_err(|e| Error::Usage(e.to_string()))?;
-        let mut p = SceneParams::new(kind);
-        if let Some(dt) = a.dt {
-            p.pair_dt = dt;
-        }
-        let (w, h) = (a.width.unwrap_or(p.width), a.height.unwrap_or(p.height));
-        if w < 8
-            || h < 8
-            || (usize::from(w) * usize::from(h)) % 8 != 0
-            || u64::from(w) * u64::from(h) > MAX_FRAME_PIXELS
-        {
-            return Err(Error::Usage(format!(
-                "--width {w} --height {h}: both at least 8, width*height a multiple of 8 and at most {MAX_FRAME_PIXELS}"
-            )));
-        }
-        p.width = w;
-        p.height = h;
-        let mut cfg = config(a, p.pair_dt)?;
-        cfg.schedule.pairs = Some(a.pairs.unwrap_or(4).max(1));
-        let req = Request::new(p, a.seed);
-        let (out, mut control) = open_link(a, &shared)?;
-        let link = Faulty::new(Plain(out), faults, a.seed);
-        let (mut fw, _) = run_on_scene(&req, cfg, link, a.checksum, control.as_mut(), |_, _| {})?;
-        kept = fw.keep.take().unwrap_or_default();
-        let c = fw.counters();
-        heard = (fw.downlink(), control);
-        let fc = fw.into_link().counts;
-        (c, w, h, None, fc)
-    } else {
-        let path = a
-            .input
-            .as_ref()
-            .ok_or_else(|| Error::Usage("--scene or --input".into()))?;
-        let meta = Capture::beside(path)?;
-        let (w, h) = match (a.width, a.height, &meta) {
-            (Some(w), Some(h), _) => (w, h),
-            (None, None, Some(m)) => (m.width, m.height),
-            _ => {
-                return Err(Error::Usage(format!(
-                    "{}: give --width and --height (no scene.json beside it)",
-                    path.display()
-                )))
-            }
-        };
-        // scene.json is input too: a pair listed backwards is refused by
-        // `config`'s range check, not wrapped.
-        let dt =
-            a.dt.or_else(|| meta.as_ref().map(|m| m.pair[1].saturating_sub(m.pair[0])))
-                .unwrap_or(13);
-        let cfg = config(a, dt)?;
-        let (out, mut control) = open_link(a, &shared)?;
-        let link = Faulty::new(Plain(out), faults, a.seed);
-        let opts = DatOptions::default();
-        let mut fw = run_on_dat(path, w, h, opts, cfg, link, a.checksum, control.as_mut())?;
-        kept = fw.keep.take().unwrap_or_default();
-        let c = fw.counters();
-        heard = (fw.downlink(), control);
-        let fc = fw.into_link().counts;
-        (c, w, h, Some(meta.map_or(TICK_HZ, |m| m.tick_hz)), fc)
+    let run = match &a.scene {
+        Some(name) => from_scene(a, name, &shared, faults)?,
+        None => from_input(a, &shared, faults)?,
     };
     if a.checksum {
         let stream = shared.0.borrow();
-        let frames: Vec<u32> = kept.iter().map(|f| frame_crc(&f.data)).collect();
-        println!("{}", checksum_line(&counters, crc32(&stream), &frames));
+        let frames: Vec<u32> = run.kept.iter().map(|f| frame_crc(&f.data)).collect();
+        println!("{}", checksum_line(&run.counters, crc32(&stream), &frames));
         return Ok(());
     }
     if !a.quiet {
-        report(
-            &counters,
-            width,
-            height,
-            tick_hz,
-            t0.elapsed().as_secs_f64(),
-        );
+        let secs = t0.elapsed().as_secs_f64();
+        report(&run.counters, run.width, run.height, run.tick_hz, secs);
         if faults != Faults::default() {
+            let f = &run.faults;
             eprintln!(
                 "spiv-firmware-sim: faults: {} dropped, {} corrupted, {} truncated, {} stalled, {} reordered",
-                fault_counts.dropped,
-                fault_counts.corrupted,
-                fault_counts.truncated,
-                fault_counts.stalled,
-                fault_counts.reordered
+                f.dropped, f.corrupted, f.truncated, f.stalled, f.reordered
             );
         }
-        if let (d, Some(c)) = &heard {
-            let f = c.fault_counts();
-            eprintln!(
-                "spiv-firmware-sim: downlink: {} controls heard, {} applied, {} refused; {} pairs began without an answer{}",
-                d.heard,
-                d.applied,
-                d.refused,
-                c.timeouts,
-                if f == Default::default() {
-                    String::new()
-                } else {
-                    format!(
-                        "; faults: {} dropped, {} corrupted, {} truncated, {} reordered",
-                        f.dropped, f.corrupted, f.truncated, f.reordered
-                    )
-                }
-            );
+        if let (d, Some(c)) = &run.heard {
+            report_downlink(d, c);
         }
     }
     Ok(())
+}
+
+/// What one run of the firmware loop leaves for the report.
+struct Run {
+    counters: Counters,
+    width: u16,
+    height: u16,
+    /// The recording's tick rate (`None`: simulated at [`TICK_HZ`]).
+    tick_hz: Option<f64>,
+    /// Faults injected on the uplink.
+    faults: FaultCounts,
+    /// The frames as the firmware made them.
+    kept: Vec<SentFrame>,
+    /// What the downlink heard, and the control stream if there was one.
+    heard: (DownlinkStats, Option<ControlStream>),
+}
+
+/// The firmware loop on the simulated scene `name`.
+fn from_scene(a: &Args, name: &str, shared: &Shared, faults: Faults) -> Result<Run, Error> {
+    let kind = SceneKind::parse(name).map_err(|e| Error::Usage(e.to_string()))?;
+    let mut p = SceneParams::new(kind);
+    if let Some(dt) = a.dt {
+        p.pair_dt = dt;
+    }
+    let (w, h) = (a.width.unwrap_or(p.width), a.height.unwrap_or(p.height));
+    if w < 8
+        || h < 8
+        || (usize::from(w) * usize::from(h)) % 8 != 0
+        || u64::from(w) * u64::from(h) > MAX_FRAME_PIXELS
+    {
+        return Err(Error::Usage(format!(
+            "--width {w} --height {h}: both at least 8, width*height a multiple of 8 and at most {MAX_FRAME_PIXELS}"
+        )));
+    }
+    p.width = w;
+    p.height = h;
+    let mut cfg = config(a, p.pair_dt)?;
+    cfg.schedule.pairs = Some(a.pairs.unwrap_or(4).max(1));
+    let req = Request::new(p, a.seed);
+    let (out, mut control) = open_link(a, shared)?;
+    let link = Faulty::new(Plain(out), faults, a.seed);
+    let (mut fw, _) = run_on_scene(&req, cfg, link, a.checksum, control.as_mut(), |_, _| {})?;
+    Ok(Run {
+        kept: fw.keep.take().unwrap_or_default(),
+        counters: fw.counters(),
+        heard: (fw.downlink(), control),
+        faults: fw.into_link().counts,
+        width: w,
+        height: h,
+        tick_hz: None,
+    })
+}
+
+/// The firmware loop on the recording `--input` (its size and pair from
+/// the scene.json beside it, or the command line).
+fn from_input(a: &Args, shared: &Shared, faults: Faults) -> Result<Run, Error> {
+    let path = a
+        .input
+        .as_ref()
+        .ok_or_else(|| Error::Usage("--scene or --input".into()))?;
+    let meta = Capture::beside(path)?;
+    let (w, h) = match (a.width, a.height, &meta) {
+        (Some(w), Some(h), _) => (w, h),
+        (None, None, Some(m)) => (m.width, m.height),
+        _ => {
+            return Err(Error::Usage(format!(
+                "{}: give --width and --height (no scene.json beside it)",
+                path.display()
+            )))
+        }
+    };
+    // scene.json is input too: a pair listed backwards is refused by
+    // `config`'s range check, not wrapped.
+    let dt =
+        a.dt.or_else(|| meta.as_ref().map(|m| m.pair[1].saturating_sub(m.pair[0])))
+            .unwrap_or(13);
+    let cfg = config(a, dt)?;
+    let (out, mut control) = open_link(a, shared)?;
+    let link = Faulty::new(Plain(out), faults, a.seed);
+    let opts = DatOptions::default();
+    let mut fw = run_on_dat(path, w, h, opts, cfg, link, a.checksum, control.as_mut())?;
+    Ok(Run {
+        kept: fw.keep.take().unwrap_or_default(),
+        counters: fw.counters(),
+        heard: (fw.downlink(), control),
+        faults: fw.into_link().counts,
+        width: w,
+        height: h,
+        tick_hz: Some(meta.map_or(TICK_HZ, |m| m.tick_hz)),
+    })
+}
+
+/// One line on what the downlink heard, and its injected faults.
+fn report_downlink(d: &DownlinkStats, c: &ControlStream) {
+    let f = c.fault_counts();
+    let faults = if f == Default::default() {
+        String::new()
+    } else {
+        format!(
+            "; faults: {} dropped, {} corrupted, {} truncated, {} reordered",
+            f.dropped, f.corrupted, f.truncated, f.reordered
+        )
+    };
+    eprintln!(
+        "spiv-firmware-sim: downlink: {} controls heard, {} applied, {} refused; {} pairs began without an answer{faults}",
+        d.heard, d.applied, d.refused, c.timeouts
+    );
 }
 
 /// The parity line; `firmware-sim/cortex-m4` prints the same format.

@@ -9,12 +9,9 @@
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use spiv_core::buffers::WorkspaceBuf;
 use spiv_core::motion::{refine, Motion, Refine};
-use spiv_core::region::Region;
-use spiv_core::state::Buffers;
 use spiv_core::window::tfp;
 use spiv_core::{
-    reconstruct_adaptive, reconstruct_compensated, History, Params, PlaneView, Workspace,
-    WorkspaceSizes,
+    reconstruct_adaptive, reconstruct_compensated, History, Params, PlaneView, WorkspaceSizes,
 };
 use spiv_firmware_sim::scene::{Scene, SceneKind, SceneParams};
 use spiv_firmware_sim::sensor::{simulate, SensorParams};
@@ -24,70 +21,53 @@ use std::hint::black_box;
 const W: u16 = 400;
 const H: u16 = 250;
 const TICKS: u32 = 160;
+/// Pixels of a frame.
+const PX: usize = W as usize * H as usize;
+/// The frames' centre tick.
+const K: u32 = 80;
 
 fn stream() -> Vec<u8> {
     let scene = Scene::new(SceneParams::new(SceneKind::PaperLinear), 1, 160);
     simulate(&scene, SensorParams::default(), 1, 0, TICKS)
 }
 
-fn bench(c: &mut Criterion) {
-    let packed = stream();
-    let plane = usize::from(W) * usize::from(H) / 8;
-    let px = usize::from(W) * usize::from(H);
-
-    let mut g = c.benchmark_group("ingest");
-    g.throughput(Throughput::Elements(px as u64 * u64::from(TICKS)));
-    g.bench_function("400x250 x160 planes", |b| {
-        let mut hb = vec![0u64; History::words_needed(W, H, 128).unwrap()];
-        b.iter(|| {
-            let mut hist = History::new(&mut hb, W, H, 0, H, 128).unwrap();
-            for bytes in packed.chunks_exact(plane) {
-                hist.push(&PlaneView::new(bytes, W, H).unwrap()).unwrap();
-            }
-            black_box(hist.newest());
-        })
-    });
-    g.finish();
-
-    let mut hb = vec![0u64; History::words_needed(W, H, TICKS as u16).unwrap()];
-    let mut hist = History::new(&mut hb, W, H, 0, H, TICKS as u16).unwrap();
-    for bytes in packed.chunks_exact(plane) {
+/// Every plane of `packed` pushed into a history over `words`, `depth`
+/// planes deep.
+fn history<'a>(words: &'a mut [u64], packed: &[u8], depth: u16) -> History<'a> {
+    let mut hist = History::new(words, W, H, 0, H, depth).unwrap();
+    for bytes in packed.chunks_exact(PX / 8) {
         hist.push(&PlaneView::new(bytes, W, H).unwrap()).unwrap();
     }
+    hist
+}
+
+fn bench_ingest(c: &mut Criterion) {
+    let packed = stream();
+    let mut g = c.benchmark_group("ingest");
+    g.throughput(Throughput::Elements(PX as u64 * u64::from(TICKS)));
+    g.bench_function("400x250 x160 planes", |b| {
+        let mut hb = vec![0u64; History::words_needed(W, H, 128).unwrap()];
+        b.iter(|| black_box(history(&mut hb, &packed, 128).newest()))
+    });
+    g.finish();
+}
+
+fn bench_frames(c: &mut Criterion) {
+    let packed = stream();
+    let mut hb = vec![0u64; History::words_needed(W, H, TICKS as u16).unwrap()];
+    let hist = history(&mut hb, &packed, TICKS as u16);
     let p = Params::default();
     let mut g = c.benchmark_group("frame");
     g.sample_size(30);
     for strip in [H, 64] {
-        let sizes = WorkspaceSizes::for_strip(W, strip);
-        let n = sizes.pixels();
-        let (mut a, mut b2, mut cl) = (vec![0u64; sizes.count_words()], vec![0u8; n], vec![0u8; n]);
-        let mut labels = vec![0u16; n];
-        let mut masks = vec![0u64; sizes.mask_words()];
-        let mut tiles = vec![0u8; sizes.tiles()];
-        let mut parents = vec![0u16; sizes.parents()];
-        let mut regions = vec![Region::default(); usize::from(sizes.max_regions)];
-        let mut ws = Workspace::new(
-            sizes,
-            Buffers {
-                counts: &mut a,
-                c_t: &mut b2,
-                class: &mut cl,
-                labels: &mut labels,
-                masks: &mut masks,
-                tiles: &mut tiles,
-                parents: &mut parents,
-                regions: &mut regions,
-            },
-        )
-        .unwrap();
-        let mut out = vec![0u8; px];
+        let mut buf = WorkspaceBuf::new(WorkspaceSizes::for_strip(W, strip));
+        let mut ws = buf.workspace().unwrap();
+        let mut out = vec![0u8; PX];
         g.bench_with_input(
             BenchmarkId::new("adaptive n_max=128, strip rows", strip),
             &strip,
             |b, _| {
-                b.iter(|| {
-                    black_box(reconstruct_adaptive(&hist, 80, &p, &mut ws, &mut out).unwrap())
-                })
+                b.iter(|| black_box(reconstruct_adaptive(&hist, K, &p, &mut ws, &mut out).unwrap()))
             },
         );
     }
@@ -103,63 +83,44 @@ fn bench(c: &mut Criterion) {
     let vy = vec![0i16; usize::from(H)];
     let (mut rvx, mut rvy) = (vy.clone(), vy.clone());
     let mut mws = WorkspaceBuf::new(WorkspaceSizes::for_motion(W, H));
-    let mut out = vec![0u8; px];
+    let mut out = vec![0u8; PX];
     g.bench_function("motion-compensated n_max=128, refine on", |b| {
         b.iter(|| {
             let m = Motion { vx: &vx, vy: &vy };
-            refine(&hist, 80, &m, &Refine::default(), &mut rvx, &mut rvy).unwrap();
+            refine(&hist, K, &m, &Refine::default(), &mut rvx, &mut rvy).unwrap();
             let m = Motion { vx: &rvx, vy: &rvy };
             let mut ws = mws.workspace().unwrap();
-            black_box(
-                reconstruct_compensated(&hist, 80, &p, &mut ws, (0, H), &m, &mut out).unwrap(),
-            )
+            black_box(reconstruct_compensated(&hist, K, &p, &mut ws, (0, H), &m, &mut out).unwrap())
         })
     });
     g.bench_function("refine alone", |b| {
         b.iter(|| {
             let m = Motion { vx: &vx, vy: &vy };
-            refine(&hist, 80, &m, &Refine::default(), &mut rvx, &mut rvy).unwrap();
+            refine(&hist, K, &m, &Refine::default(), &mut rvx, &mut rvy).unwrap();
             black_box(rvx[0])
         })
     });
-    let mut counts = vec![0u8; px];
-    let mut out = vec![0u8; px];
+    let mut counts = vec![0u8; PX];
     g.bench_function("tfp n=8", |b| {
-        b.iter(|| black_box(tfp(&hist, 80, 8, 255, &mut counts, &mut out).unwrap()))
+        b.iter(|| black_box(tfp(&hist, K, 8, 255, &mut counts, &mut out).unwrap()))
     });
     let vol = SpikeVolume::from_packed(&packed, usize::from(W), usize::from(H), 0);
     g.sample_size(10);
     g.bench_function("f64 reference adaptive", |b| {
-        b.iter(|| black_box(adaptive_frame(&vol, 80, &p, 255.0)))
+        b.iter(|| black_box(adaptive_frame(&vol, K, &p, 255.0)))
     });
     g.finish();
+    print_error(&hist, &vol, &p);
+}
 
-    // Error of the fixed-point core against the reference, printed beside the times.
-    let sizes = WorkspaceSizes::for_strip(W, H);
-    let n = sizes.pixels();
-    let (mut a, mut b2, mut cl) = (vec![0u64; sizes.count_words()], vec![0u8; n], vec![0u8; n]);
-    let mut labels = vec![0u16; n];
-    let mut masks = vec![0u64; sizes.mask_words()];
-    let mut tiles = vec![0u8; sizes.tiles()];
-    let mut parents = vec![0u16; sizes.parents()];
-    let mut regions = vec![Region::default(); usize::from(sizes.max_regions)];
-    let mut ws = Workspace::new(
-        sizes,
-        Buffers {
-            counts: &mut a,
-            c_t: &mut b2,
-            class: &mut cl,
-            labels: &mut labels,
-            masks: &mut masks,
-            tiles: &mut tiles,
-            parents: &mut parents,
-            regions: &mut regions,
-        },
-    )
-    .unwrap();
-    let mut out = vec![0u8; px];
-    let stats = reconstruct_adaptive(&hist, 80, &p, &mut ws, &mut out).unwrap();
-    let r = adaptive_frame(&vol, 80, &p, 255.0);
+/// The error of the fixed-point core's adaptive frame against the f64
+/// reference, printed beside the times.
+fn print_error(hist: &History<'_>, vol: &SpikeVolume, p: &Params) {
+    let mut buf = WorkspaceBuf::new(WorkspaceSizes::for_strip(W, H));
+    let mut ws = buf.workspace().unwrap();
+    let mut out = vec![0u8; PX];
+    let stats = reconstruct_adaptive(hist, K, p, &mut ws, &mut out).unwrap();
+    let r = adaptive_frame(vol, K, p, 255.0);
     let diffs: Vec<f64> = out
         .iter()
         .zip(&r.gray)
@@ -174,5 +135,5 @@ fn bench(c: &mut Criterion) {
     );
 }
 
-criterion_group!(benches, bench);
+criterion_group!(benches, bench_ingest, bench_frames);
 criterion_main!(benches);

@@ -1,4 +1,4 @@
-//! The dense stage (issue 17) against dense ground truth: turbulence whose
+//! The dense stage against dense ground truth: turbulence whose
 //! eddies are smaller than the window and whose displacements exceed its
 //! quarter rule, where window PIV measures nothing; smooth flows, where it
 //! must not lose PIV's precision; flat and tiny images.

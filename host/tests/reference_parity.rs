@@ -372,7 +372,8 @@ proptest::proptest! {
 /// slow — and outside the glare band (stored rows ≥ 64 px from the wall)
 /// the refined velocities are much closer to the truth than it. (In the
 /// glare, where u is small and the glare's photon noise swamps the
-/// particles' contrast, refinement is not reliable yet: issue 14.)
+/// particles' contrast, refinement keeps the prediction: its contrast is
+/// flat there.)
 #[test]
 fn refined_motion_matches_reference_and_moves_toward_the_truth() {
     use spiv_core::motion::{refine, Motion, Refine};

@@ -507,60 +507,73 @@ fn simulate<'py>(
             "{n} planes of {w}x{h} px exceed {MAX_ARRAY_BYTES} bytes"
         )));
     }
-    let (spikes, frames, pair, truth, grid, full) = py
-        .detach(|| -> Result<_, Failure> {
-            let (planes, sim) = match &out {
-                None => simulate_planes(&req)?,
-                Some(dir) => {
-                    // The CLI's files, then the planes read back from them.
-                    let sim = simulate_to_dir(&req, dir, |_, _| {})?;
-                    let mut r =
-                        DatReader::open(&dir.join("spikes.dat"), w, h, DatOptions::default())?;
-                    (r.read_range(0, r.planes())?, sim)
-                }
-            };
-            let pb = (px / 8) as usize;
-            let mut spikes = Vec::with_capacity(planes.len() * 8);
-            for p in planes.chunks_exact(pb) {
-                spikes.extend(unpack_upright(p, w, h, true));
-            }
-            let pair = sim.meta.capture.pair;
-            let dtp = f64::from(pair[1] - pair[0]);
-            let grid = Grid::new(usize::from(w), usize::from(h), 32, 16)
-                .ok_or_else(|| format!("{w}x{h} px: smaller than the 32-px truth grid"))?;
-            let truth = sim.scene.truth_vectors(&grid.centres(), dtp);
-            let dense = sim.scene.truth_dense(dtp);
-            let [fa, fb] = sim.frames;
-            Ok((
-                spikes,
-                [fa, fb].concat(),
-                pair,
-                (truth, dense),
-                grid,
-                req.camera.max_dn(),
-            ))
-        })
-        .map_err(err)?;
-    let (h, w) = (usize::from(h), usize::from(w));
-    let t = spikes.len() / (h * w);
-    let shape = |e: numpy::ndarray::ShapeError| SpivError::new_err(e.to_string());
+    let sim = py.detach(|| simulated(&req, out.as_deref())).map_err(err)?;
+    simulated_dict(py, sim)
+}
+
+/// What [`simulate`] returns, before it becomes a dict.
+struct Simulation {
+    /// Upright 0/1 per pixel, plane after plane.
+    spikes: Vec<u8>,
+    /// The frame camera's pair, back to back, upright.
+    frames: Vec<u16>,
+    frame_full_scale: u16,
+    pair: [u32; 2],
+    truth: Vec<Vector>,
+    dense: spiv_formats::dense::DenseField,
+    grid: Grid,
+    size: (usize, usize),
+}
+
+/// Simulates `req` (writing `spiv simulate`'s files to `out` too, and
+/// reading the planes back from them) with its truth on the 32-px grid.
+fn simulated(
+    req: &spiv_firmware_sim::simulation::Request,
+    out: Option<&Path>,
+) -> Result<Simulation, Failure> {
+    let (w, h) = (req.scene.width, req.scene.height);
+    let (planes, sim) = match out {
+        None => simulate_planes(req)?,
+        Some(dir) => {
+            let sim = simulate_to_dir(req, dir, |_, _| {})?;
+            let mut r = DatReader::open(&dir.join("spikes.dat"), w, h, DatOptions::default())?;
+            (r.read_range(0, r.planes())?, sim)
+        }
+    };
+    let pb = usize::from(w) * usize::from(h) / 8;
+    let mut spikes = Vec::with_capacity(planes.len() * 8);
+    for p in planes.chunks_exact(pb) {
+        spikes.extend(unpack_upright(p, w, h, true));
+    }
+    let pair = sim.meta.capture.pair;
+    let dtp = f64::from(pair[1] - pair[0]);
+    let grid = Grid::new(usize::from(w), usize::from(h), 32, 16)
+        .ok_or_else(|| format!("{w}x{h} px: smaller than the 32-px truth grid"))?;
+    let truth = sim.scene.truth_vectors(&grid.centres(), dtp);
+    let dense = sim.scene.truth_dense(dtp);
+    let [fa, fb] = sim.frames;
+    Ok(Simulation {
+        spikes,
+        frames: [fa, fb].concat(),
+        frame_full_scale: req.camera.max_dn(),
+        pair,
+        truth,
+        dense,
+        grid,
+        size: (usize::from(h), usize::from(w)),
+    })
+}
+
+/// [`simulate`]'s dict.
+fn simulated_dict(py: Python<'_>, s: Simulation) -> PyResult<Bound<'_, PyDict>> {
+    let (h, w) = s.size;
+    let t = s.spikes.len() / (h * w);
     let d = PyDict::new(py);
-    d.set_item(
-        "spikes",
-        Array3::from_shape_vec((t, h, w), spikes)
-            .map_err(shape)?
-            .into_pyarray(py),
-    )?;
-    d.set_item(
-        "frames",
-        Array3::from_shape_vec((2, h, w), frames)
-            .map_err(shape)?
-            .into_pyarray(py),
-    )?;
-    d.set_item("frame_full_scale", full)?;
-    d.set_item("pair", (pair[0], pair[1]))?;
-    let (truth, dense) = truth;
-    let (x, y, u, v, _) = field_arrays(&truth, &grid);
+    d.set_item("spikes", array3((t, h, w), s.spikes)?.into_pyarray(py))?;
+    d.set_item("frames", array3((2, h, w), s.frames)?.into_pyarray(py))?;
+    d.set_item("frame_full_scale", s.frame_full_scale)?;
+    d.set_item("pair", (s.pair[0], s.pair[1]))?;
+    let (x, y, u, v, _) = field_arrays(&s.truth, &s.grid);
     let td = PyDict::new(py);
     td.set_item("x", x.into_pyarray(py))?;
     td.set_item("y", y.into_pyarray(py))?;
@@ -568,20 +581,20 @@ fn simulate<'py>(
     td.set_item("v", v.into_pyarray(py))?;
     d.set_item("truth", td)?;
     let dd = PyDict::new(py);
-    dd.set_item(
-        "u",
-        Array2::from_shape_vec((h, w), dense.u)
-            .map_err(shape)?
-            .into_pyarray(py),
-    )?;
-    dd.set_item(
-        "v",
-        Array2::from_shape_vec((h, w), dense.v)
-            .map_err(shape)?
-            .into_pyarray(py),
-    )?;
+    dd.set_item("u", array2((h, w), s.dense.u)?.into_pyarray(py))?;
+    dd.set_item("v", array2((h, w), s.dense.v)?.into_pyarray(py))?;
     d.set_item("truth_dense", dd)?;
     Ok(d)
+}
+
+/// `v` as an array of `shape` (a Python error if the lengths disagree).
+fn array2<T>(shape: (usize, usize), v: Vec<T>) -> PyResult<Array2<T>> {
+    Array2::from_shape_vec(shape, v).map_err(|e| SpivError::new_err(e.to_string()))
+}
+
+/// `v` as an array of `shape` (a Python error if the lengths disagree).
+fn array3<T>(shape: (usize, usize, usize), v: Vec<T>) -> PyResult<Array3<T>> {
+    Array3::from_shape_vec(shape, v).map_err(|e| SpivError::new_err(e.to_string()))
 }
 
 /// The flow job on a spike recording (the same as `spiv flow`, without
@@ -645,16 +658,21 @@ fn flow<'py>(
             allow_truncated: false,
         },
     };
-    let (out, grid_of) = py
+    let out = py
         .detach(|| -> Result<_, Failure> {
             let mut rec = Recording::open(&path, &fopts)?;
             let o = req.options(&rec, &path)?;
-            let out = run_flow(&mut rec, &o, |_, _| {})?;
-            let grid = out.grid;
-            Ok((out, grid))
+            Ok(run_flow(&mut rec, &o, |_, _| {})?)
         })
         .map_err(err)?;
-    let (ny, nx) = (grid_of.ny, grid_of.nx);
+    flow_dict(py, out)
+}
+
+/// [`flow`]'s dict: the pairs' fields stacked along the first axis, the
+/// mean field, and the mean dense field if there is one.
+fn flow_dict(py: Python<'_>, out: spiv_host::flow::FlowOutcome) -> PyResult<Bound<'_, PyDict>> {
+    let grid = &out.grid;
+    let (ny, nx) = (grid.ny, grid.nx);
     let p = out.pairs.len();
     let mut us = Array3::<f64>::zeros((p, ny, nx));
     let mut vs = Array3::<f64>::zeros((p, ny, nx));
@@ -663,21 +681,22 @@ fn flow<'py>(
     let mut svs = Array3::<f64>::zeros((p, ny, nx));
     let mut ticks = Array2::<i64>::zeros((p, 2));
     let mut methods = Vec::with_capacity(p);
+    let axis = numpy::ndarray::Axis(0);
     for (i, pr) in out.pairs.iter().enumerate() {
-        let (_, _, u, v, f) = field_arrays(&pr.vectors, &grid_of);
-        us.index_axis_mut(numpy::ndarray::Axis(0), i).assign(&u);
-        vs.index_axis_mut(numpy::ndarray::Axis(0), i).assign(&v);
-        fs.index_axis_mut(numpy::ndarray::Axis(0), i).assign(&f);
-        let (su, sv) = sigma_arrays(&pr.sigma, &grid_of);
-        sus.index_axis_mut(numpy::ndarray::Axis(0), i).assign(&su);
-        svs.index_axis_mut(numpy::ndarray::Axis(0), i).assign(&sv);
+        let (_, _, u, v, f) = field_arrays(&pr.vectors, grid);
+        us.index_axis_mut(axis, i).assign(&u);
+        vs.index_axis_mut(axis, i).assign(&v);
+        fs.index_axis_mut(axis, i).assign(&f);
+        let (su, sv) = sigma_arrays(&pr.sigma, grid);
+        sus.index_axis_mut(axis, i).assign(&su);
+        svs.index_axis_mut(axis, i).assign(&sv);
         ticks[[i, 0]] = pr.ticks[0] as i64;
         ticks[[i, 1]] = pr.ticks[1] as i64;
         methods.push(pr.method.name());
     }
     let mean = out.mean();
-    let (x, y, mu, mv, mf) = field_arrays(&mean.vectors, &grid_of);
-    let (msu, msv) = sigma_arrays(&mean.sigma, &grid_of);
+    let (x, y, mu, mv, mf) = field_arrays(&mean.vectors, grid);
+    let (msu, msv) = sigma_arrays(&mean.sigma, grid);
     let mpairs = Array2::from_shape_fn((ny, nx), |(r, c)| {
         mean.pairs.get(r * nx + c).copied().unwrap_or(0)
     });
@@ -698,20 +717,9 @@ fn flow<'py>(
     d.set_item("mean_sigma_v", msv.into_pyarray(py))?;
     d.set_item("mean_pairs", mpairs.into_pyarray(py))?;
     if let Some(m) = out.mean_dense {
-        let shape = |e: numpy::ndarray::ShapeError| SpivError::new_err(e.to_string());
         let (h, w) = (m.height, m.width);
-        d.set_item(
-            "mean_dense_u",
-            Array2::from_shape_vec((h, w), m.u)
-                .map_err(shape)?
-                .into_pyarray(py),
-        )?;
-        d.set_item(
-            "mean_dense_v",
-            Array2::from_shape_vec((h, w), m.v)
-                .map_err(shape)?
-                .into_pyarray(py),
-        )?;
+        d.set_item("mean_dense_u", array2((h, w), m.u)?.into_pyarray(py))?;
+        d.set_item("mean_dense_v", array2((h, w), m.v)?.into_pyarray(py))?;
     }
     Ok(d)
 }

@@ -406,6 +406,114 @@ impl Tracks {
     }
 }
 
+/// Side of the seeding cells, px (the paper's 32×32 density rule).
+const SEED_CELL: f64 = 32.0;
+
+/// The area to seed, `(x0, x1, r0, r1)` px: the image and an 8-px margin,
+/// extended by whole cells up- and downstream by what the flow carries
+/// into the image by `last_tick`; one period of a periodic field.
+fn seeding_area(params: &SceneParams, flow: &Flow, last_tick: u32) -> (f64, f64, f64, f64) {
+    let (w, h) = (f64::from(params.width), f64::from(params.height));
+    let (mut umin, mut umax) = (0.0f64, 0.0f64);
+    for i in 0..=64 {
+        if let Some(u) = flow.profile_u(h * f64::from(i) / 64.0) {
+            umin = umin.min(u);
+            umax = umax.max(u);
+        }
+    }
+    let t = f64::from(last_tick);
+    let margin = 8.0;
+    // Seeding cells sit on the image's own 32×32 grid (the rule is about
+    // those cells), extended by whole cells up- and downstream.
+    let snap_lo = |v: f64| (v / SEED_CELL).floor() * SEED_CELL;
+    let x0 = snap_lo(-margin - umax.max(0.0) * t);
+    let x1 = w + margin - umin.min(0.0) * t;
+    let (r0, r1) = match flow {
+        Flow::Uniform { v, .. } => (
+            snap_lo(-margin - v.max(0.0) * t),
+            h + margin - v.min(0.0) * t,
+        ),
+        _ => (snap_lo(-margin), h + margin),
+    };
+    // A periodic field: seed one period; particles wrap around it.
+    match flow {
+        Flow::Turbulence { period, .. } => (0.0, *period, 0.0, *period),
+        _ => (x0, x1, r0, r1),
+    }
+}
+
+/// Particles over `area` from `seed`: per cell at least `per_cell`,
+/// centres at least `min_spacing` apart, at most 1000 tries per particle.
+fn seed_particles(
+    params: &SceneParams,
+    (x0, x1, r0, r1): (f64, f64, f64, f64),
+    seed: u64,
+) -> Vec<Particle> {
+    let cell = SEED_CELL;
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut particles: Vec<Particle> = Vec::new();
+    let (nx, ny) = (
+        ((x1 - x0) / cell).ceil() as usize,
+        ((r1 - r0) / cell).ceil() as usize,
+    );
+    // A grid of particle indices for the spacing test.
+    let mut grid: Vec<Vec<usize>> = vec![Vec::new(); nx * ny];
+    let min2 = params.min_spacing * params.min_spacing;
+    for cy in 0..ny {
+        for cx in 0..nx {
+            let (cx0, cy0) = (x0 + cell * cx as f64, r0 + cell * cy as f64);
+            let (cw, ch) = (cell.min(x1 - cx0), cell.min(r1 - cy0));
+            let mut have = grid[cy * nx + cx].len();
+            let mut tries = 0;
+            while have < params.per_cell && tries < 1000 * params.per_cell {
+                tries += 1;
+                let x = cx0 + rng.gen::<f64>() * cw;
+                let row = cy0 + rng.gen::<f64>() * ch;
+                let near = (cy.saturating_sub(1)..(cy + 2).min(ny)).any(|gy| {
+                    (cx.saturating_sub(1)..(cx + 2).min(nx)).any(|gx| {
+                        grid[gy * nx + gx].iter().any(|&i| {
+                            let p: &Particle = &particles[i];
+                            (p.x - x).powi(2) + (p.row - row).powi(2) < min2
+                        })
+                    })
+                });
+                if near {
+                    continue;
+                }
+                let peak = params.particle_peak * (1.0 + 0.3 * (2.0 * rng.gen::<f64>() - 1.0));
+                let d =
+                    params.diameter.0 + (params.diameter.1 - params.diameter.0) * rng.gen::<f64>();
+                grid[cy * nx + cx].push(particles.len());
+                particles.push(Particle {
+                    x,
+                    row,
+                    peak,
+                    diameter: d,
+                });
+                have += 1;
+            }
+        }
+    }
+    particles
+}
+
+/// Density reached over the image's full 32×32 cells at tick 0 (cells cut
+/// by the right or bottom edge hold proportionally fewer): `(cells with at
+/// least per_cell particles, cells)`.
+fn density_reached(params: &SceneParams, particles: &[Particle]) -> (usize, usize) {
+    let cell = SEED_CELL;
+    let (w, h) = (f64::from(params.width), f64::from(params.height));
+    let (icx, icy) = ((w / cell).floor() as usize, (h / cell).floor() as usize);
+    let mut per = vec![0usize; icx * icy];
+    for p in particles {
+        if p.x >= 0.0 && p.x < icx as f64 * cell && p.row >= 0.0 && p.row < icy as f64 * cell {
+            per[(p.row / cell) as usize * icx + (p.x / cell) as usize] += 1;
+        }
+    }
+    let ok = per.iter().filter(|&&n| n >= params.per_cell).count();
+    (ok, per.len())
+}
+
 impl Scene {
     /// Seeds particles for ticks `0..=last_tick`: over the image, plus the
     /// region upstream that the flow carries into it by then. Per 32×32 cell
@@ -413,95 +521,9 @@ impl Scene {
     /// tries per particle (the paper's rule with its bounded retries).
     pub fn new(params: SceneParams, seed: u64, last_tick: u32) -> Scene {
         let flow = params.flow();
-        let (w, h) = (f64::from(params.width), f64::from(params.height));
-        let (mut umin, mut umax) = (0.0f64, 0.0f64);
-        for i in 0..=64 {
-            if let Some(u) = flow.profile_u(h * f64::from(i) / 64.0) {
-                umin = umin.min(u);
-                umax = umax.max(u);
-            }
-        }
-        let t = f64::from(last_tick);
-        let margin = 8.0;
-        let cell = 32.0;
-        // Seeding cells sit on the image's own 32×32 grid (the rule is about
-        // those cells), extended by whole cells up- and downstream.
-        let snap_lo = |v: f64| (v / cell).floor() * cell;
-        let x0 = snap_lo(-margin - umax.max(0.0) * t);
-        let x1 = w + margin - umin.min(0.0) * t;
-        let (r0, r1) = match flow {
-            Flow::Uniform { v, .. } => (
-                snap_lo(-margin - v.max(0.0) * t),
-                h + margin - v.min(0.0) * t,
-            ),
-            _ => (snap_lo(-margin), h + margin),
-        };
-        // A periodic field: seed one period; particles wrap around it.
-        let (x0, x1, r0, r1) = match &flow {
-            Flow::Turbulence { period, .. } => (0.0, *period, 0.0, *period),
-            _ => (x0, x1, r0, r1),
-        };
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let mut particles: Vec<Particle> = Vec::new();
-        let (nx, ny) = (
-            ((x1 - x0) / cell).ceil() as usize,
-            ((r1 - r0) / cell).ceil() as usize,
-        );
-        // A grid of particle indices for the spacing test.
-        let mut grid: Vec<Vec<usize>> = vec![Vec::new(); nx * ny];
-        let min2 = params.min_spacing * params.min_spacing;
-        let mut image_ok = 0;
-        let mut image_cells = 0;
-        for cy in 0..ny {
-            for cx in 0..nx {
-                let (cx0, cy0) = (x0 + cell * cx as f64, r0 + cell * cy as f64);
-                let (cw, ch) = (cell.min(x1 - cx0), cell.min(r1 - cy0));
-                let mut have = grid[cy * nx + cx].len();
-                let mut tries = 0;
-                while have < params.per_cell && tries < 1000 * params.per_cell {
-                    tries += 1;
-                    let x = cx0 + rng.gen::<f64>() * cw;
-                    let row = cy0 + rng.gen::<f64>() * ch;
-                    let near = (cy.saturating_sub(1)..(cy + 2).min(ny)).any(|gy| {
-                        (cx.saturating_sub(1)..(cx + 2).min(nx)).any(|gx| {
-                            grid[gy * nx + gx].iter().any(|&i| {
-                                let p: &Particle = &particles[i];
-                                (p.x - x).powi(2) + (p.row - row).powi(2) < min2
-                            })
-                        })
-                    });
-                    if near {
-                        continue;
-                    }
-                    let peak = params.particle_peak * (1.0 + 0.3 * (2.0 * rng.gen::<f64>() - 1.0));
-                    let d = params.diameter.0
-                        + (params.diameter.1 - params.diameter.0) * rng.gen::<f64>();
-                    grid[cy * nx + cx].push(particles.len());
-                    particles.push(Particle {
-                        x,
-                        row,
-                        peak,
-                        diameter: d,
-                    });
-                    have += 1;
-                }
-            }
-        }
-        // Density reached over the image's full 32×32 cells at tick 0 (cells
-        // cut by the right or bottom edge hold proportionally fewer).
-        let (icx, icy) = ((w / cell).floor() as usize, (h / cell).floor() as usize);
-        let mut per = vec![0usize; icx * icy];
-        for p in &particles {
-            if p.x >= 0.0 && p.x < icx as f64 * cell && p.row >= 0.0 && p.row < icy as f64 * cell {
-                per[(p.row / cell) as usize * icx + (p.x / cell) as usize] += 1;
-            }
-        }
-        for &n in &per {
-            image_cells += 1;
-            if n >= params.per_cell {
-                image_ok += 1;
-            }
-        }
+        let area = seeding_area(&params, &flow, last_tick);
+        let particles = seed_particles(&params, area, seed);
+        let density_reached = density_reached(&params, &particles);
         let static_rows = (0..params.height)
             .map(|i| Self::static_light_of(&params, usize::from(i)) as f32)
             .collect();
@@ -510,7 +532,7 @@ impl Scene {
             params,
             flow,
             particles,
-            density_reached: (image_ok, image_cells),
+            density_reached,
             static_rows,
             tracks,
         }

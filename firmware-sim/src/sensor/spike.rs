@@ -197,100 +197,17 @@ impl SpikeSensor {
     pub fn tick(&mut self, light: &[f32], flip: bool, plane: &mut [u8]) -> u64 {
         let (w, h) = (self.width, self.height);
         let p = self.params;
-        let (phi0, dark) = (p.phi0 as f32, p.dark as f32);
         let table = normal_table();
         let spikes: u64 = self
             .rows
             .par_iter_mut()
             .zip(light.par_chunks(w))
             .map(|(row, lrow)| {
-                let Row {
-                    charge,
-                    phi,
-                    rng,
-                    bits,
-                    z,
-                    fired,
-                } = row;
-                // Pass 1: the row's normal draws, 5 per 64-bit word.
-                for five in z.chunks_mut(5) {
-                    let mut bits = rng.next_u64();
-                    for v in five {
-                        *v = table[(bits & ((1 << NORMAL_BITS) - 1)) as usize];
-                        bits >>= NORMAL_BITS;
-                    }
+                row.draw_normals(table);
+                if row.integrate(lrow, &p) {
+                    row.integrate_dim(lrow, &p);
                 }
-                // Pass 2: branch-free integrate-and-fire (vectorises).
-                let zero_reset = p.reset == Reset::Zero;
-                let mut small = false;
-                for ((((c, &ph), &r), &zz), f) in charge
-                    .iter_mut()
-                    .zip(phi.iter())
-                    .zip(lrow)
-                    .zip(z.iter())
-                    .zip(fired.iter_mut())
-                {
-                    let mean = (r.max(0.0) + dark) * phi0;
-                    small |= mean < 10.0;
-                    let a = *c + (mean + mean.sqrt() * zz).max(0.0);
-                    let spike = a >= ph;
-                    let after = if zero_reset {
-                        0.0
-                    } else {
-                        (a - ph).min(ph * 0.999_999)
-                    };
-                    *c = if spike { after } else { a };
-                    *f = u8::from(spike);
-                }
-                // Dim pixels (under 10 electrons a tick): redo with exact Poisson.
-                if small {
-                    for ((((c, &ph), &r), &zz), f) in charge
-                        .iter_mut()
-                        .zip(phi.iter())
-                        .zip(lrow)
-                        .zip(z.iter())
-                        .zip(fired.iter_mut())
-                    {
-                        let mean = (r.max(0.0) + dark) * phi0;
-                        if mean >= 10.0 {
-                            continue;
-                        }
-                        // Undo pass 2 for this pixel, then integrate exactly.
-                        let before = if *f == 1 {
-                            None
-                        } else {
-                            Some(*c - (mean + mean.sqrt() * zz).max(0.0))
-                        };
-                        let Some(c0) = before else {
-                            // It fired with the approximation; its charge
-                            // before is unknown, so keep the spike (rare:
-                            // a dim pixel fires once per ≥ 100 ticks).
-                            continue;
-                        };
-                        let a = c0 + poisson_small(rng, mean);
-                        if a >= ph {
-                            *f = 1;
-                            *c = if zero_reset {
-                                0.0
-                            } else {
-                                (a - ph).min(ph * 0.999_999)
-                            };
-                        } else {
-                            *c = a;
-                        }
-                    }
-                }
-                // Pass 3: spike bits.
-                let mut n = 0u64;
-                for (word, f64s) in bits.iter_mut().zip(fired.chunks(64)) {
-                    let mut w = 0u64;
-                    for (k, &f) in f64s.iter().enumerate() {
-                        w |= u64::from(f) << k;
-                    }
-                    n += u64::from(w.count_ones());
-                    *word = w;
-                }
-                n
+                row.pack_bits()
             })
             .sum();
         plane.fill(0);
@@ -299,6 +216,104 @@ impl SpikeSensor {
             spiv_formats::dat::pack_row(&row.bits, stored, w, plane);
         }
         spikes
+    }
+}
+
+impl Row {
+    /// The row's normal draws for this tick, 5 per 64-bit word of its
+    /// generator, from the quantile `table`.
+    fn draw_normals(&mut self, table: &[f32]) {
+        for five in self.z.chunks_mut(5) {
+            let mut bits = self.rng.next_u64();
+            for v in five {
+                *v = table[(bits & ((1 << NORMAL_BITS) - 1)) as usize];
+                bits >>= NORMAL_BITS;
+            }
+        }
+    }
+
+    /// Branch-free integrate-and-fire of every pixel of the row under
+    /// `light` (thresholds per tick), photon noise as a normal draw
+    /// (vectorises). Whether a pixel got under 10 electrons a tick, where
+    /// the normal is a poor model ([`Row::integrate_dim`]).
+    fn integrate(&mut self, light: &[f32], p: &SensorParams) -> bool {
+        let (phi0, dark) = (p.phi0 as f32, p.dark as f32);
+        let zero_reset = p.reset == Reset::Zero;
+        let mut small = false;
+        for ((((c, &ph), &r), &zz), f) in self
+            .charge
+            .iter_mut()
+            .zip(self.phi.iter())
+            .zip(light)
+            .zip(self.z.iter())
+            .zip(self.fired.iter_mut())
+        {
+            let mean = (r.max(0.0) + dark) * phi0;
+            small |= mean < 10.0;
+            let a = *c + (mean + mean.sqrt() * zz).max(0.0);
+            let spike = a >= ph;
+            let after = if zero_reset {
+                0.0
+            } else {
+                (a - ph).min(ph * 0.999_999)
+            };
+            *c = if spike { after } else { a };
+            *f = u8::from(spike);
+        }
+        small
+    }
+
+    /// Dim pixels (under 10 electrons a tick) integrated again with exact
+    /// Poisson draws: [`Row::integrate`]'s step undone, then redone.
+    fn integrate_dim(&mut self, light: &[f32], p: &SensorParams) {
+        let (phi0, dark) = (p.phi0 as f32, p.dark as f32);
+        let zero_reset = p.reset == Reset::Zero;
+        for ((((c, &ph), &r), &zz), f) in self
+            .charge
+            .iter_mut()
+            .zip(self.phi.iter())
+            .zip(light)
+            .zip(self.z.iter())
+            .zip(self.fired.iter_mut())
+        {
+            let mean = (r.max(0.0) + dark) * phi0;
+            if mean >= 10.0 {
+                continue;
+            }
+            if *f == 1 {
+                // It fired with the approximation; its charge before is
+                // unknown, so keep the spike (rare: a dim pixel fires once
+                // per ≥ 100 ticks).
+                continue;
+            }
+            let c0 = *c - (mean + mean.sqrt() * zz).max(0.0);
+            let a = c0 + poisson_small(&mut self.rng, mean);
+            if a >= ph {
+                *f = 1;
+                *c = if zero_reset {
+                    0.0
+                } else {
+                    (a - ph).min(ph * 0.999_999)
+                };
+            } else {
+                *c = a;
+            }
+        }
+    }
+
+    /// The row's spikes packed into words (bit `k` of word `j` is pixel
+    /// `64j + k`); returns how many.
+    fn pack_bits(&mut self) -> u64 {
+        let mut n = 0u64;
+        for (word, f64s) in self.bits.iter_mut().zip(self.fired.chunks(64)) {
+            let mut w = 0u64;
+            for (k, &f) in f64s.iter().enumerate() {
+                w |= u64::from(f) << k;
+            }
+            n += u64::from(w.count_ones());
+            *word = w;
+        }
+        n
     }
 }
 

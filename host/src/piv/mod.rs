@@ -451,72 +451,106 @@ pub fn piv_ensemble(
         s,
         size: (h, w),
     };
-    let run = |by: Option<&Field>, rung: Rung| passes.run(by, rung);
-    let mut prev: Option<(Field, f64)> = None;
-    let mut predictor: Option<Field> = initial.cloned();
-    // The last field that passed (any grid): what a failed last pass
-    // degrades to.
-    let mut good: Option<Field> = None;
-    // Once a rescue needed the neighbours to judge weak peaks, so do the
-    // passes after it: the frames' peaks do not grow stronger.
-    let mut relaxed = false;
-    // Whether the reported pass judged its peaks by the neighbours (then
-    // none of its vectors is valid).
-    let mut weak = false;
-    let npass = s.windows.len();
-    for (pi, &size) in s.windows.iter().enumerate() {
-        let rung = Rung {
-            relaxed,
-            ..Rung::plain(size)
-        };
-        // Every pass but the last deforms by the filtered predictor
-        // (`smooth`); the last one measures the residual of the field as
-        // it stands, so that what it reports is not smoothed.
-        let filtered = match &predictor {
-            Some(f) if pi + 1 < npass => Some(smooth::filtered(f, s.edge)),
-            _ => None,
-        };
-        let (mut field, mut support) = run(filtered.as_ref().or(predictor.as_ref()), rung)?;
-        let good_same_grid = prev
-            .as_ref()
-            .is_some_and(|(f, sup)| *sup >= MIN_SUPPORT && f.grid == field.grid);
-        if s.rescue && support < MIN_SUPPORT && predictor.is_none() && !good_same_grid {
-            // A pass on the undeformed images failed: a signal, not a
-            // verdict. Larger displacements than the window's quarter rule
-            // or too few particles per window both fail so; the rescue
-            // rungs measure a coarser field, which then predicts (deforms)
-            // this pass again.
-            if let Some((coarse, how)) = rescue(&run, size, w, h)? {
-                relaxed |= how.relaxed;
-                let rung = Rung {
-                    relaxed,
-                    ..Rung::plain(size)
-                };
-                let (f2, s2) = run(Some(&coarse), rung)?;
-                good = Some(coarse);
-                if s2 >= MIN_SUPPORT {
-                    (field, support) = (f2, s2);
+    let m = passes.measure(initial)?;
+    Ok(concluded(
+        m.field,
+        m.support,
+        m.weak,
+        m.good.as_ref(),
+        raw,
+        s,
+    ))
+}
+
+/// What [`Passes::measure`] leaves: the reported pass's field and its
+/// support, whether it judged its peaks by the neighbours, and the last
+/// field that passed (any grid).
+struct Measured {
+    field: Field,
+    support: f64,
+    weak: bool,
+    good: Option<Field>,
+}
+
+impl Passes<'_> {
+    /// Every pass of the settings' windows, from `initial` if given: each
+    /// pass but the last deforms by the filtered predictor, a failed pass
+    /// on undeformed images is rescued by coarser rungs, and a failed pass
+    /// after a good one on the same grid leaves that one standing.
+    fn measure(&self, initial: Option<&Field>) -> Result<Measured, PivError> {
+        let (s, (h, w)) = (self.s, self.size);
+        let run = |by: Option<&Field>, rung: Rung| self.run(by, rung);
+        let mut prev: Option<(Field, f64)> = None;
+        let mut predictor: Option<Field> = initial.cloned();
+        // The last field that passed (any grid): what a failed last pass
+        // degrades to.
+        let mut good: Option<Field> = None;
+        // Once a rescue needed the neighbours to judge weak peaks, so do the
+        // passes after it: the frames' peaks do not grow stronger.
+        let mut relaxed = false;
+        // Whether the reported pass judged its peaks by the neighbours (then
+        // none of its vectors is valid).
+        let mut weak = false;
+        let npass = s.windows.len();
+        for (pi, &size) in s.windows.iter().enumerate() {
+            let rung = Rung {
+                relaxed,
+                ..Rung::plain(size)
+            };
+            // Every pass but the last deforms by the filtered predictor
+            // (`smooth`); the last one measures the residual of the field as
+            // it stands, so that what it reports is not smoothed.
+            let filtered = match &predictor {
+                Some(f) if pi + 1 < npass => Some(smooth::filtered(f, s.edge)),
+                _ => None,
+            };
+            let (mut field, mut support) = run(filtered.as_ref().or(predictor.as_ref()), rung)?;
+            let good_same_grid = prev
+                .as_ref()
+                .is_some_and(|(f, sup)| *sup >= MIN_SUPPORT && f.grid == field.grid);
+            if s.rescue && support < MIN_SUPPORT && predictor.is_none() && !good_same_grid {
+                // A pass on the undeformed images failed: a signal, not a
+                // verdict. Larger displacements than the window's quarter rule
+                // or too few particles per window both fail so; the rescue
+                // rungs measure a coarser field, which then predicts (deforms)
+                // this pass again.
+                if let Some((coarse, how)) = rescue(&run, size, w, h)? {
+                    relaxed |= how.relaxed;
+                    let rung = Rung {
+                        relaxed,
+                        ..Rung::plain(size)
+                    };
+                    let (f2, s2) = run(Some(&coarse), rung)?;
+                    good = Some(coarse);
+                    if s2 >= MIN_SUPPORT {
+                        (field, support) = (f2, s2);
+                    }
                 }
             }
+            // A pass where fewer than a quarter of the windows with signal
+            // passed validation has failed (e.g. displacements beyond the
+            // window): its replaced field would only spread noise. After a
+            // good pass on the same grid (a repeated final window), that pass
+            // stands: it stays the predictor and the result. Otherwise the
+            // next pass starts again from the undeformed images.
+            if support < MIN_SUPPORT && good_same_grid {
+                continue;
+            }
+            if support >= MIN_SUPPORT {
+                good = Some(field.clone());
+            }
+            predictor = (support >= MIN_SUPPORT).then(|| field.clone());
+            weak = relaxed;
+            prev = Some((field, support));
         }
-        // A pass where fewer than a quarter of the windows with signal
-        // passed validation has failed (e.g. displacements beyond the
-        // window): its replaced field would only spread noise. After a
-        // good pass on the same grid (a repeated final window), that pass
-        // stands: it stays the predictor and the result. Otherwise the
-        // next pass starts again from the undeformed images.
-        if support < MIN_SUPPORT && good_same_grid {
-            continue;
-        }
-        if support >= MIN_SUPPORT {
-            good = Some(field.clone());
-        }
-        predictor = (support >= MIN_SUPPORT).then(|| field.clone());
-        weak = relaxed;
-        prev = Some((field, support));
+        let (field, support) = prev.ok_or_else(|| PivError::Settings("no windows given".into()))?;
+        Ok(Measured {
+            field,
+            support,
+            weak,
+            good,
+        })
     }
-    let (field, support) = prev.ok_or_else(|| PivError::Settings("no windows given".into()))?;
-    Ok(concluded(field, support, weak, good.as_ref(), raw, s))
 }
 
 /// The images' size after checking that every image, and the mask, has

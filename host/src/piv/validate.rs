@@ -160,79 +160,14 @@ pub fn median_test(
             if before[[r, c]] != State::Valid {
                 continue;
             }
-            (nu.n, nv.n) = (0, 0);
-            let mut planes: Option<Option<(Plane, Plane)>> = None;
-            for dr in -1isize..=1 {
-                for dc in -1isize..=1 {
-                    if dr == 0 && dc == 0 {
-                        continue;
-                    }
-                    let (rr, cc) = (r as isize + dr, c as isize + dc);
-                    let inside = |k: isize, n: usize| (0..n as isize).contains(&k);
-                    if inside(rr, ny) && inside(cc, nx) {
-                        let (rr, cc) = (rr as usize, cc as usize);
-                        if before[[rr, cc]] == State::Valid {
-                            nu.push(u[[rr, cc]]);
-                            nv.push(v[[rr, cc]]);
-                        }
-                        continue;
-                    }
-                    // Beyond the edge: extrapolate linearly from the two
-                    // vectors inward of the missing one (never the tested
-                    // vector itself), so a gradient at the edge is not an
-                    // outlier.
-                    let fold = |k: isize, n: usize| -> Option<(usize, usize)> {
-                        if inside(k, n) {
-                            Some((k as usize, k as usize))
-                        } else if n >= 2 {
-                            let near = k.clamp(0, n as isize - 1);
-                            Some((near as usize, (2 * near - k) as usize))
-                        } else {
-                            None
-                        }
-                    };
-                    let (Some((r1, r2)), Some((c1, c2))) = (fold(rr, ny), fold(cc, nx)) else {
-                        continue;
-                    };
-                    if (r1, c1) == (r, c) || (r2, c2) == (r, c) || r2 >= ny || c2 >= nx {
-                        // At a corner the line outward runs through the
-                        // tested vector itself: the plane of its valid
-                        // neighbours stands in, so that a gradient is not
-                        // an outlier there either.
-                        if let Some((pu, pv)) =
-                            planes.get_or_insert_with(|| neighbour_planes(u, v, &before, r, c))
-                        {
-                            nu.push(pu.at(dr as f64, dc as f64));
-                            nv.push(pv.at(dr as f64, dc as f64));
-                        }
-                        continue;
-                    }
-                    if before[[r1, c1]] == State::Valid && before[[r2, c2]] == State::Valid {
-                        nu.push(2.0 * u[[r1, c1]] - u[[r2, c2]]);
-                        nv.push(2.0 * v[[r1, c1]] - v[[r2, c2]]);
-                    }
-                }
-            }
-            if nu.n < 2 {
-                // Unsupported: no neighbour agrees or disagrees. A lone
-                // vector among rejected ones is as likely noise as not.
-                state[[r, c]] = State::Invalid;
-                rejected += 1;
-                continue;
-            }
-            let mut fails = false;
-            for (vals, x) in [(&mut nu, u[[r, c]]), (&mut nv, v[[r, c]])] {
-                let vals = vals.values();
-                let m = median(vals);
-                let mut res = [0.0f64; 8];
-                for (o, y) in res.iter_mut().zip(vals.iter()) {
-                    *o = (y - m).abs();
-                }
-                let rm = median(&mut res[..vals.len()]);
-                if (x - m).abs() / (rm + eps) > threshold {
-                    fails = true;
-                }
-            }
+            neighbours(u, v, &before, (r, c), (&mut nu, &mut nv));
+            // Unsupported (fewer than 2 neighbours): no neighbour agrees or
+            // disagrees, and a lone vector among rejected ones is as likely
+            // noise as not.
+            let fails = nu.n < 2
+                || [(&mut nu, u[[r, c]]), (&mut nv, v[[r, c]])]
+                    .into_iter()
+                    .any(|(vals, x)| normalised_residual(vals.values(), x, eps) > threshold);
             if fails {
                 state[[r, c]] = State::Invalid;
                 rejected += 1;
@@ -240,6 +175,80 @@ pub fn median_test(
         }
     }
     rejected
+}
+
+/// The normalised median residual of `x` against its neighbours `vals`
+/// (at most 8, at least 1; reordered): |x − median| over the median of
+/// the neighbours' own residuals plus `eps`.
+fn normalised_residual(vals: &mut [f64], x: f64, eps: f64) -> f64 {
+    let m = median(vals);
+    let mut res = [0.0f64; 8];
+    for (o, y) in res.iter_mut().zip(vals.iter()) {
+        *o = (y - m).abs();
+    }
+    let rm = median(&mut res[..vals.len()]);
+    (x - m).abs() / (rm + eps)
+}
+
+/// The neighbours of (r, c) that the median test compares it with, into
+/// `nu`, `nv`: its valid neighbours; beyond the grid's edge, the linear
+/// extrapolation of the two vectors inward of the missing one (never the
+/// tested vector itself), so a gradient at the edge is not an outlier; at
+/// a corner, where that line would run through the tested vector, the
+/// plane of its valid neighbours, so a gradient is not an outlier there
+/// either.
+fn neighbours(
+    u: &Array2<f64>,
+    v: &Array2<f64>,
+    before: &Array2<State>,
+    (r, c): (usize, usize),
+    (nu, nv): (&mut Eight<f64>, &mut Eight<f64>),
+) {
+    let (ny, nx) = u.dim();
+    (nu.n, nv.n) = (0, 0);
+    let inside = |k: isize, n: usize| (0..n as isize).contains(&k);
+    // Rows or columns (k, 2k − inward) of an extrapolation.
+    let fold = |k: isize, n: usize| -> Option<(usize, usize)> {
+        if inside(k, n) {
+            Some((k as usize, k as usize))
+        } else if n >= 2 {
+            let near = k.clamp(0, n as isize - 1);
+            Some((near as usize, (2 * near - k) as usize))
+        } else {
+            None
+        }
+    };
+    let mut planes: Option<Option<(Plane, Plane)>> = None;
+    for (dr, dc) in (-1isize..=1).flat_map(|dr| (-1isize..=1).map(move |dc| (dr, dc))) {
+        if dr == 0 && dc == 0 {
+            continue;
+        }
+        let (rr, cc) = (r as isize + dr, c as isize + dc);
+        if inside(rr, ny) && inside(cc, nx) {
+            let (rr, cc) = (rr as usize, cc as usize);
+            if before[[rr, cc]] == State::Valid {
+                nu.push(u[[rr, cc]]);
+                nv.push(v[[rr, cc]]);
+            }
+            continue;
+        }
+        let (Some((r1, r2)), Some((c1, c2))) = (fold(rr, ny), fold(cc, nx)) else {
+            continue;
+        };
+        if (r1, c1) == (r, c) || (r2, c2) == (r, c) || r2 >= ny || c2 >= nx {
+            if let Some((pu, pv)) =
+                planes.get_or_insert_with(|| neighbour_planes(u, v, before, r, c))
+            {
+                nu.push(pu.at(dr as f64, dc as f64));
+                nv.push(pv.at(dr as f64, dc as f64));
+            }
+            continue;
+        }
+        if before[[r1, c1]] == State::Valid && before[[r2, c2]] == State::Valid {
+            nu.push(2.0 * u[[r1, c1]] - u[[r2, c2]]);
+            nv.push(2.0 * v[[r1, c1]] - v[[r2, c2]]);
+        }
+    }
 }
 
 /// The planes (u, v) through the neighbours of (r, c) that `state` calls
