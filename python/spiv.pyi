@@ -174,6 +174,12 @@ class Flow(TypedDict):
     mean_pairs: npt.NDArray[np.uint32]
     mean_dense_u: npt.NDArray[np.float32]  # only with dense=True
     mean_dense_v: npt.NDArray[np.float32]
+    pixel_size: Optional[float]  # mm; None when uncalibrated
+    tick_hz: Optional[float]
+    u_m_s: _F64  # only when calibrated; m/s, v down
+    v_m_s: _F64
+    mean_u_m_s: _F64
+    mean_v_m_s: _F64
 
 def flow(
     path: _Path,
@@ -190,6 +196,8 @@ def flow(
     flip: bool = True,
     strip_head: int = 0,
     dense: bool = False,
+    pixel_size: Optional[float] = None,
+    tick_hz: Optional[float] = None,
 ) -> Flow:
     """The flow job on a .dat or .npz recording, as `spiv flow` (without its files).
 
@@ -201,7 +209,8 @@ def flow(
     inf where invalid) (pairs, ny, nx), the grid x, y (ny, nx), each pair's ticks
     and method, the robust mean field (per node the median of the valid vectors,
     its uncertainty and mean_pairs, the count of valid vectors), and with dense
-    the mean dense field.
+    the mean dense field. pixel_size (mm) and tick_hz calibrate it (default: the
+    scene.json beside the file): then u_m_s, v_m_s, mean_u_m_s, mean_v_m_s in m/s.
     """
 
 def receive(

@@ -21,6 +21,7 @@ pub mod dat;
 pub mod dense;
 pub mod grid;
 pub mod image;
+pub mod netcdf;
 pub mod npz;
 pub mod vectors;
 

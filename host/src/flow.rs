@@ -39,6 +39,7 @@ use crate::motion::Innovation;
 use crate::piv::validate::median;
 use crate::piv::{piv, to_f32, Field, PivError, Settings, NO_SIGMA};
 use crate::reconstruct::{frame_from_planes, FileOptions, Planes, ReconstructError};
+use crate::units::Calibration;
 
 /// The TFP window of the dwell cap's bootstrap pair, ticks.
 pub const BOOTSTRAP_WINDOW: u16 = 8;
@@ -78,6 +79,9 @@ pub struct Recording {
     pub crop_width: u16,
     /// The pair separation `scene.json` beside a `.dat` names, ticks.
     pub meta_dt: Option<u32>,
+    /// The calibration `scene.json` beside a `.dat` gives (pixel size and
+    /// tick rate).
+    pub meta_calibration: Option<Calibration>,
 }
 
 #[derive(Debug)]
@@ -102,6 +106,7 @@ impl Recording {
                 flip: false,
                 crop_width: s.width,
                 meta_dt: None,
+                meta_calibration: None,
                 source: Source::Memory(s.planes),
             });
         }
@@ -118,7 +123,8 @@ impl Recording {
             planes: r.planes(),
             flip: r.flip(),
             crop_width: r.width(),
-            meta_dt: meta.map(|m| m.pair[1].saturating_sub(m.pair[0])),
+            meta_dt: meta.as_ref().map(|m| m.pair[1].saturating_sub(m.pair[0])),
+            meta_calibration: meta.and_then(|m| Calibration::new(m.pixel_mm, m.tick_hz).ok()),
             source: Source::Dat(r),
         })
     }
@@ -134,6 +140,7 @@ impl Recording {
             flip: true,
             crop_width: width,
             meta_dt: Some(dt),
+            meta_calibration: None,
             source: Source::Memory(planes),
         }
     }
@@ -199,6 +206,9 @@ pub struct FlowOptions {
     /// Also run the dense stage on every pair ([`crate::piv::dense`]) and
     /// average it into [`FlowOutcome::mean_dense`].
     pub dense: bool,
+    /// The recording's calibration, when known: the outputs give m/s and
+    /// seconds beside px per pair and ticks.
+    pub calibration: Option<Calibration>,
 }
 
 impl FlowOptions {
@@ -222,6 +232,7 @@ impl FlowOptions {
             piv: Settings::for_spike_frames(),
             ladder: LadderSettings::default(),
             dense: false,
+            calibration: rec.meta_calibration,
         };
         o.schedule(rec.planes);
         o
@@ -302,6 +313,11 @@ pub struct FlowRequest {
     pub windows: Option<Vec<usize>>,
     /// Run the dense stage on every pair and average it.
     pub dense: bool,
+    /// Pixel size on the object, mm (default: the `scene.json` beside the
+    /// file).
+    pub pixel_mm: Option<f64>,
+    /// Ticks per second, Hz (default: the `scene.json` beside the file).
+    pub tick_hz: Option<f64>,
 }
 
 impl Default for FlowRequest {
@@ -316,6 +332,8 @@ impl Default for FlowRequest {
             dwell_cap: Some(DWELL_CAP),
             windows: None,
             dense: false,
+            pixel_mm: None,
+            tick_hz: None,
         }
     }
 }
@@ -362,6 +380,8 @@ impl FlowRequest {
             o.ladder.piv.windows = w.clone();
         }
         o.dense = self.dense;
+        o.calibration = Calibration::resolve(self.pixel_mm, self.tick_hz, rec.meta_calibration)
+            .map_err(|e| FlowError::Schedule(e.to_string()))?;
         Ok(o)
     }
 }

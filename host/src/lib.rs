@@ -37,3 +37,4 @@ pub mod reconstruct;
 pub mod reference;
 pub mod report;
 pub mod simulate;
+pub mod units;

@@ -425,6 +425,23 @@ fn piv_on_a_simulated_pair_and_its_errors() {
         std::fs::read(&out).expect("v"),
         std::fs::read(&out3).expect("v3")
     );
+    // The same field as netCDF: u where measured, the flags, the grid.
+    let nc = tmp.path().join("v.nc");
+    ok(&args(&nc).iter().map(String::as_str).collect::<Vec<_>>());
+    let mut r = netcdf3::FileReader::open(&nc).expect("v.nc");
+    let (u, flag) = (
+        r.read_var_f64("u").unwrap(),
+        r.read_var_i32("flag").unwrap(),
+    );
+    assert_eq!((u.len(), r.read_var_f64("x").unwrap().len()), (35, 7));
+    for ((a, b), f) in u.iter().zip(&v).zip(&flag) {
+        assert_eq!(*f, i32::from(b.state.flag()));
+        assert!(if b.state.is_measured() {
+            (a - b.u).abs() < 5.1e-7
+        } else {
+            a.is_nan()
+        });
+    }
     let mut a0 = args(&out3);
     a0.extend(["--repeat".into(), "0".into()]);
     let e = fails(&a0.iter().map(String::as_str).collect::<Vec<_>>());
@@ -580,6 +597,7 @@ fn flow_writes_vectors_per_pair_the_mean_field_and_plots() {
         "pair_a.png",
         "pair_b.png",
         "summary.json",
+        "flow.nc",
     ] {
         assert!(out.join(f).is_file(), "{f} missing: {msg}");
     }
@@ -591,11 +609,16 @@ fn flow_writes_vectors_per_pair_the_mean_field_and_plots() {
     assert_eq!(rungs[0]["separation"], 4);
     let mean = std::fs::read_to_string(out.join("mean.csv")).unwrap();
     assert!(
-        mean.starts_with("x,y,u,v,flag,sigma_u,sigma_v,pairs\n"),
+        mean.starts_with("x,y,u,v,flag,sigma_u,sigma_v,u_m_s,v_m_s,pairs\n"),
         "{mean}"
     );
     let pair = std::fs::read_to_string(out.join("vectors_00000.csv")).unwrap();
-    assert!(pair.starts_with("x,y,u,v,flag,sigma_u,sigma_v\n"), "{pair}");
+    assert!(
+        pair.starts_with("x,y,u,v,flag,sigma_u,sigma_v,u_m_s,v_m_s\n"),
+        "{pair}"
+    );
+    // The calibration from scene.json, in summary.json.
+    assert_eq!(s["calibration"]["pixel_mm"], 0.02);
     let msg = ok(&["flow", p(&dat), "--out", p(&out), "--method", "adaptive"]);
     assert!(msg.contains("dwell cap 8 px"), "{msg}");
     // TFP, another schedule.
@@ -620,4 +643,8 @@ fn flow_writes_vectors_per_pair_the_mean_field_and_plots() {
     assert!(e.contains("no pair fits"), "{e}");
     let e = fails(&["flow", p(&dat), "--window", "0", "--out", p(&out)]);
     assert!(e.contains("window 0"), "{e}");
+    let e = fails(&["flow", p(&dat), "--pixel-size", "0", "--out", p(&out)]);
+    assert!(e.contains("pixel size 0"), "{e}");
+    let e = fails(&["flow", p(&dat), "--tick-hz", "NaN", "--out", p(&out)]);
+    assert!(e.contains("tick rate NaN"), "{e}");
 }

@@ -605,7 +605,9 @@ fn array3<T>(shape: (usize, usize, usize), v: Vec<T>) -> PyResult<Array3<T>> {
 /// pair's frames (default: scene.json's), `every` between pairs (default
 /// 4·dt), `start`/`end` ticks; `method` "mc" (default), "adaptive" or
 /// "tfp"; `window` ticks; `dwell_cap` px or None (off); `windows` the PIV
-/// passes, px; `dense` also runs the dense stage on every pair.
+/// passes, px; `dense` also runs the dense stage on every pair;
+/// `pixel_size` (mm) and `tick_hz` calibrate it (default: the
+/// `scene.json` beside the file).
 ///
 /// Returns a dict: `ticks` `int64 (pairs, 2)`, `methods` (each pair's),
 /// `x`, `y` `(ny, nx)`, `u`, `v`, `flags`, and each vector's standard
@@ -614,9 +616,11 @@ fn array3<T>(shape: (usize, usize, usize), v: Vec<T>) -> PyResult<Array3<T>> {
 /// median of the valid vectors) `mean_u`, `mean_v`, `mean_flags`,
 /// `mean_sigma_u`, `mean_sigma_v` and `mean_pairs` (valid vectors per
 /// node) `(ny, nx)`; with `dense`, `mean_dense_u`, `mean_dense_v`
-/// `float32 (height, width)`.
+/// `float32 (height, width)`; calibrated, `pixel_size`, `tick_hz` and
+/// `u_m_s`, `v_m_s`, `mean_u_m_s`, `mean_v_m_s` (m/s, v down), else
+/// `pixel_size` and `tick_hz` None.
 #[pyfunction]
-#[pyo3(signature = (path, dt=None, every=None, start=None, end=None, method="mc", window=None, dwell_cap=Some(spiv_host::dwell::DWELL_CAP), windows=None, width=None, height=None, flip=true, strip_head=0, dense=false))]
+#[pyo3(signature = (path, dt=None, every=None, start=None, end=None, method="mc", window=None, dwell_cap=Some(spiv_host::dwell::DWELL_CAP), windows=None, width=None, height=None, flip=true, strip_head=0, dense=false, pixel_size=None, tick_hz=None))]
 #[allow(clippy::too_many_arguments)]
 fn flow<'py>(
     py: Python<'py>,
@@ -634,6 +638,8 @@ fn flow<'py>(
     flip: bool,
     strip_head: u16,
     dense: bool,
+    pixel_size: Option<f64>,
+    tick_hz: Option<f64>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let req = FlowRequest {
         dt,
@@ -645,6 +651,8 @@ fn flow<'py>(
         dwell_cap,
         windows,
         dense,
+        pixel_mm: pixel_size,
+        tick_hz,
     };
     if width.is_some() != height.is_some() {
         return Err(SpivError::new_err("give both width and height, or neither"));
@@ -658,14 +666,36 @@ fn flow<'py>(
             allow_truncated: false,
         },
     };
-    let out = py
+    let (out, o) = py
         .detach(|| -> Result<_, Failure> {
             let mut rec = Recording::open(&path, &fopts)?;
             let o = req.options(&rec, &path)?;
-            Ok(run_flow(&mut rec, &o, |_, _| {})?)
+            Ok((run_flow(&mut rec, &o, |_, _| {})?, o))
         })
         .map_err(err)?;
-    flow_dict(py, out)
+    let d = flow_dict(py, out)?;
+    calibrated(&d, &o)?;
+    Ok(d)
+}
+
+/// With a calibration: `pixel_size` (mm), `tick_hz`, and every u, v
+/// array again in m/s as `*_m_s`; without one, `pixel_size` and
+/// `tick_hz` are None.
+fn calibrated(d: &Bound<'_, PyDict>, o: &spiv_host::flow::FlowOptions) -> PyResult<()> {
+    let Some(c) = o.calibration else {
+        d.set_item("pixel_size", None::<f64>)?;
+        d.set_item("tick_hz", None::<f64>)?;
+        return Ok(());
+    };
+    d.set_item("pixel_size", c.pixel_mm)?;
+    d.set_item("tick_hz", c.tick_hz)?;
+    let k = c.m_per_s(1.0, f64::from(o.dt));
+    for name in ["u", "v", "mean_u", "mean_v"] {
+        if let Some(a) = d.get_item(name)? {
+            d.set_item(format!("{name}_m_s"), a.call_method1("__mul__", (k,))?)?;
+        }
+    }
+    Ok(())
 }
 
 /// [`flow`]'s dict: the pairs' fields stacked along the first axis, the

@@ -14,7 +14,8 @@ import spiv
 def read_csv(path):
     with open(path) as f:
         rows = list(csv.DictReader(f))
-    keys = ("x", "y", "u", "v", "flag", "peak_ratio", "correlation", "sigma_u", "sigma_v", "pairs")
+    keys = ("x", "y", "u", "v", "flag", "peak_ratio", "correlation", "sigma_u", "sigma_v",
+            "u_m_s", "v_m_s", "pairs")
     cols = {k: np.array([float(r[k]) for r in rows]) for k in keys if k in rows[0]}
     return cols
 
@@ -151,6 +152,37 @@ def test_flow_gives_the_cli_mean_field(cli, tmp_path):
     assert np.all(np.isinf(got["sigma_u"][got["flags"] == 2]))
     np.testing.assert_allclose(got["mean_sigma_u"].ravel(), want["sigma_u"], atol=5.1e-7, rtol=0)
     np.testing.assert_array_equal(got["mean_pairs"].ravel(), want["pairs"])
+    # Calibrated by scene.json: m/s beside px per pair, as the CLI's columns.
+    assert got["pixel_size"] == 0.02 and got["tick_hz"] == 20000.0
+    np.testing.assert_allclose(got["mean_u_m_s"].ravel(), want["u_m_s"], atol=5.1e-7, rtol=0)
+    k = 0.02e-3 * 20000.0 / 13
+    np.testing.assert_allclose(got["u_m_s"], got["u"] * k, rtol=1e-12)
+
+
+def test_flow_nc_opens_in_xarray_with_the_fields_and_units(cli, tmp_path):
+    import xarray as xr
+
+    d = tmp_path / "rec"
+    cli("simulate", "--scene", "paper-linear", "--width", "128", "--height", "128",
+        "--ticks", "400", "--seed", "2", "--out", d)
+    cli("flow", d / "spikes.dat", "--out", tmp_path / "out")
+    got = spiv.flow(d / "spikes.dat")
+    with xr.open_dataset(tmp_path / "out" / "flow.nc") as ds:
+        pairs, ny, nx = got["u"].shape
+        assert dict(ds.sizes) == {"time": pairs, "y": ny, "x": nx}
+        assert ds.u.dims == ("time", "y", "x") and ds.mean_u.dims == ("y", "x")
+        assert ds.u.attrs["units"] == "px" and ds.u_m_s.attrs["units"] == "m s-1"
+        assert ds.attrs["Conventions"] == "CF-1.8" and ds.attrs["dt_ticks"] == 13
+        np.testing.assert_array_equal(ds.x.values, got["x"][0])
+        np.testing.assert_array_equal(ds.y.values, got["y"][:, 0])
+        np.testing.assert_array_equal(ds.flag.values, got["flags"])
+        measured = got["flags"] < 2
+        np.testing.assert_array_equal(ds.u.values[measured], got["u"][measured])
+        assert np.all(np.isnan(ds.u.values[~measured]))
+        np.testing.assert_array_equal(ds.mean_pairs.values, got["mean_pairs"])
+        np.testing.assert_allclose(ds.u_m_s.values[measured], got["u_m_s"][measured], rtol=1e-12)
+        # Seconds since the first plane: each pair's midpoint tick / 20 kHz.
+        np.testing.assert_allclose(ds.time.values, got["ticks"].mean(axis=1) / 20000.0)
 
 
 def test_bad_input_raises_the_cli_message(cli, recording, tmp_path):

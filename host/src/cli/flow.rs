@@ -15,7 +15,7 @@ use super::{bar, parse_dwell_cap, CliError};
 /// A field per pair at a fixed schedule, measured from the recording's
 /// own spikes around each pair (motion-compensated by default), and their
 /// robust mean; one vectors CSV per pair with each vector's uncertainty,
-/// the mean field, plots.
+/// the mean field, all of it in one netCDF file (`flow.nc`), plots.
 #[derive(Debug, Args)]
 pub struct FlowArgs {
     /// The spike recording: a Vidar .dat or a .npz capture.
@@ -66,6 +66,14 @@ pub struct FlowArgs {
     /// `mean_dense.flo` (one vector per pixel, px per pair, v down).
     #[arg(long)]
     dense: bool,
+    /// Pixel size on the object, mm (else from scene.json beside the
+    /// recording); with the tick rate, the outputs give m/s beside px per
+    /// pair.
+    #[arg(long)]
+    pixel_size: Option<f64>,
+    /// Ticks per second, Hz (else from scene.json beside the recording).
+    #[arg(long)]
+    tick_hz: Option<f64>,
     /// Output folder (created if missing).
     #[arg(long, default_value = "spiv-flow")]
     out: PathBuf,
@@ -93,6 +101,8 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
         dwell_cap: parse_dwell_cap(&a.dwell_cap)?,
         windows: a.windows.clone(),
         dense: a.dense,
+        pixel_mm: a.pixel_size,
+        tick_hz: a.tick_hz,
     }
     .options(&rec, &a.input)
     .map_err(flow_err)?;
@@ -103,10 +113,13 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
     let t0 = std::time::Instant::now();
     let out = run_flow(&mut rec, &o, |i, _| b.set_position(i as u64)).map_err(flow_err)?;
     b.finish_and_clear();
+    let command: Vec<String> = std::env::args().collect();
+    let command = command.join(" ");
     let info = RunInfo {
         input: &a.input,
         planes: rec.planes,
         seconds: t0.elapsed().as_secs_f64(),
+        command: &command,
     };
     write_flow(&a.out, &out, &o, info).map_err(|e| CliError::Usage(e.to_string()))?;
     let (mut valid, mut all, mut empty) = (0, 0, 0);

@@ -19,7 +19,8 @@ pub struct PivArgs {
     /// Second image.
     b: PathBuf,
     /// Output CSV (x,y,u,v,flag; FORMATS.md), then each vector's confidence:
-    /// peak_ratio and correlation (0 where no peak).
+    /// peak_ratio and correlation (0 where no peak); a name ending in `.nc`
+    /// writes the same as netCDF (CF conventions, one time step).
     #[arg(short = 'o', long = "out")]
     out: PathBuf,
     /// Window side of each pass, px; the list sets the passes.
@@ -123,7 +124,22 @@ pub fn run(a: &PivArgs) -> Result<(), CliError> {
             )
         }
     };
-    write_vectors_scored(&a.out, &field.vectors(), &field.scores())?;
+    let is_nc = a
+        .out
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("nc"));
+    if is_nc {
+        let command: Vec<String> = std::env::args().collect();
+        let s = spiv_host::report::netcdf::piv_series(
+            &field.grid,
+            &field.vectors(),
+            &field.scores(),
+            &command.join(" "),
+        );
+        spiv_formats::netcdf::write_field_series(&a.out, &s)?;
+    } else {
+        write_vectors_scored(&a.out, &field.vectors(), &field.scores())?;
+    }
     let (valid, replaced, invalid) = field.counts();
     println!(
         "{} vectors ({}x{}): {valid} valid, {replaced} replaced, {invalid} invalid; {:.1} ms{} -> {}{dense_note}",

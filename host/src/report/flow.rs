@@ -6,7 +6,7 @@ use std::path::Path;
 
 use serde_json::json;
 use spiv_formats::image::write_levels;
-use spiv_formats::vectors::{write_vectors_uncertain, write_vectors_with, Column};
+use spiv_formats::vectors::{write_vectors_with, Column};
 use spiv_formats::FormatError;
 
 use crate::flow::{FlowOptions, FlowOutcome};
@@ -36,47 +36,55 @@ pub struct RunInfo<'a> {
     pub planes: u64,
     /// Wall time of the run, s.
     pub seconds: f64,
+    /// The command line that made the run (netCDF `history`).
+    pub command: &'a str,
 }
 
 /// Writes every file of a run into `dir` (which must exist):
-/// `vectors_NNNNN.csv` per pair, `mean.csv`, `mean_dense.flo` (when the
-/// dense stage ran), `pair_a.png`, `pair_b.png`, `mean_field.png`,
-/// `pair_vectors.png` and `summary.json`.
+/// `vectors_NNNNN.csv` per pair and `mean.csv` (px per pair, and m/s in
+/// `u_m_s`, `v_m_s` when calibrated), `flow.nc` (all of it in one netCDF
+/// file, [`super::netcdf`]), `mean_dense.flo` (when the dense stage ran),
+/// `pair_a.png`, `pair_b.png`, `mean_field.png`, `pair_vectors.png` and
+/// `summary.json`.
 pub fn write_flow(
     dir: &Path,
     out: &FlowOutcome,
     opts: &FlowOptions,
     info: RunInfo<'_>,
 ) -> Result<(), WriteError> {
+    let cal = opts.calibration;
+    let dt = f64::from(opts.dt);
+    // Sigma columns, then u and v in m/s when calibrated.
+    let columns = |vectors: &[spiv_formats::Vector], sigma: &[(f64, f64)]| {
+        let mut c = vec![
+            col("sigma_u", sigma.iter().map(|s| s.0).collect(), 6),
+            col("sigma_v", sigma.iter().map(|s| s.1).collect(), 6),
+        ];
+        if let Some(k) = cal {
+            let ms = |f: fn(&spiv_formats::Vector) -> f64| {
+                vectors.iter().map(|v| k.m_per_s(f(v), dt)).collect()
+            };
+            c.push(col("u_m_s", ms(|v| v.u), 6));
+            c.push(col("v_m_s", ms(|v| v.v), 6));
+        }
+        c
+    };
     for (i, p) in out.pairs.iter().enumerate() {
-        write_vectors_uncertain(
-            &dir.join(format!("vectors_{i:05}.csv")),
-            &p.vectors,
-            &p.sigma,
-        )?;
+        let path = dir.join(format!("vectors_{i:05}.csv"));
+        write_vectors_with(&path, &p.vectors, &columns(&p.vectors, &p.sigma))?;
     }
     if let Some(d) = &out.mean_dense {
         spiv_formats::dense::write_dense(&dir.join("mean_dense.flo"), d)?;
     }
     let mean = out.mean();
-    let col = |name, values: Vec<f64>, decimals| Column {
-        name,
-        values,
-        decimals,
-    };
-    write_vectors_with(
-        &dir.join("mean.csv"),
-        &mean.vectors,
-        &[
-            col("sigma_u", mean.sigma.iter().map(|s| s.0).collect(), 6),
-            col("sigma_v", mean.sigma.iter().map(|s| s.1).collect(), 6),
-            col(
-                "pairs",
-                mean.pairs.iter().map(|&n| f64::from(n)).collect(),
-                0,
-            ),
-        ],
-    )?;
+    let mut mean_columns = columns(&mean.vectors, &mean.sigma);
+    mean_columns.push(col(
+        "pairs",
+        mean.pairs.iter().map(|&n| f64::from(n)).collect(),
+        0,
+    ));
+    write_vectors_with(&dir.join("mean.csv"), &mean.vectors, &mean_columns)?;
+    super::netcdf::write_flow_nc(&dir.join("flow.nc"), out, opts, info)?;
     let (w, h) = (u32::from(out.size.0), u32::from(out.size.1));
     for (name, f) in ["pair_a.png", "pair_b.png"].iter().zip(&out.first_frames) {
         write_levels(&dir.join(name), w, h, f, out.full_scale)?;
@@ -105,6 +113,15 @@ pub fn write_flow(
     let path = dir.join("summary.json");
     let text = serde_json::to_string_pretty(&flow_summary(out, opts, info)).unwrap_or_default();
     std::fs::write(&path, text).map_err(|e| WriteError::Io(path.display().to_string(), e))
+}
+
+/// A CSV column of `values` printed with `decimals` decimals.
+fn col(name: &'static str, values: Vec<f64>, decimals: usize) -> Column<'static> {
+    Column {
+        name,
+        values,
+        decimals,
+    }
 }
 
 /// `summary.json` of a flow run: the settings, and per pair its ticks,
@@ -138,7 +155,9 @@ pub fn flow_summary(out: &FlowOutcome, opts: &FlowOptions, info: RunInfo<'_>) ->
         "dt_ticks": opts.dt, "every_ticks": opts.every,
         "piv": opts.grid_settings(),
         "ladder_separations": opts.ladder.separations,
-        "units": {"u": "px per pair", "v": "px per pair, down", "sigma": "px per pair"},
+        "units": {"u": "px per pair", "v": "px per pair, down", "sigma": "px per pair",
+                  "u_m_s": "m/s (when calibrated)", "v_m_s": "m/s, down (when calibrated)"},
+        "calibration": opts.calibration,
         "seconds": info.seconds,
         "pairs": per_pair,
     })
