@@ -198,7 +198,8 @@ def flow(
     dense: bool = False,
     pixel_size: Optional[float] = None,
     tick_hz: Optional[float] = None,
-) -> Flow:
+    as_xarray: bool = False,
+) -> Flow:  # an xarray.Dataset with as_xarray=True
     """The flow job on a .dat or .npz recording, as `spiv flow` (without its files).
 
     dt: ticks between a pair's frames (default: scene.json's); every: between pairs
@@ -211,6 +212,8 @@ def flow(
     its uncertainty and mean_pairs, the count of valid vectors), and with dense
     the mean dense field. pixel_size (mm) and tick_hz calibrate it (default: the
     scene.json beside the file): then u_m_s, v_m_s, mean_u_m_s, mean_v_m_s in m/s.
+    as_xarray: an xarray.Dataset in pivpy's layout instead (dims y, x, t; u, v, chc,
+    sigma_u, sigma_v; m, s and m/s when calibrated), so ds.piv.vorticity() works.
     """
 
 def receive(

@@ -18,6 +18,7 @@ use numpy::{
     IntoPyArray, PyArray2, PyArray3, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods,
 };
 use pyo3::exceptions::{PyOSError, PyValueError};
+use pyo3::ffi::c_str;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 
@@ -618,9 +619,12 @@ fn array3<T>(shape: (usize, usize, usize), v: Vec<T>) -> PyResult<Array3<T>> {
 /// node) `(ny, nx)`; with `dense`, `mean_dense_u`, `mean_dense_v`
 /// `float32 (height, width)`; calibrated, `pixel_size`, `tick_hz` and
 /// `u_m_s`, `v_m_s`, `mean_u_m_s`, `mean_v_m_s` (m/s, v down), else
-/// `pixel_size` and `tick_hz` None.
+/// `pixel_size` and `tick_hz` None. With `as_xarray`, an xarray Dataset
+/// in pivpy's layout instead: dimensions `y, x, t`, variables `u, v`,
+/// `chc` (the flags), `sigma_u, sigma_v`, in m, s and m/s when calibrated
+/// (else px, ticks and px per pair), so `ds.piv.vorticity()` works.
 #[pyfunction]
-#[pyo3(signature = (path, dt=None, every=None, start=None, end=None, method="mc", window=None, dwell_cap=Some(spiv_host::dwell::DWELL_CAP), windows=None, width=None, height=None, flip=true, strip_head=0, dense=false, pixel_size=None, tick_hz=None))]
+#[pyo3(signature = (path, dt=None, every=None, start=None, end=None, method="mc", window=None, dwell_cap=Some(spiv_host::dwell::DWELL_CAP), windows=None, width=None, height=None, flip=true, strip_head=0, dense=false, pixel_size=None, tick_hz=None, as_xarray=false))]
 #[allow(clippy::too_many_arguments)]
 fn flow<'py>(
     py: Python<'py>,
@@ -640,7 +644,8 @@ fn flow<'py>(
     dense: bool,
     pixel_size: Option<f64>,
     tick_hz: Option<f64>,
-) -> PyResult<Bound<'py, PyDict>> {
+    as_xarray: bool,
+) -> PyResult<Bound<'py, PyAny>> {
     let req = FlowRequest {
         dt,
         every,
@@ -675,7 +680,13 @@ fn flow<'py>(
         .map_err(err)?;
     let d = flow_dict(py, out)?;
     calibrated(&d, &o)?;
-    Ok(d)
+    if !as_xarray {
+        return Ok(d.into_any());
+    }
+    // pivpy's layout, built by xarray itself (python/src/to_xarray.py).
+    let code = c_str!(include_str!("to_xarray.py"));
+    let m = PyModule::from_code(py, code, c"to_xarray.py", c"spiv._to_xarray")?;
+    m.getattr("to_xarray")?.call1((d,))
 }
 
 /// With a calibration: `pixel_size` (mm), `tick_hz`, and every u, v

@@ -159,6 +159,37 @@ def test_flow_gives_the_cli_mean_field(cli, tmp_path):
     np.testing.assert_allclose(got["u_m_s"], got["u"] * k, rtol=1e-12)
 
 
+def test_flow_as_xarray_is_pivpys_layout_and_pivpy_computes_on_it(cli, tmp_path):
+    from pivpy import pivpy  # noqa: F401  (registers the .piv accessor)
+
+    d = tmp_path / "rec"
+    cli("simulate", "--scene", "paper-linear", "--width", "128", "--height", "128",
+        "--ticks", "400", "--seed", "2", "--out", d)
+    got = spiv.flow(d / "spikes.dat")
+    ds = spiv.flow(d / "spikes.dat", as_xarray=True)
+    yxt = lambda a: np.transpose(a, (1, 2, 0))
+    k = 0.02e-3 * 20000.0 / 13  # (m/s) per (px per pair)
+    assert ds.u.dims == ("y", "x", "t") and ds.attrs["units"] == ["m", "m", "m/s", "m/s"]
+    np.testing.assert_allclose(ds.u.values, yxt(got["u"]) * k, rtol=1e-12)
+    np.testing.assert_array_equal(ds.chc.values, yxt(got["flags"]))
+    np.testing.assert_allclose(ds.x.values, got["x"][0] * 0.02e-3, rtol=1e-12)
+    np.testing.assert_allclose(ds.t.values, got["ticks"].mean(axis=1) / 20000.0)
+    # pivpy's vorticity is numpy's central differences of the same field.
+    w = ds.piv.vorticity()["w"].values
+    want = (np.gradient(ds.v.values, ds.x.values, axis=1)
+            - np.gradient(ds.u.values, ds.y.values, axis=0))
+    np.testing.assert_allclose(w, want, rtol=1e-9, atol=1e-12)
+    # Against the truth's own vorticity (truth.csv, the same grid), away
+    # from the glare rows at the bottom wall.
+    t = read_csv(d / "truth.csv")
+    ny, nx = got["u"].shape[1:]
+    tu, tv = t["u"].reshape(ny, nx) * k, t["v"].reshape(ny, nx) * k
+    tw = (np.gradient(tv, ds.x.values, axis=1) - np.gradient(tu, ds.y.values, axis=0))
+    truth_w, measured_w = np.median(tw[1:4, 1:-1]), np.median(w[1:4, 1:-1, :])
+    assert truth_w != 0 and abs(measured_w / truth_w - 1) < 0.1, (measured_w, truth_w)
+    np.testing.assert_allclose(ds.piv.average.u.values, ds.u.values.mean(axis=2), rtol=1e-12)
+
+
 def test_flow_nc_opens_in_xarray_with_the_fields_and_units(cli, tmp_path):
     import xarray as xr
 
