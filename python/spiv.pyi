@@ -199,6 +199,7 @@ def flow(
     pixel_size: Optional[float] = None,
     tick_hz: Optional[float] = None,
     as_xarray: bool = False,
+    mask: Optional[npt.ArrayLike] = None,
 ) -> Flow:  # an xarray.Dataset with as_xarray=True
     """The flow job on a .dat or .npz recording, as `spiv flow` (without its files).
 
@@ -214,6 +215,8 @@ def flow(
     scene.json beside the file): then u_m_s, v_m_s, mean_u_m_s, mean_v_m_s in m/s.
     as_xarray: an xarray.Dataset in pivpy's layout instead (dims y, x, t; u, v, chc,
     sigma_u, sigma_v; m, s and m/s when calibrated), so ds.piv.vorticity() works.
+    mask: nonzero pixels (height, width) left out; nodes whose centre it covers are
+    invalid in every pair.
     """
 
 def receive(

@@ -209,6 +209,12 @@ pub struct FlowOptions {
     /// The recording's calibration, when known: the outputs give m/s and
     /// seconds beside px per pair and ticks.
     pub calibration: Option<Calibration>,
+    /// Pixels left out (upright, `crop_width × height`; `true`: masked):
+    /// plain pairs' PIV and the time ladder's bootstrap rungs leave them
+    /// out of the correlation (`LadderSettings::mask`), and a node whose
+    /// centre is masked is invalid in every pair, so it never predicts the
+    /// next one.
+    pub mask: Option<Array2<bool>>,
 }
 
 impl FlowOptions {
@@ -233,6 +239,7 @@ impl FlowOptions {
             ladder: LadderSettings::default(),
             dense: false,
             calibration: rec.meta_calibration,
+            mask: None,
         };
         o.schedule(rec.planes);
         o
@@ -318,6 +325,8 @@ pub struct FlowRequest {
     pub pixel_mm: Option<f64>,
     /// Ticks per second, Hz (default: the `scene.json` beside the file).
     pub tick_hz: Option<f64>,
+    /// Pixels to leave out (upright, the frames' size; `true`: masked).
+    pub mask: Option<Array2<bool>>,
 }
 
 impl Default for FlowRequest {
@@ -334,6 +343,7 @@ impl Default for FlowRequest {
             dense: false,
             pixel_mm: None,
             tick_hz: None,
+            mask: None,
         }
     }
 }
@@ -382,7 +392,40 @@ impl FlowRequest {
         o.dense = self.dense;
         o.calibration = Calibration::resolve(self.pixel_mm, self.tick_hz, rec.meta_calibration)
             .map_err(|e| FlowError::Schedule(e.to_string()))?;
+        if let Some(m) = &self.mask {
+            let want = (usize::from(rec.height), usize::from(rec.crop_width));
+            if m.dim() != want {
+                return Err(FlowError::Schedule(format!(
+                    "mask is {}x{} px but the frames are {}x{} px",
+                    m.ncols(),
+                    m.nrows(),
+                    want.1,
+                    want.0
+                )));
+            }
+        }
+        o.mask = self.mask.clone();
+        o.ladder.mask = self.mask.clone();
         Ok(o)
+    }
+}
+
+/// Makes every node of `f` whose centre pixel `mask` covers invalid
+/// (`u = v = 0`, infinite uncertainty): a masked region measures nothing,
+/// whatever the validation's replacement filled in from its neighbours.
+fn masked_out(f: &mut Field, mask: &Array2<bool>) {
+    let g = f.grid;
+    for r in 0..g.ny {
+        for c in 0..g.nx {
+            let (x, y) = g.centre(r, c);
+            let at = (y.round() as usize, x.round() as usize);
+            if mask.get(at).copied().unwrap_or(false) {
+                f.u[[r, c]] = 0.0;
+                f.v[[r, c]] = 0.0;
+                f.state[[r, c]] = State::Invalid;
+                f.sigma[[r, c]] = crate::piv::NO_SIGMA;
+            }
+        }
     }
 }
 
@@ -618,6 +661,10 @@ pub fn run_flow(
             }
             (m, _) => plain_pair(rec, [ka, kb], opts, &core, m)?,
         };
+        let mut m = m;
+        if let Some(mask) = &opts.mask {
+            masked_out(&mut m.field, mask);
+        }
         if opts.dense {
             dense.add(&m, f64::from(opts.dt));
         }
@@ -718,7 +765,7 @@ fn capped_pair(
         Some(p) => (p, false),
         None => {
             let [a, b] = frames(rec, [ka, kb], Method::Tfp, BOOTSTRAP_WINDOW, core)?;
-            (piv(&a, &b, None, &opts.piv)?, true)
+            (piv(&a, &b, opts.mask.as_ref(), &opts.piv)?, true)
         }
     };
     let dt = f64::from(opts.dt);
@@ -728,7 +775,7 @@ fn capped_pair(
     let b = adaptive_banded(&rec.around(kb, core.n_max)?, kb, core, &caps)?;
     let (w, h) = (usize::from(rec.crop_width), usize::from(rec.height));
     let frames = [to_f32(&a, w, h), to_f32(&b, w, h)];
-    let field = piv(&frames[0], &frames[1], None, &opts.piv)?;
+    let field = piv(&frames[0], &frames[1], opts.mask.as_ref(), &opts.piv)?;
     Ok(Measured {
         method: Method::Adaptive,
         field,
@@ -750,7 +797,7 @@ fn plain_pair(
     method: Method,
 ) -> Result<Measured, FlowError> {
     let frames = frames(rec, ticks, method, opts.window, core)?;
-    let field = piv(&frames[0], &frames[1], None, &opts.piv)?;
+    let field = piv(&frames[0], &frames[1], opts.mask.as_ref(), &opts.piv)?;
     Ok(Measured {
         method,
         field,

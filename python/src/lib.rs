@@ -608,7 +608,9 @@ fn array3<T>(shape: (usize, usize, usize), v: Vec<T>) -> PyResult<Array3<T>> {
 /// "tfp"; `window` ticks; `dwell_cap` px or None (off); `windows` the PIV
 /// passes, px; `dense` also runs the dense stage on every pair;
 /// `pixel_size` (mm) and `tick_hz` calibrate it (default: the
-/// `scene.json` beside the file).
+/// `scene.json` beside the file); `mask` (nonzero = left out, the frames'
+/// `(height, width)`) leaves a wall, a body or a region outside the flow
+/// out: nodes whose centre it covers are invalid in every pair.
 ///
 /// Returns a dict: `ticks` `int64 (pairs, 2)`, `methods` (each pair's),
 /// `x`, `y` `(ny, nx)`, `u`, `v`, `flags`, and each vector's standard
@@ -624,7 +626,7 @@ fn array3<T>(shape: (usize, usize, usize), v: Vec<T>) -> PyResult<Array3<T>> {
 /// `chc` (the flags), `sigma_u, sigma_v`, in m, s and m/s when calibrated
 /// (else px, ticks and px per pair), so `ds.piv.vorticity()` works.
 #[pyfunction]
-#[pyo3(signature = (path, dt=None, every=None, start=None, end=None, method="mc", window=None, dwell_cap=Some(spiv_host::dwell::DWELL_CAP), windows=None, width=None, height=None, flip=true, strip_head=0, dense=false, pixel_size=None, tick_hz=None, as_xarray=false))]
+#[pyo3(signature = (path, dt=None, every=None, start=None, end=None, method="mc", window=None, dwell_cap=Some(spiv_host::dwell::DWELL_CAP), windows=None, width=None, height=None, flip=true, strip_head=0, dense=false, pixel_size=None, tick_hz=None, as_xarray=false, mask=None))]
 #[allow(clippy::too_many_arguments)]
 fn flow<'py>(
     py: Python<'py>,
@@ -645,7 +647,11 @@ fn flow<'py>(
     pixel_size: Option<f64>,
     tick_hz: Option<f64>,
     as_xarray: bool,
+    mask: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    let mask = mask
+        .map(|m| image(m, "mask").map(|m| m.mapv(|v| v != 0.0)))
+        .transpose()?;
     let req = FlowRequest {
         dt,
         every,
@@ -658,6 +664,7 @@ fn flow<'py>(
         dense,
         pixel_mm: pixel_size,
         tick_hz,
+        mask,
     };
     if width.is_some() != height.is_some() {
         return Err(SpivError::new_err("give both width and height, or neither"));

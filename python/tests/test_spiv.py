@@ -190,6 +190,21 @@ def test_flow_as_xarray_is_pivpys_layout_and_pivpy_computes_on_it(cli, tmp_path)
     np.testing.assert_allclose(ds.piv.average.u.values, ds.u.values.mean(axis=2), rtol=1e-12)
 
 
+def test_flow_mask_leaves_a_body_invalid(cli, tmp_path):
+    d = tmp_path / "rec"
+    cli("simulate", "--scene", "paper-linear", "--width", "128", "--height", "128",
+        "--ticks", "400", "--seed", "2", "--out", d)
+    mask = np.zeros((128, 128), dtype=bool)
+    mask[32:80, 40:90] = True
+    got = spiv.flow(d / "spikes.dat", mask=mask)
+    x, y = got["x"].round().astype(int), got["y"].round().astype(int)
+    inside = mask[y, x]
+    assert inside.sum() >= 4
+    assert np.all(got["flags"][:, inside] == 2) and np.all(got["mean_pairs"][inside] == 0)
+    with pytest.raises(spiv.SpivError, match="mask is 10x10 px"):
+        spiv.flow(d / "spikes.dat", mask=np.zeros((10, 10), dtype=bool))
+
+
 def test_flow_nc_opens_in_xarray_with_the_fields_and_units(cli, tmp_path):
     import xarray as xr
 

@@ -74,6 +74,11 @@ pub struct FlowArgs {
     /// Ticks per second, Hz (else from scene.json beside the recording).
     #[arg(long)]
     tick_hz: Option<f64>,
+    /// Mask image (the frames' size, upright; pixels above 0 are left out:
+    /// a wall, a body, a region outside the flow). Nodes whose centre is
+    /// masked are invalid in every pair.
+    #[arg(long)]
+    mask: Option<PathBuf>,
     /// Output folder (created if missing).
     #[arg(long, default_value = "spiv-flow")]
     out: PathBuf,
@@ -103,6 +108,11 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
         dense: a.dense,
         pixel_mm: a.pixel_size,
         tick_hz: a.tick_hz,
+        mask: a
+            .mask
+            .as_deref()
+            .map(spiv_host::piv::load_mask)
+            .transpose()?,
     }
     .options(&rec, &a.input)
     .map_err(flow_err)?;
