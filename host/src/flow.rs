@@ -86,7 +86,9 @@ pub struct Recording {
 
 #[derive(Debug)]
 enum Source {
-    Dat(DatReader<std::io::BufReader<std::fs::File>>),
+    /// Read window by window; one reader, each read under its lock (the
+    /// pairs of [`run_flow`]'s chains read concurrently).
+    Dat(std::sync::Mutex<DatReader<std::io::BufReader<std::fs::File>>>),
     Memory(Vec<u8>),
 }
 
@@ -125,7 +127,7 @@ impl Recording {
             crop_width: r.width(),
             meta_dt: meta.as_ref().map(|m| m.pair[1].saturating_sub(m.pair[0])),
             meta_calibration: meta.and_then(|m| Calibration::new(m.pixel_mm, m.tick_hz).ok()),
-            source: Source::Dat(r),
+            source: Source::Dat(std::sync::Mutex::new(r)),
         })
     }
 
@@ -147,15 +149,20 @@ impl Recording {
 
     /// The planes a window of `window` ticks centred on `k` needs (clipped
     /// at the recording's ends).
-    pub fn around(&mut self, k: u64, window: u16) -> Result<Planes, FlowError> {
+    pub fn around(&self, k: u64, window: u16) -> Result<Planes, FlowError> {
         self.stretch(k.saturating_sub(u64::from(window / 2)), u64::from(window))
     }
 
     /// The planes `first..first + n` (clipped at the recording's end).
-    pub fn stretch(&mut self, first: u64, n: u64) -> Result<Planes, FlowError> {
+    pub fn stretch(&self, first: u64, n: u64) -> Result<Planes, FlowError> {
         let n = n.min(self.planes.saturating_sub(first));
-        let data = match &mut self.source {
-            Source::Dat(r) => r.read_range(first, n)?,
+        let data = match &self.source {
+            Source::Dat(r) => {
+                // A poisoned lock only means another pair's read panicked;
+                // the reader seeks before every read.
+                let mut r = r.lock().unwrap_or_else(|e| e.into_inner());
+                r.read_range(first, n)?
+            }
             Source::Memory(all) => {
                 let pb = usize::from(self.width) * usize::from(self.height) / 8;
                 let a = (first as usize).saturating_mul(pb).min(all.len());
@@ -632,12 +639,23 @@ struct Measured {
     frame_ticks: f64,
 }
 
-/// Runs the flow job over `rec`; `progress` is told (pairs done, pairs).
+/// Pairs per chain of [`run_flow`]: within a chain each pair starts from
+/// the previous pair's field, the first from nothing; chains run in
+/// parallel. Fixed, not derived from the cores, so the output is the same
+/// on any number of cores. A chain's first pair costs about 1.5× a warm
+/// one (the ladder's bootstrap rungs), so 8 pairs per chain cost about 6 %
+/// over one chain of all pairs on one core.
+pub const CHAIN: usize = 8;
+
+/// Runs the flow job over `rec` on every core (rayon: [`CHAIN`]s of pairs
+/// in parallel; the output is identical on any number of threads);
+/// `progress` is told (pairs done, pairs).
 pub fn run_flow(
-    rec: &mut Recording,
+    rec: &Recording,
     opts: &FlowOptions,
-    mut progress: impl FnMut(usize, usize),
+    progress: impl FnMut(usize, usize) + Send,
 ) -> Result<FlowOutcome, FlowError> {
+    use rayon::prelude::*;
     let ticks = check(rec, opts)?;
     let core = Params {
         n_max: opts.window.max(opts.core.n0),
@@ -648,32 +666,27 @@ pub fn run_flow(
         .grid_settings()
         .grid(w, h)
         .ok_or(PivError::TooSmall(w, h, 32))?;
-    let mut prediction: Option<Field> = None;
-    let mut pairs = Vec::with_capacity(ticks.len());
+    let total = ticks.len();
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let progress = std::sync::Mutex::new(progress);
+    let tell = || {
+        let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+        if let Ok(mut p) = progress.lock() {
+            p(n, total);
+        }
+    };
+    let chains: Vec<Result<Chain, FlowError>> = ticks
+        .par_chunks(CHAIN)
+        .map(|chain| measure_chain(rec, opts, &core, chain, &tell))
+        .collect();
+    let mut pairs = Vec::with_capacity(total);
     let mut first_frames = None;
     let mut dense = DenseSum::default();
-    for (i, &ka) in ticks.iter().enumerate() {
-        let kb = ka + u64::from(opts.dt);
-        let m = match (opts.method, opts.dwell_cap) {
-            (Method::Mc, _) => ladder_pair(rec, [ka, kb], opts, prediction.take())?,
-            (Method::Adaptive, Some(budget)) => {
-                capped_pair(rec, [ka, kb], opts, &core, budget, prediction.take())?
-            }
-            (m, _) => plain_pair(rec, [ka, kb], opts, &core, m)?,
-        };
-        let mut m = m;
-        if let Some(mask) = &opts.mask {
-            masked_out(&mut m.field, mask);
-        }
-        if opts.dense {
-            dense.add(&m, f64::from(opts.dt));
-        }
-        prediction = m.field.usable().then(|| m.field.clone());
-        if first_frames.is_none() {
-            first_frames = Some(m.frames.clone().map(|f| gray(&f, core.full_scale)));
-        }
-        pairs.push(pair_result(m, [ka, kb]));
-        progress(i + 1, ticks.len());
+    for c in chains {
+        let c = c?;
+        first_frames = first_frames.or(c.first_frames);
+        dense.merge(c.dense);
+        pairs.extend(c.pairs);
     }
     Ok(FlowOutcome {
         pairs,
@@ -683,6 +696,53 @@ pub fn run_flow(
         grid,
         mean_dense: dense.mean(w, h),
     })
+}
+
+/// One chain's pairs, the first pair's frames and its dense sums.
+struct Chain {
+    pairs: Vec<PairResult>,
+    first_frames: Option<[Vec<u16>; 2]>,
+    dense: DenseSum,
+}
+
+/// The pairs whose first ticks are `chain`, in order: each from the
+/// previous one's usable field, the first from nothing.
+fn measure_chain(
+    rec: &Recording,
+    opts: &FlowOptions,
+    core: &Params,
+    chain: &[u64],
+    tell: &(impl Fn() + Sync),
+) -> Result<Chain, FlowError> {
+    let mut prediction: Option<Field> = None;
+    let mut out = Chain {
+        pairs: Vec::with_capacity(chain.len()),
+        first_frames: None,
+        dense: DenseSum::default(),
+    };
+    for &ka in chain {
+        let kb = ka + u64::from(opts.dt);
+        let mut m = match (opts.method, opts.dwell_cap) {
+            (Method::Mc, _) => ladder_pair(rec, [ka, kb], opts, prediction.take())?,
+            (Method::Adaptive, Some(budget)) => {
+                capped_pair(rec, [ka, kb], opts, core, budget, prediction.take())?
+            }
+            (m, _) => plain_pair(rec, [ka, kb], opts, core, m)?,
+        };
+        if let Some(mask) = &opts.mask {
+            masked_out(&mut m.field, mask);
+        }
+        if opts.dense {
+            out.dense.add(&m, f64::from(opts.dt));
+        }
+        prediction = m.field.usable().then(|| m.field.clone());
+        if out.first_frames.is_none() {
+            out.first_frames = Some(m.frames.clone().map(|f| gray(&f, core.full_scale)));
+        }
+        out.pairs.push(pair_result(m, [ka, kb]));
+        tell();
+    }
+    Ok(out)
 }
 
 /// The pairs' first ticks, once the options are known to fit `rec`.
@@ -714,7 +774,7 @@ fn check(rec: &Recording, opts: &FlowOptions) -> Result<Vec<u64>, FlowError> {
 /// started from `prediction` (the previous pair's usable field, px per
 /// pair) when there is one.
 fn ladder_pair(
-    rec: &mut Recording,
+    rec: &Recording,
     [ka, kb]: [u64; 2],
     opts: &FlowOptions,
     prediction: Option<Field>,
@@ -754,7 +814,7 @@ fn ladder_pair(
 /// previous pair's usable field) or, without one, by the TFP pair at the
 /// same ticks.
 fn capped_pair(
-    rec: &mut Recording,
+    rec: &Recording,
     [ka, kb]: [u64; 2],
     opts: &FlowOptions,
     core: &Params,
@@ -790,7 +850,7 @@ fn capped_pair(
 
 /// A pair of plain frames by `method` (TFP, TFI, adaptive with one n_max).
 fn plain_pair(
-    rec: &mut Recording,
+    rec: &Recording,
     ticks: [u64; 2],
     opts: &FlowOptions,
     core: &Params,
@@ -812,7 +872,7 @@ fn plain_pair(
 
 /// Both frames of a pair by `method` with window (or n_max) `n`.
 fn frames(
-    rec: &mut Recording,
+    rec: &Recording,
     ticks: [u64; 2],
     method: Method,
     n: u16,
@@ -879,6 +939,26 @@ impl DenseSum {
             *s += f64::from(*x) * k;
         }
         d.2 += 1;
+    }
+
+    /// Adds another chain's sums (chains are merged in their order, so
+    /// the sums do not depend on which thread ran which chain).
+    fn merge(&mut self, other: DenseSum) {
+        let Some((u, v, n)) = other.sum else {
+            return;
+        };
+        match &mut self.sum {
+            None => self.sum = Some((u, v, n)),
+            Some(d) => {
+                for (s, x) in d.0.iter_mut().zip(&u) {
+                    *s += x;
+                }
+                for (s, x) in d.1.iter_mut().zip(&v) {
+                    *s += x;
+                }
+                d.2 += n;
+            }
+        }
     }
 
     fn mean(self, w: usize, h: usize) -> Option<spiv_formats::dense::DenseField> {

@@ -137,7 +137,7 @@ fn flow_averages_the_dense_stage_over_pairs() {
         height: None,
         dat: spiv_formats::dat::DatOptions::default(),
     };
-    let mut rec = Recording::open(&path, &fo).unwrap();
+    let rec = Recording::open(&path, &fo).unwrap();
     let o = FlowRequest {
         method: spiv_core::Method::Tfp,
         every: Some(42),
@@ -146,7 +146,7 @@ fn flow_averages_the_dense_stage_over_pairs() {
     }
     .options(&rec, &path)
     .unwrap();
-    let out = run_flow(&mut rec, &o, |_, _| {}).unwrap();
+    let out = run_flow(&rec, &o, |_, _| {}).unwrap();
     assert!(out.pairs.len() >= 2);
     // A frozen field: every pair has the same dense truth.
     let truth = sim.scene.truth_dense(f64::from(o.dt));
@@ -166,8 +166,5 @@ fn flow_averages_the_dense_stage_over_pairs() {
     }
     .options(&rec, &path)
     .unwrap();
-    assert!(run_flow(&mut rec, &o, |_, _| {})
-        .unwrap()
-        .mean_dense
-        .is_none());
+    assert!(run_flow(&rec, &o, |_, _| {}).unwrap().mean_dense.is_none());
 }

@@ -680,9 +680,9 @@ fn flow<'py>(
     };
     let (out, o) = py
         .detach(|| -> Result<_, Failure> {
-            let mut rec = Recording::open(&path, &fopts)?;
+            let rec = Recording::open(&path, &fopts)?;
             let o = req.options(&rec, &path)?;
-            Ok((run_flow(&mut rec, &o, |_, _| {})?, o))
+            Ok((run_flow(&rec, &o, |_, _| {})?, o))
         })
         .map_err(err)?;
     let d = flow_dict(py, out)?;

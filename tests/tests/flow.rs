@@ -67,7 +67,7 @@ fn motion_compensation_measures_the_flow_best_and_one_n_max_does_not() {
     let dir = tempfile::tempdir().unwrap();
     simulate(dir.path(), None, 600, None);
     let dat = dir.path().join("spikes.dat");
-    let mut rec = open(&dat);
+    let rec = open(&dat);
     let dt = rec.meta_dt.expect("scene.json names the pair");
     let o = FlowOptions::new(&rec, dt);
     assert_eq!(o.method, spiv_core::Method::Mc, "the default");
@@ -79,7 +79,7 @@ fn motion_compensation_measures_the_flow_best_and_one_n_max_does_not() {
         o.pair_ticks()
     );
     let mut seen = 0;
-    let out = run_flow(&mut rec, &o, |i, n| {
+    let out = run_flow(&rec, &o, |i, n| {
         assert!(i <= n);
         seen = i;
     })
@@ -99,7 +99,7 @@ fn motion_compensation_measures_the_flow_best_and_one_n_max_does_not() {
         method: spiv_core::Method::Adaptive,
         ..o.clone()
     };
-    let out = run_flow(&mut rec, &capped, |_, _| {}).unwrap();
+    let out = run_flow(&rec, &capped, |_, _| {}).unwrap();
     assert!(out.pairs[0].bootstrapped && !out.pairs[0].caps.is_empty());
     assert!(out.pairs.iter().skip(1).any(|p| !p.bootstrapped));
     let (cap, _) = rmae(dir.path(), &out.mean_field(), rec.height);
@@ -110,7 +110,7 @@ fn motion_compensation_measures_the_flow_best_and_one_n_max_does_not() {
         dwell_cap: None,
         ..capped
     };
-    let out = run_flow(&mut rec, &paper, |_, _| {}).unwrap();
+    let out = run_flow(&rec, &paper, |_, _| {}).unwrap();
     let (one, _) = rmae(dir.path(), &out.mean_field(), rec.height);
     assert!(
         one > 5.0 * cap,
@@ -122,7 +122,7 @@ fn motion_compensation_measures_the_flow_best_and_one_n_max_does_not() {
         window: 8,
         ..o
     };
-    let out = run_flow(&mut rec, &tfp, |_, _| {}).unwrap();
+    let out = run_flow(&rec, &tfp, |_, _| {}).unwrap();
     let (t, _) = rmae(dir.path(), &out.mean_field(), rec.height);
     assert!(t < 0.06, "TFP: {t:.3}");
     eprintln!("other-row RMAE: mc {mc:.4}, TFP {t:.4}, dwell cap {cap:.4}, one n_max {one:.4}");
@@ -137,17 +137,17 @@ fn motion_compensation_measures_the_flow_best_and_one_n_max_does_not() {
 fn a_short_recording_gets_one_central_pair() {
     let dir = tempfile::tempdir().unwrap();
     simulate(dir.path(), Some((256, 256)), 62, Some(21));
-    let mut rec = open(&dir.path().join("spikes.dat"));
+    let rec = open(&dir.path().join("spikes.dat"));
     assert_eq!((rec.planes, rec.meta_dt), (62, Some(21)));
     let o = FlowOptions::new(&rec, 21);
     assert_eq!(o.pair_ticks(), [20]);
-    let out = run_flow(&mut rec, &o, |_, _| {}).unwrap();
+    let out = run_flow(&rec, &o, |_, _| {}).unwrap();
     let (other, _) = rmae(dir.path(), &out.mean_field(), rec.height);
     eprintln!("short recording: other-row RMAE {other:.4}");
     assert!(other < 0.026, "short recording: other-row RMAE {other:.4}");
     // A pair that cannot fit is a clear error, not a panic.
     let late = FlowOptions { start: 50, ..o };
-    assert!(run_flow(&mut rec, &late, |_, _| {}).is_err());
+    assert!(run_flow(&rec, &late, |_, _| {}).is_err());
 }
 
 #[test]
@@ -164,7 +164,7 @@ fn junk_columns_are_stripped_and_change_nothing() {
     let wide_dat = dir.path().join("wide/spikes.dat");
     std::fs::create_dir_all(wide_dat.parent().unwrap()).unwrap();
     std::fs::write(&wide_dat, wide).unwrap();
-    let mut narrow = open(&dat);
+    let narrow = open(&dat);
     let dt = narrow.meta_dt.unwrap();
     let mut opts = FileOptions {
         width: Some(416),
@@ -174,20 +174,20 @@ fn junk_columns_are_stripped_and_change_nothing() {
             ..DatOptions::default()
         },
     };
-    let mut stripped = Recording::open(&wide_dat, &opts).unwrap();
+    let stripped = Recording::open(&wide_dat, &opts).unwrap();
     assert_eq!((stripped.width, stripped.planes), (400, narrow.planes));
     let o = FlowOptions::new(&narrow, dt);
-    let a = run_flow(&mut narrow, &o, |_, _| {}).unwrap();
-    let b = run_flow(&mut stripped, &o, |_, _| {}).unwrap();
+    let a = run_flow(&narrow, &o, |_, _| {}).unwrap();
+    let b = run_flow(&stripped, &o, |_, _| {}).unwrap();
     assert!(!a.pairs.is_empty());
     for (x, y) in a.pairs.iter().zip(&b.pairs) {
         assert_eq!(x.vectors, y.vectors);
     }
     // Unstripped, the junk columns are seen (and the field differs).
     opts.dat.strip_head = 0;
-    let mut raw = Recording::open(&wide_dat, &opts).unwrap();
+    let raw = Recording::open(&wide_dat, &opts).unwrap();
     assert_eq!(raw.width, 416);
-    let c = run_flow(&mut raw, &o, |_, _| {}).unwrap();
+    let c = run_flow(&raw, &o, |_, _| {}).unwrap();
     assert_ne!(c.pairs[0].vectors.len(), a.pairs[0].vectors.len());
 }
 
@@ -199,10 +199,10 @@ fn the_real_capture_runs_end_to_end() {
         height: None,
         dat: DatOptions::default(),
     };
-    let mut rec = Recording::open(&npz, &o).unwrap();
+    let rec = Recording::open(&npz, &o).unwrap();
     assert_eq!((rec.crop_width, rec.height, rec.planes), (250, 250, 200));
     let opts = FlowOptions::new(&rec, 10);
-    let out = run_flow(&mut rec, &opts, |_, _| {}).unwrap();
+    let out = run_flow(&rec, &opts, |_, _| {}).unwrap();
     // 200 planes: one pair at the centre.
     assert_eq!(out.pairs.len(), 1);
     assert_eq!(out.pairs[0].ticks, [95, 105]);
@@ -219,7 +219,7 @@ fn the_real_capture_runs_end_to_end() {
         dwell_cap: None,
         ..opts
     };
-    let out = run_flow(&mut rec, &adaptive, |_, _| {}).unwrap();
+    let out = run_flow(&rec, &adaptive, |_, _| {}).unwrap();
     assert!(out
         .pairs
         .iter()
@@ -234,14 +234,14 @@ fn the_real_capture_runs_end_to_end() {
 fn pairs_at_the_recording_ends_say_they_are_less_certain() {
     let dir = tempfile::tempdir().unwrap();
     simulate(dir.path(), None, 400, None);
-    let mut rec = open(&dir.path().join("spikes.dat"));
+    let rec = open(&dir.path().join("spikes.dat"));
     let dt = rec.meta_dt.expect("scene.json names the pair");
     let mut o = FlowOptions::new(&rec, dt);
     // Every pair from the first tick to the last: the ends are clipped.
     o.start = 0;
     o.last_start = None;
     o.every = 6 * dt;
-    let out = run_flow(&mut rec, &o, |_, _| {}).unwrap();
+    let out = run_flow(&rec, &o, |_, _| {}).unwrap();
     let truth = read_vectors(&dir.path().join("truth.csv")).expect("truth.csv");
     let median_sigma = |p: &spiv_host::flow::PairResult| {
         let mut s: Vec<f64> = p
@@ -276,4 +276,35 @@ fn pairs_at_the_recording_ends_say_they_are_less_certain() {
     let (wf, wm) = (within(first), within(middle));
     eprintln!("errors within 2σ: first pair {wf:.2}, middle pair {wm:.2}");
     assert!(wf > 0.7 && wm > 0.7, "{wf} {wm}");
+}
+
+/// `spiv flow` on every core gives what it gives on one: chains of pairs
+/// run in parallel, each pair inside a chain starts from the one before,
+/// and the chains are fixed by the schedule, not by the cores.
+#[test]
+fn all_cores_give_the_same_output_as_one() {
+    let dir = tempfile::tempdir().unwrap();
+    simulate(dir.path(), Some((128, 96)), 800, None);
+    let rec = open(&dir.path().join("spikes.dat"));
+    let o = FlowOptions::new(&rec, rec.meta_dt.unwrap());
+    assert!(
+        o.pair_ticks().len() > spiv_host::flow::CHAIN,
+        "{:?}",
+        o.pair_ticks()
+    );
+    let on = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| run_flow(&rec, &o, |_, _| {}).unwrap())
+    };
+    let (one, two) = (on(1), on(2));
+    assert_eq!(one.pairs.len(), two.pairs.len());
+    for (a, b) in one.pairs.iter().zip(&two.pairs) {
+        assert_eq!(a.ticks, b.ticks);
+        assert_eq!(a.vectors, b.vectors, "pair at {:?}", a.ticks);
+        assert_eq!(a.sigma, b.sigma);
+    }
+    assert_eq!(one.mean().vectors, two.mean().vectors);
 }

@@ -71,9 +71,9 @@ fn pure_noise_measures_nothing() {
             *byte |= bit() << b;
         }
     }
-    let mut rec = Recording::simulated(w, h, data, 10);
+    let rec = Recording::simulated(w, h, data, 10);
     let o = FlowOptions::new(&rec, 10);
-    let out = run_flow(&mut rec, &o, |_, _| {}).expect("runs");
+    let out = run_flow(&rec, &o, |_, _| {}).expect("runs");
     assert!(!out.pairs.is_empty());
     for p in &out.pairs {
         let (v, r, _) = p.counts();
@@ -90,9 +90,9 @@ fn glare_without_particles_measures_nothing() {
         particle_peak: 0.0,
         ..SceneParams::new(SceneKind::VortexArray)
     };
-    let (mut rec, _, _) = simulated(p, 3, 160);
+    let (rec, _, _) = simulated(p, 3, 160);
     let o = FlowOptions::new(&rec, 10);
-    let out = run_flow(&mut rec, &o, |_, _| {}).expect("runs");
+    let out = run_flow(&rec, &o, |_, _| {}).expect("runs");
     for p in &out.pairs {
         let (v, r, _) = p.counts();
         assert!(all_invalid(p), "static glare: {v} valid, {r} replaced");
@@ -113,9 +113,9 @@ fn motion_beyond_reach_is_not_confidently_wrong() {
             shift: (speed * f64::from(dt), 0.0),
             ..SceneParams::new(SceneKind::Uniform)
         };
-        let (mut rec, scene, _) = simulated(p, 5, 160);
+        let (rec, scene, _) = simulated(p, 5, 160);
         let o = FlowOptions::new(&rec, dt);
-        let out = run_flow(&mut rec, &o, |_, _| {}).expect("runs");
+        let out = run_flow(&rec, &o, |_, _| {}).expect("runs");
         for pr in &out.pairs {
             let bad = confidently_wrong(pr, &scene, f64::from(dt));
             let (v, r, i) = pr.counts();

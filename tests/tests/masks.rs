@@ -58,13 +58,13 @@ fn a_masked_body_measures_nothing_inside_and_no_worse_outside() {
         dat: DatOptions::default(),
     };
     let run = |mask: Option<Array2<bool>>| -> FlowOutcome {
-        let mut rec = Recording::open(&dat, &fo).unwrap();
+        let rec = Recording::open(&dat, &fo).unwrap();
         let req = FlowRequest {
             mask,
             ..FlowRequest::default()
         };
         let o = req.options(&rec, &dat).unwrap();
-        run_flow(&mut rec, &o, |_, _| {}).unwrap()
+        run_flow(&rec, &o, |_, _| {}).unwrap()
     };
     let plain = run(None);
     let masked = run(Some(body()));

@@ -25,9 +25,9 @@ fn flow(dir: &Path, req: FlowRequest) -> (FlowOutcome, spiv_host::flow::FlowOpti
         height: None,
         dat: DatOptions::default(),
     };
-    let mut rec = Recording::open(&dat, &fo).expect("opens");
+    let rec = Recording::open(&dat, &fo).expect("opens");
     let o = req.options(&rec, &dat).expect("options");
-    let out = run_flow(&mut rec, &o, |_, _| {}).expect("runs");
+    let out = run_flow(&rec, &o, |_, _| {}).expect("runs");
     let info = RunInfo {
         input: &dat,
         planes: rec.planes,
@@ -160,7 +160,7 @@ fn without_a_calibration_there_are_no_m_per_s_and_time_is_in_ticks() {
         height: Some(250),
         dat: DatOptions::default(),
     };
-    let mut rec = Recording::open(&dat, &fo).unwrap();
+    let rec = Recording::open(&dat, &fo).unwrap();
     let req = FlowRequest {
         dt: Some(13),
         pixel_mm: Some(0.02),
@@ -168,7 +168,7 @@ fn without_a_calibration_there_are_no_m_per_s_and_time_is_in_ticks() {
     };
     let o = req.options(&rec, &dat).unwrap();
     assert!(o.calibration.is_none());
-    let out = run_flow(&mut rec, &o, |_, _| {}).unwrap();
+    let out = run_flow(&rec, &o, |_, _| {}).unwrap();
     let info = RunInfo {
         input: &dat,
         planes: rec.planes,

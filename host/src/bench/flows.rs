@@ -209,10 +209,10 @@ pub fn family_rows(
         rows.push(s.row(&fam.name, seed, name, Some(dense_epe(&f, &truth)), ms));
     }
 
-    let mut rec = Recording::simulated(p.width, p.height, data, pair[1] - pair[0]);
+    let rec = Recording::simulated(p.width, p.height, data, pair[1] - pair[0]);
     let opts = FlowOptions::new(&rec, pair[1] - pair[0]);
     let t0 = Instant::now();
-    let out = run_flow(&mut rec, &opts, |_, _| {}).map_err(|e| match e {
+    let out = run_flow(&rec, &opts, |_, _| {}).map_err(|e| match e {
         crate::flow::FlowError::Piv(p) => JobError::Piv(p),
         crate::flow::FlowError::Reconstruct(r) => JobError::Reconstruct(r),
         crate::flow::FlowError::Format(f) => JobError::Format(f),

@@ -95,7 +95,7 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
             allow_truncated: a.allow_truncated,
         },
     };
-    let mut rec = Recording::open(&a.input, &fopts).map_err(flow_err)?;
+    let rec = Recording::open(&a.input, &fopts).map_err(flow_err)?;
     let o = FlowRequest {
         dt: a.dt,
         every: a.every,
@@ -121,7 +121,7 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
     let pairs = o.pair_ticks().len() as u64;
     let b = bar(pairs, "pairs");
     let t0 = std::time::Instant::now();
-    let out = run_flow(&mut rec, &o, |i, _| b.set_position(i as u64)).map_err(flow_err)?;
+    let out = run_flow(&rec, &o, |i, _| b.set_position(i as u64)).map_err(flow_err)?;
     b.finish_and_clear();
     let command: Vec<String> = std::env::args().collect();
     let command = command.join(" ");
