@@ -538,6 +538,9 @@ pub struct FlowOutcome {
     /// With [`FlowOptions::dense`]: the mean over pairs of the dense stage's
     /// field (px per pair, v down, upright).
     pub mean_dense: Option<spiv_formats::dense::DenseField>,
+    /// Pixels under glare around the first pair (upright, `width × height`,
+    /// [`glare`]).
+    pub glare: Vec<bool>,
 }
 
 impl FlowOutcome {
@@ -695,7 +698,50 @@ pub fn run_flow(
         full_scale: core.full_scale,
         grid,
         mean_dense: dense.mean(w, h),
+        glare: glare(rec, ticks[0] + u64::from(opts.dt) / 2)?,
     })
+}
+
+/// Ticks over which [`glare`] counts each pixel's spikes.
+pub const GLARE_TICKS: u16 = 128;
+/// A pixel is under glare when it fires at least this many times the
+/// median pixel's rate (and at least [`GLARE_MIN_RATE`]): static light far
+/// above the scene's background. On the paper's scenes (background about
+/// 0.025 spikes per tick, glare rising to the sensor's 0.5 at the wall)
+/// this marks the band the paper calls glare, 50 px above the wall, and no
+/// particle (at most 0.05 spikes per tick over 128 ticks).
+pub const GLARE_FACTOR: f64 = 4.0;
+/// The lowest rate called glare, spikes per tick.
+pub const GLARE_MIN_RATE: f64 = 0.1;
+
+/// The pixels of `rec` under glare around tick `k` (upright, cropped):
+/// each pixel's spikes per tick over [`GLARE_TICKS`] ticks, against
+/// [`GLARE_FACTOR`] × the median pixel's and [`GLARE_MIN_RATE`].
+pub fn glare(rec: &Recording, k: u64) -> Result<Vec<bool>, FlowError> {
+    let p = rec.around(k, GLARE_TICKS)?;
+    let (w, h) = (usize::from(p.width), usize::from(p.height));
+    let cw = usize::from(p.crop_width);
+    let pb = w * h / 8;
+    let mut counts = vec![0u32; cw * h];
+    let mut n = 0u32;
+    for plane in p.data.chunks_exact(pb.max(1)) {
+        let px = spiv_formats::dat::unpack_upright(plane, p.width, p.height, p.flip);
+        for (r, row) in px.chunks_exact(w).enumerate() {
+            for (c, &b) in row[..cw].iter().enumerate() {
+                counts[r * cw + c] += u32::from(b);
+            }
+        }
+        n += 1;
+    }
+    let rate: Vec<f64> = counts
+        .iter()
+        .map(|&c| f64::from(c) / f64::from(n.max(1)))
+        .collect();
+    let mut sorted = rate.clone();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
+    let limit = (GLARE_FACTOR * median).max(GLARE_MIN_RATE);
+    Ok(rate.iter().map(|&r| n > 0 && r >= limit).collect())
 }
 
 /// One chain's pairs, the first pair's frames and its dense sums.

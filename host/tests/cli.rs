@@ -598,6 +598,8 @@ fn flow_writes_vectors_per_pair_the_mean_field_and_plots() {
         "pair_b.png",
         "summary.json",
         "flow.nc",
+        "mean_speed.png",
+        "mean_vorticity.png",
     ] {
         assert!(out.join(f).is_file(), "{f} missing: {msg}");
     }

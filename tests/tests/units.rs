@@ -134,6 +134,22 @@ fn flow_nc_holds_every_pair_and_the_mean_as_measured() {
             assert!(s.is_finite() && sigma_u[k] == s || !s.is_finite() && sigma_u[k].is_nan());
         }
     }
+    // The glare band: the paper's 50 px above the wall, nothing in the
+    // top half; and the colour maps of the mean field with it marked.
+    let (w, h) = (usize::from(out.size.0), usize::from(out.size.1));
+    let row_glare = |r: usize| out.glare[r * w..(r + 1) * w].iter().filter(|&&g| g).count();
+    assert!(row_glare(h - 5) > w * 9 / 10, "{} of {w}", row_glare(h - 5));
+    assert!((0..h / 2).all(|r| row_glare(r) == 0));
+    let band = (0..h).filter(|&r| row_glare(r) > w / 2).count();
+    assert!((35..=65).contains(&band), "glare band {band} rows");
+    for png in ["mean_speed.png", "mean_vorticity.png"] {
+        let img = image::open(dir.path().join("out").join(png)).expect(png);
+        assert_eq!(
+            (img.width(), img.height()),
+            (2 * w as u32, 2 * h as u32 + 28),
+            "{png}"
+        );
+    }
     let mean = out.mean();
     let mean_u = nc.read_var_f64("mean_u").unwrap();
     let pairs = nc.read_var_f64("mean_pairs").unwrap();

@@ -5,9 +5,11 @@
 use std::path::Path;
 
 use serde_json::json;
+use spiv_formats::grid::Grid;
 use spiv_formats::image::write_levels;
 use spiv_formats::vectors::{write_vectors_with, Column};
 use spiv_formats::FormatError;
+use spiv_formats::Vector;
 
 use crate::flow::{FlowOptions, FlowOutcome};
 
@@ -44,8 +46,9 @@ pub struct RunInfo<'a> {
 /// `vectors_NNNNN.csv` per pair and `mean.csv` (px per pair, and m/s in
 /// `u_m_s`, `v_m_s` when calibrated), `flow.nc` (all of it in one netCDF
 /// file, [`super::netcdf`]), `mean_dense.flo` (when the dense stage ran),
-/// `pair_a.png`, `pair_b.png`, `mean_field.png`, `pair_vectors.png` and
-/// `summary.json`.
+/// `pair_a.png`, `pair_b.png`, `mean_field.png`, `mean_speed.png` and
+/// `mean_vorticity.png` (colour maps, glare marked), `pair_vectors.png`
+/// and `summary.json`.
 pub fn write_flow(
     dir: &Path,
     out: &FlowOutcome,
@@ -99,6 +102,33 @@ pub fn write_flow(
         &mean.vectors,
         1.0,
     )?;
+    let (speed, vorticity) = speed_and_vorticity(&mean.vectors, &out.grid);
+    // Per pair, or per second when calibrated.
+    let (k_speed, k_w, units) = match cal {
+        Some(c) => (c.m_per_s(1.0, dt), c.tick_hz / dt, ("m/s", "1/s")),
+        None => (1.0, 1.0, ("px per pair", "1/pair")),
+    };
+    for (name, values, signed, title) in [
+        (
+            "mean_speed.png",
+            speed.iter().map(|v| v * k_speed).collect::<Vec<_>>(),
+            false,
+            format!("mean speed, {}", units.0),
+        ),
+        (
+            "mean_vorticity.png",
+            vorticity.iter().map(|v| v * k_w).collect(),
+            true,
+            format!("mean vorticity dv/dx - du/dy (y down), {}", units.1),
+        ),
+    ] {
+        let scalar = plot::NodeScalar {
+            values: &values,
+            name: &title,
+            signed,
+        };
+        plot::node_map(&dir.join(name), (w, h), &out.grid, scalar, &out.glare)?;
+    }
     if let Some(p) = out.pairs.first() {
         plot::vectors(
             &dir.join("pair_vectors.png"),
@@ -113,6 +143,50 @@ pub fn write_flow(
     let path = dir.join("summary.json");
     let text = serde_json::to_string_pretty(&flow_summary(out, opts, info)).unwrap_or_default();
     std::fs::write(&path, text).map_err(|e| WriteError::Io(path.display().to_string(), e))
+}
+
+/// Per node of `grid`, the speed of `field` (px per pair) and its
+/// vorticity ∂v/∂x − ∂u/∂y (per pair; x right, y down) by central
+/// differences between measured neighbours (one-sided at an edge or a
+/// hole); NaN where the node or both neighbours along an axis are
+/// unmeasured.
+pub fn speed_and_vorticity(field: &[Vector], grid: &Grid) -> (Vec<f64>, Vec<f64>) {
+    let (nx, ny, h) = (grid.nx, grid.ny, grid.step as f64);
+    let at = |r: usize, c: usize| field.get(r * nx + c).filter(|v| v.state.is_measured());
+    // d/d(axis) of `f` at (r, c) from the measured neighbours.
+    let diff = |r: usize, c: usize, along_x: bool, f: fn(&Vector) -> f64| -> f64 {
+        let (n, i) = if along_x { (nx, c) } else { (ny, r) };
+        let get = |j: usize| if along_x { at(r, j) } else { at(j, c) };
+        let prev = i.checked_sub(1).and_then(get).map(|v| (f(v), 1.0));
+        let next = (i + 1 < n)
+            .then(|| get(i + 1))
+            .flatten()
+            .map(|v| (f(v), 1.0));
+        let here = get(i).map(f);
+        match (prev, here, next) {
+            (Some((a, _)), _, Some((b, _))) => (b - a) / (2.0 * h),
+            (Some((a, _)), Some(x), None) => (x - a) / h,
+            (None, Some(x), Some((b, _))) => (b - x) / h,
+            _ => f64::NAN,
+        }
+    };
+    let mut speed = Vec::with_capacity(nx * ny);
+    let mut w = Vec::with_capacity(nx * ny);
+    for r in 0..ny {
+        for c in 0..nx {
+            match at(r, c) {
+                Some(v) => {
+                    speed.push(v.u.hypot(v.v));
+                    w.push(diff(r, c, true, |v| v.v) - diff(r, c, false, |v| v.u));
+                }
+                None => {
+                    speed.push(f64::NAN);
+                    w.push(f64::NAN);
+                }
+            }
+        }
+    }
+    (speed, w)
 }
 
 /// A CSV column of `values` printed with `decimals` decimals.
@@ -161,4 +235,62 @@ pub fn flow_summary(out: &FlowOutcome, opts: &FlowOptions, info: RunInfo<'_>) ->
         "seconds": info.seconds,
         "pairs": per_pair,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use spiv_formats::State;
+
+    /// A linear field u = a·y, v = b·x has vorticity b − a at every node,
+    /// edges (one-sided) and holes included; a node without neighbours
+    /// along an axis has none.
+    #[test]
+    fn vorticity_of_a_linear_field() {
+        let grid = Grid::new(128, 96, 32, 16).unwrap();
+        let (a, b) = (0.03, -0.01);
+        let mut field: Vec<Vector> = grid
+            .centres()
+            .into_iter()
+            .map(|(x, y)| Vector {
+                x,
+                y,
+                u: a * y,
+                v: b * x,
+                state: State::Valid,
+            })
+            .collect();
+        field[grid.nx + 2].state = State::Invalid;
+        let (speed, w) = speed_and_vorticity(&field, &grid);
+        for (i, (s, w)) in speed.iter().zip(&w).enumerate() {
+            if i == grid.nx + 2 {
+                assert!(s.is_nan() && w.is_nan());
+                continue;
+            }
+            if i == 2 {
+                // The top edge above the hole: no neighbour down the
+                // column, so no vorticity.
+                assert!(w.is_nan() && s.is_finite());
+                continue;
+            }
+            assert!((w - (b - a)).abs() < 1e-12, "node {i}: {w}");
+            assert!((s - field[i].u.hypot(field[i].v)).abs() < 1e-12);
+        }
+        let one_row = Grid::new(128, 32, 32, 16).unwrap();
+        let f: Vec<Vector> = one_row
+            .centres()
+            .into_iter()
+            .map(|(x, y)| Vector {
+                x,
+                y,
+                u: 1.0,
+                v: 0.0,
+                state: State::Valid,
+            })
+            .collect();
+        assert!(speed_and_vorticity(&f, &one_row)
+            .1
+            .iter()
+            .all(|w| w.is_nan()));
+    }
 }

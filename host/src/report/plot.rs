@@ -246,3 +246,99 @@ fn pareto_inner(path: &Path, rows: &[SpeedRow]) -> Result<(), String> {
     }
     root.present().map_err(|e| e.to_string())
 }
+
+plotters::style::colors::colormaps::def_linear_colormap! {
+    BlueWhiteRed,
+    RGBColor,
+    "A diverging map for signed values: blue below zero, white at zero, red above.",
+    ( 59,  76, 192),
+    (221, 221, 221),
+    (180,   4,  38)
+}
+
+/// A scalar on the PIV nodes, for [`node_map`].
+#[derive(Debug, Clone, Copy)]
+pub struct NodeScalar<'a> {
+    /// One value per node, row-major (NaN: none).
+    pub values: &'a [f64],
+    /// What it is and its unit, for the caption.
+    pub name: &'a str,
+    /// Signed (a diverging map centred on 0) or not (viridis from 0).
+    pub signed: bool,
+}
+
+/// A scalar field of the nodes of `grid` as cells of its colour over a
+/// `width × height` frame (scaled 2×), nodes without a value dark gray,
+/// `glare` pixels (upright, `width × height`) shaded and outlined in
+/// red, the range in the caption.
+pub fn node_map(
+    path: &Path,
+    (width, height): (u32, u32),
+    grid: &spiv_formats::grid::Grid,
+    s: NodeScalar<'_>,
+    glare: &[bool],
+) -> Result<(), PlotError> {
+    use plotters::style::colors::colormaps::ViridisRGB;
+    font();
+    let e = err(path);
+    let k = 2i32;
+    let caption = 28i32;
+    let (w, h) = (width as i32, height as i32);
+    let root =
+        BitMapBackend::new(path, ((w * k) as u32, (h * k + caption) as u32)).into_drawing_area();
+    root.fill(&WHITE).map_err(|x| e(x.to_string()))?;
+    let finite = s.values.iter().copied().filter(|v| v.is_finite());
+    let (lo, hi) = finite.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+        (a.min(v), b.max(v))
+    });
+    let top = if s.signed { lo.abs().max(hi.abs()) } else { hi };
+    let half = grid.step as f64 / 2.0;
+    for r in 0..grid.ny {
+        for c in 0..grid.nx {
+            let v = s.values.get(r * grid.nx + c).copied().unwrap_or(f64::NAN);
+            let color = match (v.is_finite() && top > 0.0, s.signed) {
+                (false, _) => RGBColor(60, 60, 60),
+                (true, true) => BlueWhiteRed::get_color_normalized(v, -top, top),
+                (true, false) => ViridisRGB::get_color_normalized(v.max(0.0), 0.0, top),
+            };
+            let (x, y) = grid.centre(r, c);
+            let corner = |dx: f64, dy: f64| {
+                (
+                    ((x + dx) * f64::from(k)) as i32,
+                    ((y + dy) * f64::from(k)) as i32 + caption,
+                )
+            };
+            root.draw(&Rectangle::new(
+                [corner(-half, -half), corner(half, half)],
+                color.filled(),
+            ))
+            .map_err(|x| e(x.to_string()))?;
+        }
+    }
+    // Glare: every other pixel of it red, so the field shows through.
+    let (wu, hu) = (width as usize, height as usize);
+    for (i, _) in glare.iter().enumerate().filter(|(_, &g)| g) {
+        let (r, c) = (i / wu, i % wu);
+        if r < hu && (r + c) % 2 == 0 {
+            root.draw_pixel((c as i32 * k, r as i32 * k + caption), &RED)
+                .map_err(|x| e(x.to_string()))?;
+        }
+    }
+    let range = if lo.is_finite() {
+        format!("{lo:.3} to {hi:.3}")
+    } else {
+        "no value".to_string()
+    };
+    let marked = if glare.contains(&true) {
+        "; red dots: glare"
+    } else {
+        ""
+    };
+    root.draw(&Text::new(
+        format!("{}: {range}{marked}", s.name),
+        (6, 6),
+        ("sans-serif", 16).into_font(),
+    ))
+    .map_err(|x| e(x.to_string()))?;
+    root.present().map_err(|x| e(x.to_string()))
+}
