@@ -29,18 +29,7 @@ pub enum WriteError {
     Io(String, std::io::Error),
 }
 
-/// What the run was asked, for `summary.json`.
-#[derive(Debug, Clone, Copy)]
-pub struct RunInfo<'a> {
-    /// The recording's path as given.
-    pub input: &'a Path,
-    /// Planes in the recording.
-    pub planes: u64,
-    /// Wall time of the run, s.
-    pub seconds: f64,
-    /// The command line that made the run (netCDF `history`).
-    pub command: &'a str,
-}
+pub use super::RunInfo;
 
 /// Writes every file of a run into `dir` (which must exist):
 /// `vectors_NNNNN.csv` per pair and `mean.csv` (px per pair, and m/s in

@@ -7,3 +7,18 @@ pub mod netcdf;
 pub mod plot;
 pub mod summary;
 pub mod table;
+
+use std::path::Path;
+
+/// What a flow run was asked, for `summary.json` and `flow.nc`.
+#[derive(Debug, Clone, Copy)]
+pub struct RunInfo<'a> {
+    /// The recording's path as given.
+    pub input: &'a Path,
+    /// Planes in the recording.
+    pub planes: u64,
+    /// Wall time of the run, s.
+    pub seconds: f64,
+    /// The command line that made the run (netCDF `history`).
+    pub command: &'a str,
+}

@@ -13,7 +13,7 @@ use spiv_formats::FormatError;
 
 use crate::flow::{FlowOptions, FlowOutcome};
 
-use super::flow::RunInfo;
+use super::RunInfo;
 
 /// Writes `flow.nc` of a run to `path`.
 pub fn write_flow_nc(
