@@ -16,7 +16,7 @@ use spiv_core::Method;
 use spiv_firmware_sim::downlink::ControlStream;
 use spiv_firmware_sim::drive::{run_on_dat, run_on_scene, DriveError};
 use spiv_firmware_sim::firmware::{
-    Config, Counters, FaultCounts, Faults, Faulty, Plain, SentFrame,
+    Config, Counters, FaultCounts, Faults, Faulty, Firmware, Plain, SentFrame,
 };
 use spiv_firmware_sim::scene::{SceneKind, SceneParams, TICK_HZ};
 use spiv_firmware_sim::simulation::Request;
@@ -370,6 +370,27 @@ struct Run {
     heard: (DownlinkStats, Option<ControlStream>),
 }
 
+impl Run {
+    /// What firmware `fw` (over its faulty uplink) leaves, with the control
+    /// stream it heard, the frames' size and the tick rate.
+    fn of(
+        mut fw: Firmware<Faulty<Plain<Box<dyn Write>>>>,
+        control: Option<ControlStream>,
+        (width, height): (u16, u16),
+        tick_hz: Option<f64>,
+    ) -> Run {
+        Run {
+            kept: fw.keep.take().unwrap_or_default(),
+            counters: fw.counters(),
+            heard: (fw.downlink(), control),
+            faults: fw.into_link().counts,
+            width,
+            height,
+            tick_hz,
+        }
+    }
+}
+
 /// The firmware loop on the simulated scene `name`.
 fn from_scene(a: &Args, name: &str, shared: &Shared, faults: Faults) -> Result<Run, Error> {
     let kind = SceneKind::parse(name).map_err(|e| Error::Usage(e.to_string()))?;
@@ -394,16 +415,8 @@ fn from_scene(a: &Args, name: &str, shared: &Shared, faults: Faults) -> Result<R
     let req = Request::new(p, a.seed);
     let (out, mut control) = open_link(a, shared)?;
     let link = Faulty::new(Plain(out), faults, a.seed);
-    let (mut fw, _) = run_on_scene(&req, cfg, link, a.checksum, control.as_mut(), |_, _| {})?;
-    Ok(Run {
-        kept: fw.keep.take().unwrap_or_default(),
-        counters: fw.counters(),
-        heard: (fw.downlink(), control),
-        faults: fw.into_link().counts,
-        width: w,
-        height: h,
-        tick_hz: None,
-    })
+    let (fw, _) = run_on_scene(&req, cfg, link, a.checksum, control.as_mut(), |_, _| {})?;
+    Ok(Run::of(fw, control, (w, h), None))
 }
 
 /// The firmware loop on the recording `--input` (its size and pair from
@@ -433,16 +446,9 @@ fn from_input(a: &Args, shared: &Shared, faults: Faults) -> Result<Run, Error> {
     let (out, mut control) = open_link(a, shared)?;
     let link = Faulty::new(Plain(out), faults, a.seed);
     let opts = DatOptions::default();
-    let mut fw = run_on_dat(path, w, h, opts, cfg, link, a.checksum, control.as_mut())?;
-    Ok(Run {
-        kept: fw.keep.take().unwrap_or_default(),
-        counters: fw.counters(),
-        heard: (fw.downlink(), control),
-        faults: fw.into_link().counts,
-        width: w,
-        height: h,
-        tick_hz: Some(meta.map_or(TICK_HZ, |m| m.tick_hz)),
-    })
+    let fw = run_on_dat(path, w, h, opts, cfg, link, a.checksum, control.as_mut())?;
+    let tick_hz = Some(meta.map_or(TICK_HZ, |m| m.tick_hz));
+    Ok(Run::of(fw, control, (w, h), tick_hz))
 }
 
 /// One line on what the downlink heard, and its injected faults.

@@ -140,40 +140,38 @@ fn displacement(
             ),
         ]
     };
-    let mut vars = Vec::new();
-    if let Some((c, dt)) = cal {
-        let ms = |d: &[f64]| d.iter().map(|&x| c.m_per_s(x, dt)).collect();
-        vars.push(variable(
-            &format!("{prefix}u_m_s"),
-            dims,
-            Values::F64(ms(&u)),
-            attrs("velocity right", "m s-1"),
-        ));
-        vars.push(variable(
-            &format!("{prefix}v_m_s"),
-            dims,
-            Values::F64(ms(&v)),
-            attrs("velocity down", "m s-1"),
-        ));
-    }
-    vars.insert(
-        0,
+    let ms = cal.map(|(c, dt)| {
+        let to = |d: &[f64]| d.iter().map(|&x| c.m_per_s(x, dt)).collect();
+        (to(&u), to(&v))
+    });
+    let mut vars = vec![
         variable(
             &format!("{prefix}u"),
             dims,
             Values::F64(u),
             attrs("displacement right per pair", "px"),
         ),
-    );
-    vars.insert(
-        1,
         variable(
             &format!("{prefix}v"),
             dims,
             Values::F64(v),
             attrs("displacement down per pair", "px"),
         ),
-    );
+    ];
+    if let Some((um, vm)) = ms {
+        vars.push(variable(
+            &format!("{prefix}u_m_s"),
+            dims,
+            Values::F64(um),
+            attrs("velocity right", "m s-1"),
+        ));
+        vars.push(variable(
+            &format!("{prefix}v_m_s"),
+            dims,
+            Values::F64(vm),
+            attrs("velocity down", "m s-1"),
+        ));
+    }
     vars
 }
 
