@@ -222,6 +222,11 @@ pub struct FlowOptions {
     /// centre is masked is invalid in every pair, so it never predicts the
     /// next one.
     pub mask: Option<Array2<bool>>,
+    /// Only the pairs with these indices in [`FlowOptions::pair_ticks`]
+    /// (`None`: all). A range that starts at a multiple of [`CHAIN`] gives
+    /// exactly the vectors of those pairs in a run of all of them, so runs
+    /// of such ranges can be spread over processes or machines.
+    pub pairs: Option<std::ops::Range<usize>>,
 }
 
 impl FlowOptions {
@@ -247,6 +252,7 @@ impl FlowOptions {
             dense: false,
             calibration: rec.meta_calibration,
             mask: None,
+            pairs: None,
         };
         o.schedule(rec.planes);
         o
@@ -334,6 +340,8 @@ pub struct FlowRequest {
     pub tick_hz: Option<f64>,
     /// Pixels to leave out (upright, the frames' size; `true`: masked).
     pub mask: Option<Array2<bool>>,
+    /// Only these pairs of the schedule ([`FlowOptions::pairs`]).
+    pub pairs: Option<std::ops::Range<usize>>,
 }
 
 impl Default for FlowRequest {
@@ -351,6 +359,7 @@ impl Default for FlowRequest {
             pixel_mm: None,
             tick_hz: None,
             mask: None,
+            pairs: None,
         }
     }
 }
@@ -413,6 +422,7 @@ impl FlowRequest {
         }
         o.mask = self.mask.clone();
         o.ladder.mask = self.mask.clone();
+        o.pairs = self.pairs.clone();
         Ok(o)
     }
 }
@@ -522,6 +532,53 @@ pub struct MeanField {
     pub pairs: Vec<u32>,
 }
 
+/// One pair's field as [`MeanField::of`] takes it: its vectors and their
+/// standard uncertainties `(σu, σv)`, px per pair, in grid order.
+pub type PairField<'a> = (&'a [Vector], &'a [(f64, f64)]);
+
+impl MeanField {
+    /// The robust mean of `pairs` (each pair's vectors and their
+    /// uncertainties, on one grid, in time order): per node the median of
+    /// the valid vectors (u and v each), their count and the median's
+    /// uncertainty ([`median_sigma`]).
+    pub fn of(pairs: &[PairField<'_>]) -> MeanField {
+        let Some(first) = pairs.first() else {
+            return MeanField {
+                vectors: Vec::new(),
+                sigma: Vec::new(),
+                pairs: Vec::new(),
+            };
+        };
+        let n = first.0.len();
+        let mut out = MeanField {
+            vectors: Vec::with_capacity(n),
+            sigma: Vec::with_capacity(n),
+            pairs: Vec::with_capacity(n),
+        };
+        for (i, v0) in first.0.iter().enumerate() {
+            let valid: Vec<Measure> = pairs
+                .iter()
+                .filter_map(|(vectors, sigma)| {
+                    let v = vectors.get(i).filter(|v| v.state == State::Valid)?;
+                    Some((v.u, v.v, sigma.get(i).copied().unwrap_or(NO_SIGMA)))
+                })
+                .collect();
+            let n = valid.len();
+            let (u, v, state) = if n == 0 {
+                (0.0, 0.0, State::Invalid)
+            } else {
+                let mut us: Vec<f64> = valid.iter().map(|x| x.0).collect();
+                let mut vs: Vec<f64> = valid.iter().map(|x| x.1).collect();
+                (median(&mut us), median(&mut vs), State::Valid)
+            };
+            out.vectors.push(Vector { u, v, state, ..*v0 });
+            out.sigma.push(median_sigma(&valid));
+            out.pairs.push(n as u32);
+        }
+        out
+    }
+}
+
 /// Everything a run produced.
 #[derive(Debug, Clone)]
 pub struct FlowOutcome {
@@ -553,43 +610,15 @@ impl FlowOutcome {
         l
     }
 
-    /// The robust mean over pairs: per node the median of the valid
-    /// vectors, their count and the median's uncertainty.
+    /// The robust mean over pairs ([`MeanField::of`]).
     pub fn mean(&self) -> MeanField {
-        let Some(first) = self.pairs.first() else {
-            return MeanField {
-                vectors: Vec::new(),
-                sigma: Vec::new(),
-                pairs: Vec::new(),
-            };
-        };
-        let mut out = MeanField {
-            vectors: Vec::with_capacity(first.vectors.len()),
-            sigma: Vec::with_capacity(first.vectors.len()),
-            pairs: Vec::with_capacity(first.vectors.len()),
-        };
-        for (i, v0) in first.vectors.iter().enumerate() {
-            let valid: Vec<Measure> = self
+        MeanField::of(
+            &self
                 .pairs
                 .iter()
-                .filter_map(|p| {
-                    let v = p.vectors.get(i).filter(|v| v.state == State::Valid)?;
-                    Some((v.u, v.v, p.sigma.get(i).copied().unwrap_or(NO_SIGMA)))
-                })
-                .collect();
-            let n = valid.len();
-            let (u, v, state) = if n == 0 {
-                (0.0, 0.0, State::Invalid)
-            } else {
-                let mut us: Vec<f64> = valid.iter().map(|x| x.0).collect();
-                let mut vs: Vec<f64> = valid.iter().map(|x| x.1).collect();
-                (median(&mut us), median(&mut vs), State::Valid)
-            };
-            out.vectors.push(Vector { u, v, state, ..*v0 });
-            out.sigma.push(median_sigma(&valid));
-            out.pairs.push(n as u32);
-        }
-        out
+                .map(|p| (p.vectors.as_slice(), p.sigma.as_slice()))
+                .collect::<Vec<_>>(),
+        )
     }
 
     /// The mean field's vectors ([`FlowOutcome::mean`]).
@@ -812,7 +841,16 @@ fn check(rec: &Recording, opts: &FlowOptions) -> Result<Vec<u64>, FlowError> {
             rec.planes, opts.start, opts.dt, opts.end
         )));
     }
-    Ok(ticks)
+    match &opts.pairs {
+        None => Ok(ticks),
+        Some(r) if r.start < r.end && r.end <= ticks.len() => Ok(ticks[r.clone()].to_vec()),
+        Some(r) => Err(FlowError::Schedule(format!(
+            "pairs {}..{}: the schedule has pairs 0..{}",
+            r.start,
+            r.end,
+            ticks.len()
+        ))),
+    }
 }
 
 /// A motion-compensated pair: the time ladder around its midpoint, over

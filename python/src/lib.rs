@@ -18,7 +18,6 @@ use numpy::{
     IntoPyArray, PyArray2, PyArray3, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods,
 };
 use pyo3::exceptions::{PyOSError, PyValueError};
-use pyo3::ffi::c_str;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 
@@ -28,14 +27,15 @@ use spiv_formats::capture::Capture;
 use spiv_formats::dat::{unpack_upright, DatOptions, DatReader};
 use spiv_formats::grid::Grid;
 use spiv_formats::image::read_gray;
-use spiv_formats::{FormatError, Vector, MAX_FRAME_PIXELS};
-use spiv_host::flow::{run_flow, FlowError, FlowRequest, Recording};
+use spiv_formats::{FormatError, State, Vector, MAX_FRAME_PIXELS};
+use spiv_host::flow::{run_flow, FlowError, FlowRequest, MeanField, Recording};
 use spiv_host::live::{open_downlink, run_live, LiveError, LiveOptions};
 use spiv_host::piv::options::PivOptions;
 use spiv_host::piv::{piv as run_piv, PivError};
 use spiv_host::receive::{FrameLimit, Spec};
 use spiv_host::reconstruct::{frame_from_planes, FileOptions, Planes, ReconstructError};
 use spiv_host::simulate::SimulateRequest;
+use spiv_host::units::Calibration;
 
 pyo3::create_exception!(
     spiv,
@@ -313,7 +313,10 @@ type FieldArrays = (
 );
 
 fn field_arrays(vectors: &[Vector], grid: &Grid) -> FieldArrays {
-    let (ny, nx) = (grid.ny, grid.nx);
+    field_arrays_of(vectors, (grid.ny, grid.nx))
+}
+
+fn field_arrays_of(vectors: &[Vector], (ny, nx): (usize, usize)) -> FieldArrays {
     let at = |f: &dyn Fn(&Vector) -> f64| {
         Array2::from_shape_fn((ny, nx), |(r, c)| vectors.get(r * nx + c).map_or(0.0, f))
     };
@@ -331,8 +334,7 @@ fn field_arrays(vectors: &[Vector], grid: &Grid) -> FieldArrays {
 
 /// Per-vector uncertainties `(σu, σv)` as two `(ny, nx)` arrays (inf past
 /// the end).
-fn sigma_arrays(sigma: &[(f64, f64)], grid: &Grid) -> (Array2<f64>, Array2<f64>) {
-    let (ny, nx) = (grid.ny, grid.nx);
+fn sigma_arrays(sigma: &[(f64, f64)], (ny, nx): (usize, usize)) -> (Array2<f64>, Array2<f64>) {
     let at = |f: fn(&(f64, f64)) -> f64| {
         Array2::from_shape_fn((ny, nx), |(r, c)| {
             sigma.get(r * nx + c).map_or(f64::INFINITY, f)
@@ -610,7 +612,8 @@ fn array3<T>(shape: (usize, usize, usize), v: Vec<T>) -> PyResult<Array3<T>> {
 /// `pixel_size` (mm) and `tick_hz` calibrate it (default: the
 /// `scene.json` beside the file); `mask` (nonzero = left out, the frames'
 /// `(height, width)`) leaves a wall, a body or a region outside the flow
-/// out: nodes whose centre it covers are invalid in every pair.
+/// out: nodes whose centre it covers are invalid in every pair; `pairs`
+/// `(a, b)` measures only pairs `a..b` of the schedule (`flow_pairs`).
 ///
 /// Returns a dict: `ticks` `int64 (pairs, 2)`, `methods` (each pair's),
 /// `x`, `y` `(ny, nx)`, `u`, `v`, `flags`, and each vector's standard
@@ -626,7 +629,7 @@ fn array3<T>(shape: (usize, usize, usize), v: Vec<T>) -> PyResult<Array3<T>> {
 /// `chc` (the flags), `sigma_u, sigma_v`, in m, s and m/s when calibrated
 /// (else px, ticks and px per pair), so `ds.piv.vorticity()` works.
 #[pyfunction]
-#[pyo3(signature = (path, dt=None, every=None, start=None, end=None, method="mc", window=None, dwell_cap=Some(spiv_host::dwell::DWELL_CAP), windows=None, width=None, height=None, flip=true, strip_head=0, dense=false, pixel_size=None, tick_hz=None, as_xarray=false, mask=None))]
+#[pyo3(signature = (path, dt=None, every=None, start=None, end=None, method="mc", window=None, dwell_cap=Some(spiv_host::dwell::DWELL_CAP), windows=None, width=None, height=None, flip=true, strip_head=0, dense=false, pixel_size=None, tick_hz=None, as_xarray=false, mask=None, pairs=None))]
 #[allow(clippy::too_many_arguments)]
 fn flow<'py>(
     py: Python<'py>,
@@ -648,6 +651,7 @@ fn flow<'py>(
     tick_hz: Option<f64>,
     as_xarray: bool,
     mask: Option<&Bound<'py, PyAny>>,
+    pairs: Option<(usize, usize)>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let mask = mask
         .map(|m| image(m, "mask").map(|m| m.mapv(|v| v != 0.0)))
@@ -665,19 +669,9 @@ fn flow<'py>(
         pixel_mm: pixel_size,
         tick_hz,
         mask,
+        pairs: pairs.map(|(a, b)| a..b),
     };
-    if width.is_some() != height.is_some() {
-        return Err(SpivError::new_err("give both width and height, or neither"));
-    }
-    let fopts = FileOptions {
-        width,
-        height,
-        dat: DatOptions {
-            flip,
-            strip_head,
-            allow_truncated: false,
-        },
-    };
+    let fopts = file_options(width, height, flip, strip_head)?;
     let (out, o) = py
         .detach(|| -> Result<_, Failure> {
             let rec = Recording::open(&path, &fopts)?;
@@ -686,29 +680,220 @@ fn flow<'py>(
         })
         .map_err(err)?;
     let d = flow_dict(py, out)?;
-    calibrated(&d, &o)?;
+    calibrated(&d, o.calibration, f64::from(o.dt))?;
     if !as_xarray {
         return Ok(d.into_any());
     }
-    // pivpy's layout, built by xarray itself (python/src/to_xarray.py).
-    let code = c_str!(include_str!("to_xarray.py"));
-    let m = PyModule::from_code(py, code, c"to_xarray.py", c"spiv._to_xarray")?;
-    m.getattr("to_xarray")?.call1((d,))
+    // pivpy's layout, built by xarray itself (python/pysrc/spiv/_xarray.py).
+    py.import("spiv._xarray")?.getattr("to_xarray")?.call1((d,))
+}
+
+/// The pairs `flow` measures with these options: their frame ticks,
+/// `int64 (pairs, 2)`. `flow(..., pairs=(a, b))` measures pairs `a..b` of
+/// them; when `a` is a multiple of `FLOW_CHAIN` (pairs that follow one
+/// another's field, the first from nothing) those pairs' vectors are
+/// exactly the ones a run of all pairs gives, which is how `spiv.dask`
+/// spreads a recording over workers.
+#[pyfunction]
+#[pyo3(signature = (path, dt=None, every=None, start=None, end=None, method="mc", width=None, height=None, flip=true, strip_head=0))]
+#[allow(clippy::too_many_arguments)]
+fn flow_pairs<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    dt: Option<u32>,
+    every: Option<u32>,
+    start: Option<u64>,
+    end: Option<u64>,
+    method: &str,
+    width: Option<u16>,
+    height: Option<u16>,
+    flip: bool,
+    strip_head: u16,
+) -> PyResult<Bound<'py, PyArray2<i64>>> {
+    let req = FlowRequest {
+        dt,
+        every,
+        start,
+        end,
+        method: method_named(method)?,
+        ..FlowRequest::default()
+    };
+    let fopts = file_options(width, height, flip, strip_head)?;
+    let o = py
+        .detach(|| -> Result<_, Failure> {
+            let rec = Recording::open(&path, &fopts)?;
+            Ok(req.options(&rec, &path)?)
+        })
+        .map_err(err)?;
+    let ticks = o.pair_ticks();
+    let dt = i64::from(o.dt);
+    let a = Array2::from_shape_fn((ticks.len(), 2), |(i, j)| ticks[i] as i64 + dt * j as i64);
+    Ok(a.into_pyarray(py))
+}
+
+/// The `.dat` reading options of `flow` and `flow_pairs`.
+fn file_options(
+    width: Option<u16>,
+    height: Option<u16>,
+    flip: bool,
+    strip_head: u16,
+) -> PyResult<FileOptions> {
+    if width.is_some() != height.is_some() {
+        return Err(SpivError::new_err("give both width and height, or neither"));
+    }
+    Ok(FileOptions {
+        width,
+        height,
+        dat: DatOptions {
+            flip,
+            strip_head,
+            allow_truncated: false,
+        },
+    })
+}
+
+/// The robust mean field of a flow dict's pairs (`x`, `y`, `u`, `v`,
+/// `flags`, `sigma_u`, `sigma_v`, as `flow` returns them, pairs stacked
+/// along the first axis; `pixel_size`, `tick_hz` and `ticks` for the m/s
+/// arrays): sets `mean_u`, `mean_v`, `mean_flags`, `mean_sigma_u`,
+/// `mean_sigma_v`, `mean_pairs` (and `mean_u_m_s`, `mean_v_m_s` when
+/// calibrated) in the dict, as `flow` computes them, and returns it. This
+/// is how `spiv.dask` joins the pairs of several workers.
+#[pyfunction]
+fn flow_mean<'py>(d: Bound<'py, PyDict>) -> PyResult<Bound<'py, PyDict>> {
+    let get = |name: &str| -> PyResult<Bound<'py, PyAny>> {
+        d.get_item(name)?
+            .ok_or_else(|| SpivError::new_err(format!("flow dict without {name}")))
+    };
+    let f64s = |name: &str| -> PyResult<Array3<f64>> {
+        let a = contiguous(&get(name)?, "float64")?;
+        Ok(a.extract::<PyReadonlyArray3<f64>>()?.as_array().to_owned())
+    };
+    let (u, v, su, sv) = (f64s("u")?, f64s("v")?, f64s("sigma_u")?, f64s("sigma_v")?);
+    let flags = contiguous(&get("flags")?, "uint8")?
+        .extract::<PyReadonlyArray3<u8>>()?
+        .as_array()
+        .to_owned();
+    let x2 = |name: &str| -> PyResult<Array2<f64>> {
+        let a = contiguous(&get(name)?, "float64")?;
+        Ok(a.extract::<PyReadonlyArray2<f64>>()?.as_array().to_owned())
+    };
+    let (x, y) = (x2("x")?, x2("y")?);
+    let (p, ny, nx) = u.dim();
+    let shapes = [v.dim(), su.dim(), sv.dim(), flags.dim()];
+    if shapes.iter().any(|&s| s != (p, ny, nx)) || x.dim() != (ny, nx) || y.dim() != (ny, nx) {
+        return Err(SpivError::new_err(
+            "flow dict: u, v, flags, sigma_u, sigma_v must be (pairs, ny, nx) and x, y (ny, nx)",
+        ));
+    }
+    let state = |f: u8| match f {
+        0 => Ok(State::Valid),
+        1 => Ok(State::Replaced),
+        2 => Ok(State::Invalid),
+        _ => Err(SpivError::new_err(format!("flag {f}: expected 0, 1 or 2"))),
+    };
+    let mut fields = Vec::with_capacity(p);
+    for i in 0..p {
+        let mut vectors = Vec::with_capacity(ny * nx);
+        let mut sigma = Vec::with_capacity(ny * nx);
+        for r in 0..ny {
+            for c in 0..nx {
+                vectors.push(Vector {
+                    x: x[[r, c]],
+                    y: y[[r, c]],
+                    u: u[[i, r, c]],
+                    v: v[[i, r, c]],
+                    state: state(flags[[i, r, c]])?,
+                });
+                sigma.push((su[[i, r, c]], sv[[i, r, c]]));
+            }
+        }
+        fields.push((vectors, sigma));
+    }
+    let refs: Vec<_> = fields
+        .iter()
+        .map(|(v, s)| (v.as_slice(), s.as_slice()))
+        .collect();
+    let mean = MeanField::of(&refs);
+    mean_items(&d, &mean, (ny, nx))?;
+    let number = |name: &str| -> PyResult<Option<f64>> {
+        d.get_item(name)?.map(|a| a.extract()).transpose()
+    };
+    let calibration = match (number("pixel_size")?, number("tick_hz")?) {
+        (Some(mm), Some(hz)) => {
+            Some(Calibration::new(mm, hz).map_err(|e| SpivError::new_err(e.to_string()))?)
+        }
+        _ => None,
+    };
+    if calibration.is_some() {
+        let ticks = get("ticks")?;
+        let t = contiguous(&ticks, "int64")?
+            .extract::<PyReadonlyArray2<i64>>()?
+            .as_array()
+            .to_owned();
+        let dt = t
+            .row(0)
+            .get(1)
+            .zip(t.row(0).first())
+            .map_or(0, |(b, a)| b - a);
+        if p == 0 || dt <= 0 {
+            return Err(SpivError::new_err(
+                "flow dict: ticks must hold the pairs' (first, second) ticks",
+            ));
+        }
+        calibrated_means(&d, calibration, dt as f64)?;
+    }
+    Ok(d)
+}
+
+/// The mean field's arrays in a flow dict: `mean_u`, `mean_v`,
+/// `mean_flags`, `mean_sigma_u`, `mean_sigma_v`, `mean_pairs`.
+fn mean_items(d: &Bound<'_, PyDict>, mean: &MeanField, (ny, nx): (usize, usize)) -> PyResult<()> {
+    let py = d.py();
+    let (_, _, mu, mv, mf) = field_arrays_of(&mean.vectors, (ny, nx));
+    let (msu, msv) = sigma_arrays(&mean.sigma, (ny, nx));
+    let mpairs = Array2::from_shape_fn((ny, nx), |(r, c)| {
+        mean.pairs.get(r * nx + c).copied().unwrap_or(0)
+    });
+    d.set_item("mean_u", mu.into_pyarray(py))?;
+    d.set_item("mean_v", mv.into_pyarray(py))?;
+    d.set_item("mean_flags", mf.into_pyarray(py))?;
+    d.set_item("mean_sigma_u", msu.into_pyarray(py))?;
+    d.set_item("mean_sigma_v", msv.into_pyarray(py))?;
+    d.set_item("mean_pairs", mpairs.into_pyarray(py))?;
+    Ok(())
 }
 
 /// With a calibration: `pixel_size` (mm), `tick_hz`, and every u, v
-/// array again in m/s as `*_m_s`; without one, `pixel_size` and
-/// `tick_hz` are None.
-fn calibrated(d: &Bound<'_, PyDict>, o: &spiv_host::flow::FlowOptions) -> PyResult<()> {
-    let Some(c) = o.calibration else {
+/// array again in m/s as `*_m_s` (pairs `dt` ticks apart); without one,
+/// `pixel_size` and `tick_hz` are None.
+fn calibrated(d: &Bound<'_, PyDict>, calibration: Option<Calibration>, dt: f64) -> PyResult<()> {
+    let Some(c) = calibration else {
         d.set_item("pixel_size", None::<f64>)?;
         d.set_item("tick_hz", None::<f64>)?;
         return Ok(());
     };
     d.set_item("pixel_size", c.pixel_mm)?;
     d.set_item("tick_hz", c.tick_hz)?;
-    let k = c.m_per_s(1.0, f64::from(o.dt));
-    for name in ["u", "v", "mean_u", "mean_v"] {
+    in_m_s(d, &["u", "v", "mean_u", "mean_v"], c, dt)
+}
+
+/// The mean field's m/s arrays (`mean_u_m_s`, `mean_v_m_s`).
+fn calibrated_means(
+    d: &Bound<'_, PyDict>,
+    calibration: Option<Calibration>,
+    dt: f64,
+) -> PyResult<()> {
+    match calibration {
+        Some(c) => in_m_s(d, &["mean_u", "mean_v"], c, dt),
+        None => Ok(()),
+    }
+}
+
+/// `name_m_s` = `name` (px per pair, pairs `dt` ticks apart) in m/s.
+fn in_m_s(d: &Bound<'_, PyDict>, names: &[&str], c: Calibration, dt: f64) -> PyResult<()> {
+    let k = c.m_per_s(1.0, dt);
+    for &name in names {
         if let Some(a) = d.get_item(name)? {
             d.set_item(format!("{name}_m_s"), a.call_method1("__mul__", (k,))?)?;
         }
@@ -735,7 +920,7 @@ fn flow_dict(py: Python<'_>, out: spiv_host::flow::FlowOutcome) -> PyResult<Boun
         us.index_axis_mut(axis, i).assign(&u);
         vs.index_axis_mut(axis, i).assign(&v);
         fs.index_axis_mut(axis, i).assign(&f);
-        let (su, sv) = sigma_arrays(&pr.sigma, grid);
+        let (su, sv) = sigma_arrays(&pr.sigma, (ny, nx));
         sus.index_axis_mut(axis, i).assign(&su);
         svs.index_axis_mut(axis, i).assign(&sv);
         ticks[[i, 0]] = pr.ticks[0] as i64;
@@ -743,11 +928,7 @@ fn flow_dict(py: Python<'_>, out: spiv_host::flow::FlowOutcome) -> PyResult<Boun
         methods.push(pr.method.name());
     }
     let mean = out.mean();
-    let (x, y, mu, mv, mf) = field_arrays(&mean.vectors, grid);
-    let (msu, msv) = sigma_arrays(&mean.sigma, grid);
-    let mpairs = Array2::from_shape_fn((ny, nx), |(r, c)| {
-        mean.pairs.get(r * nx + c).copied().unwrap_or(0)
-    });
+    let (x, y, ..) = field_arrays(&mean.vectors, grid);
     let d = PyDict::new(py);
     d.set_item("ticks", ticks.into_pyarray(py))?;
     d.set_item("methods", methods)?;
@@ -756,14 +937,9 @@ fn flow_dict(py: Python<'_>, out: spiv_host::flow::FlowOutcome) -> PyResult<Boun
     d.set_item("u", us.into_pyarray(py))?;
     d.set_item("v", vs.into_pyarray(py))?;
     d.set_item("flags", fs.into_pyarray(py))?;
-    d.set_item("mean_u", mu.into_pyarray(py))?;
-    d.set_item("mean_v", mv.into_pyarray(py))?;
-    d.set_item("mean_flags", mf.into_pyarray(py))?;
     d.set_item("sigma_u", sus.into_pyarray(py))?;
     d.set_item("sigma_v", svs.into_pyarray(py))?;
-    d.set_item("mean_sigma_u", msu.into_pyarray(py))?;
-    d.set_item("mean_sigma_v", msv.into_pyarray(py))?;
-    d.set_item("mean_pairs", mpairs.into_pyarray(py))?;
+    mean_items(&d, &mean, (ny, nx))?;
     if let Some(m) = out.mean_dense {
         let (h, w) = (m.height, m.width);
         d.set_item("mean_dense_u", array2((h, w), m.u)?.into_pyarray(py))?;
@@ -871,6 +1047,9 @@ fn spiv(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(dense, m)?)?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(flow, m)?)?;
+    m.add_function(wrap_pyfunction!(flow_pairs, m)?)?;
+    m.add_function(wrap_pyfunction!(flow_mean, m)?)?;
+    m.add("FLOW_CHAIN", spiv_host::flow::CHAIN)?;
     m.add_function(wrap_pyfunction!(receive, m)?)?;
     Ok(())
 }

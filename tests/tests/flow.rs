@@ -307,4 +307,39 @@ fn all_cores_give_the_same_output_as_one() {
         assert_eq!(a.sigma, b.sigma);
     }
     assert_eq!(one.mean().vectors, two.mean().vectors);
+    // Runs of whole chains (as `spiv.dask` spreads them over workers) give
+    // exactly the pairs of the whole run; their robust mean is its mean.
+    let n = one.pairs.len();
+    let mut joined = Vec::new();
+    for a in (0..n).step_by(spiv_host::flow::CHAIN) {
+        let part = FlowOptions {
+            pairs: Some(a..(a + spiv_host::flow::CHAIN).min(n)),
+            ..o.clone()
+        };
+        joined.extend(run_flow(&rec, &part, |_, _| {}).unwrap().pairs);
+    }
+    assert_eq!(joined.len(), n);
+    for (a, b) in one.pairs.iter().zip(&joined) {
+        assert_eq!(
+            (a.ticks, &a.vectors, &a.sigma),
+            (b.ticks, &b.vectors, &b.sigma)
+        );
+    }
+    let fields: Vec<_> = joined
+        .iter()
+        .map(|p| (p.vectors.as_slice(), p.sigma.as_slice()))
+        .collect();
+    let mean = spiv_host::flow::MeanField::of(&fields);
+    assert_eq!(mean.vectors, one.mean().vectors);
+    assert_eq!(mean.pairs, one.mean().pairs);
+    // A range outside the schedule is refused in one line.
+    let past = FlowOptions {
+        pairs: Some(n..n + 1),
+        ..o.clone()
+    };
+    let e = run_flow(&rec, &past, |_, _| {}).unwrap_err().to_string();
+    assert_eq!(
+        e,
+        format!("pairs {n}..{}: the schedule has pairs 0..{n}", n + 1)
+    );
 }

@@ -108,6 +108,7 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
         dense: a.dense,
         pixel_mm: a.pixel_size,
         tick_hz: a.tick_hz,
+        pairs: None,
         mask: a
             .mask
             .as_deref()

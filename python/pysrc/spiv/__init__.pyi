@@ -200,6 +200,7 @@ def flow(
     tick_hz: Optional[float] = None,
     as_xarray: bool = False,
     mask: Optional[npt.ArrayLike] = None,
+    pairs: Optional[Tuple[int, int]] = None,
 ) -> Flow:  # an xarray.Dataset with as_xarray=True
     """The flow job on a .dat or .npz recording, as `spiv flow` (without its files).
 
@@ -214,10 +215,36 @@ def flow(
     the mean dense field. pixel_size (mm) and tick_hz calibrate it (default: the
     scene.json beside the file): then u_m_s, v_m_s, mean_u_m_s, mean_v_m_s in m/s.
     as_xarray: an xarray.Dataset in pivpy's layout instead (dims y, x, t; u, v, chc,
-    sigma_u, sigma_v; m, s and m/s when calibrated), so ds.piv.vorticity() works.
-    mask: nonzero pixels (height, width) left out; nodes whose centre it covers are
-    invalid in every pair.
+    sigma_u, sigma_v; the mean field as mean_u, mean_v, mean_chc, mean_sigma_u,
+    mean_sigma_v, mean_pairs on (y, x); m, s and m/s when calibrated), so
+    ds.piv.vorticity() works. mask: nonzero pixels (height, width) left out; nodes
+    whose centre it covers are invalid in every pair. pairs: (a, b) measures only
+    pairs a..b of flow_pairs(); from a multiple of FLOW_CHAIN, exactly the vectors
+    a run of all pairs gives them.
     """
+
+#: Pairs per chain of `flow`: each starts from the previous pair's field, the
+#: first from nothing; a run from a multiple of it matches a whole run.
+FLOW_CHAIN: int
+
+def flow_pairs(
+    path: _Path,
+    dt: Optional[int] = None,
+    every: Optional[int] = None,
+    start: Optional[int] = None,
+    end: Optional[int] = None,
+    method: str = "mc",
+    width: Optional[int] = None,
+    height: Optional[int] = None,
+    flip: bool = True,
+    strip_head: int = 0,
+) -> npt.NDArray[np.int64]:
+    """The pairs flow() measures with these options: their frame ticks (pairs, 2)."""
+
+def flow_mean(d: Flow) -> Flow:
+    """Sets the robust mean field (mean_u, mean_v, mean_flags, mean_sigma_u,
+    mean_sigma_v, mean_pairs, and mean_*_m_s when calibrated) of a flow dict's
+    stacked pairs, as flow() computes it, and returns the dict."""
 
 def receive(
     file: Optional[_Path] = None,

@@ -1,6 +1,7 @@
 """`spiv.flow(..., as_xarray=True)`: the flow dict as an xarray Dataset in
 pivpy's layout (dimensions y, x, t; variables u, v, chc), so that pivpy's
-`.piv` accessor (vorticity, averages, plots) works on it directly."""
+`.piv` accessor (vorticity, averages, plots) works on it directly; the
+robust mean field rides along as `mean_*` variables on (y, x)."""
 
 import numpy as np
 
@@ -22,7 +23,7 @@ def to_xarray(d):
         k, per, t = 1.0, 1.0, mid
         units = ["pix", "pix", "pix/dt", "pix/dt"]
     u, v, su, sv = (d[n] * per for n in ("u", "v", "sigma_u", "sigma_v"))
-    yxt = ("y", "x", "t")
+    yxt, yx = ("y", "x", "t"), ("y", "x")
     tr = lambda a: np.transpose(a, (1, 2, 0))
     ds = xr.Dataset(
         {
@@ -32,6 +33,16 @@ def to_xarray(d):
                     {"long_name": "0 valid, 1 replaced, 2 invalid"}),
             "sigma_u": (yxt, tr(su), {"units": units[2]}),
             "sigma_v": (yxt, tr(sv), {"units": units[3]}),
+            "mean_u": (yx, d["mean_u"] * per, {"units": units[2],
+                       "long_name": "median of the valid u over t"}),
+            "mean_v": (yx, d["mean_v"] * per, {"units": units[3],
+                       "long_name": "median of the valid v over t, positive down"}),
+            "mean_chc": (yx, d["mean_flags"].astype(np.int32),
+                         {"long_name": "0 valid, 2 no valid vector"}),
+            "mean_sigma_u": (yx, d["mean_sigma_u"] * per, {"units": units[2]}),
+            "mean_sigma_v": (yx, d["mean_sigma_v"] * per, {"units": units[3]}),
+            "mean_pairs": (yx, d["mean_pairs"].astype(np.int32),
+                           {"long_name": "pairs with a valid vector"}),
         },
         coords={
             "x": ("x", d["x"][0, :] * k, {"units": units[0]}),
