@@ -623,7 +623,8 @@ fn flow_writes_vectors_per_pair_the_mean_field_and_plots() {
     assert_eq!(s["calibration"]["pixel_mm"], 0.02);
     let msg = ok(&["flow", p(&dat), "--out", p(&out), "--method", "adaptive"]);
     assert!(msg.contains("dwell cap 8 px"), "{msg}");
-    // TFP, another schedule.
+    // TFP, another schedule, with the movie: one frame per pair, the map
+    // at twice the frame's size under its caption, looping.
     ok(&[
         "flow",
         p(&dat),
@@ -633,7 +634,26 @@ fn flow_writes_vectors_per_pair_the_mean_field_and_plots() {
         "tfp",
         "--every",
         "20",
+        "--movie",
     ]);
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let pairs = s["pairs"].as_array().expect("pairs").len();
+    assert!(pairs > 2, "{pairs}");
+    let mut opts = gif::DecodeOptions::new();
+    opts.set_color_output(gif::ColorOutput::RGBA);
+    let mut gif = opts
+        .read_info(std::fs::File::open(out.join("flow.gif")).unwrap())
+        .unwrap();
+    assert_eq!((gif.width(), gif.height()), (256, 96 * 2 + 28));
+    let mut frames = Vec::new();
+    while let Some(f) = gif.read_next_frame().unwrap() {
+        assert_eq!(f.delay, 10);
+        frames.push(f.buffer.to_vec());
+    }
+    assert_eq!(frames.len(), pairs);
+    // The pairs differ, so the frames do (their captions at least).
+    assert!(frames.windows(2).all(|w| w[0] != w[1]));
     // Without scene.json the pair separation must be given; bad values fail.
     let lone = tmp.path().join("lone.dat");
     std::fs::copy(&dat, &lone).unwrap();

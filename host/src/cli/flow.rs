@@ -79,6 +79,11 @@ pub struct FlowArgs {
     /// masked are invalid in every pair.
     #[arg(long)]
     mask: Option<PathBuf>,
+    /// Also write `flow.gif`: each pair's speed over time, one colour scale,
+    /// the glare marked (at most 240 frames: every k-th pair of a longer
+    /// run), 10 frames per second.
+    #[arg(long)]
+    movie: bool,
     /// Output folder (created if missing).
     #[arg(long, default_value = "spiv-flow")]
     out: PathBuf,
@@ -133,6 +138,10 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
         command: &command,
     };
     write_flow(&a.out, &out, &o, info).map_err(|e| CliError::Usage(e.to_string()))?;
+    if a.movie {
+        spiv_host::report::movie::write_movie(&a.out.join("flow.gif"), &out, &o)
+            .map_err(|e| CliError::Usage(e.to_string()))?;
+    }
     let (mut valid, mut all, mut empty) = (0, 0, 0);
     for p in &out.pairs {
         let (v, r, i) = p.counts();

@@ -115,6 +115,7 @@ pub fn write_flow(
             values: &values,
             name: &title,
             signed,
+            top: None,
         };
         plot::node_map(&dir.join(name), (w, h), &out.grid, scalar, &out.glare)?;
     }

@@ -3,6 +3,7 @@
 //! files ([`flow`], with [`netcdf`]).
 
 pub mod flow;
+pub mod movie;
 pub mod netcdf;
 pub mod plot;
 pub mod summary;

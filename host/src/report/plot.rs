@@ -20,6 +20,16 @@ pub struct PlotError {
     msg: String,
 }
 
+impl PlotError {
+    /// A failure writing `path`.
+    pub fn new(path: &Path, msg: String) -> PlotError {
+        PlotError {
+            path: path.display().to_string(),
+            msg,
+        }
+    }
+}
+
 fn err(path: &Path) -> impl Fn(String) -> PlotError + '_ {
     move |msg| PlotError {
         path: path.display().to_string(),
@@ -265,7 +275,15 @@ pub struct NodeScalar<'a> {
     pub name: &'a str,
     /// Signed (a diverging map centred on 0) or not (viridis from 0).
     pub signed: bool,
+    /// The end of the colour scale (`None`: the largest magnitude of
+    /// `values`); frames of one movie share one.
+    pub top: Option<f64>,
 }
+
+/// Pixels of the caption above a [`node_map`].
+const CAPTION: i32 = 28;
+/// Scale of a [`node_map`] over its frame.
+const SCALE: i32 = 2;
 
 /// A scalar field of the nodes of `grid` as cells of its colour over a
 /// `width × height` frame (scaled 2×), nodes without a value dark gray,
@@ -278,28 +296,64 @@ pub fn node_map(
     s: NodeScalar<'_>,
     glare: &[bool],
 ) -> Result<(), PlotError> {
+    let e = err(path);
+    let size = node_map_size(width, height);
+    let root = BitMapBackend::new(path, size).into_drawing_area();
+    draw_node_map(&root, (width, height), grid, s, glare).map_err(&e)?;
+    root.present().map_err(|x| e(x.to_string()))
+}
+
+/// [`node_map`] into memory: its RGB pixels (8 bits each, row-major) and
+/// its size.
+pub fn node_map_rgb(
+    (width, height): (u32, u32),
+    grid: &spiv_formats::grid::Grid,
+    s: NodeScalar<'_>,
+    glare: &[bool],
+) -> Result<(Vec<u8>, (u32, u32)), PlotError> {
+    let e = err(Path::new("(memory)"));
+    let size = node_map_size(width, height);
+    let mut rgb = vec![0u8; size.0 as usize * size.1 as usize * 3];
+    {
+        let root = BitMapBackend::with_buffer(&mut rgb, size).into_drawing_area();
+        draw_node_map(&root, (width, height), grid, s, glare).map_err(&e)?;
+        root.present().map_err(|x| e(x.to_string()))?;
+    }
+    Ok((rgb, size))
+}
+
+fn node_map_size(width: u32, height: u32) -> (u32, u32) {
+    let k = SCALE as u32;
+    (width * k, height * k + CAPTION as u32)
+}
+
+fn draw_node_map<DB: DrawingBackend>(
+    root: &DrawingArea<DB, plotters::coord::Shift>,
+    (width, height): (u32, u32),
+    grid: &spiv_formats::grid::Grid,
+    s: NodeScalar<'_>,
+    glare: &[bool],
+) -> Result<(), String> {
     use plotters::style::colors::colormaps::ViridisRGB;
     font();
-    let e = err(path);
-    let k = 2i32;
-    let caption = 28i32;
-    let (w, h) = (width as i32, height as i32);
-    let root =
-        BitMapBackend::new(path, ((w * k) as u32, (h * k + caption) as u32)).into_drawing_area();
-    root.fill(&WHITE).map_err(|x| e(x.to_string()))?;
+    let e = |x: DrawingAreaErrorKind<DB::ErrorType>| x.to_string();
+    let (k, caption) = (SCALE, CAPTION);
+    root.fill(&WHITE).map_err(e)?;
     let finite = s.values.iter().copied().filter(|v| v.is_finite());
     let (lo, hi) = finite.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
         (a.min(v), b.max(v))
     });
-    let top = if s.signed { lo.abs().max(hi.abs()) } else { hi };
+    let top = s
+        .top
+        .unwrap_or(if s.signed { lo.abs().max(hi.abs()) } else { hi });
     let half = grid.step as f64 / 2.0;
     for r in 0..grid.ny {
         for c in 0..grid.nx {
             let v = s.values.get(r * grid.nx + c).copied().unwrap_or(f64::NAN);
             let color = match (v.is_finite() && top > 0.0, s.signed) {
                 (false, _) => RGBColor(60, 60, 60),
-                (true, true) => BlueWhiteRed::get_color_normalized(v, -top, top),
-                (true, false) => ViridisRGB::get_color_normalized(v.max(0.0), 0.0, top),
+                (true, true) => BlueWhiteRed::get_color_normalized(v.clamp(-top, top), -top, top),
+                (true, false) => ViridisRGB::get_color_normalized(v.clamp(0.0, top), 0.0, top),
             };
             let (x, y) = grid.centre(r, c);
             let corner = |dx: f64, dy: f64| {
@@ -312,7 +366,7 @@ pub fn node_map(
                 [corner(-half, -half), corner(half, half)],
                 color.filled(),
             ))
-            .map_err(|x| e(x.to_string()))?;
+            .map_err(e)?;
         }
     }
     // Glare: every other pixel of it red, so the field shows through.
@@ -321,16 +375,16 @@ pub fn node_map(
         let (r, c) = (i / wu, i % wu);
         if r < hu && (r + c) % 2 == 0 {
             root.draw_pixel((c as i32 * k, r as i32 * k + caption), &RED)
-                .map_err(|x| e(x.to_string()))?;
+                .map_err(e)?;
         }
     }
-    let range = if lo.is_finite() {
-        format!("{lo:.3} to {hi:.3}")
-    } else {
-        "no value".to_string()
+    let range = match (lo.is_finite(), s.top) {
+        (false, _) => "no value".to_string(),
+        (true, None) => format!("{lo:.3} to {hi:.3}"),
+        (true, Some(t)) => format!("{lo:.3} to {hi:.3} of {t:.3}"),
     };
     let marked = if glare.contains(&true) {
-        "; red dots: glare"
+        "; red: glare"
     } else {
         ""
     };
@@ -339,6 +393,5 @@ pub fn node_map(
         (6, 6),
         ("sans-serif", 16).into_font(),
     ))
-    .map_err(|x| e(x.to_string()))?;
-    root.present().map_err(|x| e(x.to_string()))
+    .map_err(e)
 }
