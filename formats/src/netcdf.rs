@@ -2,12 +2,20 @@
 //! conventions), the form xarray, pivpy and the netCDF tools of the field
 //! open directly.
 //!
-//! The file is netCDF-3 in its 64-bit-offset form, written by the pure-Rust
-//! `netcdf3` crate: no C library is needed to build or run spiv, and every
-//! netCDF reader (netCDF-C, xarray with its netCDF4, h5netcdf or scipy
-//! engines) reads it. Dimensions are `time`, `y` and `x`, each with its
-//! coordinate variable; the data variables are `f64` (or `i32` for flags)
-//! over `(time, y, x)` or `(y, x)`, with their attributes.
+//! Two forms, one content ([`write_field_series`] picks by the build):
+//! - netCDF-4 (HDF5), with the `netcdf4` feature: written by the `netcdf`
+//!   crate over the system's libnetcdf (Debian: `libnetcdf-dev`), every
+//!   data variable deflated (level 4, shuffled) in chunks of one time step,
+//!   `NaN` as the `_FillValue` of the doubles ([`write_netcdf4`]);
+//! - netCDF-3 in its 64-bit-offset form, without it: written by the
+//!   pure-Rust `netcdf3` crate, so no C library is needed to build or run
+//!   spiv ([`write_netcdf3`]).
+//!
+//! Every netCDF reader reads both (netCDF-C; xarray with its netCDF4 or
+//! h5netcdf engines, and scipy for netCDF-3). Dimensions are `time`, `y`
+//! and `x`, each with its coordinate variable; the data variables are
+//! `f64` (or `i32` for flags) over `(time, y, x)` or `(y, x)`, with their
+//! attributes.
 
 use std::path::Path;
 
@@ -96,14 +104,25 @@ pub struct FieldSeries {
     pub globals: Vec<(String, Attr)>,
 }
 
-/// Writes `s` to `path` (replacing it). Refused before anything is
-/// written: a variable whose length does not match its dimensions, a
-/// name netCDF does not accept, twice the same name.
+/// The form [`write_field_series`] writes: netCDF-4 when built with the
+/// `netcdf4` feature, else netCDF-3 (64-bit offset).
+pub const FORM: &str = if cfg!(feature = "netcdf4") {
+    "netCDF-4"
+} else {
+    "netCDF-3 64-bit offset"
+};
+
+/// Writes `s` to `path` (replacing it) in this build's [`FORM`].
 pub fn write_field_series(path: &Path, s: &FieldSeries) -> Result<(), FormatError> {
-    let bad = |msg: String| FormatError::Parse {
-        path: path.to_path_buf(),
-        msg,
-    };
+    #[cfg(feature = "netcdf4")]
+    return write_netcdf4(path, s);
+    #[cfg(not(feature = "netcdf4"))]
+    write_netcdf3(path, s)
+}
+
+/// Refuses, before anything is written, a variable whose length does not
+/// match its dimensions.
+fn check_lengths(path: &Path, s: &FieldSeries) -> Result<(), FormatError> {
     let shape = (s.time.0.len(), s.y.0.len(), s.x.0.len());
     for v in &s.variables {
         let n = match &v.values {
@@ -111,13 +130,103 @@ pub fn write_field_series(path: &Path, s: &FieldSeries) -> Result<(), FormatErro
             Values::I32(d) => d.len(),
         };
         if n != v.dims.len(shape) {
-            return Err(bad(format!(
-                "variable {}: {n} values for dimensions {:?} of {shape:?}",
-                v.name,
-                v.dims.names()
-            )));
+            return Err(FormatError::Parse {
+                path: path.to_path_buf(),
+                msg: format!(
+                    "variable {}: {n} values for dimensions {:?} of {shape:?}",
+                    v.name,
+                    v.dims.names()
+                ),
+            });
         }
     }
+    Ok(())
+}
+
+/// Writes `s` to `path` as netCDF-4 (HDF5; replacing it): the data
+/// variables deflated in chunks of one time step, `NaN` the doubles'
+/// `_FillValue`. Refused before anything is written: a variable whose
+/// length does not match its dimensions; a name netCDF does not accept or
+/// twice the same name fails while writing, and the file is removed.
+#[cfg(feature = "netcdf4")]
+pub fn write_netcdf4(path: &Path, s: &FieldSeries) -> Result<(), FormatError> {
+    check_lengths(path, s)?;
+    let write = || -> Result<(), netcdf::Error> {
+        let mut f = netcdf::create(path)?;
+        for (name, (values, _)) in [("time", &s.time), ("y", &s.y), ("x", &s.x)] {
+            f.add_dimension(name, values.len())?;
+        }
+        for (name, (values, attrs)) in [("time", &s.time), ("y", &s.y), ("x", &s.x)] {
+            let mut v = f.add_variable::<f64>(name, &[name])?;
+            nc4_attrs(attrs, |k, a| v.put_attribute(k, a).map(|_| ()))?;
+            v.put_values(values, ..)?;
+        }
+        for var in &s.variables {
+            let dims = var.dims.names();
+            let chunk: Vec<usize> = dims
+                .iter()
+                .map(|&d| match d {
+                    "time" => 1,
+                    "y" => s.y.0.len().max(1),
+                    _ => s.x.0.len().max(1),
+                })
+                .collect();
+            match &var.values {
+                Values::F64(d) => {
+                    let mut v = f.add_variable::<f64>(&var.name, dims)?;
+                    v.set_compression(4, true)?;
+                    v.set_chunking(&chunk)?;
+                    v.set_fill_value(f64::NAN)?;
+                    nc4_attrs(&var.attrs, |k, a| v.put_attribute(k, a).map(|_| ()))?;
+                    v.put_values(d, ..)?;
+                }
+                Values::I32(d) => {
+                    let mut v = f.add_variable::<i32>(&var.name, dims)?;
+                    v.set_compression(4, true)?;
+                    v.set_chunking(&chunk)?;
+                    nc4_attrs(&var.attrs, |k, a| v.put_attribute(k, a).map(|_| ()))?;
+                    v.put_values(d, ..)?;
+                }
+            }
+        }
+        nc4_attrs(&s.globals, |k, a| f.add_attribute(k, a).map(|_| ()))?;
+        f.close()
+    };
+    write().map_err(|e| {
+        let _ = std::fs::remove_file(path);
+        FormatError::Parse {
+            path: path.to_path_buf(),
+            msg: format!("netCDF-4: {e}"),
+        }
+    })
+}
+
+/// Puts `attrs` through `put` as netCDF attribute values.
+#[cfg(feature = "netcdf4")]
+fn nc4_attrs(
+    attrs: &[(String, Attr)],
+    mut put: impl FnMut(&str, netcdf::AttributeValue) -> Result<(), netcdf::Error>,
+) -> Result<(), netcdf::Error> {
+    for (name, a) in attrs {
+        let value = match a {
+            Attr::Text(t) => netcdf::AttributeValue::from(t.as_str()),
+            Attr::F64(x) => x.clone().into(),
+            Attr::I32(x) => x.clone().into(),
+        };
+        put(name, value)?;
+    }
+    Ok(())
+}
+
+/// Writes `s` to `path` as netCDF-3, 64-bit offset (replacing it). Refused
+/// before anything is written: a variable whose length does not match its
+/// dimensions, a name netCDF does not accept, twice the same name.
+pub fn write_netcdf3(path: &Path, s: &FieldSeries) -> Result<(), FormatError> {
+    let bad = |msg: String| FormatError::Parse {
+        path: path.to_path_buf(),
+        msg,
+    };
+    check_lengths(path, s)?;
     let ds = definition(s).map_err(|e| bad(format!("netCDF definition: {e:?}")))?;
     let write = || -> Result<(), netcdf3::error::WriteError> {
         let mut w = FileWriter::open(path)?;
@@ -226,7 +335,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("f.nc");
         let s = series();
-        write_field_series(&path, &s).unwrap();
+        write_netcdf3(&path, &s).unwrap();
         let mut r = netcdf3::FileReader::open(&path).unwrap();
         assert_eq!(
             r.read_var_f64("u").unwrap(),
@@ -254,11 +363,60 @@ mod tests {
         let path = dir.path().join("f.nc");
         let mut s = series();
         s.variables[0].values = Values::F64(vec![0.0; 11]);
-        let e = write_field_series(&path, &s).unwrap_err();
-        assert!(e.to_string().contains("11 values"), "{e}");
-        assert!(!path.exists());
+        for write in [write_netcdf3, write_field_series] {
+            let e = write(&path, &s).unwrap_err();
+            assert!(e.to_string().contains("11 values"), "{e}");
+            assert!(!path.exists());
+        }
         let mut s = series();
         s.variables[1].name = "u".into();
+        assert!(write_netcdf3(&path, &s).is_err());
         assert!(write_field_series(&path, &s).is_err());
+        assert!(!path.exists());
+    }
+
+    /// netCDF-4: what is written reads back through libnetcdf itself
+    /// (the library xarray's netCDF4 engine uses), values, fill, chunks,
+    /// compression and attributes.
+    #[cfg(feature = "netcdf4")]
+    #[test]
+    fn a_series_reads_back_as_netcdf4() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("f.nc");
+        let mut s = series();
+        if let Values::F64(d) = &mut s.variables[0].values {
+            d[5] = f64::NAN;
+        }
+        write_field_series(&path, &s).unwrap();
+        let f = netcdf::open(&path).unwrap();
+        let u = f.variable("u").unwrap();
+        let got: Vec<f64> = u.get_values(..).unwrap();
+        let Values::F64(want) = &s.variables[0].values else {
+            unreachable!()
+        };
+        assert_eq!(got.len(), 12);
+        for (g, w) in got.iter().zip(want) {
+            assert!(g == w || (g.is_nan() && w.is_nan()), "{g} {w}");
+        }
+        assert_eq!(
+            u.dimensions().iter().map(|d| d.name()).collect::<Vec<_>>(),
+            ["time", "y", "x"]
+        );
+        assert!(u.fill_value::<f64>().unwrap().is_some_and(f64::is_nan));
+        assert_eq!(
+            u.attribute_value("units").unwrap().unwrap(),
+            netcdf::AttributeValue::Str("px".into())
+        );
+        let flag: Vec<i32> = f.variable("flag").unwrap().get_values(..).unwrap();
+        assert_eq!(flag, vec![0, 1, 2, 0, 0, 2]);
+        let y: Vec<f64> = f.variable("y").unwrap().get_values(..).unwrap();
+        assert_eq!(y, vec![16.0, 32.0, 48.0]);
+        assert_eq!(
+            f.attribute("dt").unwrap().value().unwrap(),
+            netcdf::AttributeValue::Double(13.0)
+        );
+        // HDF5 underneath: the file starts with HDF5's signature.
+        let head = std::fs::read(&path).unwrap();
+        assert_eq!(&head[..8], b"\x89HDF\r\n\x1a\n");
     }
 }

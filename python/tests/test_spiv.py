@@ -3,6 +3,8 @@
 and on bad input (the CLI's messages, never a crash)."""
 
 import csv
+import os
+import subprocess
 import threading
 
 import numpy as np
@@ -229,6 +231,32 @@ def test_flow_nc_opens_in_xarray_with_the_fields_and_units(cli, tmp_path):
         np.testing.assert_allclose(ds.u_m_s.values[measured], got["u_m_s"][measured], rtol=1e-12)
         # Seconds since the first plane: each pair's midpoint tick / 20 kHz.
         np.testing.assert_allclose(ds.time.values, got["ticks"].mean(axis=1) / 20000.0)
+
+
+@pytest.mark.skipif(not os.environ.get("SPIV_BIN_NETCDF4"),
+                    reason="needs SPIV_BIN_NETCDF4: spiv built with --features netcdf4 (CI)")
+def test_flow_nc_as_netcdf4_opens_in_xarray(tmp_path):
+    import xarray as xr
+
+    exe = os.environ["SPIV_BIN_NETCDF4"]
+    d = tmp_path / "rec"
+    subprocess.run([exe, "simulate", "--scene", "paper-linear", "--width", "128", "--height",
+                    "128", "--ticks", "400", "--seed", "2", "--out", d], check=True,
+                   capture_output=True)
+    subprocess.run([exe, "flow", d / "spikes.dat", "--out", tmp_path / "out"], check=True,
+                   capture_output=True)
+    nc = tmp_path / "out" / "flow.nc"
+    assert nc.read_bytes()[:8] == b"\x89HDF\r\n\x1a\n"  # netCDF-4 is HDF5
+    got = spiv.flow(d / "spikes.dat")
+    with xr.open_dataset(nc, engine="netcdf4") as ds:
+        assert ds.u.encoding["zlib"] and ds.u.encoding["chunksizes"][0] == 1
+        assert ds.u.dims == ("time", "y", "x") and ds.attrs["Conventions"] == "CF-1.8"
+        measured = got["flags"] < 2
+        np.testing.assert_array_equal(ds.flag.values, got["flags"])
+        np.testing.assert_array_equal(ds.u.values[measured], got["u"][measured])
+        assert np.all(np.isnan(ds.u.values[~measured]))
+        np.testing.assert_array_equal(ds.mean_pairs.values, got["mean_pairs"])
+        np.testing.assert_allclose(ds.u_m_s.values[measured], got["u_m_s"][measured], rtol=1e-12)
 
 
 def test_bad_input_raises_the_cli_message(cli, recording, tmp_path):
