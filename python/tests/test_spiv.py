@@ -231,6 +231,17 @@ def test_flow_nc_opens_in_xarray_with_the_fields_and_units(cli, tmp_path):
         np.testing.assert_allclose(ds.u_m_s.values[measured], got["u_m_s"][measured], rtol=1e-12)
         # Seconds since the first plane: each pair's midpoint tick / 20 kHz.
         np.testing.assert_allclose(ds.time.values, got["ticks"].mean(axis=1) / 20000.0)
+    # The file in pivpy's layout: pivpy's vorticity of it is that of the
+    # run's own Dataset.
+    from pivpy import pivpy  # noqa: F401  (registers the .piv accessor)
+
+    want = spiv.flow(d / "spikes.dat", as_xarray=True)
+    piv = spiv.open_flow(tmp_path / "out" / "flow.nc")
+    assert piv.u.dims == ("y", "x", "t") and piv.attrs["units"] == want.attrs["units"]
+    xr.testing.assert_allclose(piv, want, rtol=1e-12, atol=1e-15)
+    w = piv.piv.vorticity()["w"].values
+    np.testing.assert_allclose(w, want.piv.vorticity()["w"].values, rtol=1e-9, atol=1e-12)
+    assert np.isfinite(w).any() and np.abs(w[np.isfinite(w)]).max() > 0
 
 
 @pytest.mark.skipif(not os.environ.get("SPIV_BIN_NETCDF4"),

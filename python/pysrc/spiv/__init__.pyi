@@ -10,7 +10,7 @@ tools.transform_coordinates. Flags: 0 valid, 1 replaced from neighbours,
 """
 
 from os import PathLike
-from typing import Dict, Literal, Optional, Sequence, Tuple, TypedDict, Union, overload
+from typing import Any, Dict, Literal, Optional, Sequence, Tuple, TypedDict, Union, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -222,6 +222,10 @@ def flow(
     pairs a..b of flow_pairs(); from a multiple of FLOW_CHAIN, exactly the vectors
     a run of all pairs gives them.
     """
+
+def open_flow(path: _Path) -> Any:
+    """spiv flow's flow.nc as the xarray Dataset flow(as_xarray=True) gives
+    (pivpy's layout; SI units when calibrated)."""
 
 #: Pairs per chain of `flow`: each starts from the previous pair's field, the
 #: first from nothing; a run from a multiple of it matches a whole run.
