@@ -366,6 +366,38 @@ proptest::proptest! {
     }
 }
 
+/// The refinement's candidates, in order: the core's `candidate` against
+/// the reference's `candidates`, written from the documented set (the
+/// prediction; scaled by 1 ± 2 %·k; offset by ±3k/256 px per tick in x,
+/// then in y), over velocities out to i16's ends, where they clamp. A
+/// candidate in the wrong unit fails here; the refinement on a scene
+/// (below) rarely picks an offset candidate, so it cannot see one.
+#[test]
+fn refine_candidates_are_the_documented_set() {
+    use spiv_core::motion::{candidate, Refine};
+    let d = Refine::default();
+    let velocities = [
+        (0i16, 0i16),
+        (4096, -2048),
+        (-1, 1),
+        (123, 4567),
+        (32_700, -32_700),
+        (i16::MAX, i16::MIN),
+    ];
+    for (vx, vy) in velocities {
+        for (rel, abs) in [(0u8, 0u8), (1, 1), (3, 2), (d.rel, d.abs)] {
+            let cfg = Refine { rel, abs, ..d };
+            let core: Vec<(i16, i16)> = (0..).map_while(|n| candidate(&cfg, vx, vy, n)).collect();
+            let reference = spiv_host::reference::motion::candidates(vx, vy, rel, abs);
+            assert_eq!(core, reference, "({vx}, {vy}), rel {rel}, abs {abs}");
+            assert_eq!(core.len(), 1 + 2 * usize::from(rel) + 4 * usize::from(abs));
+        }
+    }
+    // One offset step is 3/256 px per tick: 48 in 1/4096 px per tick.
+    let one = spiv_host::reference::motion::candidates(0, 0, 0, 1);
+    assert_eq!(one, vec![(0, 0), (48, 0), (-48, 0), (0, 48), (0, -48)]);
+}
+
 /// Motion compensation: the core's contrast-maximisation refinement picks
 /// the same velocity for every row as the `f64` reference (no tolerance:
 /// both are integer decisions), on a paper scene with a prediction 15 %

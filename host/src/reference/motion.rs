@@ -72,6 +72,8 @@ pub fn positions(vol: &SpikeVolume, kc: u32, n: u16, (vx, vy): (i16, i16)) -> u3
 /// then in y (k = 1..=abs); each component clamped to `i16`.
 pub fn candidates(vx: i16, vy: i16, rel: u8, abs: u8) -> Vec<(i16, i16)> {
     let clamp = |v: f64| v.clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16;
+    // ±3k/256 px per tick, in the velocities' 1/4096 px per tick.
+    let offset = |k: i32| 3.0 * f64::from(k) / 256.0 * 4096.0;
     let mut out = vec![(vx, vy)];
     for k in 1..=i32::from(rel) {
         for sign in [1, -1] {
@@ -81,12 +83,12 @@ pub fn candidates(vx: i16, vy: i16, rel: u8, abs: u8) -> Vec<(i16, i16)> {
     }
     for k in 1..=i32::from(abs) {
         for sign in [1, -1] {
-            out.push((clamp(f64::from(vx) + f64::from(3 * sign * k)), vy));
+            out.push((clamp(f64::from(vx) + offset(sign * k)), vy));
         }
     }
     for k in 1..=i32::from(abs) {
         for sign in [1, -1] {
-            out.push((vx, clamp(f64::from(vy) + f64::from(3 * sign * k))));
+            out.push((vx, clamp(f64::from(vy) + offset(sign * k))));
         }
     }
     out
