@@ -1,7 +1,7 @@
 //! The sidecar firmware, simulated: the core's loop
 //! ([`spiv_core::sidecar`], the same code the Cortex-M4 firmware runs) over
 //! owned buffers, sending into a [`Link`] — a writer, memory, or a
-//! [`Faulty`] link that drops, corrupts, truncates, stalls and reorders
+//! [`Faulty`] link that drops, corrupts, truncates, stalls, reorders and duplicates
 //! messages — and the drivers that feed it planes from a simulated scene, a
 //! `.dat` file or memory.
 //!
@@ -223,10 +223,13 @@ pub struct Faults {
     pub stall: f64,
     /// The message is held back and sent after the next one.
     pub reorder: f64,
+    /// The message is sent twice, back to back.
+    pub duplicate: f64,
 }
 
 impl Faults {
-    /// Parses `drop=P,corrupt=P,truncate=P,stall=P,reorder=P` (any subset).
+    /// Parses `drop=P,corrupt=P,truncate=P,stall=P,reorder=P,duplicate=P`
+    /// (any subset).
     pub fn parse(s: &str) -> Result<Faults, String> {
         let mut f = Faults::default();
         for part in s.split(',').filter(|p| !p.is_empty()) {
@@ -245,9 +248,10 @@ impl Faults {
                 "truncate" => f.truncate = p,
                 "stall" => f.stall = p,
                 "reorder" => f.reorder = p,
+                "duplicate" => f.duplicate = p,
                 _ => {
                     return Err(format!(
-                        "unknown fault `{k}` (drop, corrupt, truncate, stall, reorder)"
+                        "unknown fault `{k}` (drop, corrupt, truncate, stall, reorder, duplicate)"
                     ))
                 }
             }
@@ -269,6 +273,8 @@ pub struct FaultCounts {
     pub stalled: u64,
     /// Messages sent late.
     pub reordered: u64,
+    /// Messages sent twice.
+    pub duplicated: u64,
 }
 
 /// A link that injects [`Faults`], deterministic for a seed.
@@ -339,6 +345,10 @@ impl<L: Link> Link for Faulty<L> {
             return Ok(());
         }
         self.inner.send(&m)?;
+        if self.hit(self.faults.duplicate) {
+            self.inner.send(&m)?;
+            self.counts.duplicated += 1;
+        }
         if let Some(h) = self.held.take() {
             self.inner.send(&h)?;
         }

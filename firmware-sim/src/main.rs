@@ -52,7 +52,7 @@ struct Args {
     /// Write the messages to this file (stdout when neither --tcp nor --out).
     #[arg(long)]
     out: Option<PathBuf>,
-    /// Faults per message: drop=P,corrupt=P,truncate=P,stall=P,reorder=P.
+    /// Faults per message: drop=P,corrupt=P,truncate=P,stall=P,reorder=P,duplicate=P.
     #[arg(long)]
     fault: Option<String>,
     /// Seed of the scene and of the faults.
@@ -344,8 +344,8 @@ fn run(a: &Args) -> Result<(), Error> {
         if faults != Faults::default() {
             let f = &run.faults;
             eprintln!(
-                "spiv-firmware-sim: faults: {} dropped, {} corrupted, {} truncated, {} stalled, {} reordered",
-                f.dropped, f.corrupted, f.truncated, f.stalled, f.reordered
+                "spiv-firmware-sim: faults: {} dropped, {} corrupted, {} truncated, {} stalled, {} reordered, {} duplicated",
+                f.dropped, f.corrupted, f.truncated, f.stalled, f.reordered, f.duplicated
             );
         }
         if let (d, Some(c)) = &run.heard {
@@ -458,8 +458,8 @@ fn report_downlink(d: &DownlinkStats, c: &ControlStream) {
         String::new()
     } else {
         format!(
-            "; faults: {} dropped, {} corrupted, {} truncated, {} reordered",
-            f.dropped, f.corrupted, f.truncated, f.reordered
+            "; faults: {} dropped, {} corrupted, {} truncated, {} reordered, {} duplicated",
+            f.dropped, f.corrupted, f.truncated, f.reordered, f.duplicated
         )
     };
     eprintln!(

@@ -208,3 +208,93 @@ fn closed_loop_over_a_pipe_and_a_fifo_survives_faults_both_ways() {
     let lost = report["lost_frames"].as_u64().unwrap_or(0);
     assert_eq!(frames + lost, 2 * u64::from(PAIRS), "{report}");
 }
+
+/// The loop over a pipe and a FIFO with `faults` on the downlink only:
+/// the firmware's stderr, `spiv receive`'s report and its output folder.
+fn loop_with_control_faults(
+    dir: &Path,
+    faults: &str,
+) -> (String, serde_json::Value, std::path::PathBuf) {
+    let fifo = dir.join("control");
+    let made = Command::new("mkfifo").arg(&fifo).status().expect("mkfifo");
+    assert!(made.success());
+    let out = dir.join("rx");
+    let fifo_s = fifo.to_str().expect("utf-8");
+    let mut sim = command("spiv-firmware-sim")
+        .args(sim_args(&[
+            "--control",
+            fifo_s,
+            "--control-wait",
+            "3000",
+            "--control-fault",
+            faults,
+        ]))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn spiv-firmware-sim");
+    let up = sim.stdout.take().expect("stdout");
+    let rx = command("spiv")
+        .args(["receive", "--pipe", "--piv", "--json", "--control", fifo_s])
+        .arg("--out")
+        .arg(&out)
+        .stdin(up)
+        .output()
+        .expect("spawn spiv receive");
+    let sim = sim.wait_with_output().expect("firmware-sim");
+    let err = String::from_utf8_lossy(&sim.stderr).to_string();
+    assert!(sim.status.success(), "firmware-sim: {err}");
+    assert!(
+        rx.status.success(),
+        "{}",
+        String::from_utf8_lossy(&rx.stderr)
+    );
+    eprintln!("{faults}: {err}");
+    (err, json(&rx.stdout), out)
+}
+
+/// A count on the firmware's downlink line ("3 dropped", "1 duplicated").
+fn downlink_count(err: &str, what: &str) -> u32 {
+    err.lines()
+        .find(|l| l.starts_with("spiv-firmware-sim: downlink: "))
+        .and_then(|l| l.split(&format!(" {what}")).next())
+        .and_then(|t| t.rsplit(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no {what} count in: {err}"))
+}
+
+/// Controls cut short, sent twice and dropped on the downlink (two runs,
+/// each seed's faults counted): a cut control is refused with the control
+/// its lost delimiter ran into and never takes effect; a duplicate is
+/// heard again with the same content and changes nothing; a dropped one
+/// leaves its pair on the control before it. The loop still compensates.
+#[test]
+fn closed_loop_survives_truncated_duplicated_and_dropped_controls() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let a = dir.path().join("cut");
+    std::fs::create_dir(&a).expect("mkdir");
+    let (err, report, out) = loop_with_control_faults(&a, "drop=0.15,truncate=0.25,duplicate=0.5");
+    let (heard, applied, refused) = downlink_line(&err);
+    let sent = report["downlink"]["sent"].as_u64().expect("sent") as u32;
+    let (truncated, duplicated) = (
+        downlink_count(&err, "truncated"),
+        downlink_count(&err, "duplicated"),
+    );
+    assert!(truncated > 0 && duplicated > 0 && refused >= 1, "{err}");
+    assert!(heard + refused <= sent + duplicated, "{err} {report}");
+    assert!(applied >= 1 && applied <= heard, "{err}");
+    assert_compensation_helps(&out);
+
+    let b = dir.path().join("drop");
+    std::fs::create_dir(&b).expect("mkdir");
+    let (err, report, out) = loop_with_control_faults(&b, "drop=0.25,truncate=0.3,duplicate=0.6");
+    let (heard, applied, _) = downlink_line(&err);
+    let sent = report["downlink"]["sent"].as_u64().expect("sent") as u32;
+    let dropped = downlink_count(&err, "dropped");
+    assert!(
+        dropped > 0 && heard <= sent - dropped + downlink_count(&err, "duplicated"),
+        "{err}"
+    );
+    assert!(applied >= 1 && applied <= heard, "{err}");
+    assert_compensation_helps(&out);
+}
