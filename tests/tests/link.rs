@@ -278,7 +278,8 @@ fn faults_lose_frames_only_counted_never_deliver_a_wrong_one() {
         let mut args = sim_args(pairs, seed);
         args.extend([
             "--fault".to_string(),
-            "drop=0.04,corrupt=0.04,truncate=0.04,stall=0.04,reorder=0.08".to_string(),
+            "drop=0.04,corrupt=0.04,truncate=0.04,stall=0.04,reorder=0.08,duplicate=0.08"
+                .to_string(),
         ]);
         let report = if via_pipe {
             through_pipe(&args, &out)
