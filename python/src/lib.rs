@@ -626,8 +626,10 @@ fn array3<T>(shape: (usize, usize, usize), v: Vec<T>) -> PyResult<Array3<T>> {
 /// `u_m_s`, `v_m_s`, `mean_u_m_s`, `mean_v_m_s` (m/s, v down), else
 /// `pixel_size` and `tick_hz` None. With `as_xarray`, an xarray Dataset
 /// in pivpy's layout instead: dimensions `y, x, t`, variables `u, v`,
-/// `chc` (the flags), `sigma_u, sigma_v`, in m, s and m/s when calibrated
-/// (else px, ticks and px per pair), so `ds.piv.vorticity()` works.
+/// `chc` (the flags), `sigma_u, sigma_v`, and the mean field as `mean_u`,
+/// `mean_v`, `mean_chc`, `mean_sigma_u`, `mean_sigma_v`, `mean_pairs` on
+/// `y, x`, in m, s and m/s when calibrated (else px, ticks and px per
+/// pair), so `ds.piv.vorticity()` works.
 #[pyfunction]
 #[pyo3(signature = (path, dt=None, every=None, start=None, end=None, method="mc", window=None, dwell_cap=Some(spiv_host::dwell::DWELL_CAP), windows=None, width=None, height=None, flip=true, strip_head=0, dense=false, pixel_size=None, tick_hz=None, as_xarray=false, mask=None, pairs=None))]
 #[allow(clippy::too_many_arguments)]
