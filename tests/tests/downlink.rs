@@ -151,43 +151,11 @@ fn closed_loop_over_tcp_compensates_every_pair_after_the_first() {
 #[test]
 fn closed_loop_over_a_pipe_and_a_fifo_survives_faults_both_ways() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let fifo = dir.path().join("control");
-    let made = Command::new("mkfifo").arg(&fifo).status().expect("mkfifo");
-    assert!(made.success());
-    let out = dir.path().join("rx");
-    let fifo_s = fifo.to_str().expect("utf-8");
-    let mut sim = command("spiv-firmware-sim")
-        .args(sim_args(&[
-            "--control",
-            fifo_s,
-            "--control-wait",
-            "3000",
-            "--control-fault",
-            "corrupt=0.4",
-            "--fault",
-            "reorder=0.1,stall=0.05",
-        ]))
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn spiv-firmware-sim");
-    let up = sim.stdout.take().expect("stdout");
-    let rx = command("spiv")
-        .args(["receive", "--pipe", "--piv", "--json", "--control", fifo_s])
-        .arg("--out")
-        .arg(&out)
-        .stdin(up)
-        .output()
-        .expect("spawn spiv receive");
-    let sim = sim.wait_with_output().expect("firmware-sim");
-    let err = String::from_utf8_lossy(&sim.stderr);
-    assert!(sim.status.success(), "firmware-sim: {err}");
-    assert!(
-        rx.status.success(),
-        "spiv receive: {}",
-        String::from_utf8_lossy(&rx.stderr)
+    let (err, report, _) = loop_with_faults(
+        dir.path(),
+        "corrupt=0.4",
+        &["--fault", "reorder=0.1,stall=0.05"],
     );
-    let report = json(&rx.stdout);
     let (heard, applied, refused) = downlink_line(&err);
     let corrupted: u32 = err
         .split("faults: ")
@@ -209,11 +177,13 @@ fn closed_loop_over_a_pipe_and_a_fifo_survives_faults_both_ways() {
     assert_eq!(frames + lost, 2 * u64::from(PAIRS), "{report}");
 }
 
-/// The loop over a pipe and a FIFO with `faults` on the downlink only:
-/// the firmware's stderr, `spiv receive`'s report and its output folder.
-fn loop_with_control_faults(
+/// The loop over a pipe and a FIFO with `faults` on the downlink (and
+/// the firmware's `extra` options, such as `--fault` on the uplink): the
+/// firmware's stderr, `spiv receive`'s report and its output folder.
+fn loop_with_faults(
     dir: &Path,
     faults: &str,
+    extra: &[&str],
 ) -> (String, serde_json::Value, std::path::PathBuf) {
     let fifo = dir.join("control");
     let made = Command::new("mkfifo").arg(&fifo).status().expect("mkfifo");
@@ -229,6 +199,7 @@ fn loop_with_control_faults(
             "--control-fault",
             faults,
         ]))
+        .args(extra)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
@@ -273,7 +244,7 @@ fn closed_loop_survives_truncated_duplicated_and_dropped_controls() {
     let dir = tempfile::tempdir().expect("tempdir");
     let a = dir.path().join("cut");
     std::fs::create_dir(&a).expect("mkdir");
-    let (err, report, out) = loop_with_control_faults(&a, "drop=0.15,truncate=0.25,duplicate=0.5");
+    let (err, report, out) = loop_with_faults(&a, "drop=0.15,truncate=0.25,duplicate=0.5", &[]);
     let (heard, applied, refused) = downlink_line(&err);
     let sent = report["downlink"]["sent"].as_u64().expect("sent") as u32;
     let (truncated, duplicated) = (
@@ -287,7 +258,7 @@ fn closed_loop_survives_truncated_duplicated_and_dropped_controls() {
 
     let b = dir.path().join("drop");
     std::fs::create_dir(&b).expect("mkdir");
-    let (err, report, out) = loop_with_control_faults(&b, "drop=0.25,truncate=0.3,duplicate=0.6");
+    let (err, report, out) = loop_with_faults(&b, "drop=0.25,truncate=0.3,duplicate=0.6", &[]);
     let (heard, applied, _) = downlink_line(&err);
     let sent = report["downlink"]["sent"].as_u64().expect("sent") as u32;
     let dropped = downlink_count(&err, "dropped");

@@ -43,10 +43,16 @@ pub fn write_movie(path: &Path, out: &FlowOutcome, opts: &FlowOptions) -> Result
     };
     let size = (u32::from(out.size.0), u32::from(out.size.1));
     let e = |msg: String| PlotError::new(path, msg);
+    let (w, h) = plot::node_map_size(size);
+    let (Ok(w), Ok(h)) = (u16::try_from(w), u16::try_from(h)) else {
+        return Err(e(format!("{w}x{h} px: a GIF frame holds at most 65535x65535")).into());
+    };
     let file =
         std::fs::File::create(path).map_err(|x| WriteError::Io(path.display().to_string(), x))?;
-    let mut gif: Option<gif::Encoder<std::io::BufWriter<std::fs::File>>> = None;
-    let mut file = Some(std::io::BufWriter::new(file));
+    let mut gif = gif::Encoder::new(std::io::BufWriter::new(file), w, h, &[])
+        .map_err(|x| e(x.to_string()))?;
+    gif.set_repeat(gif::Repeat::Infinite)
+        .map_err(|x| e(x.to_string()))?;
     for (i, speed) in &shown {
         let p = &out.pairs[*i];
         let t = match opts.calibration {
@@ -60,27 +66,11 @@ pub fn write_movie(path: &Path, out: &FlowOutcome, opts: &FlowOptions) -> Result
             signed: false,
             top: Some(top),
         };
-        let (rgb, (w, h)) = plot::node_map_rgb(size, &out.grid, scalar, &out.glare)?;
-        let (w, h) = match (u16::try_from(w), u16::try_from(h)) {
-            (Ok(w), Ok(h)) => (w, h),
-            _ => {
-                return Err(e(format!("{w}x{h} px: a GIF frame holds at most 65535x65535")).into())
-            }
-        };
-        let enc = match &mut gif {
-            Some(g) => g,
-            None => {
-                let f = file.take().ok_or_else(|| e("the file is gone".into()))?;
-                let mut g = gif::Encoder::new(f, w, h, &[]).map_err(|x| e(x.to_string()))?;
-                g.set_repeat(gif::Repeat::Infinite)
-                    .map_err(|x| e(x.to_string()))?;
-                gif.insert(g)
-            }
-        };
+        let (rgb, _) = plot::node_map_rgb(size, &out.grid, scalar, &out.glare)?;
         // NeuQuant at its fastest setting: the frames are flat colour cells.
         let mut frame = gif::Frame::from_rgb_speed(w, h, &rgb, 30);
         frame.delay = 100 / MOVIE_FPS;
-        enc.write_frame(&frame).map_err(|x| e(x.to_string()))?;
+        gif.write_frame(&frame).map_err(|x| e(x.to_string()))?;
     }
     Ok(())
 }

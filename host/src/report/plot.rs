@@ -297,7 +297,7 @@ pub fn node_map(
     glare: &[bool],
 ) -> Result<(), PlotError> {
     let e = err(path);
-    let size = node_map_size(width, height);
+    let size = node_map_size((width, height));
     let root = BitMapBackend::new(path, size).into_drawing_area();
     draw_node_map(&root, (width, height), grid, s, glare).map_err(&e)?;
     root.present().map_err(|x| e(x.to_string()))
@@ -312,7 +312,7 @@ pub fn node_map_rgb(
     glare: &[bool],
 ) -> Result<(Vec<u8>, (u32, u32)), PlotError> {
     let e = err(Path::new("(memory)"));
-    let size = node_map_size(width, height);
+    let size = node_map_size((width, height));
     let mut rgb = vec![0u8; size.0 as usize * size.1 as usize * 3];
     {
         let root = BitMapBackend::with_buffer(&mut rgb, size).into_drawing_area();
@@ -322,7 +322,8 @@ pub fn node_map_rgb(
     Ok((rgb, size))
 }
 
-fn node_map_size(width: u32, height: u32) -> (u32, u32) {
+/// The size of a [`node_map`] of a `width × height` frame, px.
+pub fn node_map_size((width, height): (u32, u32)) -> (u32, u32) {
     let k = SCALE as u32;
     (width * k, height * k + CAPTION as u32)
 }
