@@ -669,6 +669,8 @@ struct Measured {
     separation: Vec<u32>,
     /// Ticks the frames' displacement spans (`dt` but for ladder frames).
     frame_ticks: f64,
+    /// The dense flow, px per `dt`, when the pair was measured densely.
+    dense: Option<crate::piv::dense::Flow>,
 }
 
 /// Pairs per chain of [`run_flow`]: within a chain each pair starts from
@@ -891,6 +893,7 @@ fn ladder_pair(
         bootstrapped: false,
         rungs: m.rungs,
         frame_ticks,
+        dense: m.dense,
     })
 }
 
@@ -929,6 +932,7 @@ fn capped_pair(
         rungs: Vec::new(),
         separation: Vec::new(),
         frame_ticks: dt,
+        dense: None,
     })
 }
 
@@ -951,6 +955,7 @@ fn plain_pair(
         rungs: Vec::new(),
         separation: Vec::new(),
         frame_ticks: f64::from(opts.dt),
+        dense: None,
     })
 }
 
@@ -1006,12 +1011,20 @@ struct DenseSum {
 }
 
 impl DenseSum {
-    /// Adds the dense stage's field of `m`'s frames, in px per `dt` ticks.
+    /// Adds the dense stage's field of `m`'s frames (or the dense flow it
+    /// was measured by), in px per `dt` ticks.
     fn add(&mut self, m: &Measured, dt: f64) {
         let [a, b] = &m.frames;
-        let start = crate::motion::ladder::per_ticks(&m.field, m.frame_ticks / dt);
-        let (flow, _) = crate::piv::dense::for_piv(a, b, &start);
-        let k = dt / m.frame_ticks;
+        let (flow, k) = match &m.dense {
+            Some(f) => (f.clone(), 1.0),
+            None => {
+                let start = crate::motion::ladder::per_ticks(&m.field, m.frame_ticks / dt);
+                (
+                    crate::piv::dense::for_piv(a, b, &start).0,
+                    dt / m.frame_ticks,
+                )
+            }
+        };
         let n = a.len();
         let d = self
             .sum

@@ -28,6 +28,10 @@
 //! shorter rung stands. The ladder climbs while rungs fit the recording
 //! around the pair and each rung's field is usable; a node no rung measured is replaced from its neighbours or
 //! stays invalid.
+//!
+//! Where the ladder's field is not usable in the end (eddies below the
+//! windows, displacements beyond them), the dense ensemble
+//! ([`super::ensemble`]) measures the pair, if its field is usable.
 
 use ndarray::Array2;
 
@@ -37,7 +41,10 @@ use crate::piv::{
     piv_ensemble, piv_predicted, validate, Field, PivError, Settings, State, NO_SIGMA,
 };
 
+use crate::piv::dense::Flow;
+
 use super::compensate::compensated_pair;
+use super::ensemble;
 use super::{compensated, Innovation, Velocity};
 
 /// Separations of the rungs, ticks, shortest first.
@@ -119,6 +126,9 @@ pub struct Measurement {
     pub rungs: Vec<Rung>,
     /// The frames of the rung most vectors came from.
     pub frames: Option<RungFrames>,
+    /// The dense flow per pixel, px per `dt` ticks, when the dense
+    /// ensemble ([`ensemble`]) measured the pair.
+    pub dense: Option<Flow>,
 }
 
 /// A rung's compensated frames (upright, in spikes).
@@ -231,10 +241,20 @@ pub fn measure_from(
             with_resolution(&mut f, dt);
             f
         }
-        None => return nothing(w, h, cfg),
+        None => {
+            return match ensemble_pair(inn, mid, dt, cfg, &rungs)? {
+                Some(m) => Ok(m),
+                None => nothing(w, h, cfg),
+            }
+        }
     };
     let mut field = flow_map(&velocity, &dense_velocity(&velocity, h, w), dt);
     flag_uncertain(&mut field);
+    if !field.usable() {
+        if let Some(m) = ensemble_pair(inn, mid, dt, cfg, &rungs)? {
+            return Ok(m);
+        }
+    }
     let mut separation = separation.unwrap_or_else(|| Array2::zeros(field.u.dim()));
     for (s, st) in separation.iter_mut().zip(field.state.iter()) {
         if *st != State::Valid {
@@ -246,7 +266,60 @@ pub fn measure_from(
         separation,
         rungs,
         frames,
+        dense: None,
     })
+}
+
+/// The pair measured by the dense ensemble ([`ensemble::measure`], within
+/// the bootstrap reach), in px per `dt` ticks along the paths of its mean
+/// flow, after the window rungs `rungs`; `None` when it does not fit or
+/// its field is not usable (the ladder's own result stands).
+fn ensemble_pair(
+    inn: &Innovation,
+    mid: u64,
+    dt: f64,
+    cfg: &LadderSettings,
+    rungs: &[Rung],
+) -> Result<Option<Measurement>, PivError> {
+    let (w, h) = (inn.width, inn.height);
+    let size = cfg.piv.windows.last().copied().unwrap_or(32);
+    let grid = cfg.piv.grid(w, h).ok_or(PivError::TooSmall(w, h, size))?;
+    let t0 = std::time::Instant::now();
+    let Some(e) = ensemble::measure(inn, mid, &grid, u64::from(cfg.bootstrap_reach)) else {
+        return Ok(None);
+    };
+    let mut field = flow_map(&e.field, &e.velocity, dt);
+    if !field.usable() {
+        return Ok(None);
+    }
+    flag_uncertain(&mut field);
+    let frame = ensemble::FRAME as u32;
+    let separation = field
+        .state
+        .mapv(|st| if st == State::Valid { frame } else { 0 });
+    let (valid, _, _) = field.counts();
+    let mut rungs = rungs.to_vec();
+    rungs.push(Rung {
+        separation: frame,
+        counts: field.counts(),
+        kept: valid,
+        ms: t0.elapsed().as_secs_f64() * 1e3,
+    });
+    let k = dt as f32;
+    let dense = Flow {
+        u: e.velocity.u.mapv(|x| x * k),
+        v: e.velocity.v.mapv(|x| x * k),
+    };
+    Ok(Some(Measurement {
+        field,
+        separation,
+        rungs,
+        frames: Some(RungFrames {
+            separation: frame,
+            frames: e.frames,
+        }),
+        dense: Some(dense),
+    }))
 }
 
 /// The measurement of a pair no rung fits: every vector of the grid
@@ -268,6 +341,7 @@ fn nothing(w: usize, h: usize, cfg: &LadderSettings) -> Result<Measurement, PivE
         separation: Array2::zeros(shape),
         rungs: Vec::new(),
         frames: None,
+        dense: None,
     })
 }
 

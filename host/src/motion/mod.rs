@@ -5,9 +5,12 @@
 //!   its own static light predicts;
 //! - [`compensate`]: innovation summed along predicted paths;
 //! - [`ladder`]: disjoint compensated frames at growing separations, PIV
-//!   on each, the most certain vector per node.
+//!   on each, the most certain vector per node;
+//! - [`ensemble`]: where window PIV cannot start the ladder, the dense
+//!   stage on consecutive short frames, their mean and spread.
 
 pub mod compensate;
+pub mod ensemble;
 pub mod ladder;
 pub mod spikes;
 
