@@ -74,7 +74,7 @@ pub struct FlowsRow {
     pub family: String,
     /// Seed of particles, noise and flow.
     pub seed: u64,
-    /// "spiv flow", "frame camera" or "TFP 8".
+    /// "spiv flow" (or "spiv flow --dense"), "frame camera" or "TFP 8".
     pub method: String,
     /// Mean EPE of the measured vectors in the glare rows, px per pair.
     pub glare: Option<f64>,
@@ -166,14 +166,23 @@ fn dense_epe(f: &Field, truth: &DenseField) -> f64 {
     d.epe(truth, None).unwrap_or(f64::NAN)
 }
 
+/// The method name of `spiv flow`'s row.
+pub const SPIV_FLOW: &str = "spiv flow";
+
+/// The method name of `spiv flow --dense`'s row.
+pub const SPIV_FLOW_DENSE: &str = "spiv flow --dense";
+
 /// The rows of one family and seed: `spiv flow` with its defaults, and the
 /// frame camera's and the TFP 8 pair's PIV (`spiv piv`'s defaults).
 /// With `vectors`, every vector of `spiv flow`'s pairs is appended there
-/// as a CSV line ([`dump`]).
+/// as a CSV line ([`dump`]). With `dense`, `spiv flow --dense` instead:
+/// its dense EPE is that of the dense field it writes (the mean over pairs
+/// of each pair's dense flow; every family's truth is steady).
 pub fn family_rows(
     fam: &Family,
     seed: u64,
     vectors: Option<&std::path::Path>,
+    dense: bool,
 ) -> Result<Vec<FlowsRow>, JobError> {
     let mut p = SceneParams::new(fam.scene);
     if let Some(s) = fam.speed {
@@ -210,7 +219,8 @@ pub fn family_rows(
     }
 
     let rec = Recording::simulated(p.width, p.height, data, pair[1] - pair[0]);
-    let opts = FlowOptions::new(&rec, pair[1] - pair[0]);
+    let mut opts = FlowOptions::new(&rec, pair[1] - pair[0]);
+    opts.dense = dense;
     let t0 = Instant::now();
     let out = run_flow(&rec, &opts, |_, _| {}).map_err(|e| match e {
         crate::flow::FlowError::Piv(p) => JobError::Piv(p),
@@ -223,13 +233,19 @@ pub fn family_rows(
         dump(path, fam, seed, &sim.scene, dt, &out)?;
     }
     let mut s = Score::default();
-    let mut dense = 0.0;
+    let mut interpolated = 0.0;
     for pr in &out.pairs {
         s.add(&sim.scene, dt, &pr.vectors, Some(&pr.sigma));
-        dense += dense_epe(&field_of(&out.grid, pr), &truth);
+        interpolated += dense_epe(&field_of(&out.grid, pr), &truth);
     }
-    let dense = dense / out.pairs.len().max(1) as f64;
-    rows.push(s.row(&fam.name, seed, "spiv flow", Some(dense), ms));
+    let (name, epe) = match &out.mean_dense {
+        Some(d) if dense => (SPIV_FLOW_DENSE, d.epe(&truth, None)),
+        _ => (
+            SPIV_FLOW,
+            Some(interpolated / out.pairs.len().max(1) as f64),
+        ),
+    };
+    rows.push(s.row(&fam.name, seed, name, epe, ms));
     Ok(rows)
 }
 

@@ -78,6 +78,11 @@ enum Which {
         /// this CSV, for fitting an uncertainty model on tuning seeds.
         #[arg(long)]
         vectors: Option<PathBuf>,
+        /// Run `spiv flow --dense` instead (the row "spiv flow --dense"):
+        /// its dense column is the EPE of the dense field it writes
+        /// (`mean_dense.flo`), not of its vectors interpolated.
+        #[arg(long)]
+        dense: bool,
     },
 }
 
@@ -98,11 +103,13 @@ pub fn run(a: &BenchArgs) -> Result<(), CliError> {
             families,
             json,
             vectors,
+            dense,
         } => flows(
             seeds,
             families.as_deref(),
             json.as_ref(),
             vectors.as_deref(),
+            *dense,
         ),
     }
 }
@@ -131,8 +138,9 @@ fn flows(
     only: Option<&[String]>,
     json_out: Option<&PathBuf>,
     vectors: Option<&Path>,
+    dense: bool,
 ) -> Result<(), CliError> {
-    use spiv_host::bench::flows::{families, family_rows, FlowsRow};
+    use spiv_host::bench::flows::{families, family_rows, FlowsRow, SPIV_FLOW, SPIV_FLOW_DENSE};
     let seeds = parse_seeds(seeds)?;
     let fams: Vec<_> = families()
         .into_iter()
@@ -149,7 +157,7 @@ fn flows(
     let mut rows: Vec<FlowsRow> = Vec::new();
     for f in &fams {
         for &seed in &seeds {
-            rows.extend(family_rows(f, seed, vectors).map_err(CliError::Job)?);
+            rows.extend(family_rows(f, seed, vectors, dense).map_err(CliError::Job)?);
             b.inc(1);
         }
     }
@@ -168,7 +176,8 @@ fn flows(
     };
     let f3 = |x: Option<f64>| x.map_or("-".to_string(), |x| format!("{x:.3}"));
     for f in &fams {
-        for method in ["frame camera", "TFP 8", "spiv flow"] {
+        let flow = if dense { SPIV_FLOW_DENSE } else { SPIV_FLOW };
+        for method in ["frame camera", "TFP 8", flow] {
             let rs: Vec<&FlowsRow> = rows
                 .iter()
                 .filter(|r| r.family == f.name && r.method == method)

@@ -55,10 +55,21 @@ pub struct Ensemble {
     pub field: Field,
     /// The mean flow per pixel, px per tick.
     pub velocity: Velocity,
+    /// The consecutive frames, oldest first; frames `centre - 1` and
+    /// `centre` meet at the midpoint.
+    pub frames: Vec<Array2<f32>>,
+    /// Index of the first frame after the midpoint.
+    pub centre: usize,
+}
+
+impl Ensemble {
     /// The frames that meet at the midpoint (A before, B after).
-    pub frames: [Array2<f32>; 2],
-    /// Frame pairs measured.
-    pub pairs: usize,
+    pub fn centre_pair(&self) -> [Array2<f32>; 2] {
+        [
+            self.frames[self.centre - 1].clone(),
+            self.frames[self.centre].clone(),
+        ]
+    }
 }
 
 /// Measures the flow at `mid` (a tick boundary) from the frames within
@@ -129,13 +140,11 @@ pub fn measure(inn: &Innovation, mid: u64, grid: &Grid, reach: u64) -> Option<En
             field.sigma[[r, c]] = (SPREAD * se.0, SPREAD * se.1);
         }
     }
-    let centre = ((mid - (mid - back)) / s) as usize;
-    let frames = [frames[centre - 1].clone(), frames[centre].clone()];
     Some(Ensemble {
         field,
         velocity,
         frames,
-        pairs: n,
+        centre: (back / s) as usize,
     })
 }
 
