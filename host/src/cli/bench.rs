@@ -162,12 +162,14 @@ fn flows(
         }
     }
     b.finish_and_clear();
+    // The method column fits the longest method name.
+    let mw = if dense { SPIV_FLOW_DENSE.len() } else { 13 };
     println!(
         "seeds {:?}; EPE px per pair of measured vectors (mean over seeds); coverage: error components within 1σ",
         seeds
     );
     println!(
-        "{:<17} {:<13} {:>9} {:>9} {:>8} {:>9} {:>9} {:>10} {:>9}",
+        "{:<17} {:<mw$} {:>9} {:>9} {:>8} {:>9} {:>9} {:>10} {:>9}",
         "family", "method", "glare", "other", "flagged", "coverage", "dense", "mean |d|", "ms/pair"
     );
     let mean = |xs: Vec<Option<f64>>| {
@@ -183,7 +185,7 @@ fn flows(
                 .filter(|r| r.family == f.name && r.method == method)
                 .collect();
             println!(
-                "{:<17} {:<13} {:>9} {:>9} {:>7.1}% {:>9} {:>9} {:>10.2} {:>9.1}",
+                "{:<17} {:<mw$} {:>9} {:>9} {:>7.1}% {:>9} {:>9} {:>10.2} {:>9.1}",
                 f.name,
                 method,
                 f3(mean(rs.iter().map(|r| r.glare).collect())),

@@ -29,9 +29,11 @@
 //! around the pair and each rung's field is usable; a node no rung measured is replaced from its neighbours or
 //! stays invalid.
 //!
-//! Where the ladder's field is not usable in the end (eddies below the
-//! windows, displacements beyond them), the dense ensemble
-//! ([`super::ensemble`]) measures the pair, if its field is usable.
+//! Where the ladder's field is not usable in the end, or flags more than
+//! [`ENSEMBLE_FLAGGED`] of its vectors (eddies below the windows,
+//! displacements beyond them), the dense ensemble ([`super::ensemble`])
+//! measures the pair instead, if its field is usable. It leaves the mask
+//! out as the compensated rungs do; the flow job flags masked nodes.
 
 use ndarray::Array2;
 
