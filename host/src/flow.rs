@@ -810,7 +810,8 @@ fn measure_chain(
             masked_out(&mut m.field, mask);
         }
         if opts.dense {
-            out.dense.add(&m, f64::from(opts.dt));
+            let measured = m.dense.take();
+            out.dense.add(&m, measured, f64::from(opts.dt));
         }
         prediction = m.field.usable().then(|| m.field.clone());
         if out.first_frames.is_none() {
@@ -1011,12 +1012,12 @@ struct DenseSum {
 }
 
 impl DenseSum {
-    /// Adds the dense stage's field of `m`'s frames (or the dense flow it
-    /// was measured by), in px per `dt` ticks.
-    fn add(&mut self, m: &Measured, dt: f64) {
+    /// Adds `measured`, the dense flow `m` was measured by, or else the
+    /// dense stage's field of `m`'s frames, in px per `dt` ticks.
+    fn add(&mut self, m: &Measured, measured: Option<crate::piv::dense::Flow>, dt: f64) {
         let [a, b] = &m.frames;
-        let (flow, k) = match &m.dense {
-            Some(f) => (f.clone(), 1.0),
+        let (flow, k) = match measured {
+            Some(f) => (f, 1.0),
             None => {
                 let start = crate::motion::ladder::per_ticks(&m.field, m.frame_ticks / dt);
                 (

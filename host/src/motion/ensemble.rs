@@ -30,7 +30,7 @@ use ndarray::Array2;
 use rayon::prelude::*;
 
 use crate::piv::dense::{dense_flow, DenseMode, Flow};
-use crate::piv::{Field, State, NO_SIGMA};
+use crate::piv::{Field, State};
 use spiv_formats::grid::Grid;
 
 use super::{compensated, Innovation, Velocity};
@@ -105,17 +105,8 @@ pub fn measure(inn: &Innovation, mid: u64, grid: &Grid, reach: u64) -> Option<En
         velocity.u.zip_mut_with(&f.u, |m, &x| *m += x * k);
         velocity.v.zip_mut_with(&f.v, |m, &x| *m += x * k);
     }
-    let shape = (grid.ny, grid.nx);
-    let mut field = Field {
-        grid: *grid,
-        u: Array2::zeros(shape),
-        v: Array2::zeros(shape),
-        state: Array2::from_elem(shape, State::Invalid),
-        peak_ratio: Array2::zeros(shape),
-        peak_height: Array2::zeros(shape),
-        sigma: Array2::from_elem(shape, NO_SIGMA),
-    };
-    let nodes: Vec<(usize, usize)> = ndarray::indices(shape).into_iter().collect();
+    let mut field = Field::unmeasured(*grid);
+    let nodes: Vec<(usize, usize)> = ndarray::indices((grid.ny, grid.nx)).into_iter().collect();
     let per_node: Vec<Node> = nodes
         .par_iter()
         .map(|&(r, c)| {

@@ -44,6 +44,7 @@ use crate::piv::{
 };
 
 use crate::piv::dense::Flow;
+use crate::piv::Grid;
 
 use super::compensate::compensated_pair;
 use super::ensemble;
@@ -293,9 +294,7 @@ fn ensemble_pair(
     cfg: &LadderSettings,
     rungs: &[Rung],
 ) -> Result<Option<Measurement>, PivError> {
-    let (w, h) = (inn.width, inn.height);
-    let size = cfg.piv.windows.last().copied().unwrap_or(32);
-    let grid = cfg.piv.grid(w, h).ok_or(PivError::TooSmall(w, h, size))?;
+    let grid = grid_of(inn.width, inn.height, cfg)?;
     let t0 = std::time::Instant::now();
     let Some(e) = ensemble::measure(inn, mid, &grid, u64::from(cfg.bootstrap_reach)) else {
         return Ok(None);
@@ -334,23 +333,19 @@ fn ensemble_pair(
     }))
 }
 
+/// The grid of the ladder's fields on a `w × h` recording.
+fn grid_of(w: usize, h: usize, cfg: &LadderSettings) -> Result<Grid, PivError> {
+    let size = cfg.piv.windows.last().copied().unwrap_or(32);
+    cfg.piv.grid(w, h).ok_or(PivError::TooSmall(w, h, size))
+}
+
 /// The measurement of a pair no rung fits: every vector of the grid
 /// invalid, with no uncertainty.
 fn nothing(w: usize, h: usize, cfg: &LadderSettings) -> Result<Measurement, PivError> {
-    let size = cfg.piv.windows.last().copied().unwrap_or(32);
-    let grid = cfg.piv.grid(w, h).ok_or(PivError::TooSmall(w, h, size))?;
-    let shape = (grid.ny, grid.nx);
+    let grid = grid_of(w, h, cfg)?;
     Ok(Measurement {
-        field: Field {
-            grid,
-            u: Array2::zeros(shape),
-            v: Array2::zeros(shape),
-            state: Array2::from_elem(shape, State::Invalid),
-            peak_ratio: Array2::zeros(shape),
-            peak_height: Array2::zeros(shape),
-            sigma: Array2::from_elem(shape, NO_SIGMA),
-        },
-        separation: Array2::zeros(shape),
+        field: Field::unmeasured(grid),
+        separation: Array2::zeros((grid.ny, grid.nx)),
         rungs: Vec::new(),
         frames: None,
         dense: None,

@@ -270,6 +270,21 @@ pub struct Field {
 }
 
 impl Field {
+    /// A field on `grid` that measured nothing: every vector invalid at
+    /// zero, with no peak and no uncertainty.
+    pub fn unmeasured(grid: Grid) -> Field {
+        let shape = (grid.ny, grid.nx);
+        Field {
+            grid,
+            u: Array2::zeros(shape),
+            v: Array2::zeros(shape),
+            state: Array2::from_elem(shape, State::Invalid),
+            peak_ratio: Array2::zeros(shape),
+            peak_height: Array2::zeros(shape),
+            sigma: Array2::from_elem(shape, NO_SIGMA),
+        }
+    }
+
     /// The vectors in row-major order, as the CSV writes them.
     pub fn vectors(&self) -> Vec<Vector> {
         let mut out = Vec::with_capacity(self.grid.len());
