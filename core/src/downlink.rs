@@ -17,8 +17,8 @@
 //!
 //! Memory: the caller's [`DownlinkBuffers`] — a receive buffer
 //! ([`crate::wire::control::MAX_CONTROL_ENCODED`] bytes for every legal
-//! control) and two sets of row velocities (4 bytes per stored row each)
-//! and caps. The state itself is a few dozen bytes.
+//! control) and two sets of velocities (4 bytes per stored row and tile
+//! column each; the finest grid has a column per 64-px word) and caps. The state itself is a few dozen bytes.
 
 use crate::motion::Motion;
 use crate::wire::control::ControlView;
@@ -42,9 +42,11 @@ pub struct DownlinkStats {
 pub struct DownlinkBuffers<'a> {
     /// Receive buffer of the stream decoder.
     pub rx: &'a mut [u8],
-    /// The applied x velocity of each stored row, 1/4096 px per tick.
+    /// The applied x velocity of each stored row and tile column
+    /// (`rows × cols`), 1/4096 px per tick.
     pub vx: &'a mut [i16],
-    /// The applied y velocity of each stored row (stored rows, down).
+    /// The applied y velocity of each stored row and tile column (stored
+    /// rows, down).
     pub vy: &'a mut [i16],
     /// The applied caps, one per band of [`crate::sidecar::CAP_BAND`]
     /// upright rows.
@@ -79,6 +81,8 @@ struct Steer {
     from_pair: u32,
     n_max: u16,
     motion: bool,
+    cols: u16,
+    tile: u16,
     caps: u16,
 }
 
@@ -150,16 +154,16 @@ impl Downlink {
         let Ok(c) = ControlView::parse(m.payload) else {
             return false;
         };
-        let rows = usize::from(fit.height);
+        let entries = Motion::entries(fit.height, c.head.cols);
         let newest = self.next.or(self.active).map(|s| s.from_pair);
         if c.head.n_max > fit.n_max
-            || (c.nodes() > 0 && (vx.len() < rows || vy.len() < rows))
+            || (c.nodes() > 0 && (vx.len() < entries || vy.len() < entries))
             || c.caps() > caps.len()
             || newest.is_some_and(|p| c.head.from_pair < p)
         {
             return false;
         }
-        if let (Some(x), Some(y)) = (vx.get_mut(..rows), vy.get_mut(..rows)) {
+        if let (Some(x), Some(y)) = (vx.get_mut(..entries), vy.get_mut(..entries)) {
             c.rows_into(x, y);
         }
         for (i, d) in caps.iter_mut().take(c.caps()).enumerate() {
@@ -169,6 +173,8 @@ impl Downlink {
             from_pair: c.head.from_pair,
             n_max: c.head.n_max,
             motion: c.nodes() > 0,
+            cols: c.head.cols,
+            tile: c.head.tile,
             caps: c.caps() as u16,
         });
         true
@@ -182,10 +188,10 @@ impl Downlink {
             return;
         }
         if n.motion {
-            let rows = buf.next_vx.len().min(buf.vx.len());
-            buf.vx[..rows].copy_from_slice(&buf.next_vx[..rows]);
-            let rows = buf.next_vy.len().min(buf.vy.len());
-            buf.vy[..rows].copy_from_slice(&buf.next_vy[..rows]);
+            let e = buf.next_vx.len().min(buf.vx.len());
+            buf.vx[..e].copy_from_slice(&buf.next_vx[..e]);
+            let e = buf.next_vy.len().min(buf.vy.len());
+            buf.vy[..e].copy_from_slice(&buf.next_vy[..e]);
         }
         let caps = usize::from(n.caps)
             .min(buf.caps.len())
@@ -199,10 +205,7 @@ impl Downlink {
     /// The applied motion, if the applied control has one.
     pub fn motion<'b>(&self, buf: &'b DownlinkBuffers<'_>) -> Option<Motion<'b>> {
         match self.active {
-            Some(s) if s.motion => Some(Motion {
-                vx: &*buf.vx,
-                vy: &*buf.vy,
-            }),
+            Some(s) if s.motion => Motion::grid(&*buf.vx, &*buf.vy, s.cols, s.tile).ok(),
             _ => None,
         }
     }

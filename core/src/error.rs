@@ -57,6 +57,9 @@ pub enum ParamError {
     FullScale,
     /// `margin` must be at most [`crate::params::MAX_MARGIN`].
     Margin,
+    /// A motion grid needs `cols` in `1..=`[`crate::motion::MAX_COLS`] and
+    /// a tile that is a positive multiple of 64 px.
+    Motion,
 }
 
 impl core::fmt::Display for Error {

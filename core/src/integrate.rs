@@ -101,7 +101,8 @@ struct Cell {
     at: usize,
     ring: u64,
     reg: u64,
-    /// The row's predicted velocity (1/4096 px per tick; 0 without a motion).
+    /// The word's predicted velocity (1/4096 px per tick; 0 without a
+    /// motion).
     v: (i16, i16),
     /// Strip row and word of the row.
     r: u16,
@@ -763,10 +764,10 @@ fn adapt_with<const HALF: bool>(
     let ring = &mut rest[..plane];
     region_words(ws.labels, any, regm, &b, idx as u16 + 1);
     let nr = ring_words(any, regm, ring, &b);
-    // The row's predicted velocity.
-    let vel = |r: usize| {
+    // The predicted velocity of a word of a strip row.
+    let vel = |r: usize, j: usize| {
         ctx.motion
-            .map_or((0, 0), |m| m.at(s0.saturating_add(r as u16)))
+            .map_or((0, 0), |m| m.at_word(s0.saturating_add(r as u16), j))
     };
     // Cells of a word in the band planes (the strip's first word is
     // `band0`).
@@ -775,7 +776,7 @@ fn adapt_with<const HALF: bool>(
         r: r as u16,
         j: j as u16,
         at: band0 + r * wpr + j,
-        v: vel(r),
+        v: vel(r, j),
         ..Cell::default()
     };
     let mut pt = [Tick::default(); 256];

@@ -76,25 +76,108 @@ pub const ABSOLUTE_STEP: i32 = 48;
 /// 0.200 / 0.423 at 4 px, 0.280 / 0.473 without the floor).
 pub const MIN_TRAVEL: i32 = 1;
 
-/// A predicted velocity per band row.
+/// The most tile columns (`cols`) a [`Motion`] may have: a 65 535 px row
+/// holds 1024 words of 64 px.
+pub const MAX_COLS: u16 = 1024;
+
+/// The tile a per-row motion states on the wire (one column covers the
+/// row whatever its tile).
+pub const ROW_TILE: u16 = 64;
+
+/// A predicted velocity per band row and tile column: a 2-D grid that is
+/// fine in y (every band row; the host interpolates its coarser nodes) and
+/// piecewise constant in x over tiles of `tile` px, a whole number of
+/// 64-px words, so every packed word of a row moves by one shift (one
+/// funnel shift of two words per tick, as a per-row motion; a tile that
+/// split a word would cost a shift and a mask per part).
+///
+/// Entry `r·cols + c` is band row `r`'s velocity in tile column `c`
+/// (columns `c·tile ..`); the last column also covers whatever of the row
+/// lies beyond `cols·tile`. A per-row motion ([`Motion::rows`]) is the
+/// case `cols = 1`.
 #[derive(Debug, Clone, Copy)]
 pub struct Motion<'a> {
-    /// x velocity of each band row, 1/4096 px per tick (missing rows: 0).
+    /// x velocities, 1/4096 px per tick, `rows × cols` row-major (missing
+    /// entries: 0).
     pub vx: &'a [i16],
-    /// y velocity of each band row (stored rows, down), 1/4096 px per
-    /// tick.
+    /// y velocities (stored rows, down), 1/4096 px per tick, laid out as
+    /// `vx`.
     pub vy: &'a [i16],
+    /// Tile columns per row, 1..=[`MAX_COLS`].
+    pub cols: u16,
+    /// Width of a tile column, 64-px words (≥ 1).
+    pub tile_words: u16,
 }
 
-impl Motion<'_> {
-    /// The velocity of band row `r`.
+impl<'a> Motion<'a> {
+    /// One velocity per band row (`vx[r]`, `vy[r]`).
+    pub fn rows(vx: &'a [i16], vy: &'a [i16]) -> Motion<'a> {
+        Motion {
+            vx,
+            vy,
+            cols: 1,
+            tile_words: 1,
+        }
+    }
+
+    /// A grid of `cols` tile columns of `tile` px per band row; `tile`
+    /// must be a positive multiple of 64 and `cols` in 1..=[`MAX_COLS`].
+    pub fn grid(vx: &'a [i16], vy: &'a [i16], cols: u16, tile: u16) -> Result<Motion<'a>, Error> {
+        if cols == 0 || cols > MAX_COLS || tile == 0 || !tile.is_multiple_of(64) {
+            return Err(Error::BadParam(ParamError::Motion));
+        }
+        Ok(Motion {
+            vx,
+            vy,
+            cols,
+            tile_words: tile / 64,
+        })
+    }
+
+    /// Entries a motion of `rows` band rows and `cols` columns needs.
+    pub const fn entries(rows: u16, cols: u16) -> usize {
+        rows as usize * cols as usize
+    }
+
+    /// The tile column of word `j` of a row.
     #[inline]
-    pub fn at(&self, r: u16) -> (i16, i16) {
-        let r = usize::from(r);
+    pub fn col_of_word(&self, j: usize) -> u16 {
+        let c = j / usize::from(self.tile_words.max(1));
+        c.min(usize::from(self.cols.max(1)) - 1) as u16
+    }
+
+    /// The velocity of band row `r` in tile column `c`.
+    #[inline]
+    pub fn at(&self, r: u16, c: u16) -> (i16, i16) {
+        let i = usize::from(r) * usize::from(self.cols.max(1)) + usize::from(c);
         (
-            self.vx.get(r).copied().unwrap_or(0),
-            self.vy.get(r).copied().unwrap_or(0),
+            self.vx.get(i).copied().unwrap_or(0),
+            self.vy.get(i).copied().unwrap_or(0),
         )
+    }
+
+    /// The velocity of band row `r` at word `j` (its 64 pixels share one).
+    #[inline]
+    pub fn at_word(&self, r: u16, j: usize) -> (i16, i16) {
+        self.at(r, self.col_of_word(j))
+    }
+
+    /// Words `j` of a `wpr`-word row in tile column `c`.
+    pub fn words_of(&self, c: u16, wpr: usize) -> core::ops::Range<usize> {
+        let tw = usize::from(self.tile_words.max(1));
+        let j0 = (usize::from(c) * tw).min(wpr);
+        let j1 = if c + 1 >= self.cols.max(1) {
+            wpr
+        } else {
+            (j0 + tw).min(wpr)
+        };
+        j0..j1
+    }
+
+    /// Whether the motion holds every entry of `rows` band rows.
+    pub fn covers(&self, rows: u16) -> bool {
+        let n = Motion::entries(rows, self.cols);
+        self.vx.len() >= n && self.vy.len() >= n
     }
 }
 
@@ -163,9 +246,9 @@ pub fn shifted_word(
 /// Adds the motion-compensated counts of band rows `rows.0..rows.1` over
 /// `planes` (consecutive ticks from `start`, each the band's
 /// `band_rows × words` words) for a frame centred on `kc` to `counts`
-/// (row-major, `width` per row, first row = `rows.0`), with `motion`'s
-/// velocity of each row. The caller keeps every count ≤ 255 (at most 255
-/// ticks in all); bytes wrap otherwise.
+/// (row-major, `width` per row, first row = `rows.0`), each word with
+/// `motion`'s velocity at its row and tile column. The caller keeps every
+/// count ≤ 255 (at most 255 ticks in all); bytes wrap otherwise.
 #[allow(clippy::too_many_arguments)]
 pub fn add_compensated(
     planes: &[&[u64]],
@@ -178,11 +261,18 @@ pub fn add_compensated(
     counts: &mut [u8],
 ) {
     let w = usize::from(width);
+    let wpr = crate::plane::words_per_row(width);
     for (r, crow) in (rows.0..rows.1).zip(counts.chunks_exact_mut(w)) {
-        add_row(planes, start, kc, width, band_rows, r, motion.at(r), crow);
+        for c in 0..motion.cols.max(1) {
+            let words = motion.words_of(c, wpr);
+            let Some(cw) = crow.get_mut(64 * words.start..(64 * words.end).min(w)) else {
+                continue;
+            };
+            let at = (planes, start, kc, wpr, band_rows);
+            add_words_of(at, r, motion.at(r, c), words.start, cw);
+        }
     }
 }
-
 /// Settings of [`refine`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -251,15 +341,17 @@ pub fn candidate(cfg: &Refine, vx: i16, vy: i16, n: usize) -> Option<(i16, i16)>
 }
 
 /// Refines `motion` at the frame centred on `kc` by contrast maximisation:
-/// for each band of `cfg.band` rows, every [`candidate`] around the
-/// velocity of the band's middle row is tried over a window of
-/// `cfg.window` ticks, and the one with the largest sum of squared
-/// compensated counts over the band wins (the earliest on a tie, so the
-/// prediction when nothing is sharper). The winners are written to
-/// `out_vx`, `out_vy` (one per band row), piecewise linear between band
-/// centres (rounded down) and constant beyond the outer ones. Kept out of
-/// line (one call per frame) so instruction counters can attribute its
-/// cost (`firmware-sim/cost.sh`).
+/// for each node — a band of `cfg.band` rows in one tile column — every
+/// [`candidate`] around the velocity of the band's middle row there is
+/// tried over a window of `cfg.window` ticks, and the one with the largest
+/// sum of squared compensated counts over the node's pixels wins (the
+/// earliest on a tie, so the prediction when nothing is sharper). The
+/// winners are written to `out_vx`, `out_vy` (laid out as `motion`'s:
+/// `rows × cols`), per column piecewise linear in y between band centres
+/// (rounded down) and constant beyond the outer ones; the refined motion
+/// is `motion` with these velocities. Kept out of line (one call per
+/// frame) so instruction counters can attribute its cost
+/// (`firmware-sim/cost.sh`).
 #[inline(never)]
 pub fn refine(
     hist: &History<'_>,
@@ -272,12 +364,17 @@ pub fn refine(
     if cfg.band == 0 || cfg.window == 0 || cfg.window > 255 {
         return Err(Error::BadParam(ParamError::Window));
     }
+    if motion.cols == 0 || motion.cols > MAX_COLS || motion.tile_words == 0 {
+        return Err(Error::BadParam(ParamError::Motion));
+    }
     if !hist.holds(kc) {
         return Err(Error::TickUnavailable);
     }
     let (width, rows) = (hist.width(), hist.rows());
-    crate::window::check_len(out_vx.len(), usize::from(rows))?;
-    crate::window::check_len(out_vy.len(), usize::from(rows))?;
+    let cols = usize::from(motion.cols);
+    let entries = Motion::entries(rows, motion.cols);
+    crate::window::check_len(out_vx.len(), entries)?;
+    crate::window::check_len(out_vy.len(), entries)?;
     let bands = rows.div_ceil(cfg.band);
     if usize::from(bands) > MAX_BANDS {
         return Err(Error::BufferTooSmall {
@@ -285,106 +382,126 @@ pub fn refine(
             got: MAX_BANDS,
         });
     }
+    let wpr = crate::plane::words_per_row(width);
     let span = Span::new(hist, Window::in_history(hist, kc, cfg.window));
     let mut win = [(0i16, 0i16); MAX_BANDS];
     let mut sharp = SharpScratch {
         shifts: [Shift::default(); 256],
-        items: [Source::EMPTY; 256],
     };
     // The window's ticks relative to the centre.
     let dts = (
         i64::from(span.start) - i64::from(kc),
         i64::from(span.start) + span.planes().len() as i64 - 1 - i64::from(kc),
     );
-    for (b, slot) in (0..bands).zip(win.iter_mut()) {
-        let r0 = b * cfg.band;
-        let r1 = r0.saturating_add(cfg.band).min(rows);
-        let (px, py) = motion.at(r0 + (r1 - r0) / 2);
-        let mut best: Option<(u64, i16, i16)> = None;
-        let mut first = 0u64;
-        let mut n = 0;
-        // Candidates measured so far in this band. One whose shifts equal
-        // a measured one's at every tick of the window has its counts, so
-        // its sum, and cannot beat it (a later one wins only when larger):
-        // it is skipped. Slow rows have many such.
-        let mut seen: heapless::Vec<(i16, i16), 64> = heapless::Vec::new();
-        while let Some((cx, cy)) = candidate(cfg, px, py, n) {
-            n += 1;
-            if seen.iter().any(|&o| same_path(o, (cx, cy), dts)) {
-                continue;
+    for c in 0..motion.cols {
+        let words = motion.words_of(c, wpr);
+        for (b, slot) in (0..bands).zip(win.iter_mut()) {
+            let r0 = b * cfg.band;
+            let r1 = r0.saturating_add(cfg.band).min(rows);
+            let (px, py) = motion.at(r0 + (r1 - r0) / 2, c);
+            let mut best: Option<(u64, i16, i16)> = None;
+            let mut first = 0u64;
+            let mut n = 0;
+            // Candidates measured so far in this node. One whose shifts
+            // equal a measured one's at every tick of the window has its
+            // counts, so its sum, and cannot beat it (a later one wins only
+            // when larger): it is skipped. Slow rows have many such.
+            let mut seen: heapless::Vec<(i16, i16), 64> = heapless::Vec::new();
+            while let Some((cx, cy)) = candidate(cfg, px, py, n) {
+                n += 1;
+                if seen.iter().any(|&o| same_path(o, (cx, cy), dts)) {
+                    continue;
+                }
+                // A full table only stops the skipping.
+                let _ = seen.push((cx, cy));
+                let node = Node {
+                    width,
+                    band_rows: rows,
+                    rows: (r0, r1),
+                    words: (words.start, words.end),
+                };
+                let e = sharpness(&mut sharp, &span, kc, &node, (cx, cy));
+                if n == 1 {
+                    first = e;
+                }
+                if best.is_none_or(|(be, _, _)| e > be) {
+                    best = Some((e, cx, cy));
+                }
             }
-            // A full table only stops the skipping.
-            let _ = seen.push((cx, cy));
-            let e = sharpness(&mut sharp, &span, kc, width, rows, (r0, r1), (cx, cy));
-            if n == 1 {
-                first = e;
-            }
-            if best.is_none_or(|(be, _, _)| e > be) {
-                best = Some((e, cx, cy));
-            }
+            // The prediction (candidate 0) stays unless beaten by min_gain.
+            let gain = u128::from(first) * (1000 + u128::from(cfg.min_gain));
+            *slot = match best {
+                Some((e, x, y)) if u128::from(e) * 1000 > gain => (x, y),
+                _ => (px, py),
+            };
         }
-        // The prediction (candidate 0) stays unless beaten by min_gain.
-        let gain = u128::from(first) * (1000 + u128::from(cfg.min_gain));
-        *slot = match best {
-            Some((e, x, y)) if u128::from(e) * 1000 > gain => (x, y),
-            _ => (px, py),
-        };
-    }
-    // Band centres at rows b·band + (band − 1)/2 (in half rows: c2(b));
-    // linear between them, constant beyond.
-    let band2 = 2 * i64::from(cfg.band);
-    let c2 = |b: u16| i64::from(b) * band2 + i64::from(cfg.band) - 1;
-    let last = bands.saturating_sub(1);
-    for r in 0..rows {
-        let y2 = 2 * i64::from(r);
-        let b = ((y2 - c2(0)).max(0) / band2).min(i64::from(last)) as u16;
-        let b1 = (b + 1).min(last);
-        let (a, z) = (win[usize::from(b)], win[usize::from(b1)]);
-        let (c0, c1) = (c2(b), c2(b1));
-        let lerp = |a: i16, z: i16| -> i16 {
-            if b1 == b || y2 <= c0 {
-                a
-            } else if y2 >= c1 {
-                z
-            } else {
-                let d = (i64::from(z) - i64::from(a)) * (y2 - c0);
-                (i64::from(a) + d.div_euclid(c1 - c0)) as i16
-            }
-        };
-        out_vx[usize::from(r)] = lerp(a.0, z.0);
-        out_vy[usize::from(r)] = lerp(a.1, z.1);
+        // Band centres at rows b·band + (band − 1)/2 (in half rows: c2(b));
+        // linear between them, constant beyond.
+        let band2 = 2 * i64::from(cfg.band);
+        let c2 = |b: u16| i64::from(b) * band2 + i64::from(cfg.band) - 1;
+        let last = bands.saturating_sub(1);
+        for r in 0..rows {
+            let y2 = 2 * i64::from(r);
+            let b = ((y2 - c2(0)).max(0) / band2).min(i64::from(last)) as u16;
+            let b1 = (b + 1).min(last);
+            let (a, z) = (win[usize::from(b)], win[usize::from(b1)]);
+            let (c0, c1) = (c2(b), c2(b1));
+            let lerp = |a: i16, z: i16| -> i16 {
+                if b1 == b || y2 <= c0 {
+                    a
+                } else if y2 >= c1 {
+                    z
+                } else {
+                    let d = (i64::from(z) - i64::from(a)) * (y2 - c0);
+                    (i64::from(a) + d.div_euclid(c1 - c0)) as i16
+                }
+            };
+            let i = usize::from(r) * cols + usize::from(c);
+            out_vx[i] = lerp(a.0, z.0);
+            out_vy[i] = lerp(a.1, z.1);
+        }
     }
     Ok(())
 }
 
-/// Adds the counts of band row `r` compensated for `(vx, vy)` to `row`,
-/// bit-sliced as the plain counts are (`window::add_words`).
-///
-/// Each tick's shift is resolved once per row: its source row
-/// (empty when the shift leaves the band), the word offset and the bit
-/// offset, so a shifted word is two loads and a funnel shift — the same
-/// words as [`shifted_word`].
-#[allow(clippy::too_many_arguments)]
-fn add_row(
-    planes: &[&[u64]],
-    start: u32,
-    kc: u32,
+/// The pixels of one [`refine`] node: band rows `rows.0..rows.1` of a
+/// band of `band_rows` rows `width` px wide, words `words.0..words.1`.
+struct Node {
     width: u16,
     band_rows: u16,
+    rows: (u16, u16),
+    words: (usize, usize),
+}
+
+/// Adds the counts of band row `r`'s words from `j0` on compensated for
+/// `(vx, vy)` to `out` (their pixels, 64 per word), bit-sliced as the
+/// plain counts are (`window::add_words`); `at` is `(planes, start, kc,
+/// wpr, band_rows)`.
+///
+/// Each tick's shift is resolved once per call: its source row (empty
+/// when the shift leaves the band), the word offset and the bit offset,
+/// so a shifted word is two loads and a funnel shift — the same words as
+/// [`shifted_word`].
+fn add_words_of(
+    (planes, start, kc, wpr, band_rows): (&[&[u64]], u32, u32, usize, u16),
     r: u16,
     (vx, vy): (i16, i16),
-    row: &mut [u8],
+    j0: usize,
+    out: &mut [u8],
 ) {
-    let wpr = crate::plane::words_per_row(width);
-    // Each tick's source row, word offset and bit offset.
-    let mut items: [Source<'_>; 256] = [Source::EMPTY; 256];
-    let n = planes.len().min(items.len());
-    for ((it, p), i) in items.iter_mut().zip(planes).zip(0i64..) {
+    // Each tick's source row, word offset and bit offset (a vector, so
+    // only the ticks there are are written: calls come per row, column
+    // and level).
+    let mut items: heapless::Vec<Source<'_>, 256> = heapless::Vec::new();
+    for (p, i) in planes.iter().zip(0i64..) {
         let dt = (i64::from(start) + i - i64::from(kc)) as i32;
-        *it = Source::new(p, wpr, band_rows, r, shift(vx, dt), shift(vy, dt));
+        let s = Source::new(p, wpr, band_rows, r, shift(vx, dt), shift(vy, dt));
+        if items.push(s).is_err() {
+            break;
+        }
     }
-    for (j, cw) in row.chunks_mut(64).enumerate() {
-        crate::window::add_words(&items[..n], |s| s.word(j), cw);
+    for (q, cw) in out.chunks_mut(64).enumerate() {
+        crate::window::add_words(&items, |s| s.word(j0 + q), cw);
     }
 }
 
@@ -437,23 +554,6 @@ impl<'p> Source<'p> {
         // (hi << 1) << (63 − b) is hi << (64 − b) for b > 0 and 0 for b = 0.
         (lo >> self.b) | ((hi << 1) << (63 - self.b))
     }
-
-    /// Words `j` and `j + 1` of the shifted row, as [`Source::word`] each.
-    #[cfg(target_arch = "x86_64")]
-    #[inline(always)]
-    fn word_pair(&self, j: usize) -> wide::u64x2 {
-        use wide::u64x2;
-        let q = (j as isize).wrapping_add(self.q);
-        let [a, b, c] = match self.row.get(q as usize..(q as usize).wrapping_add(3)) {
-            Some(&[a, b, c]) => [a, b, c],
-            _ => core::array::from_fn(|d| {
-                let i = q.wrapping_add(d as isize) as usize;
-                self.row.get(i).copied().unwrap_or(0)
-            }),
-        };
-        let (lo, hi) = (u64x2::new([a, b]), u64x2::new([b, c]));
-        (lo >> self.b) | ((hi << 1) << (63 - self.b))
-    }
 }
 
 /// Whether velocities `a` and `b` shift every plane `dt = dts.0..=dts.1`
@@ -490,82 +590,121 @@ impl Shift {
     }
 }
 
-/// Per-tick tables of [`sharpness`], on the caller's stack once per
-/// [`refine`] (10 KB on a 64-bit host, 4 KB on a 32-bit MCU).
-struct SharpScratch<'p> {
+/// The per-tick shifts of [`sharpness`], on the caller's stack once per
+/// [`refine`] (4 KB on a 64-bit host, 3 KB on a 32-bit MCU).
+struct SharpScratch {
     shifts: [Shift; 256],
-    items: [Source<'p>; 256],
 }
 
-/// [`refine`]'s measure of a candidate: the sum over band rows
-/// `rows.0..rows.1` of the squared counts compensated for `(vx, vy)` —
-/// the counts [`add_row`] makes, summed as squares straight from the bit
+/// Rows of a node [`sharpness`] counts at once: each tick's shift is
+/// resolved once per block of rows, not once per row.
+const BLOCK_ROWS: usize = 16;
+
+/// [`refine`]'s measure of a candidate: the sum over the node's pixels of
+/// the squared counts compensated for `(vx, vy)` — the counts
+/// [`add_compensated`] makes, summed as squares straight from the bit
 /// planes ([`slices::sum_squares`]) without reading them back into bytes
 /// (byte counts would make refine most of a compensated frame's cost).
-/// Each tick's shift is resolved once for all rows.
-fn sharpness<'p>(
-    scratch: &mut SharpScratch<'p>,
-    span: &Span<'p>,
+///
+/// Loops run tick by tick over blocks of [`BLOCK_ROWS`] rows of one word
+/// column: a tick's source rows are consecutive, so the shift, the rows
+/// the band holds and the words the row holds are worked out once per
+/// tick and block, and each row's word is two loads and a funnel shift
+/// into its own carry-save counter. Hand-written: refine's hot loop.
+fn sharpness(
+    scratch: &mut SharpScratch,
+    span: &Span<'_>,
     kc: u32,
-    width: u16,
-    band_rows: u16,
-    rows: (u16, u16),
+    node: &Node,
     (vx, vy): (i16, i16),
 ) -> u64 {
     let (planes, start) = (span.planes(), span.start);
-    let wpr = crate::plane::words_per_row(width);
+    let wpr = crate::plane::words_per_row(node.width);
     let n = planes.len().min(256);
     let shifts = &mut scratch.shifts;
     for (s, i) in shifts.iter_mut().take(n).zip(0i64..) {
         let dt = (i64::from(start) + i - i64::from(kc)) as i32;
         *s = Shift::new(shift(vx, dt), shift(vy, dt));
     }
-    let items = &mut scratch.items;
+    let shifts = &shifts[..n];
+    let planes = &planes[..n];
+    let band_rows = i32::from(node.band_rows);
+    let (j0, j1) = (node.words.0, node.words.1.min(wpr));
     let mut e = 0u64;
-    for r in rows.0..rows.1 {
-        for ((it, p), &s) in items.iter_mut().zip(planes).zip(&shifts[..n]) {
-            *it = Source::at(p, wpr, band_rows, r, s);
+    let mut r0 = node.rows.0;
+    while r0 < node.rows.1 {
+        let nr = usize::from((node.rows.1 - r0).min(BLOCK_ROWS as u16));
+        for j in j0..j1 {
+            // Pixels past the row's end are not pixels.
+            let m = slices::low_bits(usize::from(node.width) - 64 * j);
+            let mut counts = [Counter::default(); BLOCK_ROWS];
+            for (ps, ss) in planes.chunks(15).zip(shifts.chunks(15)) {
+                let mut acc = [[0u64; 4]; BLOCK_ROWS];
+                #[cfg(target_arch = "x86_64")]
+                let mut pairs = [[wide::u64x2::ZERO; 4]; BLOCK_ROWS / 2];
+                for (plane, s) in ps.iter().zip(ss) {
+                    // Block row 0's source row, and the block rows whose
+                    // source row lies in the band.
+                    let first = i32::from(r0) + s.y;
+                    let lo = (-first).clamp(0, nr as i32) as usize;
+                    let hi = (band_rows - first).clamp(0, nr as i32) as usize;
+                    // The two source words of word j (in the row or not).
+                    let q = (j as isize).wrapping_add(s.q);
+                    let at = |k: isize| (0..wpr as isize).contains(&k).then_some(k as usize);
+                    let (wl, wh) = (at(q), at(q.wrapping_add(1)));
+                    let mut base = (first + lo as i32).max(0) as usize * wpr;
+                    let word = |base: usize, k: Option<usize>| {
+                        k.and_then(|k| plane.get(base + k)).copied().unwrap_or(0)
+                    };
+                    // Two rows per SSE2 operation where both lie in the
+                    // band (rows 2p and 2p + 1 are pair p's lanes); the
+                    // first row on its own when it is odd.
+                    #[cfg(target_arch = "x86_64")]
+                    let i = {
+                        let mut i = lo;
+                        if i % 2 == 1 && i < hi {
+                            let w = (word(base, wl) >> s.b) | ((word(base, wh) << 1) << (63 - s.b));
+                            slices::csa(&mut acc[i], w & m);
+                            base += wpr;
+                            i += 1;
+                        }
+                        while i + 1 < hi {
+                            let (b1, p) = (base + wpr, i / 2);
+                            let l = wide::u64x2::new([word(base, wl), word(b1, wl)]);
+                            let h = wide::u64x2::new([word(base, wh), word(b1, wh)]);
+                            let w = (l >> s.b) | ((h << 1) << (63 - s.b));
+                            slices::csa(&mut pairs[p], w & wide::u64x2::splat(m));
+                            base += 2 * wpr;
+                            i += 2;
+                        }
+                        i
+                    };
+                    #[cfg(not(target_arch = "x86_64"))]
+                    let i = lo;
+                    for a in &mut acc[i..hi] {
+                        // (hi << 1) << (63 − b) is hi << (64 − b) for b > 0
+                        // and 0 for b = 0.
+                        let w = (word(base, wl) >> s.b) | ((word(base, wh) << 1) << (63 - s.b));
+                        slices::csa(a, w & m);
+                        base += wpr;
+                    }
+                }
+                for (c, a) in counts.iter_mut().zip(&acc[..nr]) {
+                    slices::add_nibble(c, *a);
+                }
+                #[cfg(target_arch = "x86_64")]
+                for (p, a) in pairs.iter().enumerate().take(nr.div_ceil(2)) {
+                    let a = a.map(|v| v.to_array());
+                    for (l, c) in counts.iter_mut().skip(2 * p).take(2).enumerate() {
+                        slices::add_nibble(c, [a[0][l], a[1][l], a[2][l], a[3][l]]);
+                    }
+                }
+            }
+            e += counts[..nr].iter().map(slices::sum_squares).sum::<u64>();
         }
-        // Pixels past the row's end are not pixels.
-        let mask = |j: usize| slices::low_bits(usize::from(width) - 64 * j);
-        let mut j = 0;
-        #[cfg(target_arch = "x86_64")]
-        while j + 1 < wpr {
-            let [c0, c1] = counts_pair(&items[..n], j, [mask(j), mask(j + 1)]);
-            e += slices::sum_squares(&c0) + slices::sum_squares(&c1);
-            j += 2;
-        }
-        while j < wpr {
-            let m = mask(j);
-            let mut c = Counter::default();
-            slices::add(&mut c, &items[..n], |s| s.word(j) & m);
-            e += slices::sum_squares(&c);
-            j += 1;
-        }
+        r0 += nr as u16;
     }
     e
-}
-
-/// The compensated counts of words `j` and `j + 1` of every source, two
-/// words per SSE2 operation (the same counts as [`slices::add`] makes one
-/// word at a time). Hand-written: refine's hot loop.
-#[cfg(target_arch = "x86_64")]
-#[inline(always)]
-fn counts_pair(items: &[Source<'_>], j: usize, masks: [u64; 2]) -> [Counter; 2] {
-    use wide::u64x2;
-    let m = u64x2::new(masks);
-    let mut out = [Counter::default(), Counter::default()];
-    for chunk in items.chunks(15) {
-        let mut s = [u64x2::ZERO; 4];
-        for it in chunk {
-            slices::csa(&mut s, it.word_pair(j) & m);
-        }
-        let s = s.map(|v| v.to_array());
-        for (l, c) in out.iter_mut().enumerate() {
-            slices::add_nibble(c, [s[0][l], s[1][l], s[2][l], s[3][l]]);
-        }
-    }
-    out
 }
 
 #[cfg(test)]
@@ -573,7 +712,7 @@ mod tests {
     use super::*;
     use crate::plane::PlaneView;
 
-    /// `sharpness` is the sum of the squared counts `add_row` makes, for
+    /// `sharpness` is the sum of the squared counts `add_compensated` makes, for
     /// shifts either way, widths that end mid-word and rows that leave
     /// the band; `same_path` holds exactly when every plane's shift agrees.
     #[test]
@@ -599,7 +738,6 @@ mod tests {
             let span = Span::new(&hist, Window::in_history(&hist, kc, 64));
             let mut sharp = SharpScratch {
                 shifts: [Shift::default(); 256],
-                items: [Source::EMPTY; 256],
             };
             for v in [
                 (0i16, 0i16),
@@ -612,10 +750,19 @@ mod tests {
                     let mut want = 0u64;
                     for r in rows.0..rows.1 {
                         let mut row = vec![0u8; wu];
-                        add_row(span.planes(), span.start, kc, w, h, r, v, &mut row);
+                        let (vx, vy) = ([v.0; 16], [v.1; 16]);
+                        let m = Motion::rows(&vx, &vy);
+                        let (a, e) = (span.start, kc);
+                        add_compensated(span.planes(), a, e, w, h, (r, r + 1), &m, &mut row);
                         want += row.iter().map(|&c| u64::from(c).pow(2)).sum::<u64>();
                     }
-                    let got = sharpness(&mut sharp, &span, kc, w, h, rows, v);
+                    let node = Node {
+                        width: w,
+                        band_rows: h,
+                        rows,
+                        words: (0, crate::plane::words_per_row(w)),
+                    };
+                    let got = sharpness(&mut sharp, &span, kc, &node, v);
                     assert_eq!(got, want, "{w}x{h} v {v:?} rows {rows:?}");
                 }
             }

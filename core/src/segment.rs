@@ -17,7 +17,7 @@
 //! Memory: the workspace's per-pixel bytes; one 512-byte histogram on the stack.
 
 use crate::history::History;
-use crate::motion::{add_compensated, positions, travel, MIN_TRAVEL};
+use crate::motion::{add_compensated, positions, travel, Motion, MIN_TRAVEL};
 use crate::params::Params;
 use crate::particle::{is_particle_compensated, Thresholds};
 use crate::q::B_FRAC_BITS;
@@ -623,9 +623,6 @@ struct Level<'a> {
     /// last column on either side (entry `t + 1` is tile column `t`), so
     /// the blend between tile centres needs no clamping at the edges.
     bg: &'a [u32],
-    /// Where the row moves, the pixel's own plain count floors its
-    /// background (all ones), else 0.
-    floor: u32,
     sat_c: u32,
     /// Bit planes the level's counts can set ([`slices::live_planes`] of
     /// the window's length): the ones above are zero and not read.
@@ -773,20 +770,16 @@ pub(crate) fn segment(
                 plain_tile_medians(ws, &g, (tp.0, tp.1), live, &mut have);
             }
             row_backgrounds(ws.tiles, &g.tiles, tp, bg_row);
-            let (floor, segs) = match (mc, &motion) {
-                (true, Some(m)) => row_motion(m.at(br), win, k),
-                _ => (0, 1),
-            };
             let lv = Level {
                 bg: bg_row,
-                floor,
                 sat_c,
                 live,
                 last,
                 decided,
             };
-            if mc {
-                words_compensated(ws, &lv, (th, p, segs), r, &g, &mut stats);
+            if let (true, Some(m)) = (mc, &motion) {
+                let rm = RowMotion { m, r: br, win, k };
+                words_compensated(ws, &lv, (th, p, &rm), r, &g, &mut stats);
             } else {
                 words_plain(ws, &lv, (th, p), r, (g.width, g.wpr, g.words), &mut stats);
             }
@@ -983,36 +976,52 @@ fn row_backgrounds(
     bg_row[n_bg - 1] = bg_row[n_bg - 2];
 }
 
-/// A compensated row's test at level window `win` of the frame at `k`,
-/// for the row's velocity `v`: the floor mask ([`Level::floor`]: all ones
-/// where the motion moves anything within the window, [`travel`] ≥
-/// [`MIN_TRAVEL`]) and the pixels a compensated count sums ([`positions`],
-/// its noise model; 1 is the plain test).
-#[inline(always)]
-fn row_motion(v: (i16, i16), win: Window, k: u32) -> (u32, u32) {
-    let floor = if travel(v, win.start, win.end(), k) >= MIN_TRAVEL {
-        u32::MAX
-    } else {
-        0
-    };
-    (floor, positions(v, win.start, win.end(), k))
+/// The motion of one compensated row at one level: band row `r` of
+/// motion `m`, level window `win` of the frame at `k`.
+struct RowMotion<'m, 'a> {
+    m: &'m Motion<'a>,
+    r: u16,
+    win: Window,
+    k: u32,
+}
+
+impl RowMotion<'_, '_> {
+    /// The test of the row's tile column `c`: the floor mask (all ones
+    /// where the motion moves anything within the window, [`travel`] ≥
+    /// [`MIN_TRAVEL`]: the pixel's own plain count floors its background;
+    /// else 0) and the pixels a compensated count sums ([`positions`], its
+    /// noise model; 1 is the plain test).
+    #[inline(always)]
+    fn test(&self, c: u16) -> (u32, u32) {
+        let (win, v) = (self.win, self.m.at(self.r, c));
+        let floor = if travel(v, win.start, win.end(), self.k) >= MIN_TRAVEL {
+            u32::MAX
+        } else {
+            0
+        };
+        (floor, positions(v, win.start, win.end(), self.k))
+    }
 }
 
 /// One level's compensated test of strip row `r`'s words: a particle
 /// needs a tested (compensated) count above the background (so above the
-/// word's lowest; the floor only raises it), with the noise of `segs`
-/// pixels; saturation reads the plain counts. Only those pixels are read
-/// and tested; on the last level the rest are background at their count.
+/// word's lowest; the floor only raises it), with the noise of the pixels
+/// its tile column's compensated count sums ([`RowMotion::test`], worked
+/// out once per column that has candidates); saturation reads the plain
+/// counts. Only those pixels are read and tested; on the last level the
+/// rest are background at their count.
 #[inline(always)]
 fn words_compensated(
     ws: &mut Workspace<'_>,
     lv: &Level<'_>,
-    (th, p, segs): (&Thresholds, &Params, u32),
+    (th, p, rm): (&Thresholds, &Params, &RowMotion<'_, '_>),
     r: usize,
     g: &StripGeometry,
     stats: &mut SegmentStats,
 ) {
     let (width, words) = (g.width, g.words);
+    // The last tile column tested and its test.
+    let mut test: Option<(u16, (u32, u32))> = None;
     for w in r * g.wpr..(r + 1) * g.wpr {
         let a = ws.masks[w];
         if a == 0 {
@@ -1029,6 +1038,19 @@ fn words_compensated(
             above |= u64::from(u32::from(v) > t) << q;
         }
         let cand = a & (above | slices::at_least_live(c, lv.sat_c, lv.live));
+        let (floor, segs) = if cand == 0 {
+            (0, 1)
+        } else {
+            let col = rm.m.col_of_word(jw);
+            match test {
+                Some((tc, t)) if tc == col => t,
+                _ => {
+                    let t = rm.test(col);
+                    test = Some((col, t));
+                    t
+                }
+            }
+        };
         // Compensated candidates: a byte group's plain counts read out of
         // the bit planes once.
         let mut m = cand;
@@ -1039,7 +1061,7 @@ fn words_compensated(
             let x = 64 * jw + i as usize;
             let cp = counts.count(i);
             let tested = ws.mc[r * width + x];
-            let b_q10 = lv.b_at(x).max((u32::from(cp) << B_FRAC_BITS) & lv.floor);
+            let b_q10 = lv.b_at(x).max((u32::from(cp) << B_FRAC_BITS) & floor);
             let particle = if segs > 1 {
                 is_particle_compensated(tested, b_q10, p, segs)
             } else {

@@ -140,7 +140,9 @@ pub struct MemorySizes {
     pub tfp_counts: usize,
     /// Sparse codec scratch (`u16`; [`Encoding::Sparse`] only).
     pub codec_scratch: usize,
-    /// Rows of the downlink's velocity buffers (each of four).
+    /// Entries of the downlink's velocity buffers (each of four): one per
+    /// stored row and 64-px word, the finest motion grid a control may
+    /// carry ([`crate::motion::Motion`]).
     pub rows: usize,
     /// Bands of the downlink's caps (each of two).
     pub cap_bands: usize,
@@ -165,8 +167,9 @@ impl Config {
         let tfp = self.method == Method::Tfp || (mc && self.bootstrap == Method::Tfp);
         let rows = tile_rows(width, height, wide, self.lossy.block);
         let codec_scratch = tile_scratch(self.encoding, width, rows, self.lossy.block);
+        let grid = usize::from(height).checked_mul(crate::plane::words_per_row(width))?;
         let refined = match self.refine {
-            Some(_) => usize::from(height),
+            Some(_) => grid,
             None => 0,
         };
         Some(MemorySizes {
@@ -178,7 +181,7 @@ impl Config {
             motion_counts: if mc { workspace.pixels() } else { 0 },
             tfp_counts: if tfp { px } else { 0 },
             codec_scratch,
-            rows: usize::from(height),
+            rows: grid,
             cap_bands: usize::from(height.div_ceil(CAP_BAND)),
             refined,
         })
@@ -285,16 +288,17 @@ pub struct Memory<'a, G: Gray> {
     /// paper's algorithm.
     pub downlink: DownlinkBuffers<'a>,
     /// With [`Config::refine`]: where the refined velocities go (one per
-    /// band row each).
+    /// band row and tile column each).
     pub refine: RefineBuffers<'a>,
 }
 
 /// The refinement's buffers (empty when [`Config::refine`] is `None`).
 #[derive(Debug)]
 pub struct RefineBuffers<'a> {
-    /// Refined x velocities, one per band row.
+    /// Refined x velocities, laid out as the motion's (band rows × tile
+    /// columns; [`MemorySizes::refined`] holds the finest grid).
     pub vx: &'a mut [i16],
-    /// Refined y velocities, one per band row.
+    /// Refined y velocities, as `vx`.
     pub vy: &'a mut [i16],
 }
 
@@ -565,8 +569,9 @@ pub struct Guide<'m> {
     /// Window caps per band of [`CAP_BAND`] upright rows, ticks (empty:
     /// none; adaptive frames only).
     pub caps: &'m [u16],
-    /// Predicted velocity of each stored row ([`Method::Mc`] frames; `None`:
-    /// the frame is made by [`Config::bootstrap`]).
+    /// Predicted velocity of each stored row and tile column
+    /// ([`Method::Mc`] frames; `None`: the frame is made by
+    /// [`Config::bootstrap`]).
     pub motion: Option<Motion<'m>>,
 }
 
@@ -620,10 +625,9 @@ pub fn make_frame<G: Gray>(
             Ok(Method::Tfi)
         }
         (Method::Mc, Some(motion)) => {
-            let rows = usize::from(hist.rows());
-            if motion.vx.len() < rows || motion.vy.len() < rows {
+            if !motion.covers(hist.rows()) {
                 return Err(Error::BufferTooSmall {
-                    needed: rows,
+                    needed: Motion::entries(hist.rows(), motion.cols),
                     got: motion.vx.len().min(motion.vy.len()),
                 });
             }
@@ -632,7 +636,11 @@ pub fn make_frame<G: Gray>(
                 Some(rc) => {
                     let r = mem.refine;
                     refine(hist, k, &motion, rc, r.vx, r.vy)?;
-                    Motion { vx: r.vx, vy: r.vy }
+                    Motion {
+                        vx: r.vx,
+                        vy: r.vy,
+                        ..motion
+                    }
                 }
             };
             reconstruct_compensated(hist, k, p, mem.workspace, (0, hist.rows()), &m, mem.frame)?;

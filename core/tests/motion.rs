@@ -69,7 +69,7 @@ proptest! {
         let span = Span::new(&hist, win);
         let vxs: Vec<i16> = (0..h).map(|r| vx.wrapping_add(i16::try_from(r).unwrap() * 112)).collect();
         let vys = vec![vy; hu];
-        let m = Motion { vx: &vxs, vy: &vys };
+        let m = Motion::rows(&vxs, &vys);
         let mut counts = vec![0u8; wu * hu];
         add_compensated(span.planes(), span.start, kc, w, h, (0, h), &m, &mut counts);
         for r in 0..hu {
@@ -156,10 +156,7 @@ fn refine_finds_the_velocity_of_moving_particles() {
         .map(|r| (truth(r) * 0.8 * Q as f64) as i16)
         .collect();
     let zero = vec![0i16; 48];
-    let m = Motion {
-        vx: &pred,
-        vy: &zero,
-    };
+    let m = Motion::rows(&pred, &zero);
     let cfg = Refine::default();
     let (mut vx, mut vy) = (vec![0i16; 48], vec![0i16; 48]);
     refine(&hist, 50, &m, &cfg, &mut vx, &mut vy).unwrap();
@@ -186,10 +183,7 @@ fn refine_keeps_the_prediction_when_nothing_is_sharper_and_refuses_bad_input() {
     let mut words = Vec::new();
     let hist = history(&mut words, &planes, w, h);
     let pred = vec![100i16; 16];
-    let m = Motion {
-        vx: &pred,
-        vy: &pred,
-    };
+    let m = Motion::rows(&pred, &pred);
     let cfg = Refine::default();
     let (mut vx, mut vy) = (vec![0i16; 16], vec![0i16; 16]);
     refine(&hist, 20, &m, &cfg, &mut vx, &mut vy).unwrap();
@@ -285,7 +279,7 @@ fn static_light_is_never_a_compensated_particle() {
     let plain = reconstruct_adaptive(&hist, k, &p, &mut ws.workspace().unwrap(), &mut out).unwrap();
     let vx = vec![(v * Q as f64) as i16; h];
     let vy = vec![0i16; h];
-    let m = Motion { vx: &vx, vy: &vy };
+    let m = Motion::rows(&vx, &vy);
     let mut ws = WorkspaceBuf::new(WorkspaceSizes::for_motion(w as u16, h as u16));
     let mut mc_out = vec![0u8; w * h];
     let mc = reconstruct_compensated(
@@ -362,7 +356,7 @@ fn static_light_swept_along_a_path_is_not_a_particle() {
     let hist = history(&mut words, &planes, w as u16, h as u16);
     let vx = vec![(0.7 * Q as f64) as i16; h];
     let vy = vec![0i16; h];
-    let m = Motion { vx: &vx, vy: &vy };
+    let m = Motion::rows(&vx, &vy);
     let mut ws = WorkspaceBuf::new(WorkspaceSizes::for_motion(w as u16, h as u16));
     let mut out = vec![0u8; w * h];
     let st = reconstruct_compensated(

@@ -95,6 +95,8 @@ fn control(
         from_pair,
         n_max,
         pitch: 1,
+        cols: 1,
+        tile: 64,
     };
     let mut payload = vec![0u8; MAX_CONTROL_PAYLOAD];
     let n = encode_control(&head, vx, vy, caps, &mut payload).unwrap();
@@ -148,7 +150,7 @@ fn direct(method: Method, cfg: &Config, planes: &[Vec<u8>], k: u32) -> Vec<u16> 
         Method::Mc => {
             let mut ws = WorkspaceBuf::new(spiv_core::WorkspaceSizes::for_motion(W, H));
             let v = mc_velocity();
-            let m = spiv_core::motion::Motion { vx: &v, vy: &v[..] };
+            let m = spiv_core::motion::Motion::rows(&v, &v[..]);
             let zero = vec![0i16; usize::from(H)];
             let m = spiv_core::motion::Motion { vy: &zero, ..m };
             spiv_core::reconstruct_compensated(
@@ -358,10 +360,7 @@ fn a_control_applies_from_its_pair_and_both_frames_of_a_pair_share_it() {
                 hist.push(&PlaneView::new(p, W, H).unwrap()).unwrap();
             }
             let mut ws = WorkspaceBuf::new(spiv_core::WorkspaceSizes::for_motion(W, H));
-            let m = spiv_core::motion::Motion {
-                vx: &zero,
-                vy: &zero,
-            };
+            let m = spiv_core::motion::Motion::rows(&zero, &zero);
             let mut out = vec![0u16; PX];
             spiv_core::reconstruct_compensated(
                 &hist,

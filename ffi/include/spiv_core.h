@@ -180,13 +180,19 @@ typedef struct SpivGuide {
   const uint16_t *caps;
   // Entries of `caps`.
   size_t n_caps;
-  // Predicted x velocity of each stored row, 1/4096 px per tick
+  // Predicted x velocity of each stored row and tile column
+  // (`height × cols`, row-major), 1/4096 px per tick
   // (motion-compensated frames; null: the bootstrap method).
   const int16_t *vx;
-  // Predicted y velocity of each stored row (down), 1/4096 px per tick.
+  // Predicted y velocity of each stored row and tile column (down),
+  // 1/4096 px per tick.
   const int16_t *vy;
-  // Entries of `vx` and `vy` (at least `height` when given).
+  // Entries of `vx` and `vy` (at least `height × cols` when given).
   size_t rows;
+  // Tile columns per row (0 or 1: one velocity per row).
+  uint16_t cols;
+  // Tile width, px, a positive multiple of 64 (ignored for one column).
+  uint16_t tile;
 } SpivGuide;
 
 // A one-line message for a status code (a static C string).

@@ -40,7 +40,7 @@ use core::ffi::{c_char, c_void};
 use core::mem::{align_of, size_of};
 
 use spiv_core::downlink::DownlinkBuffers;
-use spiv_core::motion::{Motion, Refine};
+use spiv_core::motion::{Motion, Refine, ROW_TILE};
 use spiv_core::region::Region;
 use spiv_core::sidecar::{
     make_frame, Config, FrameBuffers, Guide, Memory, Probe, RefineBuffers, Sidecar, SidecarError,
@@ -930,13 +930,19 @@ pub struct SpivGuide {
     pub caps: *const u16,
     /// Entries of `caps`.
     pub n_caps: usize,
-    /// Predicted x velocity of each stored row, 1/4096 px per tick
+    /// Predicted x velocity of each stored row and tile column
+    /// (`height × cols`, row-major), 1/4096 px per tick
     /// (motion-compensated frames; null: the bootstrap method).
     pub vx: *const i16,
-    /// Predicted y velocity of each stored row (down), 1/4096 px per tick.
+    /// Predicted y velocity of each stored row and tile column (down),
+    /// 1/4096 px per tick.
     pub vy: *const i16,
-    /// Entries of `vx` and `vy` (at least `height` when given).
+    /// Entries of `vx` and `vy` (at least `height × cols` when given).
     pub rows: usize,
+    /// Tile columns per row (0 or 1: one velocity per row).
+    pub cols: u16,
+    /// Tile width, px, a positive multiple of 64 (ignored for one column).
+    pub tile: u16,
 }
 
 fn make<G: Gray + Plain>(
@@ -1001,8 +1007,8 @@ pub unsafe extern "C" fn spiv_make_frame(
             return Err(SpivStatus::SpivErrNull);
         };
         let (st, base) = claim(sc, Mode::Manual)?;
-        let (caps, vx, vy, n_max) = match g {
-            None => (&[][..], None, None, 0),
+        let (caps, vx, vy, n_max, grid) = match g {
+            None => (&[][..], None, None, 0, (1, ROW_TILE)),
             // SAFETY: arrays of the guide's counts (the caller's promise).
             Some(g) => unsafe {
                 let c = core::slice::from_raw_parts(nonnull(g.caps, g.n_caps)?, g.n_caps);
@@ -1014,13 +1020,23 @@ pub unsafe extern "C" fn spiv_make_frame(
                         Some(core::slice::from_raw_parts(g.vy, g.rows)),
                     )
                 };
-                (c, vx, vy, g.n_max)
+                let grid = match g.cols {
+                    0 | 1 => (1, ROW_TILE),
+                    c => (c, g.tile),
+                };
+                (c, vx, vy, g.n_max, grid)
             },
+        };
+        let motion = match vx.zip(vy) {
+            Some((vx, vy)) => {
+                Some(Motion::grid(vx, vy, grid.0, grid.1).map_err(|_| SpivStatus::SpivErrConfig)?)
+            }
+            None => None,
         };
         let guide = Guide {
             n_max: (n_max > 0).then_some(n_max),
             caps,
-            motion: vx.zip(vy).map(|(vx, vy)| Motion { vx, vy }),
+            motion,
         };
         *frame = if st.layout.wide {
             make::<u16>(st, base, tick, &guide, info)?

@@ -290,11 +290,34 @@ fn motion_on_demand_compensates_and_short_rows_are_refused() {
         vx: vx.as_ptr(),
         vy: vy.as_ptr(),
         rows: vx.len(),
+        cols: 1,
+        tile: 0,
     };
     let (s, info) = make(&g);
     assert_eq!((s, info.method), (SpivStatus::SpivOk, SPIV_METHOD_MC));
     g.rows = usize::from(H) - 1;
     assert_eq!(make(&g).0, SpivStatus::SpivErrBuffer);
+    // A grid of two 64-px columns needs two velocities per row; a tile off
+    // the word grid is refused.
+    let (gx, gy) = (
+        vec![26i16; 2 * usize::from(H)],
+        vec![0i16; 2 * usize::from(H)],
+    );
+    let mut grid = SpivGuide {
+        vx: gx.as_ptr(),
+        vy: gy.as_ptr(),
+        rows: gx.len(),
+        cols: 2,
+        tile: 64,
+        ..g
+    };
+    let (s, info) = make(&grid);
+    assert_eq!((s, info.method), (SpivStatus::SpivOk, SPIV_METHOD_MC));
+    grid.rows = gx.len() - 1;
+    assert_eq!(make(&grid).0, SpivStatus::SpivErrBuffer);
+    grid.rows = gx.len();
+    grid.tile = 96;
+    assert_eq!(make(&grid).0, SpivStatus::SpivErrConfig);
     // Caps with a null pointer and a count are refused, not read.
     g.rows = 0;
     g.n_caps = 2;

@@ -32,9 +32,10 @@ fn native_loop_prints_the_committed_parity_line() {
 
 /// The control message the Cortex-M4 firmware's motion-compensated run
 /// hears (`cortex-m4/data/control.bin`): the strip scene's true velocity of
-/// every stored row (the prediction a perfect host would send), applying
-/// from pair 0. Rebuilt here from `scene.json`; `SPIV_BLESS=1` rewrites the
-/// committed file.
+/// every stored row in each of two 64-px tile columns, at the column's
+/// centre (the prediction a perfect host would send; a 2-D grid, so the
+/// firmware's cost is the grid's), applying from pair 0. Rebuilt here from
+/// `scene.json`; `SPIV_BLESS=1` rewrites the committed file.
 fn strip_control(dir: &std::path::Path) -> Vec<u8> {
     let text = std::fs::read_to_string(dir.join("data/scene.json")).expect("scene.json");
     let json: serde_json::Value = serde_json::from_str(&text).expect("scene.json is JSON");
@@ -46,15 +47,21 @@ fn strip_control(dir: &std::path::Path) -> Vec<u8> {
     let (w, h) = (params.width, params.height);
     let flow = params.flow();
     let q = |px_per_tick: f64| (px_per_tick * f64::from(spiv_core::motion::Q)).round() as i16;
+    let (tile, cols) = (64u16, w.div_ceil(64));
     let (mut vx, mut vy) = (Vec::new(), Vec::new());
     for r in 0..h {
         let upright = if flip { h - 1 - r } else { r };
-        let (u, v) = flow.displacement(f64::from(w) / 2.0, f64::from(upright) + 0.5, dt);
-        vx.push(q(u / dt));
-        vy.push(q(if flip { -v } else { v } / dt));
+        for c in 0..cols {
+            let x = (f64::from(c) + 0.5) * f64::from(tile);
+            let (u, v) = flow.displacement(x, f64::from(upright) + 0.5, dt);
+            vx.push(q(u / dt));
+            vy.push(q(if flip { -v } else { v } / dt));
+        }
     }
     spiv_firmware_sim::firmware::Control {
         motion: (vx, vy),
+        cols,
+        tile,
         ..Default::default()
     }
     .message(0, 0, w, h)

@@ -11,7 +11,7 @@ use spiv_core::sidecar::{Config, Sidecar};
 use spiv_core::wire::sender::Link;
 use spiv_core::Method;
 
-const W: u16 = 64;
+const W: u16 = 128;
 const H: u16 = 32;
 
 struct Sink;

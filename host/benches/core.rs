@@ -86,16 +86,16 @@ fn bench_frames(c: &mut Criterion) {
     let mut out = vec![0u8; PX];
     g.bench_function("motion-compensated n_max=128, refine on", |b| {
         b.iter(|| {
-            let m = Motion { vx: &vx, vy: &vy };
+            let m = Motion::rows(&vx, &vy);
             refine(&hist, K, &m, &Refine::default(), &mut rvx, &mut rvy).unwrap();
-            let m = Motion { vx: &rvx, vy: &rvy };
+            let m = Motion::rows(&rvx, &rvy);
             let mut ws = mws.workspace().unwrap();
             black_box(reconstruct_compensated(&hist, K, &p, &mut ws, (0, H), &m, &mut out).unwrap())
         })
     });
     g.bench_function("refine alone", |b| {
         b.iter(|| {
-            let m = Motion { vx: &vx, vy: &vy };
+            let m = Motion::rows(&vx, &vy);
             refine(&hist, K, &m, &Refine::default(), &mut rvx, &mut rvy).unwrap();
             black_box(rvx[0])
         })

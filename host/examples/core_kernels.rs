@@ -53,9 +53,9 @@ fn mc_once(hist: &History<'_>, k: u32, ws: &mut Workspace<'_>, out: &mut [u8]) -
         .collect();
     let vy = vec![0i16; usize::from(H)];
     let (mut rvx, mut rvy) = (vy.clone(), vy.clone());
-    let m = Motion { vx: &vx, vy: &vy };
+    let m = Motion::rows(&vx, &vy);
     refine(hist, k, &m, &Refine::default(), &mut rvx, &mut rvy).unwrap();
-    let m = Motion { vx: &rvx, vy: &rvy };
+    let m = Motion::rows(&rvx, &rvy);
     reconstruct_compensated(hist, k, &Params::default(), ws, (0, H), &m, out)
         .unwrap()
         .regions_out

@@ -18,6 +18,7 @@ use spiv_firmware_sim::scene::{Scene, SceneKind, SceneParams};
 use spiv_firmware_sim::sensor::{simulate, SensorParams};
 use spiv_host::dwell::adaptive_banded;
 use spiv_host::reconstruct::{upright, Planes};
+use spiv_host::reference::motion::Grid;
 use spiv_host::reference::{adaptive_frame, adaptive_rows, RefClass, SpikeVolume};
 
 struct CoreFrame<G> {
@@ -38,8 +39,17 @@ fn run_core<G: Gray>(
     run_core_with(packed, w, h, k, p, strip_rows, None)
 }
 
-/// Velocities per band row (x, y), 1/4096 px per tick.
-type Velocities<'a> = Option<(&'a [i16], &'a [i16])>;
+/// Velocities per band row and tile column (x, y), 1/4096 px per tick.
+type Velocities<'a> = Option<Grid<'a>>;
+
+/// The core's motion for a reference grid (tile columns of whole words).
+fn core_motion<'a>(g: &Grid<'a>) -> spiv_core::motion::Motion<'a> {
+    if g.cols <= 1 {
+        spiv_core::motion::Motion::rows(g.vx, g.vy)
+    } else {
+        spiv_core::motion::Motion::grid(g.vx, g.vy, g.cols as u16, g.tile as u16).unwrap()
+    }
+}
 
 fn run_core_with<G: Gray>(
     packed: &[u8],
@@ -91,9 +101,9 @@ fn run_core_with<G: Gray>(
     let mut mc = vec![0u8; px];
     let stats = match motion {
         None => reconstruct_adaptive(&hist, k, p, &mut ws, &mut out).unwrap(),
-        Some((vx, vy)) => {
+        Some(grid) => {
             let mut ws = ws.with_motion_counts(&mut mc).unwrap();
-            let m = spiv_core::motion::Motion { vx, vy };
+            let m = core_motion(&grid);
             let s = reconstruct_compensated(&hist, k, p, &mut ws, (0, h), &m, &mut out).unwrap();
             let n = if s.strips == 1 {
                 s.labels.regions as usize
@@ -434,16 +444,13 @@ fn refined_motion_matches_reference_and_moves_toward_the_truth() {
         hist.push(&PlaneView::new(plane, w, h).unwrap()).unwrap();
     }
     let (mut vx, mut vy) = (vec![0i16; usize::from(h)], vec![0i16; usize::from(h)]);
-    let m = Motion {
-        vx: &pred,
-        vy: &zero,
-    };
+    let m = Motion::rows(&pred, &zero);
     refine(&hist, kc, &m, &cfg, &mut vx, &mut vy).unwrap();
     let vol = SpikeVolume::from_packed(&packed, usize::from(w), usize::from(h), 0);
     let (rx, ry) = spiv_host::reference::motion::refine(
         &vol,
         kc,
-        (&pred, &zero),
+        Grid::rows(&pred, &zero),
         usize::from(cfg.band),
         cfg.window,
         (cfg.rel, cfg.abs, cfg.min_gain),
@@ -467,6 +474,84 @@ fn refined_motion_matches_reference_and_moves_toward_the_truth() {
         "refined {:.0} against predicted {:.0} (sum of |error|, 1/4096 px/tick)",
         err(&vx),
         err(&pred)
+    );
+}
+
+/// The refinement on a 2-D grid: each node (a band of one tile column) is
+/// refined on its own. A uniform flow predicted 15 % slow in the first of
+/// three 64-px columns, 15 % fast in the second and right in the third:
+/// the core picks the reference's velocity for every node, and the first
+/// two columns move most of the way to the truth while the third stays.
+#[test]
+fn refined_grid_matches_reference_and_corrects_each_column() {
+    use spiv_core::motion::{refine, Motion, Refine};
+    let (w, h, ticks, kc) = (192u16, 64u16, 100u32, 50u32);
+    let params = SceneParams {
+        width: w,
+        height: h,
+        pair_dt: 10,
+        shift: (6.0, 2.0),
+        ..SceneParams::new(SceneKind::Uniform)
+    };
+    let scene = Scene::new(params, 6, ticks);
+    let packed = simulate(&scene, SensorParams::default(), 6, 0, ticks);
+    let (tx, ty) = true_grid(&scene, w, h, 64, 1.0);
+    let scale = [0.85, 1.15, 1.0];
+    let off = |v: &[i16]| -> Vec<i16> {
+        v.iter()
+            .enumerate()
+            .map(|(i, &a)| (scale[i % 3] * f64::from(a)).round() as i16)
+            .collect()
+    };
+    let (px, py) = (off(&tx), off(&ty));
+    let cfg = Refine::default();
+    let mut words = vec![0u64; History::words_needed(w, h, 255).unwrap()];
+    let mut hist = History::new(&mut words, w, h, 0, h, 255).unwrap();
+    let pb = usize::from(w) * usize::from(h) / 8;
+    for plane in packed.chunks_exact(pb) {
+        hist.push(&PlaneView::new(plane, w, h).unwrap()).unwrap();
+    }
+    let (mut vx, mut vy) = (vec![0i16; px.len()], vec![0i16; px.len()]);
+    let m = Motion::grid(&px, &py, 3, 64).unwrap();
+    refine(&hist, kc, &m, &cfg, &mut vx, &mut vy).unwrap();
+    let vol = SpikeVolume::from_packed(&packed, usize::from(w), usize::from(h), 0);
+    let grid = Grid {
+        vx: &px,
+        vy: &py,
+        cols: 3,
+        tile: 64,
+    };
+    let (rx, ry) = spiv_host::reference::motion::refine(
+        &vol,
+        kc,
+        grid,
+        usize::from(cfg.band),
+        cfg.window,
+        (cfg.rel, cfg.abs, cfg.min_gain),
+    );
+    assert_eq!((&vx, &vy), (&rx, &ry));
+    // Mean |error| of column c, 1/4096 px per tick.
+    let err = |x: &[i16], y: &[i16], c: usize| -> f64 {
+        let e: Vec<f64> = (c..x.len())
+            .step_by(3)
+            .map(|i| f64::from(x[i] - tx[i]).hypot(f64::from(y[i] - ty[i])))
+            .collect();
+        e.iter().sum::<f64>() / e.len() as f64
+    };
+    let speed = f64::from(tx[0]).hypot(f64::from(ty[0]));
+    for c in 0..3 {
+        eprintln!(
+            "column {c}: mean |error| {:.0} -> {:.0} (speed {speed:.0}, 1/4096 px/tick)",
+            err(&px, &py, c),
+            err(&vx, &vy, c)
+        );
+    }
+    for c in 0..2 {
+        assert!(err(&vx, &vy, c) < 0.4 * err(&px, &py, c), "column {c}");
+    }
+    assert!(
+        err(&vx, &vy, 2) < 0.05 * speed,
+        "the right column stays right"
     );
 }
 
@@ -495,7 +580,8 @@ fn motion_compensated_frames_match_reference() {
     let vy: Vec<i16> = (0..h).map(|r| (r % 3) as i16 - 1).collect();
     let p = Params::default();
     for vx in [&truth, &off] {
-        let (regions, worst) = compare_with::<u8>(&packed, w, h, k, &p, Some((vx, &vy)));
+        let grid = Some(Grid::rows(vx, &vy));
+        let (regions, worst) = compare_with::<u8>(&packed, w, h, k, &p, grid);
         assert!(regions > 5, "{regions} regions");
         assert!(worst <= 1.0, "{worst}");
         let (_, worst) = compare_with::<u16>(
@@ -507,9 +593,68 @@ fn motion_compensated_frames_match_reference() {
                 full_scale: 1023,
                 ..p
             },
-            Some((vx, &vy)),
+            grid,
         );
         assert!(worst <= 1.0, "{worst}");
+    }
+}
+
+/// The true velocity grid of `scene` (upright y, stored rows bottom-up):
+/// per stored row, the velocity at the centre of each `tile`-px column,
+/// times `scale`, 1/4096 px per tick.
+fn true_grid(scene: &Scene, w: u16, h: u16, tile: u16, scale: f64) -> (Vec<i16>, Vec<i16>) {
+    let cols = usize::from(w).div_ceil(usize::from(tile));
+    let q = f64::from(spiv_core::motion::Q);
+    let (mut vx, mut vy) = (Vec::new(), Vec::new());
+    for r in 0..usize::from(h) {
+        let y = f64::from(h) - 1.0 - r as f64;
+        for c in 0..cols {
+            let x = ((c as f64 + 0.5) * f64::from(tile)).min(f64::from(w) - 1.0);
+            let t = scene.truth(&[(x, y)], 1.0)[0];
+            vx.push((t.2 * q * scale).round() as i16);
+            // Stored rows run up: a downward upright velocity is −y.
+            vy.push((-t.3 * q * scale).round() as i16);
+        }
+    }
+    (vx, vy)
+}
+
+/// A 2-D grid (a vortex, three 64-px columns of a 160-px row, the last
+/// one partial): the compensated frame holds to the reference pixel for
+/// pixel — classes, labels, n* identical, gray within 1 level — with the
+/// true grid and with one 30 % fast; and the grid is not the per-row
+/// motion (a pixel's column decides its velocity: the frames differ).
+#[test]
+fn grid_compensated_frames_match_reference() {
+    let (w, h, ticks, k) = (160u16, 96u16, 170u32, 85u32);
+    let params = SceneParams {
+        width: w,
+        height: h,
+        ..SceneParams::new(SceneKind::Vortex)
+    };
+    let scene = Scene::new(params, 5, ticks);
+    let packed = simulate(&scene, SensorParams::default(), 5, 0, ticks);
+    let p = Params::default();
+    for scale in [1.0, 1.3] {
+        let (vx, vy) = true_grid(&scene, w, h, 64, scale);
+        let grid = Grid {
+            vx: &vx,
+            vy: &vy,
+            cols: 3,
+            tile: 64,
+        };
+        assert!(
+            vx.chunks(3).any(|r| r[0] != r[2]),
+            "the vortex varies along x"
+        );
+        let (regions, worst) = compare_with::<u8>(&packed, w, h, k, &p, Some(grid));
+        assert!(regions > 5, "{regions} regions");
+        assert!(worst <= 1.0, "{worst}");
+        let first: Vec<i16> = vx.chunks(3).map(|r| r[0]).collect();
+        let first_y: Vec<i16> = vy.chunks(3).map(|r| r[0]).collect();
+        let a = run_core_with::<u8>(&packed, w, h, k, &p, h, Some(grid));
+        let b = run_core_with::<u8>(&packed, w, h, k, &p, h, Some(Grid::rows(&first, &first_y)));
+        assert_ne!(a.out, b.out, "a grid compensates as its columns say");
     }
 }
 
@@ -524,11 +669,11 @@ fn background_renders_the_same_with_and_without_motion() {
     let p = Params::default();
     let plain = run_core::<u8>(&packed, w, h, k, &p, h);
     let zero = vec![0i16; usize::from(h)];
-    let still = run_core_with::<u8>(&packed, w, h, k, &p, h, Some((&zero, &zero)));
+    let still = run_core_with::<u8>(&packed, w, h, k, &p, h, Some(Grid::rows(&zero, &zero)));
     assert_eq!(plain.out, still.out);
     assert_eq!(plain.class, still.class);
     let fast = vec![300i16; usize::from(h)];
-    let moved = run_core_with::<u8>(&packed, w, h, k, &p, h, Some((&fast, &zero)));
+    let moved = run_core_with::<u8>(&packed, w, h, k, &p, h, Some(Grid::rows(&fast, &zero)));
     let mut bg = 0;
     for i in 0..plain.out.len() {
         let (a, _) = decode(plain.class[i]);

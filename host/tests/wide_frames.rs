@@ -34,7 +34,7 @@ fn a_wide_compensated_frame_loses_no_particle_pixels_in_the_shipped_strips() {
         })
         .collect();
     let vy = vec![0i16; usize::from(h)];
-    let m = Motion { vx: &vx, vy: &vy };
+    let m = Motion::rows(&vx, &vy);
     let p = Params::default();
     let mut out = vec![0u8; usize::from(w) * usize::from(h)];
     let mut frame = |sizes: WorkspaceSizes| {

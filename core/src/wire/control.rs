@@ -1,39 +1,48 @@
 //! The downlink's one payload: what the host tells the sidecar
-//! ([`super::Kind::Control`]) — the predicted motion per stored row on a
-//! grid of rows, the adaptive window caps per band, and a lower `n_max`.
+//! ([`super::Kind::Control`]) — the predicted motion on a grid of rows and
+//! tile columns, the adaptive window caps per band, and a lower `n_max`.
 //!
 //! ```text
 //! payload = from_pair u32 | n_max u16 | pitch u16 | nodes u16 | caps u16 |
-//!           nodes × (vx i16, vy i16) | caps × cap u16
+//!           cols u16 | tile u16 |
+//!           nodes × cols × (vx i16, vy i16) | caps × cap u16
 //! ```
+//!
+//! (Wire version 3; version 2 had no `cols` and `tile`: one velocity per
+//! node row.)
 //!
 //! - `from_pair`: the first pair it may apply to (the sidecar applies it at
 //!   the start of the first pair `≥ from_pair` it has not begun).
 //! - `n_max`: the adaptive / motion-compensated window limit, ticks; 0
 //!   keeps the sidecar's own (it can only lower it: its history is sized
 //!   for its own).
-//! - `pitch`: stored rows between velocity nodes (≥ 1 when `nodes > 0`).
-//!   Node `i` is the velocity of stored row `i·pitch`, x right and y down in
-//!   stored rows, in 1/4096 px per tick ([`crate::motion::Q`]). Rows between
-//!   nodes are interpolated linearly ([`ControlView::rows_into`]); rows past
-//!   the last node take the last node. `nodes = 0`: no motion (motion-
-//!   compensated frames fall back to the paper's adaptive ones).
+//! - `pitch`: stored rows between node rows (≥ 1 when `nodes > 0`). Node
+//!   row `i` holds the velocities of stored row `i·pitch`, one per tile
+//!   column (`cols` of them, each `tile` px wide, a multiple of 64; the
+//!   last column also covers the rest of the row: [`crate::motion::Motion`]),
+//!   x right and y down in stored rows, in 1/4096 px per tick
+//!   ([`crate::motion::Q`]). Rows between node rows are interpolated
+//!   linearly per column ([`ControlView::rows_into`]); rows past the last
+//!   take the last. `nodes = 0`: no motion (motion-compensated frames fall
+//!   back to the paper's adaptive ones). A per-row motion is `cols = 1`.
 //! - `caps`: window limits, ticks, per band of
 //!   [`crate::sidecar::CAP_BAND`] upright rows, top band first (0 entries:
 //!   none).
 //!
-//! At most [`MAX_NODES`] nodes and [`MAX_CAPS`] caps, so a payload is at
-//! most [`MAX_CONTROL_PAYLOAD`] bytes and a device's downlink buffer
+//! At most [`MAX_NODES`] velocities (`nodes × cols`), [`MAX_CAPS`] caps
+//! and [`crate::motion::MAX_COLS`] columns, so a payload is at most
+//! [`MAX_CONTROL_PAYLOAD`] bytes and a device's downlink buffer
 //! [`MAX_CONTROL_ENCODED`] bytes.
 
 use super::{Encoding, Header, Kind, WireError, CRC_LEN, HEADER_LEN};
 
-/// Most velocity nodes in a control (8192 rows at a pitch of 4).
+/// Most velocities in a control, node rows × columns (8192 rows at a
+/// pitch of 4 per row; a 1024-row sensor in 4 columns at a pitch of 2).
 pub const MAX_NODES: usize = 2048;
 /// Most cap entries (8192 rows in bands of 32).
 pub const MAX_CAPS: usize = 256;
 /// Bytes before the nodes.
-pub const CONTROL_HEAD: usize = 12;
+pub const CONTROL_HEAD: usize = 16;
 /// Largest control payload, bytes.
 pub const MAX_CONTROL_PAYLOAD: usize = CONTROL_HEAD + 4 * MAX_NODES + 2 * MAX_CAPS;
 /// Largest control message on the wire (COBS and delimiter included): the
@@ -49,8 +58,12 @@ pub struct ControlHead {
     pub from_pair: u32,
     /// Window limit, ticks; 0: the sidecar's own.
     pub n_max: u16,
-    /// Stored rows between velocity nodes.
+    /// Stored rows between node rows.
     pub pitch: u16,
+    /// Tile columns per node row (≥ 1 when there are nodes).
+    pub cols: u16,
+    /// Tile width, px (a positive multiple of 64 when there are nodes).
+    pub tile: u16,
 }
 
 /// A checked control payload, read in place.
@@ -71,7 +84,9 @@ fn u16_at(b: &[u8], i: usize) -> u16 {
 
 impl<'a> ControlView<'a> {
     /// Parses and checks a payload: lengths agree, at most [`MAX_NODES`]
-    /// nodes and [`MAX_CAPS`] caps, a pitch ≥ 1 when there are nodes.
+    /// velocities and [`MAX_CAPS`] caps; when there are nodes, a pitch
+    /// ≥ 1, 1..=[`crate::motion::MAX_COLS`] columns and a tile that is a
+    /// positive multiple of 64 px.
     pub fn parse(b: &'a [u8]) -> Result<Self, WireError> {
         if b.len() < CONTROL_HEAD {
             return Err(WireError::Payload);
@@ -80,26 +95,30 @@ impl<'a> ControlView<'a> {
             from_pair: u32::from_le_bytes([b[0], b[1], b[2], b[3]]),
             n_max: u16_at(b, 4),
             pitch: u16_at(b, 6),
+            cols: u16_at(b, 12),
+            tile: u16_at(b, 14),
         };
         let nodes = usize::from(u16_at(b, 8));
         let caps = usize::from(u16_at(b, 10));
-        if nodes > MAX_NODES
+        let velocities = nodes * usize::from(head.cols);
+        if velocities > MAX_NODES
             || caps > MAX_CAPS
-            || (nodes > 0 && head.pitch == 0)
-            || b.len() != CONTROL_HEAD + 4 * nodes + 2 * caps
+            || (nodes > 0 && !grid_ok(&head))
+            || b.len() != CONTROL_HEAD + 4 * velocities + 2 * caps
         {
             return Err(WireError::Payload);
         }
-        let (nodes, caps) = b[CONTROL_HEAD..].split_at(4 * nodes);
+        let (nodes, caps) = b[CONTROL_HEAD..].split_at(4 * velocities);
         Ok(ControlView { head, nodes, caps })
     }
 
-    /// Velocity nodes.
+    /// Node rows.
     pub fn nodes(&self) -> usize {
-        self.nodes.len() / 4
+        self.nodes.len() / 4 / usize::from(self.head.cols.max(1))
     }
 
-    /// Node `i`: `(vx, vy)`, 1/4096 px per tick ((0, 0) past the end).
+    /// Velocity `i` (node row `i / cols`, column `i % cols`): `(vx, vy)`,
+    /// 1/4096 px per tick ((0, 0) past the end).
     pub fn node(&self, i: usize) -> (i16, i16) {
         (
             u16_at(self.nodes, 4 * i) as i16,
@@ -117,37 +136,49 @@ impl<'a> ControlView<'a> {
         u16_at(self.caps, 2 * i)
     }
 
-    /// The velocity of every stored row into `vx`, `vy` (as many rows as
-    /// the shorter holds): linear between nodes, rounded half up, the last
-    /// node's beyond it. Nothing is written when there are no nodes.
+    /// The velocity of every stored row and column into `vx`, `vy` (laid
+    /// out `rows × cols`, as many rows as the shorter holds): per column
+    /// linear between node rows, rounded half up, the last node row's
+    /// beyond it. Nothing is written when there are no nodes.
     pub fn rows_into(&self, vx: &mut [i16], vy: &mut [i16]) {
         let n = self.nodes();
         if n == 0 {
             return;
         }
+        let cols = usize::from(self.head.cols.max(1));
         let pitch = i32::from(self.head.pitch.max(1));
         let lerp = |a: i16, b: i16, f: i32| -> i16 {
             let d = (i32::from(b) - i32::from(a)) * f;
             let v = i32::from(a) + (2 * d + pitch).div_euclid(2 * pitch);
             v.clamp(i32::from(i16::MIN), i32::from(i16::MAX)) as i16
         };
-        for (r, (x, y)) in vx.iter_mut().zip(vy.iter_mut()).enumerate() {
+        for (e, (x, y)) in vx.iter_mut().zip(vy.iter_mut()).enumerate() {
+            let (r, c) = (e / cols, e % cols);
             let i = r / pitch as usize;
             let f = (r % pitch as usize) as i32;
-            let (ax, ay) = self.node(i.min(n - 1));
+            let (ax, ay) = self.node(i.min(n - 1) * cols + c);
             if i + 1 >= n {
                 (*x, *y) = (ax, ay);
             } else {
-                let (bx, by) = self.node(i + 1);
+                let (bx, by) = self.node((i + 1) * cols + c);
                 (*x, *y) = (lerp(ax, bx, f), lerp(ay, by, f));
             }
         }
     }
 }
 
-/// Writes a control payload into `out` from velocity nodes `vx`, `vy` (as
-/// many as the shorter; at most [`MAX_NODES`]) and `caps` (at most
-/// [`MAX_CAPS`]); returns its length.
+/// Whether a head with nodes describes a grid the sidecar can hold.
+fn grid_ok(h: &ControlHead) -> bool {
+    h.pitch > 0
+        && (1..=crate::motion::MAX_COLS).contains(&h.cols)
+        && h.tile > 0
+        && h.tile.is_multiple_of(64)
+}
+
+/// Writes a control payload into `out` from velocities `vx`, `vy` (node
+/// rows × `head.cols`, as many as the shorter, a whole number of rows; at
+/// most [`MAX_NODES`]) and `caps` (at most [`MAX_CAPS`]); returns its
+/// length.
 pub fn encode_control(
     head: &ControlHead,
     vx: &[i16],
@@ -155,18 +186,25 @@ pub fn encode_control(
     caps: &[u16],
     out: &mut [u8],
 ) -> Result<usize, WireError> {
-    let nodes = vx.len().min(vy.len());
-    if nodes > MAX_NODES || caps.len() > MAX_CAPS || (nodes > 0 && head.pitch == 0) {
+    let velocities = vx.len().min(vy.len());
+    let cols = usize::from(head.cols.max(1));
+    if velocities > MAX_NODES
+        || caps.len() > MAX_CAPS
+        || (velocities > 0 && (!grid_ok(head) || !velocities.is_multiple_of(cols)))
+    {
         return Err(WireError::Payload);
     }
-    let len = CONTROL_HEAD + 4 * nodes + 2 * caps.len();
+    let nodes = velocities / cols;
+    let len = CONTROL_HEAD + 4 * velocities + 2 * caps.len();
     let out = out.get_mut(..len).ok_or(WireError::TooLarge)?;
     out[0..4].copy_from_slice(&head.from_pair.to_le_bytes());
     out[4..6].copy_from_slice(&head.n_max.to_le_bytes());
     out[6..8].copy_from_slice(&head.pitch.to_le_bytes());
     out[8..10].copy_from_slice(&(nodes as u16).to_le_bytes());
     out[10..12].copy_from_slice(&(caps.len() as u16).to_le_bytes());
-    let (node_bytes, cap_bytes) = out[CONTROL_HEAD..].split_at_mut(4 * nodes);
+    out[12..14].copy_from_slice(&head.cols.to_le_bytes());
+    out[14..16].copy_from_slice(&head.tile.to_le_bytes());
+    let (node_bytes, cap_bytes) = out[CONTROL_HEAD..].split_at_mut(4 * velocities);
     for ((d, x), y) in node_bytes.chunks_exact_mut(4).zip(vx).zip(vy) {
         d[0..2].copy_from_slice(&x.to_le_bytes());
         d[2..4].copy_from_slice(&y.to_le_bytes());
@@ -204,9 +242,13 @@ pub struct Control {
     /// first, the camera's stored rows being bottom-up); empty: `n_max`
     /// everywhere.
     pub caps: std::vec::Vec<u16>,
-    /// `Mc` frames: x and y velocity of each stored row, 1/4096 px per tick
-    /// (empty: none).
+    /// `Mc` frames: x and y velocity of each stored row and tile column
+    /// (`rows × cols`, row-major), 1/4096 px per tick (empty: none).
     pub motion: (std::vec::Vec<i16>, std::vec::Vec<i16>),
+    /// Tile columns of `motion` (0 or 1: one velocity per row).
+    pub cols: u16,
+    /// Tile width, px, a multiple of 64 (ignored for one column).
+    pub tile: u16,
     /// Window limit, ticks; 0: the sidecar's own.
     pub n_max: u16,
 }
@@ -219,8 +261,9 @@ impl Control {
     }
 
     /// The framed control message `seq` for a `width × height` sensor,
-    /// applying from pair `from_pair`. Rows beyond [`MAX_NODES`] are sent
-    /// as every `⌈rows / MAX_NODES⌉`-th row (the sidecar interpolates).
+    /// applying from pair `from_pair`. Velocities beyond [`MAX_NODES`] are
+    /// sent as every `⌈rows·cols / MAX_NODES⌉`-th row (the sidecar
+    /// interpolates).
     pub fn message(
         &self,
         from_pair: u32,
@@ -229,14 +272,28 @@ impl Control {
         height: u16,
     ) -> Result<std::vec::Vec<u8>, WireError> {
         let (vx, vy) = &self.motion;
-        let rows = vx.len().min(vy.len());
-        let pitch = rows.div_ceil(MAX_NODES).max(1);
-        let nx: std::vec::Vec<i16> = vx.iter().take(rows).step_by(pitch).copied().collect();
-        let ny: std::vec::Vec<i16> = vy.iter().take(rows).step_by(pitch).copied().collect();
+        let cols = usize::from(self.cols.max(1));
+        let rows = vx.len().min(vy.len()) / cols;
+        let pitch = (rows * cols).div_ceil(MAX_NODES).max(1);
+        let every = |v: &[i16]| -> std::vec::Vec<i16> {
+            v.chunks_exact(cols)
+                .take(rows)
+                .step_by(pitch)
+                .flatten()
+                .copied()
+                .collect()
+        };
+        let (nx, ny) = (every(vx), every(vy));
         let head = ControlHead {
             from_pair,
             n_max: self.n_max,
             pitch: u16::try_from(pitch).map_err(|_| WireError::Payload)?,
+            cols: cols as u16,
+            tile: if cols == 1 {
+                crate::motion::ROW_TILE
+            } else {
+                self.tile
+            },
         };
         let mut payload = std::vec![0u8; MAX_CONTROL_PAYLOAD];
         let n = encode_control(&head, &nx, &ny, &self.caps, &mut payload)?;
@@ -254,8 +311,8 @@ mod tests {
 
     #[test]
     fn sizes_are_the_documented_ones() {
-        assert_eq!(MAX_CONTROL_PAYLOAD, 8716);
-        assert_eq!(MAX_CONTROL_ENCODED, 8786);
+        assert_eq!(MAX_CONTROL_PAYLOAD, 8720);
+        assert_eq!(MAX_CONTROL_ENCODED, 8790);
     }
 
     #[test]
@@ -264,6 +321,8 @@ mod tests {
             from_pair: 7,
             n_max: 96,
             pitch: 4,
+            cols: 1,
+            tile: 64,
         };
         let (vx, vy) = ([0i16, 40, -40], [10i16, 10, 11]);
         let mut buf = [0u8; 64];
@@ -286,6 +345,8 @@ mod tests {
             from_pair: 0,
             n_max: 0,
             pitch: 1,
+            cols: 1,
+            tile: 64,
         };
         let n = encode_control(&head, &[1, 2], &[3, 4], &[], &mut buf).unwrap();
         assert!(ControlView::parse(&buf[..n - 1]).is_err());
@@ -301,5 +362,57 @@ mod tests {
             encode_control(&zero, &[1], &[1], &[], &mut buf),
             Err(WireError::Payload)
         );
+        // Columns and tiles: none, too many, a tile off the word grid, and
+        // velocities that are not whole node rows.
+        for bad in [
+            ControlHead { cols: 0, ..head },
+            ControlHead {
+                cols: crate::motion::MAX_COLS + 1,
+                ..head
+            },
+            ControlHead { tile: 0, ..head },
+            ControlHead { tile: 96, ..head },
+        ] {
+            assert_eq!(
+                encode_control(&bad, &[1], &[1], &[], &mut buf),
+                Err(WireError::Payload),
+                "{bad:?}"
+            );
+            let mut b = buf;
+            b[12..14].copy_from_slice(&bad.cols.to_le_bytes());
+            b[14..16].copy_from_slice(&bad.tile.to_le_bytes());
+            assert!(ControlView::parse(&b[..n]).is_err(), "{bad:?}");
+        }
+        let two = ControlHead { cols: 2, ..head };
+        assert_eq!(
+            encode_control(&two, &[1, 2, 3], &[1, 2, 3], &[], &mut buf),
+            Err(WireError::Payload)
+        );
+    }
+
+    /// A grid of three node rows in two columns: each column is
+    /// interpolated on its own, and the payload states its columns and
+    /// tile.
+    #[test]
+    fn grid_round_trip() {
+        let head = ControlHead {
+            from_pair: 1,
+            n_max: 0,
+            pitch: 2,
+            cols: 2,
+            tile: 128,
+        };
+        let vx = [0i16, 100, 20, 100, 40, -100];
+        let vy = [1i16, 2, 3, 4, 5, 6];
+        let mut buf = [0u8; 64];
+        let n = encode_control(&head, &vx, &vy, &[], &mut buf).unwrap();
+        assert_eq!(n, CONTROL_HEAD + 4 * 6);
+        let v = ControlView::parse(&buf[..n]).unwrap();
+        assert_eq!((v.head, v.nodes()), (head, 3));
+        let (mut x, mut y) = ([0i16; 12], [0i16; 12]);
+        v.rows_into(&mut x, &mut y);
+        // Rows 0..6 × columns 0, 1.
+        assert_eq!(x, [0, 100, 10, 100, 20, 100, 30, 0, 40, -100, 40, -100]);
+        assert_eq!(y, [1, 2, 2, 3, 3, 4, 4, 5, 5, 6, 5, 6]);
     }
 }

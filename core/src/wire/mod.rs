@@ -48,9 +48,10 @@ pub use stream::{encode_message, Decoder, DecoderState, DecoderStats, Message};
 
 /// `"SP"`.
 pub const MAGIC: u16 = 0x5053;
-/// The version this code writes and reads (2 since control velocities are
-/// in 1/4096 px per tick; 1 had them in 1/256).
-pub const VERSION: u8 = 2;
+/// The version this code writes and reads (3 since controls carry a grid
+/// of tile columns; 2 had one velocity per row, 1 had them in 1/256 px
+/// per tick).
+pub const VERSION: u8 = 3;
 /// Header bytes.
 pub const HEADER_LEN: usize = 30;
 /// CRC bytes.

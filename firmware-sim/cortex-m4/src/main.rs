@@ -12,7 +12,8 @@
 //! (`spiv-firmware-sim --input data/strip.dat --pairs 1 --checksum` on the
 //! host). Then it runs the loop again with motion-compensated frames
 //! (`Method::Mc`, refine on), hearing the committed control message
-//! (`data/control.bin`: the strip's true motion per row, from pair 0)
+//! (`data/control.bin`: the strip's true motion per row in two 64-px
+//! tile columns, from pair 0)
 //! before the first plane, and prints that run's line after `mc `
 //! (`spiv-firmware-sim --method mc --control data/control.bin …`,
 //! `expected-mc.txt`). Both runs share one set of statics, sized for the
@@ -57,7 +58,8 @@ const PX: usize = W as usize * H as usize;
 const PLANE_BYTES: usize = PX / 8;
 static STRIP: &[u8] = include_bytes!("../data/strip.dat");
 /// The host's control for the motion-compensated run: the strip's true
-/// velocity of every stored row, applying from pair 0
+/// velocity of every stored row in each 64-px tile column, applying from
+/// pair 0
 /// (`firmware-sim/tests/m4_parity.rs` rebuilds it from `data/scene.json`).
 static CONTROL: &[u8] = include_bytes!("../data/control.bin");
 
@@ -72,7 +74,9 @@ const HIST_WORDS: usize = match History::words_needed(W, H, DEPTH) {
 const SIZES: WorkspaceSizes = WorkspaceSizes::for_strip(W, H);
 /// Motion-compensated frames find more regions (1 per 16 px).
 const MC_SIZES: WorkspaceSizes = WorkspaceSizes::for_motion(W, H);
-const ROWS: usize = H as usize;
+/// Velocity entries of a motion: every stored row in every 64-px tile
+/// column, the finest grid a control may carry.
+const GRID: usize = H as usize * W.div_ceil(64) as usize;
 const CAP_BANDS: usize = H.div_ceil(CAP_BAND) as usize;
 
 const EMPTY_REGION: Region = Region {
@@ -109,10 +113,10 @@ struct Ram {
     mc: [u8; PX],
     /// The downlink: receive buffer, applied and waiting rows and caps.
     control_rx: [u8; MAX_CONTROL_ENCODED],
-    rows: [[i16; ROWS]; 4],
+    rows: [[i16; GRID]; 4],
     caps: [[u16; CAP_BANDS]; 2],
     /// Refined velocities.
-    refined: [[i16; ROWS]; 2],
+    refined: [[i16; GRID]; 2],
     /// The tile codecs' scratch (the largest: `SparseContext`).
     codec_scratch: [u16; CODEC_SCRATCH],
 }
@@ -291,9 +295,9 @@ fn run() -> Result<(), Failure> {
         wire: [0; MAX_ENCODED],
         mc: [0; PX],
         control_rx: [0; MAX_CONTROL_ENCODED],
-        rows: [[0; ROWS]; 4],
+        rows: [[0; GRID]; 4],
         caps: [[0; CAP_BANDS]; 2],
-        refined: [[0; ROWS]; 2],
+        refined: [[0; GRID]; 2],
         codec_scratch: [0; CODEC_SCRATCH],
     })
     .ok_or(Failure::Memory("RAM taken twice"))?;

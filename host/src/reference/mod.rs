@@ -187,23 +187,23 @@ pub fn adaptive_rows(
 
 /// [`adaptive_rows`] motion-compensated (`spiv_core::reconstruct_compensated`):
 /// particles are segmented and integrated on counts compensated for the
-/// velocity of each band row (`vx`, `vy`, 1/4096 px per tick; see
-/// [`motion::compensated_count`], over the whole band), saturation and
-/// background on plain counts.
+/// velocity of each pixel's band row and tile column (`grid`, 1/4096 px
+/// per tick; see [`motion::compensated_count`], over the whole band),
+/// saturation and background on plain counts.
 pub fn adaptive_rows_compensated(
     vol: &SpikeVolume,
     k: u32,
     p: &Params,
     fs: f64,
     (s0, s1): (usize, usize),
-    (vx, vy): (&[i16], &[i16]),
+    grid: motion::Grid<'_>,
 ) -> RefFrame {
     let (strip, s0) = vol.rows_of(s0, s1);
-    strip_frame(&strip, s0, k, p, fs, Some((vol, vx, vy)))
+    strip_frame(&strip, s0, k, p, fs, Some((vol, grid)))
 }
 
-/// The band and its rows' velocities, for a motion-compensated strip.
-type Compensation<'a> = Option<(&'a SpikeVolume, &'a [i16], &'a [i16])>;
+/// The band and its velocity grid, for a motion-compensated strip.
+type Compensation<'a> = Option<(&'a SpikeVolume, motion::Grid<'a>)>;
 
 /// One strip's inputs: the strip, where it sits in the band, the frame's
 /// tick and parameters, and the compensation if any.
@@ -219,18 +219,17 @@ struct Strip<'a> {
 type Decided = Vec<(u32, u16, u32)>;
 
 impl Strip<'_> {
-    /// The velocity of strip row `r` (1/4096 px per tick), when compensated.
-    fn velocity(&self, r: usize) -> Option<(&SpikeVolume, (i16, i16))> {
-        self.comp.map(|(band, vx, vy)| {
-            let v = |a: &[i16]| a.get(self.row0 + r).copied().unwrap_or(0);
-            (band, (v(vx), v(vy)))
-        })
+    /// The velocity at strip row `r`, column `c` (1/4096 px per tick),
+    /// when compensated.
+    fn velocity(&self, r: usize, c: usize) -> Option<(&SpikeVolume, (i16, i16))> {
+        self.comp
+            .map(|(band, grid)| (band, grid.at(self.row0 + r, c)))
     }
 
     /// The count a particle is judged and integrated by: plain, or
-    /// compensated for its row's motion over the whole band.
+    /// compensated for its pixel's motion over the whole band.
     fn pcount(&self, n: u16, r: usize, c: usize) -> u32 {
-        match self.velocity(r) {
+        match self.velocity(r, c) {
             None => self.vol.count(self.k, n, r, c),
             Some((band, v)) => motion::compensated_count(band, self.k, n, (self.row0 + r, c), v),
         }
@@ -320,14 +319,14 @@ impl Strip<'_> {
                 // plain count (static light gives the same count either
                 // way); a compensated count's noise is that of the pixels
                 // it sums.
-                let (floor, segs) = self.velocity(r).map_or((false, 1), |(band, v)| {
-                    (
-                        motion::travel(band, self.k, n, v)
-                            >= i64::from(spiv_core::motion::MIN_TRAVEL),
-                        motion::positions(band, self.k, n, v),
-                    )
-                });
                 for c in 0..w {
+                    let (floor, segs) = self.velocity(r, c).map_or((false, 1), |(band, v)| {
+                        (
+                            motion::travel(band, self.k, n, v)
+                                >= i64::from(spiv_core::motion::MIN_TRAVEL),
+                            motion::positions(band, self.k, n, v),
+                        )
+                    });
                     let i = r * w + c;
                     if class[i].is_some() {
                         continue;
