@@ -15,7 +15,7 @@ use spiv_core::wire::control::Control;
 use spiv_core::Params;
 use spiv_formats::vectors::Vector;
 
-use crate::predict::{predicts, row_velocities};
+use crate::predict::{motion_grid, predicts, MotionModel, Prediction};
 use crate::receive::ReceivedFrame;
 
 /// Errors of the downlink.
@@ -33,26 +33,32 @@ pub struct DownlinkReport {
     pub sent: u64,
     /// Of those, carrying a motion.
     pub with_motion: u64,
+    /// Of those, a motion on a grid of more than one tile column
+    /// ([`crate::predict::motion_grid`]).
+    pub with_grid: u64,
     /// Controls the link refused to take (the sidecar gone, no OUT
     /// endpoint); not retried.
     pub failed: u64,
 }
 
 /// The control for the pair after `pair`, from its PIV `field` (upright,
-/// px per pair): row velocities when at least half the field was measured,
-/// caps per band when `dwell_budget` (px of blur) is given.
+/// px per pair): row or tile-column velocities
+/// ([`crate::predict::motion_grid`]) when at least half the field was measured,
+/// caps per band when `dwell_budget` (px of blur) is given; `model`
+/// bounds the motion's model.
 pub fn control_for(
     pair: &[ReceivedFrame; 2],
     field: &[Vector],
     dwell_budget: Option<f64>,
     core: &Params,
+    model: MotionModel,
 ) -> Control {
     let a = &pair[0];
     let dt = f64::from(a.end.dt.max(1));
     let motion = if !field.is_empty() && predicts(field) {
-        row_velocities(field, a.height, true, dt)
+        motion_grid(field, (a.width, a.height), true, dt, model)
     } else {
-        (Vec::new(), Vec::new())
+        Prediction::rows((Vec::new(), Vec::new()))
     };
     let caps = match dwell_budget {
         Some(b) => crate::dwell::band_caps(field, usize::from(a.height), dt, b, core),
@@ -60,8 +66,7 @@ pub fn control_for(
     };
     Control {
         caps,
-        motion,
-        n_max: 0,
+        ..motion.control()
     }
 }
 
@@ -109,6 +114,9 @@ impl Downlink {
                 self.report.sent += 1;
                 if !control.motion.0.is_empty() {
                     self.report.with_motion += 1;
+                    if control.cols > 1 {
+                        self.report.with_grid += 1;
+                    }
                 }
             }
             Err(_) => self.report.failed += 1,

@@ -158,7 +158,7 @@ pub fn mc_transfer(
     dt: f64,
     mc_piv: &Settings,
 ) -> Result<Option<(Control, Transfer)>, LinkError> {
-    use crate::predict::{predicts, row_velocities, ROUNDS};
+    use crate::predict::{motion_grid, predicts, MotionModel, ROUNDS};
     if !predicts(field) {
         return Ok(None);
     }
@@ -166,10 +166,8 @@ pub fn mc_transfer(
         method: Method::Mc,
         ..cfg
     };
-    let mut control = Control {
-        motion: row_velocities(field, height, true, dt),
-        ..Control::default()
-    };
+    let model = MotionModel::Auto;
+    let mut control = motion_grid(field, (width, height), true, dt, model).control();
     let mut t = transfer_with(planes, width, height, cfg, control.clone())?;
     for _ in 1..ROUNDS {
         let Some([a, b]) = t.pairs.first() else {
@@ -179,10 +177,7 @@ pub fn mc_transfer(
         if !predicts(&f) {
             break;
         }
-        control = Control {
-            motion: row_velocities(&f, height, true, dt),
-            ..Control::default()
-        };
+        control = motion_grid(&f, (width, height), true, dt, model).control();
         t = transfer_with(planes, width, height, cfg, control.clone())?;
     }
     Ok(Some((control, t)))

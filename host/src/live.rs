@@ -50,6 +50,9 @@ pub struct LiveOptions {
     /// Folder for every frame (PNG, upright) and the vectors
     /// (`vectors_NNNNN.csv`).
     pub out: Option<PathBuf>,
+    /// The motion model of the controls sent
+    /// ([`crate::predict::motion_grid`]).
+    pub motion_model: crate::predict::MotionModel,
 }
 
 /// What the loop received, measured and sent.
@@ -89,7 +92,8 @@ pub fn open_downlink(source: &dyn Source, path: Option<&Path>) -> Result<Downlin
 
 /// Receives from `source` until it ends; with `opts.piv_windows`, runs PIV
 /// on every pair and, with a `downlink`, sends the sidecar each pair's
-/// motion (window caps and the per-row prediction, [`control_for`]).
+/// motion (window caps and the prediction per row or tile column,
+/// [`control_for`]).
 /// `progress` sees the counts as they grow.
 pub fn run_live(
     source: &mut dyn Source,
@@ -131,7 +135,8 @@ pub fn run_live(
                         let v = field.vectors();
                         vectors += v.len();
                         if let Some(d) = downlink.as_mut() {
-                            d.send(&pair, &control_for(&pair, &v, None, &core))?;
+                            let c = control_for(&pair, &v, None, &core, opts.motion_model);
+                            d.send(&pair, &c)?;
                         }
                         if let Some(d) = &opts.out {
                             write_vectors(&d.join(format!("vectors_{:05}.csv", fa.end.pair)), &v)?;

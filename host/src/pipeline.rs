@@ -384,10 +384,9 @@ fn compensated(
         if !crate::predict::predicts(&field) {
             break;
         }
-        let control = spiv_core::wire::control::Control {
-            motion: crate::predict::row_velocities(&field, h, true, dt_ticks),
-            ..Default::default()
-        };
+        let control =
+            crate::predict::motion_grid(&field, (w, h), true, dt_ticks, Default::default())
+                .control();
         let pair_cfg = Config {
             method: Method::Mc,
             ..cfg

@@ -961,7 +961,8 @@ fn flow_dict(py: Python<'_>, out: spiv_host::flow::FlowOutcome) -> PyResult<Boun
 /// Returns a dict of counts: `bytes`, `messages`, `corrupted`,
 /// `lost_messages`, `late_messages`, `frames`, `lost_frames`, `pairs`,
 /// `broken_pairs`, `truncated_tail`, `vectors`, and with `control` also
-/// `controls_sent`, `controls_with_motion`, `controls_failed`.
+/// `controls_sent`, `controls_with_motion`, `controls_with_grid`,
+/// `controls_failed`.
 #[pyfunction]
 #[pyo3(signature = (file=None, tcp=None, windows=Some(vec![64, 32, 32]), control=None, out=None, max_frame=(8192, 8192)))]
 #[allow(clippy::too_many_arguments)]
@@ -1001,6 +1002,7 @@ fn receive<'py>(
         },
         piv_windows: windows,
         out,
+        motion_model: Default::default(),
     };
     let report = py
         .detach(|| {
@@ -1032,6 +1034,7 @@ fn receive<'py>(
     if let Some(c) = report.downlink {
         d.set_item("controls_sent", c.sent)?;
         d.set_item("controls_with_motion", c.with_motion)?;
+        d.set_item("controls_with_grid", c.with_grid)?;
         d.set_item("controls_failed", c.failed)?;
     }
     Ok(d)

@@ -17,7 +17,7 @@ use spiv_firmware_sim::simulation::simulate_planes;
 use spiv_host::metrics::{region_error, row_profile};
 use spiv_host::pipeline::Job;
 use spiv_host::piv::{piv, to_f32};
-use spiv_host::predict::{compensated_frame, RowVelocities};
+use spiv_host::predict::{compensated_frame, Prediction};
 use spiv_host::reconstruct::{frame_from_planes, Method, Planes};
 
 #[test]
@@ -49,13 +49,13 @@ fn compensation_measures_like_the_frame_camera_and_degrades_gracefully() {
                 * f64::from(spiv_core::motion::Q)
         })
         .collect();
-    let scaled = |s: f64| -> RowVelocities {
-        (
+    let scaled = |s: f64| -> Prediction {
+        Prediction::rows((
             v_true.iter().map(|&v| (v * s).round() as i16).collect(),
             vec![0; hu],
-        )
+        ))
     };
-    let mc = |vel: &RowVelocities, refine: Option<Refine>| {
+    let mc = |vel: &Prediction, refine: Option<Refine>| {
         let [a, b] = [ka, kb].map(|k| compensated_frame(&planes, k, &core, vel, refine).unwrap().0);
         measure(&a, &b)
     };

@@ -254,7 +254,8 @@ impl SpeedBench {
     }
 
     /// Motion-compensated frames: the TFP pair's PIV predicts each row's
-    /// velocity, the core refines it and counts along the path (time = the
+    /// velocity (or each tile column's, `crate::predict::motion_grid`), the
+    /// core refines it and counts along the path (time = the
     /// TFP pair and its PIV + both compensated frames + PIV); then the
     /// wide baseline on top (`crate::baseline`: two more compensated
     /// frames 4·dt apart around the pair, their PIV from the pair's field,
@@ -264,11 +265,12 @@ impl SpeedBench {
         let t = Instant::now();
         let (_, ta, tb) = self.core_pair(Method::Tfp, 8)?;
         let tfp_field = piv(&ta, &tb, None, &job.piv)?;
-        let vel = crate::predict::row_velocities(
+        let vel = crate::predict::motion_grid(
             &tfp_field.vectors(),
-            planes.height,
+            (planes.width, planes.height),
             planes.flip,
             self.dt(),
+            crate::predict::MotionModel::Auto,
         );
         let refine = Some(spiv_core::motion::Refine::default());
         let frame = |k: u64| -> Result<Array2<f32>, JobError> {

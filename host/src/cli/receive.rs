@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use spiv_host::live::{open_downlink, run_live, LiveOptions};
+use spiv_host::predict::MotionModel;
 use spiv_host::receive::source::{open, parse_vid_pid};
 use spiv_host::receive::{FrameLimit, Spec};
 
@@ -38,6 +39,10 @@ pub struct ReceiveArgs {
     /// that `spiv-firmware-sim --control` reads) for --pipe and --file.
     #[arg(long, num_args = 0..=1, value_name = "PATH", requires = "piv")]
     control: Option<Option<PathBuf>>,
+    /// The motion model of the controls: auto (per row, or per row and
+    /// 64-px tile column where the flow varies along x) or rows.
+    #[arg(long, value_enum, default_value_t = MotionModel::Auto, requires = "control")]
+    motion_model: MotionModel,
     /// PIV window side of each pass, px (default: 64,32,32, and
     /// 64,32,32,32,32 for motion-compensated pairs).
     #[arg(long, value_delimiter = ',')]
@@ -74,6 +79,7 @@ pub fn run(a: &ReceiveArgs) -> Result<(), CliError> {
             .piv
             .then(|| a.windows.clone().unwrap_or_else(|| vec![64, 32, 32])),
         out: a.out.clone(),
+        motion_model: a.motion_model,
     };
     let bar = ProgressBar::new_spinner();
     bar.set_style(
@@ -125,9 +131,10 @@ pub fn run(a: &ReceiveArgs) -> Result<(), CliError> {
         );
         if let Some(r) = live.downlink {
             println!(
-                "sent {} controls ({} with motion){}",
+                "sent {} controls ({} with motion, {} of them on a grid of tile columns){}",
                 r.sent,
                 r.with_motion,
+                r.with_grid,
                 if r.failed > 0 {
                     format!("; {} refused by the link", r.failed)
                 } else {
