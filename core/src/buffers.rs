@@ -127,8 +127,8 @@ pub struct SidecarBuf<G> {
     wire: Vec<u8>,
     scratch: Vec<u16>,
     downlink_rx: Vec<u8>,
-    /// Applied and waiting velocities per stored row: vx, vy, next vx,
-    /// next vy.
+    /// Applied and waiting velocities per stored row and tile column (the
+    /// finest grid: one column per 64-px word): vx, vy, next vx, next vy.
     rows: [Vec<i16>; 4],
     /// Applied and waiting caps.
     caps: [Vec<u16>; 2],
@@ -152,7 +152,7 @@ impl<G: Gray> SidecarBuf<G> {
             wire: vec![0; MAX_ENCODED],
             scratch: vec![0; m.codec_scratch],
             downlink_rx: vec![0; crate::wire::control::MAX_CONTROL_ENCODED],
-            rows: core::array::from_fn(|_| vec![0; m.rows]),
+            rows: core::array::from_fn(|_| vec![0; m.motion_entries]),
             caps: core::array::from_fn(|_| vec![0; m.cap_bands]),
             refined: (vec![0; m.refined], vec![0; m.refined]),
         })

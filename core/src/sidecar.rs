@@ -143,7 +143,7 @@ pub struct MemorySizes {
     /// Entries of the downlink's velocity buffers (each of four): one per
     /// stored row and 64-px word, the finest motion grid a control may
     /// carry ([`crate::motion::Motion`]).
-    pub rows: usize,
+    pub motion_entries: usize,
     /// Bands of the downlink's caps (each of two).
     pub cap_bands: usize,
     /// Refined velocities (each of two; with [`Config::refine`]).
@@ -181,7 +181,7 @@ impl Config {
             motion_counts: if mc { workspace.pixels() } else { 0 },
             tfp_counts: if tfp { px } else { 0 },
             codec_scratch,
-            rows: grid,
+            motion_entries: grid,
             cap_bands: usize::from(height.div_ceil(CAP_BAND)),
             refined,
         })

@@ -337,10 +337,10 @@ impl Layout {
                 c.take::<u8>(m.frame)?
             },
             rows: [
-                c.take::<i16>(m.rows)?,
-                c.take::<i16>(m.rows)?,
-                c.take::<i16>(m.rows)?,
-                c.take::<i16>(m.rows)?,
+                c.take::<i16>(m.motion_entries)?,
+                c.take::<i16>(m.motion_entries)?,
+                c.take::<i16>(m.motion_entries)?,
+                c.take::<i16>(m.motion_entries)?,
             ],
             caps: [c.take::<u16>(m.cap_bands)?, c.take::<u16>(m.cap_bands)?],
             refined: [c.take::<i16>(m.refined)?, c.take::<i16>(m.refined)?],
