@@ -2,8 +2,9 @@
 //! spikes along a particle's predicted path instead of at a fixed place,
 //! and refining the prediction from the spikes themselves.
 //!
-//! A velocity `v` per band row (x right, y down in stored rows, Q12: 1/4096
-//! px per tick) moves plane `t` of a window centred on `k_c` by
+//! A velocity `v` per band row and tile column ([`Motion`]: x right, y
+//! down in stored rows, Q12: 1/4096 px per tick) moves plane `t` of a
+//! window centred on `k_c` by
 //! `s = round(v·(t − k_c))` before its spikes are added: the compensated
 //! count of pixel (r, c) over a window is the number of ticks `t` with a
 //! spike at (r + s_y, c + s_x). A particle moving at `v` then piles its
@@ -13,7 +14,8 @@
 //! row moves by a funnel shift of two words (a barrel shifter on an FPGA).
 //!
 //! [`refine`] corrects a predicted velocity by contrast maximisation: per
-//! band of rows it tries velocities around the prediction (scaled by
+//! node (a band of rows in one tile column) it tries velocities around the
+//! prediction (scaled by
 //! ±[`RELATIVE_STEP`]·k and offset by ±[`ABSOLUTE_STEP`]·k in x and in y)
 //! and keeps the one whose compensated counts are sharpest (largest sum of
 //! squared counts; a blurred particle spreads the same spikes over more
@@ -23,11 +25,12 @@
 //! (`host/examples/mc_probe.rs`).
 //!
 //! Memory: none beyond the caller's buffers; [`refine`] keeps a 2 KiB
-//! table of band winners and its per-tick tables (4 KiB on a 32-bit MCU,
-//! 10 KiB on a 64-bit host) on the stack. Cost of [`refine`]: at most
-//! (1 + 2·rel + 4·abs) windows of compensated counts per band row, summed
-//! as squares in the bit planes; candidates that shift every plane as an
-//! earlier one does are not counted again.
+//! table of one column's band winners, its per-tick shifts (3 KiB on a
+//! 32-bit MCU, 4 KiB on a 64-bit host) and a block's counters (1.5 KiB) on
+//! the stack. Cost of [`refine`]: at most (1 + 2·rel + 4·abs) windows of
+//! compensated counts per pixel, summed as squares in the bit planes;
+//! candidates that shift every plane of a node as an earlier one does are
+//! not counted again.
 //!
 //! Rounding rule, the one definition both this module and the host's `f64`
 //! reference use: `round(v·Δt/4096) = ⌊(v·Δt + 2048)/4096⌋` (halves up).
