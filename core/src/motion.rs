@@ -123,9 +123,14 @@ impl<'a> Motion<'a> {
         }
     }
 
-    /// A grid of `cols` tile columns of `tile` px per band row; `tile`
-    /// must be a positive multiple of 64 and `cols` in 1..=[`MAX_COLS`].
+    /// A grid of `cols` tile columns of `tile` px per band row; `cols`
+    /// must be in 1..=[`MAX_COLS`] and, with more than one column, `tile`
+    /// a positive multiple of 64 (one column covers the row whatever its
+    /// tile: [`Motion::rows`]).
     pub fn grid(vx: &'a [i16], vy: &'a [i16], cols: u16, tile: u16) -> Result<Motion<'a>, Error> {
+        if cols == 1 {
+            return Ok(Motion::rows(vx, vy));
+        }
         if cols == 0 || cols > MAX_COLS || tile == 0 || !tile.is_multiple_of(64) {
             return Err(Error::BadParam(ParamError::Motion));
         }

@@ -40,7 +40,7 @@ use core::ffi::{c_char, c_void};
 use core::mem::{align_of, size_of};
 
 use spiv_core::downlink::DownlinkBuffers;
-use spiv_core::motion::{Motion, Refine, ROW_TILE};
+use spiv_core::motion::{Motion, Refine};
 use spiv_core::region::Region;
 use spiv_core::sidecar::{
     make_frame, Config, FrameBuffers, Guide, Memory, Probe, RefineBuffers, Sidecar, SidecarError,
@@ -1008,7 +1008,7 @@ pub unsafe extern "C" fn spiv_make_frame(
         };
         let (st, base) = claim(sc, Mode::Manual)?;
         let (caps, vx, vy, n_max, grid) = match g {
-            None => (&[][..], None, None, 0, (1, ROW_TILE)),
+            None => (&[][..], None, None, 0, (1, 0)),
             // SAFETY: arrays of the guide's counts (the caller's promise).
             Some(g) => unsafe {
                 let c = core::slice::from_raw_parts(nonnull(g.caps, g.n_caps)?, g.n_caps);
@@ -1020,10 +1020,7 @@ pub unsafe extern "C" fn spiv_make_frame(
                         Some(core::slice::from_raw_parts(g.vy, g.rows)),
                     )
                 };
-                let grid = match g.cols {
-                    0 | 1 => (1, ROW_TILE),
-                    c => (c, g.tile),
-                };
+                let grid = (g.cols.max(1), g.tile);
                 (c, vx, vy, g.n_max, grid)
             },
         };

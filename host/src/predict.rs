@@ -40,6 +40,17 @@ pub fn predicts(field: &[Vector]) -> bool {
     crate::piv::usable(field)
 }
 
+/// A displacement of `px_per_pair` over `dt` ticks as a core velocity,
+/// 1/4096 px per tick, rounded and clamped to `i16` (0 when not finite).
+fn q12(px_per_pair: f64, dt: f64) -> i16 {
+    let v = px_per_pair / dt.max(1e-9) * f64::from(spiv_core::motion::Q);
+    if v.is_finite() {
+        v.round().clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16
+    } else {
+        0
+    }
+}
+
 /// The velocity of every stored row of an `h`-row frame from an upright
 /// `field` measured over `dt` ticks: the mean of each grid row's measured
 /// vectors, linear between grid rows and constant beyond the outer ones;
@@ -77,14 +88,7 @@ pub fn row_velocities(field: &[Vector], h: u16, flip: bool, dt: f64) -> RowVeloc
         let t = (y - a.0) / (b.0 - a.0);
         (a.1 + t * (b.1 - a.1), a.2 + t * (b.2 - a.2))
     };
-    let q = |px_per_pair: f64| -> i16 {
-        let v = px_per_pair / dt.max(1e-9) * f64::from(spiv_core::motion::Q);
-        if v.is_finite() {
-            v.round().clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16
-        } else {
-            0
-        }
-    };
+    let q = |px_per_pair: f64| q12(px_per_pair, dt);
     let n = usize::from(h);
     let (mut vx, mut vy) = (vec![0i16; n], vec![0i16; n]);
     for r in 0..n {
@@ -147,14 +151,10 @@ impl Prediction {
 
     /// The core's view of it.
     pub fn motion(&self) -> Motion<'_> {
-        if self.cols <= 1 {
-            Motion::rows(&self.vx, &self.vy)
-        } else {
-            // Built by this module with a positive multiple of 64 and at
-            // most MAX_COLS columns; per row otherwise.
-            Motion::grid(&self.vx, &self.vy, self.cols, self.tile)
-                .unwrap_or_else(|_| Motion::rows(&self.vx, &self.vy))
-        }
+        // Built by this module with one column or a positive multiple of
+        // 64 and at most MAX_COLS columns; per row otherwise.
+        Motion::grid(&self.vx, &self.vy, self.cols, self.tile)
+            .unwrap_or_else(|_| Motion::rows(&self.vx, &self.vy))
     }
 
     /// The control that tells a sidecar this prediction.
@@ -227,14 +227,7 @@ pub fn motion_grid(
     if bic(rss_grid, k_grid) > bic(rss_row, k_row) - GRID_EVIDENCE {
         return rows;
     }
-    let q = |px_per_pair: f64| -> i16 {
-        let v = px_per_pair / dt.max(1e-9) * f64::from(spiv_core::motion::Q);
-        if v.is_finite() {
-            v.round().clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16
-        } else {
-            0
-        }
-    };
+    let q = |px_per_pair: f64| q12(px_per_pair, dt);
     let hn = usize::from(h);
     let (mut vx, mut vy) = (vec![0i16; hn * cols], vec![0i16; hn * cols]);
     for c in 0..cols {

@@ -42,13 +42,11 @@ fn run_core<G: Gray>(
 /// Velocities per band row and tile column (x, y), 1/4096 px per tick.
 type Velocities<'a> = Option<Grid<'a>>;
 
-/// The core's motion for a reference grid (tile columns of whole words).
+/// The core's motion for a reference grid (tile columns of whole words;
+/// one column for the whole row).
 fn core_motion<'a>(g: &Grid<'a>) -> spiv_core::motion::Motion<'a> {
-    if g.cols <= 1 {
-        spiv_core::motion::Motion::rows(g.vx, g.vy)
-    } else {
-        spiv_core::motion::Motion::grid(g.vx, g.vy, g.cols as u16, g.tile as u16).unwrap()
-    }
+    let tile = g.tile.min(usize::from(u16::MAX)) as u16;
+    spiv_core::motion::Motion::grid(g.vx, g.vy, g.cols as u16, tile).unwrap()
 }
 
 fn run_core_with<G: Gray>(
@@ -408,6 +406,36 @@ fn refine_candidates_are_the_documented_set() {
     assert_eq!(one, vec![(0, 0), (48, 0), (-48, 0), (0, 48), (0, -48)]);
 }
 
+/// The core's refinement of `pred` at `kc` on the packed planes (no
+/// tolerance: held to the `f64` reference's choice for every entry).
+fn refined_like_reference(
+    packed: &[u8],
+    (w, h): (u16, u16),
+    kc: u32,
+    pred: Grid<'_>,
+    cfg: &spiv_core::motion::Refine,
+) -> (Vec<i16>, Vec<i16>) {
+    let mut words = vec![0u64; History::words_needed(w, h, 255).unwrap()];
+    let mut hist = History::new(&mut words, w, h, 0, h, 255).unwrap();
+    let pb = usize::from(w) * usize::from(h) / 8;
+    for plane in packed.chunks_exact(pb) {
+        hist.push(&PlaneView::new(plane, w, h).unwrap()).unwrap();
+    }
+    let (mut vx, mut vy) = (vec![0i16; pred.vx.len()], vec![0i16; pred.vy.len()]);
+    spiv_core::motion::refine(&hist, kc, &core_motion(&pred), cfg, &mut vx, &mut vy).unwrap();
+    let vol = SpikeVolume::from_packed(packed, usize::from(w), usize::from(h), 0);
+    let (rx, ry) = spiv_host::reference::motion::refine(
+        &vol,
+        kc,
+        pred,
+        usize::from(cfg.band),
+        cfg.window,
+        (cfg.rel, cfg.abs, cfg.min_gain),
+    );
+    assert_eq!((&vx, &vy), (&rx, &ry));
+    (vx, vy)
+}
+
 /// Motion compensation: the core's contrast-maximisation refinement picks
 /// the same velocity for every row as the `f64` reference (no tolerance:
 /// both are integer decisions), on a paper scene with a prediction 15 %
@@ -418,7 +446,7 @@ fn refine_candidates_are_the_documented_set() {
 /// flat there.)
 #[test]
 fn refined_motion_matches_reference_and_moves_toward_the_truth() {
-    use spiv_core::motion::{refine, Motion, Refine};
+    use spiv_core::motion::Refine;
     let (w, h, ticks, kc) = (128u16, 160u16, 100u32, 50u32);
     let params = SceneParams {
         width: w,
@@ -437,25 +465,7 @@ fn refined_motion_matches_reference_and_moves_toward_the_truth() {
     let pred: Vec<i16> = truth.iter().map(|&t| (0.85 * t) as i16).collect();
     let zero = vec![0i16; usize::from(h)];
     let cfg = Refine::default();
-    let mut words = vec![0u64; History::words_needed(w, h, 255).unwrap()];
-    let mut hist = History::new(&mut words, w, h, 0, h, 255).unwrap();
-    let pb = usize::from(w) * usize::from(h) / 8;
-    for plane in packed.chunks_exact(pb) {
-        hist.push(&PlaneView::new(plane, w, h).unwrap()).unwrap();
-    }
-    let (mut vx, mut vy) = (vec![0i16; usize::from(h)], vec![0i16; usize::from(h)]);
-    let m = Motion::rows(&pred, &zero);
-    refine(&hist, kc, &m, &cfg, &mut vx, &mut vy).unwrap();
-    let vol = SpikeVolume::from_packed(&packed, usize::from(w), usize::from(h), 0);
-    let (rx, ry) = spiv_host::reference::motion::refine(
-        &vol,
-        kc,
-        Grid::rows(&pred, &zero),
-        usize::from(cfg.band),
-        cfg.window,
-        (cfg.rel, cfg.abs, cfg.min_gain),
-    );
-    assert_eq!((&vx, &vy), (&rx, &ry));
+    let (vx, _) = refined_like_reference(&packed, (w, h), kc, Grid::rows(&pred, &zero), &cfg);
     let err = |v: &[i16]| -> f64 {
         v.iter()
             .zip(&truth)
@@ -484,7 +494,7 @@ fn refined_motion_matches_reference_and_moves_toward_the_truth() {
 /// two columns move most of the way to the truth while the third stays.
 #[test]
 fn refined_grid_matches_reference_and_corrects_each_column() {
-    use spiv_core::motion::{refine, Motion, Refine};
+    use spiv_core::motion::Refine;
     let (w, h, ticks, kc) = (192u16, 64u16, 100u32, 50u32);
     let params = SceneParams {
         width: w,
@@ -505,31 +515,13 @@ fn refined_grid_matches_reference_and_corrects_each_column() {
     };
     let (px, py) = (off(&tx), off(&ty));
     let cfg = Refine::default();
-    let mut words = vec![0u64; History::words_needed(w, h, 255).unwrap()];
-    let mut hist = History::new(&mut words, w, h, 0, h, 255).unwrap();
-    let pb = usize::from(w) * usize::from(h) / 8;
-    for plane in packed.chunks_exact(pb) {
-        hist.push(&PlaneView::new(plane, w, h).unwrap()).unwrap();
-    }
-    let (mut vx, mut vy) = (vec![0i16; px.len()], vec![0i16; px.len()]);
-    let m = Motion::grid(&px, &py, 3, 64).unwrap();
-    refine(&hist, kc, &m, &cfg, &mut vx, &mut vy).unwrap();
-    let vol = SpikeVolume::from_packed(&packed, usize::from(w), usize::from(h), 0);
     let grid = Grid {
         vx: &px,
         vy: &py,
         cols: 3,
         tile: 64,
     };
-    let (rx, ry) = spiv_host::reference::motion::refine(
-        &vol,
-        kc,
-        grid,
-        usize::from(cfg.band),
-        cfg.window,
-        (cfg.rel, cfg.abs, cfg.min_gain),
-    );
-    assert_eq!((&vx, &vy), (&rx, &ry));
+    let (vx, vy) = refined_like_reference(&packed, (w, h), kc, grid, &cfg);
     // Mean |error| of column c, 1/4096 px per tick.
     let err = |x: &[i16], y: &[i16], c: usize| -> f64 {
         let e: Vec<f64> = (c..x.len())

@@ -185,42 +185,51 @@ fn loop_with_faults(
     faults: &str,
     extra: &[&str],
 ) -> (String, serde_json::Value, std::path::PathBuf) {
+    let mut sim = sim_args(&["--control-wait", "3000", "--control-fault", faults]);
+    sim.extend(extra.iter().map(|s| s.to_string()));
+    let r = closed_loop(dir, &sim, &[]);
+    eprintln!("{faults}: {}", r.0);
+    r
+}
+
+/// The loop over a pipe and a FIFO in `dir`: `spiv-firmware-sim` with
+/// `sim` (and `--control FIFO`) into `spiv receive --pipe --piv --json
+/// --control FIFO` with `receive`; the firmware's stderr, the receiver's
+/// report and its output folder.
+fn closed_loop(
+    dir: &Path,
+    sim: &[String],
+    receive: &[&str],
+) -> (String, serde_json::Value, std::path::PathBuf) {
     let fifo = dir.join("control");
     let made = Command::new("mkfifo").arg(&fifo).status().expect("mkfifo");
     assert!(made.success());
     let out = dir.join("rx");
     let fifo_s = fifo.to_str().expect("utf-8");
-    let mut sim = command("spiv-firmware-sim")
-        .args(sim_args(&[
-            "--control",
-            fifo_s,
-            "--control-wait",
-            "3000",
-            "--control-fault",
-            faults,
-        ]))
-        .args(extra)
+    let mut fw = command("spiv-firmware-sim")
+        .args(sim)
+        .args(["--control", fifo_s])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .expect("spawn spiv-firmware-sim");
-    let up = sim.stdout.take().expect("stdout");
+    let up = fw.stdout.take().expect("stdout");
     let rx = command("spiv")
         .args(["receive", "--pipe", "--piv", "--json", "--control", fifo_s])
+        .args(receive)
         .arg("--out")
         .arg(&out)
         .stdin(up)
         .output()
         .expect("spawn spiv receive");
-    let sim = sim.wait_with_output().expect("firmware-sim");
-    let err = String::from_utf8_lossy(&sim.stderr).to_string();
-    assert!(sim.status.success(), "firmware-sim: {err}");
+    let fw = fw.wait_with_output().expect("firmware-sim");
+    let err = String::from_utf8_lossy(&fw.stderr).to_string();
+    assert!(fw.status.success(), "firmware-sim: {err}");
     assert!(
         rx.status.success(),
         "{}",
         String::from_utf8_lossy(&rx.stderr)
     );
-    eprintln!("{faults}: {err}");
     (err, json(&rx.stdout), out)
 }
 
@@ -281,38 +290,24 @@ fn vortex_loop(
     pairs: u32,
     model: &str,
 ) -> (String, serde_json::Value, Vec<(u32, f64)>) {
-    let fifo = dir.join("control");
-    let made = Command::new("mkfifo").arg(&fifo).status().expect("mkfifo");
-    assert!(made.success());
-    let out = dir.join("rx");
-    let fifo_s = fifo.to_str().expect("utf-8");
-    let mut sim = command("spiv-firmware-sim")
-        .args(["--scene", "vortex-array", "--method", "mc", "--pairs"])
-        .arg(pairs.to_string())
-        .args(["--seed", &seed.to_string(), "--control", fifo_s])
-        .args(["--control-wait", "3000"])
-        .args(["--control-fault", "drop=0.2,duplicate=0.5"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn spiv-firmware-sim");
-    let up = sim.stdout.take().expect("stdout");
-    let rx = command("spiv")
-        .args(["receive", "--pipe", "--piv", "--json", "--control", fifo_s])
-        .args(["--motion-model", model, "--out"])
-        .arg(&out)
-        .stdin(up)
-        .output()
-        .expect("spawn spiv receive");
-    let sim = sim.wait_with_output().expect("firmware-sim");
-    let err = String::from_utf8_lossy(&sim.stderr).to_string();
-    assert!(sim.status.success(), "firmware-sim: {err}");
-    assert!(
-        rx.status.success(),
-        "{}",
-        String::from_utf8_lossy(&rx.stderr)
-    );
-    let report = json(&rx.stdout);
+    let sim: Vec<String> = [
+        "--scene",
+        "vortex-array",
+        "--method",
+        "mc",
+        "--pairs",
+        &pairs.to_string(),
+        "--seed",
+        &seed.to_string(),
+        "--control-wait",
+        "3000",
+        "--control-fault",
+        "drop=0.2,duplicate=0.5",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    let (err, report, out) = closed_loop(dir, &sim, &["--motion-model", model]);
     let p = SceneParams::new(SceneKind::VortexArray);
     let dt = f64::from(p.pair_dt);
     let scene = Scene::new(p, seed, 1000);
