@@ -6,7 +6,10 @@
 //!
 //! Before it, the same recordings gave 60 % of the vectors flagged and an
 //! error of 4.0 px per pair on the rest (`spiv bench flows --seeds 1-5
-//! --families turbulence`), against a mean displacement of 8.7 px.
+//! --families turbulence`), against a mean displacement of 8.7 px. With
+//! the ensemble's flows averaged per frame pair, this recording measured
+//! 92 % of its vectors at 1.28 px and a dense EPE of 1.68 px; with one flow
+//! fitted to every pair of frames, 100 % at 0.77 px and 0.91 px.
 
 use spiv_firmware_sim::scene::{SceneKind, SceneParams};
 use spiv_firmware_sim::simulation::{simulate_planes, Request};
@@ -69,8 +72,8 @@ fn turbulence_is_measured_densely_with_honest_uncertainty() {
     eprintln!(
         "measured {share:.3}, EPE {epe:.3} px, coverage {coverage:.3}, dense EPE {dense:.3} px"
     );
-    assert!(share >= 0.85, "measured {share}");
-    assert!(epe <= 2.0, "EPE {epe}");
+    assert!(share >= 0.95, "measured {share}");
+    assert!(epe <= 1.0, "EPE {epe}");
     assert!((0.5..=0.85).contains(&coverage), "coverage {coverage}");
-    assert!(dense <= 2.5, "dense EPE {dense}");
+    assert!(dense <= 1.2, "dense EPE {dense}");
 }

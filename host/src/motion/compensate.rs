@@ -73,6 +73,29 @@ impl Velocity {
         (b.0 - a.0, b.1 - a.1)
     }
 
+    /// [`Velocity::displacement`] at every pixel: the field of
+    /// displacements over `ticks` ticks, `(u, v)` in px.
+    pub fn displacements(&self, ticks: f64) -> (Array2<f32>, Array2<f32>) {
+        let (h, w) = self.u.dim();
+        let rows: Vec<Vec<(f64, f64)>> = (0..h)
+            .into_par_iter()
+            .map(|i| {
+                (0..w)
+                    .map(|j| self.displacement((j as f64, i as f64), ticks))
+                    .collect()
+            })
+            .collect();
+        let mut u = Array2::zeros((h, w));
+        let mut v = Array2::zeros((h, w));
+        for (i, row) in rows.iter().enumerate() {
+            for (j, &(du, dv)) in row.iter().enumerate() {
+                u[[i, j]] = du as f32;
+                v[[i, j]] = dv as f32;
+            }
+        }
+        (u, v)
+    }
+
     /// A displacement field over `ticks` ticks as a velocity.
     pub fn from_displacement(u: &Array2<f32>, v: &Array2<f32>, ticks: f64) -> Velocity {
         let k = (1.0 / ticks.max(1e-9)) as f32;

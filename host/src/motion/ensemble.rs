@@ -4,32 +4,41 @@
 //!
 //! Around the pair's midpoint the recording is cut into consecutive,
 //! disjoint [`FRAME`]-tick innovation frames (within the ladder's
-//! bootstrap reach), and the dense stage ([`crate::piv::dense`], the
-//! pyramid from rest with the divergence penalty) measures each frame
-//! against the next. Short frames blur little whatever the speed; disjoint
-//! frames share no spike. The flows of the consecutive pairs are
-//! independent looks at the same motion: their mean per pixel is the
-//! measurement and their spread its uncertainty (the standard error of
-//! the mean, [`SPREAD`]).
+//! bootstrap reach). One steady flow is fitted to all of them at once
+//! ([`dense_frames`]: the dense stage's pyramid from rest with the
+//! divergence penalty, its data term summed over every pair of frames one
+//! and two frames apart, and three apart at full resolution, compared along
+//! the flow's own paths). Short frames blur little whatever the speed;
+//! disjoint frames share no spike; pairs further apart measure the flow
+//! more finely.
 //!
-//! A node is measured only where the frames, warped by its flows, match
+//! The uncertainty of each node's vector comes from the pairs' own
+//! disagreement with the fit: each consecutive pair's least-squares
+//! correction over [`LOOK`] px around the node ([`look`]) is one look,
+//! and the looks' standard error of the mean, scaled by [`SPREAD`], is the
+//! standard uncertainty.
+//!
+//! A node is measured only where the frames, warped by the flow, match
 //! ([`MIN_MATCH`]: the mean zero-normalised correlation over the node's
-//! window of each pair's frame A and frame B moved half their flow
-//! towards each other). Pure noise and static light match nothing, so
+//! window of each consecutive pair's frame A and frame B moved half the
+//! flow towards each other). Pure noise and static light match nothing, so
 //! nothing is reported there; a flow beyond what the pyramid reaches
 //! leaves the frames unmatched too.
 //!
-//! [`FRAME`] was chosen on the tuning seeds 1–5 (dense EPE of the mean
-//! flow, px per pair, the ladder's 32-tick reach): turbulence 2.73 / 1.51 /
-//! 2.06 / 2.19 with 4 / 6 / 8 / 10-tick frames, large-shift 1.88 / 1.57 /
-//! 1.83 with 4 / 6 / 8. Compensated dense frames of 16–30 ticks along the
-//! mean flow did not improve on it (turbulence 1.78–1.87 from 1.51); see
-//! `docs/piv.md`.
+//! What was measured to choose it (tuning seeds 1–5, dense EPE of the flow
+//! carried along its paths over the pair, px per pair; `docs/piv.md`):
+//! the mean of each consecutive pair's own pyramid, as before, 1.40–1.64 on
+//! turbulence seeds 1–2 in 6.5–8.0 s; one flow fitted to the consecutive
+//! pairs 1.41–1.45 in 1.1 s; with the pairs two apart 1.01–1.13; with the
+//! divergence penalty raised from 0.05 to 0.5 and 6 warps, and pairs three
+//! apart at full resolution, 0.87 on turbulence and 1.07 on large-shift
+//! (seeds 1–5) in 1.0–1.4 s. [`FRAME`] stays 6 ticks (4: 1.33–1.41 with
+//! steps 1, 2; 8 lost seed 3's pyramid).
 
 use ndarray::Array2;
 use rayon::prelude::*;
 
-use crate::piv::dense::{dense_flow, DenseMode, Flow};
+use crate::piv::dense::{dense_frames, DenseSettings, Flow, Steps};
 use crate::piv::{Field, State};
 use spiv_formats::grid::Grid;
 
@@ -38,12 +47,43 @@ use super::{compensated, Innovation, Velocity};
 /// Ticks per frame of the ensemble.
 pub const FRAME: u64 = 6;
 
+/// The frame pairs the flow is measured on: consecutive frames and those
+/// two apart at every pyramid level, three apart at full resolution.
+pub const STEPS: Steps<'static> = Steps {
+    every: &[1, 2],
+    fine: &[3],
+};
+
+/// The dense stage's settings for the ensemble's frames.
+pub fn settings() -> DenseSettings {
+    DenseSettings {
+        alpha: 0.2,
+        levels: 5,
+        warps: 6,
+        iterations: 60,
+        median: 5,
+        init_level: 0,
+        div_weight: 0.5,
+    }
+}
+
 /// Least mean zero-normalised correlation of a node's window between the
 /// frames warped by their flows for the node to count as measured.
 pub const MIN_MATCH: f64 = 0.2;
 
-/// Scale of the ensemble's standard error in a vector's uncertainty.
-pub const SPREAD: f64 = 1.0;
+/// Side of the window around a node's centre over which each pair's own
+/// correction ([`look`]) is measured, px: the vector is the flow at the
+/// centre, so its uncertainty is that of the flow there, not of the mean
+/// over the node's window (a 32-px window's looks agreed four times too
+/// well: 12–23 % of true errors within 1σ on the tuning seeds; 16 px
+/// 30–44 %; 8 px 50–70 %).
+pub const LOOK: usize = 8;
+
+/// Scale of the looks' standard error in a vector's uncertainty, from the
+/// tuning seeds 1–5: true errors within 1σ at 1.0 / 1.1 / 1.2, turbulence
+/// 56.7–61.6 / 58.4–64.7 / 56.7–68.2 %, large-shift 64.0–70.4 / 67.2–73.6
+/// / 71.3–77.8 %.
+pub const SPREAD: f64 = 1.15;
 
 /// A pair measured by the dense ensemble.
 #[derive(Debug, Clone)]
@@ -93,30 +133,28 @@ pub fn measure(inn: &Innovation, mid: u64, grid: &Grid, reach: u64) -> Option<En
         .par_iter()
         .map(|&t| compensated(inn, t as f64 + s as f64 / 2.0, (t, s), &zero))
         .collect();
-    let settings = DenseMode::Pyramid.settings();
-    let flows: Vec<Flow> = (0..frames.len() - 1)
-        .into_par_iter()
-        .map(|i| dense_flow(&frames[i], &frames[i + 1], None, &settings))
-        .collect();
-    let n = flows.len();
-    let k = 1.0 / (n as f32 * s as f32);
-    let mut velocity = Velocity::zero(h, w);
-    for f in &flows {
-        velocity.u.zip_mut_with(&f.u, |m, &x| *m += x * k);
-        velocity.v.zip_mut_with(&f.v, |m, &x| *m += x * k);
-    }
+    let flow = dense_frames(&frames, STEPS, &settings());
+    let k = 1.0 / s as f32;
+    let velocity = Velocity {
+        u: flow.u.mapv(|x| x * k),
+        v: flow.v.mapv(|x| x * k),
+    };
+    let n = frames.len() - 1;
     let mut field = Field::unmeasured(*grid);
     let nodes: Vec<(usize, usize)> = ndarray::indices((grid.ny, grid.nx)).into_iter().collect();
     let per_node: Vec<Node> = nodes
         .par_iter()
         .map(|&(r, c)| {
             let (x, y) = grid.centre(r, c);
-            let looks: Vec<(f64, f64)> = flows.iter().map(|f| f.at(x, y)).collect();
-            let (mean, se) = mean_and_error(&looks, s as f64);
-            let m = flows
-                .iter()
-                .enumerate()
-                .map(|(i, f)| matched(&frames[i], &frames[i + 1], f, grid, (r, c)))
+            let at = flow.at(x, y);
+            let looks: Vec<(f64, f64)> = (0..n)
+                .filter_map(|i| look(&frames[i], &frames[i + 1], &flow, grid, (r, c)))
+                .map(|d| (at.0 + d.0, at.1 + d.1))
+                .collect();
+            let (_, se) = mean_and_error(&looks, s as f64);
+            let mean = (at.0 / s as f64, at.1 / s as f64);
+            let m = (0..n)
+                .map(|i| matched(&frames[i], &frames[i + 1], &flow, grid, (r, c)))
                 .sum::<f64>()
                 / n as f64;
             Node { mean, se, m }
@@ -165,6 +203,57 @@ fn mean_and_error(looks: &[(f64, f64)], s: f64) -> ((f64, f64), (f64, f64)) {
     };
     let (vu, vv) = (var(&|l| l.0, mu), var(&|l| l.1, mv));
     ((mu / s, mv / s), ((vu / n).sqrt() / s, (vv / n).sqrt() / s))
+}
+
+/// One pair's own correction to `flow` over node `(r, c)`'s window: the
+/// least-squares displacement (Lucas & Kanade) that brings `a` and `b`,
+/// each moved half of `flow` towards the other, into register, px per
+/// step; `None` where the window has no texture to measure it.
+fn look(
+    a: &Array2<f32>,
+    b: &Array2<f32>,
+    flow: &Flow,
+    grid: &Grid,
+    (r, c): (usize, usize),
+) -> Option<(f64, f64)> {
+    use crate::piv::dense::sample;
+    let (h, w) = a.dim();
+    let side = LOOK;
+    let (cx, cy) = grid.centre(r, c);
+    let x0 = (cx - (side as f64 - 1.0) / 2.0).round().max(0.0) as usize;
+    let y0 = (cy - (side as f64 - 1.0) / 2.0).round().max(0.0) as usize;
+    let (mut sxx, mut sxy, mut syy, mut sxt, mut syt) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for y in y0..(y0 + side).min(h) {
+        for x in x0..(x0 + side).min(w) {
+            let (u, v) = (flow.u[[y, x]], flow.v[[y, x]]);
+            let (xf, yf) = (x as f32, y as f32);
+            let (xa, ya, xb, yb) = (xf - 0.5 * u, yf - 0.5 * v, xf + 0.5 * u, yf + 0.5 * v);
+            let grad = |img: &Array2<f32>, xx: f32, yy: f32| {
+                (
+                    0.5 * (sample(img, yy, xx + 1.0) - sample(img, yy, xx - 1.0)),
+                    0.5 * (sample(img, yy + 1.0, xx) - sample(img, yy - 1.0, xx)),
+                )
+            };
+            let (gax, gay) = grad(a, xa, ya);
+            let (gbx, gby) = grad(b, xb, yb);
+            let gx = f64::from(0.5 * (gax + gbx));
+            let gy = f64::from(0.5 * (gay + gby));
+            let gt = f64::from(sample(b, yb, xb) - sample(a, ya, xa));
+            sxx += gx * gx;
+            sxy += gx * gy;
+            syy += gy * gy;
+            sxt += gx * gt;
+            syt += gy * gt;
+        }
+    }
+    let det = sxx * syy - sxy * sxy;
+    if det <= 1e-9 * (sxx + syy).powi(2) || det <= 0.0 {
+        return None;
+    }
+    // (Σ g gᵀ)·d = −Σ g·gt.
+    let du = -(syy * sxt - sxy * syt) / det;
+    let dv = -(sxx * syt - sxy * sxt) / det;
+    Some((du, dv))
 }
 
 /// The zero-normalised correlation over node `(r, c)`'s window of `a`
@@ -219,6 +308,28 @@ mod tests {
         assert_eq!(ev, 0.0);
         let (_, e) = mean_and_error(&looks[..1], 6.0);
         assert!(e.0.is_infinite());
+    }
+
+    #[test]
+    fn a_look_is_the_pairs_own_correction_to_the_flow() {
+        let grid = Grid::new(64, 64, 32, 16).unwrap();
+        // Smooth texture: b is a moved 3 px right and 1 px down.
+        let tex = |x: f32, y: f32| (0.31 * x).sin() * (0.23 * y).cos() + (0.17 * (x + y)).sin();
+        let a = Array2::from_shape_fn((64, 64), |(y, x)| tex(x as f32, y as f32));
+        let b = Array2::from_shape_fn((64, 64), |(y, x)| tex(x as f32 - 3.0, y as f32 - 1.0));
+        let flow = |u: f32, v: f32| Flow {
+            u: Array2::from_elem((64, 64), u),
+            v: Array2::from_elem((64, 64), v),
+        };
+        let (du, dv) = look(&a, &b, &flow(2.6, 1.2), &grid, (1, 1)).expect("textured");
+        assert!(
+            (du - 0.4).abs() < 0.05 && (dv + 0.2).abs() < 0.05,
+            "{du} {dv}"
+        );
+        let (du, dv) = look(&a, &b, &flow(3.0, 1.0), &grid, (1, 1)).expect("textured");
+        assert!(du.abs() < 0.02 && dv.abs() < 0.02, "{du} {dv}");
+        let flat = Array2::zeros((64, 64));
+        assert!(look(&flat, &flat, &flow(0.0, 0.0), &grid, (1, 1)).is_none());
     }
 
     #[test]

@@ -7,7 +7,8 @@
 //! - [`ladder`]: disjoint compensated frames at growing separations, PIV
 //!   on each, the most certain vector per node;
 //! - [`ensemble`]: where window PIV cannot start the ladder, the dense
-//!   stage on consecutive short frames, their mean and spread.
+//!   stage's one flow fitted to every pair of consecutive short frames,
+//!   each pair's disagreement with it the uncertainty.
 
 pub mod compensate;
 pub mod ensemble;

@@ -210,19 +210,8 @@ fn level(a: &Array2<f32>, b: &Array2<f32>, f: &mut Flow, s: &DenseSettings) {
         let (u0, v0) = (f.u.clone(), f.v.clone());
         let lam = s.div_weight;
         if lam > 0.0 {
-            let (mut nu, mut nv) = (f.u.clone(), f.v.clone());
-            for _ in 0..s.iterations {
-                div_sweep(
-                    (&f.u, &f.v),
-                    (&mut nu, &mut nv),
-                    (&ix, &iy, &it),
-                    (&u0, &v0),
-                    a2,
-                    lam,
-                );
-                std::mem::swap(&mut f.u, &mut nu);
-                std::mem::swap(&mut f.v, &mut nv);
-            }
+            let data = Data::of_pair((&ix, &iy, &it), (&u0, &v0));
+            relax(f, &data, a2, lam, s.iterations);
         }
         let plain = if lam > 0.0 { 0 } else { s.iterations };
         for _ in 0..plain {
@@ -247,17 +236,77 @@ fn level(a: &Array2<f32>, b: &Array2<f32>, f: &mut Flow, s: &DenseSettings) {
     }
 }
 
+/// The linearised data term per pixel: the normal equations
+/// `J·w = −b` of brightness constancy around the flow of the warp, as
+/// the 2×2 tensor `J` (`j11`, `j12`, `j22`) and the vector `b`.
+struct Data {
+    j11: Array2<f32>,
+    j12: Array2<f32>,
+    j22: Array2<f32>,
+    b1: Array2<f32>,
+    b2: Array2<f32>,
+}
+
+impl Data {
+    /// One pair's term: gradient `g = (ix, iy)`, temporal difference `it`
+    /// at the flow `(u0, v0)`: `J = g gᵀ`, `b = g·(it − g·w0)`.
+    fn of_pair(
+        (ix, iy, it): (&Array2<f32>, &Array2<f32>, &Array2<f32>),
+        (u0, v0): (&Array2<f32>, &Array2<f32>),
+    ) -> Data {
+        let (h, w) = ix.dim();
+        let mut d = Data::zeros(h, w);
+        Zip::indexed(&mut d.j11)
+            .and(&mut d.j12)
+            .and(&mut d.j22)
+            .and(&mut d.b1)
+            .and(&mut d.b2)
+            .par_for_each(|(i, j), j11, j12, j22, b1, b2| {
+                let (gx, gy) = (ix[[i, j]], iy[[i, j]]);
+                let c = it[[i, j]] - gx * u0[[i, j]] - gy * v0[[i, j]];
+                *j11 = gx * gx;
+                *j12 = gx * gy;
+                *j22 = gy * gy;
+                *b1 = gx * c;
+                *b2 = gy * c;
+            });
+        d
+    }
+
+    fn zeros(h: usize, w: usize) -> Data {
+        let z = || Array2::<f32>::zeros((h, w));
+        Data {
+            j11: z(),
+            j12: z(),
+            j22: z(),
+            b1: z(),
+            b2: z(),
+        }
+    }
+}
+
+/// `sweeps` Jacobi sweeps of the data term `data` with smoothness `a2`
+/// (α²) and the divergence penalty `lam`, from `f`.
+fn relax(f: &mut Flow, data: &Data, a2: f32, lam: f32, sweeps: usize) {
+    let (mut nu, mut nv) = (f.u.clone(), f.v.clone());
+    for _ in 0..sweeps {
+        div_sweep((&f.u, &f.v), (&mut nu, &mut nv), data, a2, lam);
+        std::mem::swap(&mut f.u, &mut nu);
+        std::mem::swap(&mut f.v, &mut nv);
+    }
+}
+
 /// One Jacobi sweep with the divergence penalty: per pixel the 2×2 system
-/// (g gᵀ + (α² + 2λ)·I)·w = α²·w̄ + λ·(2·w̄ₐₓᵢₛ + cross) − g·c, where w̄ is
-/// Horn & Schunck's neighbour mean, w̄ₐₓᵢₛ the mean of the two neighbours
-/// along u's (v's) axis and cross the mixed derivative of the other
-/// component (the grad-div term). Reads `u`, `v`, writes `nu`, `nv`; one
-/// pass over the stencil per row (rows in parallel).
+/// (J + (α² + 2λ)·I)·w = α²·w̄ + λ·(2·w̄ₐₓᵢₛ + cross) − b, where J and b
+/// are the data term ([`Data`]), w̄ is Horn & Schunck's neighbour mean,
+/// w̄ₐₓᵢₛ the mean of the two neighbours along u's (v's) axis and cross
+/// the mixed derivative of the other component (the grad-div term). Reads
+/// `u`, `v`, writes `nu`, `nv`; one pass over the stencil per row (rows in
+/// parallel).
 fn div_sweep(
     (u, v): (&Array2<f32>, &Array2<f32>),
     (nu, nv): (&mut Array2<f32>, &mut Array2<f32>),
-    (ix, iy, it): (&Array2<f32>, &Array2<f32>, &Array2<f32>),
-    (u0, v0): (&Array2<f32>, &Array2<f32>),
+    data: &Data,
     a2: f32,
     lam: f32,
 ) {
@@ -271,6 +320,8 @@ fn div_sweep(
             let (t, b) = (i.saturating_sub(1), (i + 1).min(h - 1));
             let (ut, um, ubot) = (u.row(t), u.row(i), u.row(b));
             let (vt, vm, vbot) = (v.row(t), v.row(i), v.row(b));
+            let (j11, j12, j22) = (data.j11.row(i), data.j12.row(i), data.j22.row(i));
+            let (d1, d2) = (data.b1.row(i), data.b2.row(i));
             for j in 0..w {
                 let (l, r) = (j.saturating_sub(1), (j + 1).min(w - 1));
                 let mean = |top: &ndarray::ArrayView1<f32>,
@@ -284,11 +335,9 @@ fn div_sweep(
                 let vy = 0.5 * (vt[j] + vbot[j]);
                 let vxy = 0.25 * (vbot[r] - vbot[l] - vt[r] + vt[l]);
                 let uxy = 0.25 * (ubot[r] - ubot[l] - ut[r] + ut[l]);
-                let (gx, gy, gt) = (ix[[i, j]], iy[[i, j]], it[[i, j]]);
-                let c = gt - gx * u0[[i, j]] - gy * v0[[i, j]];
-                let (a11, a12, a22) = (gx * gx + d, gx * gy, gy * gy + d);
-                let b1 = a2 * ub + lam * (2.0 * ux + vxy) - gx * c;
-                let b2 = a2 * vb + lam * (2.0 * vy + uxy) - gy * c;
+                let (a11, a12, a22) = (j11[j] + d, j12[j], j22[j] + d);
+                let b1 = a2 * ub + lam * (2.0 * ux + vxy) - d1[j];
+                let b2 = a2 * vb + lam * (2.0 * vy + uxy) - d2[j];
                 // det ≥ d² > 0: the system is positive definite.
                 let det = a11 * a22 - a12 * a12;
                 ru[j] = (a22 * b1 - a12 * b2) / det;
@@ -315,6 +364,21 @@ fn neighbour_mean(a: &Array2<f32>) -> Array2<f32> {
             }
         });
     out
+}
+
+/// A full-resolution field at pyramid level `top` (size `(th, tw)`),
+/// lengths scaled down with it.
+fn scaled_down(i: &Flow, top: usize, (th, tw): (usize, usize)) -> Flow {
+    let k = (1usize << top) as f32;
+    let map = |a: &Array2<f32>| {
+        Array2::from_shape_fn((th, tw), |(r, c)| {
+            sample(a, (r as f32 + 0.5) * k - 0.5, (c as f32 + 0.5) * k - 0.5) / k
+        })
+    };
+    Flow {
+        u: map(&i.u),
+        v: map(&i.v),
+    }
 }
 
 /// The dense flow from `a` to `b` (same size), starting from `init` (a
@@ -344,19 +408,7 @@ pub fn dense_flow(
     };
     let (th, tw) = pa[top].dim();
     let mut f = match init {
-        Some(i) => {
-            // The initial field at the coarsest level (scaled down).
-            let k = (1usize << top) as f32;
-            let map = |a: &Array2<f32>| {
-                Array2::from_shape_fn((th, tw), |(r, c)| {
-                    sample(a, (r as f32 + 0.5) * k - 0.5, (c as f32 + 0.5) * k - 0.5) / k
-                })
-            };
-            Flow {
-                u: map(&i.u),
-                v: map(&i.v),
-            }
-        }
+        Some(i) => scaled_down(i, top, (th, tw)),
         _ => Flow {
             u: Array2::zeros((th, tw)),
             v: Array2::zeros((th, tw)),
@@ -370,6 +422,154 @@ pub fn dense_flow(
         }
     }
     f
+}
+
+/// The steps of [`dense_frames`]'s data term: which pairs of frames it
+/// compares.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Steps<'a> {
+    /// Steps `k` whose pairs `(i, i + k)` enter at every level.
+    pub every: &'a [usize],
+    /// Steps that enter at full resolution only, where the flow is close
+    /// enough for their longer paths.
+    pub fine: &'a [usize],
+}
+
+/// The flow per frame step of `frames` (consecutive, equally spaced in
+/// time, same size) from rest: one steady flow `w` whose data term sums,
+/// over every pair `(i, i + k)` of `steps`, brightness constancy between
+/// frame `i` where a particle at `x` is `k/2` steps earlier and frame
+/// `i + k` where it is `k/2` steps later, along the paths of the current
+/// flow (midpoint steps of a quarter step). Coarse to fine on the pyramid
+/// of [`dense_flow`], with its regularisers. A multi-frame
+/// generalisation of the symmetric warp: every frame pair is another look
+/// at the same flow, and a pair `k` steps apart measures it `k` times as
+/// finely.
+pub fn dense_frames(frames: &[Array2<f32>], steps: Steps<'_>, s: &DenseSettings) -> Flow {
+    let Some(first) = frames.first() else {
+        return Flow {
+            u: Array2::zeros((0, 0)),
+            v: Array2::zeros((0, 0)),
+        };
+    };
+    let (h, w) = first.dim();
+    if frames.iter().any(|f| f.dim() != (h, w)) || h == 0 || w == 0 {
+        return Flow {
+            u: Array2::zeros((h, w)),
+            v: Array2::zeros((h, w)),
+        };
+    }
+    let mut pyr: Vec<Vec<Array2<f32>>> = frames.par_iter().map(|f| vec![normalise(f)]).collect();
+    for _ in 0..s.levels {
+        let (lh, lw) = pyr[0][pyr[0].len() - 1].dim();
+        if lh < 32 || lw < 32 {
+            break;
+        }
+        pyr.par_iter_mut().for_each(|p| {
+            let d = down(&p[p.len() - 1]);
+            p.push(d);
+        });
+    }
+    let top = pyr[0].len() - 1;
+    let (th, tw) = pyr[0][top].dim();
+    let mut f = Flow {
+        u: Array2::zeros((th, tw)),
+        v: Array2::zeros((th, tw)),
+    };
+    let pairs = |ks: &[usize]| -> Vec<(usize, usize)> {
+        ks.iter()
+            .filter(|&&k| (1..=MAX_STEP).contains(&k))
+            .flat_map(|&k| (0..frames.len().saturating_sub(k)).map(move |i| (i, k)))
+            .collect()
+    };
+    let coarse = pairs(steps.every);
+    let mut finest = coarse.clone();
+    finest.extend(pairs(steps.fine));
+    for l in (0..=top).rev() {
+        let level_frames: Vec<&Array2<f32>> = pyr.iter().map(|p| &p[l]).collect();
+        let terms = if l == 0 { &finest } else { &coarse };
+        level_frames_warps(&level_frames, terms, &mut f, s);
+        if l > 0 {
+            let (nh, nw) = pyr[0][l - 1].dim();
+            f = up(&f, nh, nw);
+        }
+    }
+    f
+}
+
+/// The longest step [`dense_frames`] compares.
+pub const MAX_STEP: usize = 8;
+
+/// One level of [`dense_frames`]: `warps` re-linearisations of the summed
+/// data term of `terms` (frame index, step) around the current flow, each
+/// relaxed and median-filtered as [`level`] does.
+fn level_frames_warps(
+    frames: &[&Array2<f32>],
+    terms: &[(usize, usize)],
+    f: &mut Flow,
+    s: &DenseSettings,
+) {
+    let (h, w) = frames[0].dim();
+    let grads: Vec<(Array2<f32>, Array2<f32>)> = frames.par_iter().map(|a| gradients(a)).collect();
+    let a2 = s.alpha * s.alpha;
+    let n = terms.len().max(1) as f32;
+    let kmax = terms.iter().map(|t| t.1).max().unwrap_or(0);
+    for _ in 0..s.warps {
+        let mut data = Data::zeros(h, w);
+        let (u0, v0) = (&f.u, &f.v);
+        Zip::indexed(&mut data.j11)
+            .and(&mut data.j12)
+            .and(&mut data.j22)
+            .and(&mut data.b1)
+            .and(&mut data.b2)
+            .par_for_each(|(i, j), j11, j12, j22, b1, b2| {
+                let (x, y) = (j as f32, i as f32);
+                let (u, v) = (u0[[i, j]], v0[[i, j]]);
+                // Where the particle at (x, y) is k/2 steps later (fwd[k])
+                // and earlier (bwd[k]).
+                let mut fwd = [(x, y); MAX_STEP + 1];
+                let mut bwd = [(x, y); MAX_STEP + 1];
+                for (dir, out) in [(0.25f32, &mut fwd), (-0.25, &mut bwd)] {
+                    let (mut px, mut py) = (x, y);
+                    for slot in out.iter_mut().take(kmax + 1).skip(1) {
+                        for _ in 0..2 {
+                            let (a1, c1) = (sample(u0, py, px), sample(v0, py, px));
+                            let (mx, my) = (px + 0.5 * dir * a1, py + 0.5 * dir * c1);
+                            px += dir * sample(u0, my, mx);
+                            py += dir * sample(v0, my, mx);
+                        }
+                        *slot = (px, py);
+                    }
+                }
+                let (mut s11, mut s12, mut s22, mut t1, mut t2) = (0.0, 0.0, 0.0, 0.0, 0.0);
+                for &(a, k) in terms {
+                    let b = a + k;
+                    let ((xa, ya), (xb, yb)) = (bwd[k], fwd[k]);
+                    // d(path end)/dw ≈ ±k/2 per component: the data term's
+                    // gradient in w is k times the mean image gradient.
+                    let kf = k as f32;
+                    let gx = 0.5 * kf * (sample(&grads[a].0, ya, xa) + sample(&grads[b].0, yb, xb));
+                    let gy = 0.5 * kf * (sample(&grads[a].1, ya, xa) + sample(&grads[b].1, yb, xb));
+                    let gt = sample(frames[b], yb, xb) - sample(frames[a], ya, xa);
+                    let c = gt - gx * u - gy * v;
+                    s11 += gx * gx;
+                    s12 += gx * gy;
+                    s22 += gy * gy;
+                    t1 += gx * c;
+                    t2 += gy * c;
+                }
+                *j11 = s11 / n;
+                *j12 = s12 / n;
+                *j22 = s22 / n;
+                *b1 = t1 / n;
+                *b2 = t2 / n;
+            });
+        relax(f, &data, a2, s.div_weight, s.iterations);
+        if s.median > 1 {
+            f.u = median(&f.u, s.median);
+            f.v = median(&f.v, s.median);
+        }
+    }
 }
 
 /// How [`for_piv`] ran the dense stage.
