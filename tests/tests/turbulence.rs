@@ -9,7 +9,7 @@
 //! --families turbulence`), against a mean displacement of 8.7 px. With
 //! the ensemble's flows averaged per frame pair, this recording measured
 //! 92 % of its vectors at 1.28 px and a dense EPE of 1.68 px; with one flow
-//! fitted to every pair of frames, 100 % at 0.77 px and 0.91 px.
+//! fitted to every pair of frames, 100 % at 0.76 px and 0.86 px.
 
 use spiv_firmware_sim::scene::{SceneKind, SceneParams};
 use spiv_firmware_sim::simulation::{simulate_planes, Request};

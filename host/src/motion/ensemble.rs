@@ -32,7 +32,8 @@
 //! pairs 1.41–1.45 in 1.1 s; with the pairs two apart 1.01–1.13; with the
 //! divergence penalty raised from 0.05 to 0.5 and 6 warps, and pairs three
 //! apart at full resolution, 0.87 on turbulence and 1.07 on large-shift
-//! (seeds 1–5) in 1.0–1.4 s. [`FRAME`] stays 6 ticks (4: 1.33–1.41 with
+//! (seeds 1–5) in 1.0–1.4 s; without the pairs whose paths leave the
+//! image, 0.85 and 0.72. [`FRAME`] stays 6 ticks (4: 1.33–1.41 with
 //! steps 1, 2; 8 lost seed 3's pyramid).
 
 use ndarray::Array2;
@@ -81,7 +82,7 @@ pub const LOOK: usize = 8;
 
 /// Scale of the looks' standard error in a vector's uncertainty, from the
 /// tuning seeds 1–5: true errors within 1σ at 1.0 / 1.1 / 1.2, turbulence
-/// 56.7–61.6 / 58.4–64.7 / 56.7–68.2 %, large-shift 64.0–70.4 / 67.2–73.6
+/// 50.0–61.6 / 53.1–64.7 / 56.7–68.2 %, large-shift 64.0–70.4 / 67.2–73.6
 /// / 71.3–77.8 %.
 pub const SPREAD: f64 = 1.15;
 
@@ -89,11 +90,11 @@ pub const SPREAD: f64 = 1.15;
 #[derive(Debug, Clone)]
 pub struct Ensemble {
     /// Velocities per node (px per tick) on the grid asked for: valid
-    /// where the frames match, with the standard error of the mean as
-    /// the uncertainty; invalid, with none, elsewhere. `peak_height`
+    /// where the frames match, with the pairs' looks' standard error
+    /// ([`SPREAD`]) as the uncertainty; invalid, with none, elsewhere. `peak_height`
     /// holds each node's match (the mean correlation, `−1..=1`).
     pub field: Field,
-    /// The mean flow per pixel, px per tick.
+    /// The fitted flow per pixel, px per tick.
     pub velocity: Velocity,
     /// The consecutive frames, oldest first; frames `centre - 1` and
     /// `centre` meet at the midpoint.

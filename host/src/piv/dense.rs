@@ -440,7 +440,8 @@ pub struct Steps<'a> {
 /// over every pair `(i, i + k)` of `steps`, brightness constancy between
 /// frame `i` where a particle at `x` is `k/2` steps earlier and frame
 /// `i + k` where it is `k/2` steps later, along the paths of the current
-/// flow (midpoint steps of a quarter step). Coarse to fine on the pyramid
+/// flow (midpoint steps of a quarter step); a pair whose path leaves the
+/// image adds nothing there. Coarse to fine on the pyramid
 /// of [`dense_flow`], with its regularisers. A multi-frame
 /// generalisation of the symmetric warp: every frame pair is another look
 /// at the same flow, and a pair `k` steps apart measures it `k` times as
@@ -514,6 +515,7 @@ fn level_frames_warps(
     let a2 = s.alpha * s.alpha;
     let n = terms.len().max(1) as f32;
     let kmax = terms.iter().map(|t| t.1).max().unwrap_or(0);
+    let (xmax, ymax) = ((w - 1) as f32, (h - 1) as f32);
     for _ in 0..s.warps {
         let mut data = Data::zeros(h, w);
         let (u0, v0) = (&f.u, &f.v);
@@ -545,6 +547,14 @@ fn level_frames_warps(
                 for &(a, k) in terms {
                     let b = a + k;
                     let ((xa, ya), (xb, yb)) = (bwd[k], fwd[k]);
+                    // A particle whose path leaves the image has nothing
+                    // to compare (clamped samples would pull the flow to
+                    // the edge's).
+                    if [xa, xb].iter().any(|&q| q < 0.0 || q > xmax)
+                        || [ya, yb].iter().any(|&q| q < 0.0 || q > ymax)
+                    {
+                        continue;
+                    }
                     // d(path end)/dw ≈ ±k/2 per component: the data term's
                     // gradient in w is k times the mean image gradient.
                     let kf = k as f32;
