@@ -303,3 +303,24 @@ fn frames_degenerate_give_finite_zero_flow() {
     );
     assert!(f.u.iter().all(|x| *x == 0.0));
 }
+
+#[test]
+fn frames_without_smoothness_stay_finite() {
+    use spiv_host::motion::ensemble;
+    use spiv_host::piv::dense::{dense_frames, DenseSettings};
+    let pts = points(48, 150, 5);
+    let frames: Vec<Array2<f32>> = (0..4)
+        .map(|i| {
+            let moved: Vec<_> = pts.iter().map(|&(x, y)| (x + i as f64, y)).collect();
+            spots(48, &moved)
+        })
+        .collect();
+    let s = DenseSettings {
+        alpha: 0.0,
+        div_weight: 0.0,
+        median: 0,
+        ..DenseSettings::default()
+    };
+    let f = dense_frames(&frames, ensemble::STEPS, &s);
+    assert!(f.u.iter().chain(f.v.iter()).all(|x| x.is_finite()));
+}

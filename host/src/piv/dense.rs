@@ -512,7 +512,9 @@ fn level_frames_warps(
 ) {
     let (h, w) = frames[0].dim();
     let grads: Vec<(Array2<f32>, Array2<f32>)> = frames.par_iter().map(|a| gradients(a)).collect();
-    let a2 = s.alpha * s.alpha;
+    // Some smoothness always: with α = λ = 0 a pixel without texture
+    // would have no equation.
+    let a2 = (s.alpha * s.alpha).max(1e-6);
     let n = terms.len().max(1) as f32;
     let kmax = terms.iter().map(|t| t.1).max().unwrap_or(0);
     let (xmax, ymax) = ((w - 1) as f32, (h - 1) as f32);
