@@ -277,10 +277,10 @@ pub fn measure_from(
 /// Largest share of flagged vectors in the ladder's field with which it
 /// stands without asking the dense ensemble. On the tuning seeds (1–5 of
 /// `spiv bench flows`) the ladder flags at most 4 % on every family it
-/// measures well but the vortex array at 1 px/tick (8–16 %, where the
-/// ensemble, asked at 10 %, measured worse: glare rows 1.27 → 1.68 px per
-/// pair on seed 3); its usable fields on large shifts flag 25–33 % at
-/// twice the ensemble's error.
+/// measures well but the vortex array at 1 px/tick (8–16 %; asking the
+/// ensemble at 10 % there took the glare rows from 1.181 to 1.242 px per
+/// pair and the other rows from 0.472 to 0.441, seeds 1–5); its usable
+/// fields on large shifts flag 25–33 % at twice the ensemble's error.
 pub const ENSEMBLE_FLAGGED: f64 = 0.2;
 
 /// The pair measured by the dense ensemble ([`ensemble::measure`], within
