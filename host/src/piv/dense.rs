@@ -8,6 +8,8 @@
 //! the family Corpetti et al. 2006 extend: particles follow an
 //! incompressible flow). It outputs one displacement per pixel, px per pair,
 //! `u` right and `v` down, and may start from a PIV field.
+//! [`dense_frames`] fits one steady flow to a run of frames instead of a
+//! pair, px per frame step.
 //!
 //! Hand-written: no crate solves this for `ndarray` images; every loop is
 //! a stencil over the image, parallel over rows (rayon).
