@@ -14,7 +14,7 @@
 //!
 //! The uncertainty of each node's vector comes from the pairs' own
 //! disagreement with the fit: each consecutive pair's least-squares
-//! correction over [`LOOK`] px around the node ([`look`]) is one look,
+//! correction over [`LOOK`] px around the node (`look`) is one look,
 //! and the looks' standard error of the mean, scaled by [`SPREAD`], is the
 //! standard uncertainty.
 //!
@@ -73,7 +73,7 @@ pub fn settings() -> DenseSettings {
 pub const MIN_MATCH: f64 = 0.2;
 
 /// Side of the window around a node's centre over which each pair's own
-/// correction ([`look`]) is measured, px: the vector is the flow at the
+/// correction (`look`) is measured, px: the vector is the flow at the
 /// centre, so its uncertainty is that of the flow there, not of the mean
 /// over the node's window (a 32-px window's looks agreed four times too
 /// well: 12–23 % of true errors within 1σ on the tuning seeds; 16 px
