@@ -99,14 +99,12 @@ fn smooth_flow_keeps_the_precision_of_piv() {
     );
 }
 
+/// Flat images (rows, columns, value): dark, saturated, tiny, one pixel.
+const FLAT: [(usize, usize, f32); 4] = [(64, 80, 0.0), (64, 80, 65535.0), (7, 5, 3.0), (1, 1, 1.0)];
+
 #[test]
 fn flat_tiny_and_saturated_images_give_finite_zero_flow() {
-    for (h, w, value) in [
-        (64, 80, 0.0f32),
-        (64, 80, 65535.0),
-        (7, 5, 3.0),
-        (1, 1, 1.0),
-    ] {
+    for (h, w, value) in FLAT {
         let a = Array2::from_elem((h, w), value);
         let f = dense_flow(&a, &a, None, &DenseSettings::default());
         assert_eq!(f.u.dim(), (h, w));
@@ -277,12 +275,7 @@ fn frames_degenerate_give_finite_zero_flow() {
     use spiv_host::piv::dense::dense_frames;
     let none = dense_frames(&[], ensemble::STEPS, &ensemble::settings());
     assert_eq!(none.u.dim(), (0, 0));
-    for (h, w, value) in [
-        (64, 80, 0.0f32),
-        (64, 80, 65535.0),
-        (7, 5, 3.0),
-        (1, 1, 1.0),
-    ] {
+    for (h, w, value) in FLAT {
         let a = Array2::from_elem((h, w), value);
         let f = dense_frames(
             &[a.clone(), a.clone(), a],

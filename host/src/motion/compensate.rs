@@ -76,23 +76,15 @@ impl Velocity {
     /// [`Velocity::displacement`] at every pixel: the field of
     /// displacements over `ticks` ticks, `(u, v)` in px.
     pub fn displacements(&self, ticks: f64) -> (Array2<f32>, Array2<f32>) {
-        let (h, w) = self.u.dim();
-        let rows: Vec<Vec<(f64, f64)>> = (0..h)
-            .into_par_iter()
-            .map(|i| {
-                (0..w)
-                    .map(|j| self.displacement((j as f64, i as f64), ticks))
-                    .collect()
-            })
-            .collect();
-        let mut u = Array2::zeros((h, w));
-        let mut v = Array2::zeros((h, w));
-        for (i, row) in rows.iter().enumerate() {
-            for (j, &(du, dv)) in row.iter().enumerate() {
-                u[[i, j]] = du as f32;
-                v[[i, j]] = dv as f32;
-            }
-        }
+        let mut u = Array2::zeros(self.u.dim());
+        let mut v = Array2::zeros(self.u.dim());
+        ndarray::Zip::indexed(&mut u)
+            .and(&mut v)
+            .par_for_each(|(i, j), u, v| {
+                let (du, dv) = self.displacement((j as f64, i as f64), ticks);
+                *u = du as f32;
+                *v = dv as f32;
+            });
         (u, v)
     }
 

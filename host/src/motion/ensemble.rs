@@ -248,7 +248,8 @@ fn look(
         }
     }
     let det = sxx * syy - sxy * sxy;
-    if det <= 1e-9 * (sxx + syy).powi(2) || det <= 0.0 {
+    // Zero trace (no texture) makes both sides zero.
+    if det <= 1e-9 * (sxx + syy).powi(2) {
         return None;
     }
     // (Σ g gᵀ)·d = −Σ g·gt.

@@ -257,33 +257,33 @@ impl Data {
         (u0, v0): (&Array2<f32>, &Array2<f32>),
     ) -> Data {
         let (h, w) = ix.dim();
-        let mut d = Data::zeros(h, w);
+        Data::from_fn(h, w, |i, j| {
+            let (gx, gy) = (ix[[i, j]], iy[[i, j]]);
+            let c = it[[i, j]] - gx * u0[[i, j]] - gy * v0[[i, j]];
+            [gx * gx, gx * gy, gy * gy, gx * c, gy * c]
+        })
+    }
+
+    /// The term whose pixel `(i, j)` is `f(i, j)` = `[j11, j12, j22, b1,
+    /// b2]`, rows in parallel.
+    fn from_fn(h: usize, w: usize, f: impl Fn(usize, usize) -> [f32; 5] + Sync) -> Data {
+        let z = || Array2::<f32>::zeros((h, w));
+        let mut d = Data {
+            j11: z(),
+            j12: z(),
+            j22: z(),
+            b1: z(),
+            b2: z(),
+        };
         Zip::indexed(&mut d.j11)
             .and(&mut d.j12)
             .and(&mut d.j22)
             .and(&mut d.b1)
             .and(&mut d.b2)
             .par_for_each(|(i, j), j11, j12, j22, b1, b2| {
-                let (gx, gy) = (ix[[i, j]], iy[[i, j]]);
-                let c = it[[i, j]] - gx * u0[[i, j]] - gy * v0[[i, j]];
-                *j11 = gx * gx;
-                *j12 = gx * gy;
-                *j22 = gy * gy;
-                *b1 = gx * c;
-                *b2 = gy * c;
+                [*j11, *j12, *j22, *b1, *b2] = f(i, j);
             });
         d
-    }
-
-    fn zeros(h: usize, w: usize) -> Data {
-        let z = || Array2::<f32>::zeros((h, w));
-        Data {
-            j11: z(),
-            j12: z(),
-            j22: z(),
-            b1: z(),
-            b2: z(),
-        }
     }
 }
 
@@ -521,63 +521,53 @@ fn level_frames_warps(
     let kmax = terms.iter().map(|t| t.1).max().unwrap_or(0);
     let (xmax, ymax) = ((w - 1) as f32, (h - 1) as f32);
     for _ in 0..s.warps {
-        let mut data = Data::zeros(h, w);
         let (u0, v0) = (&f.u, &f.v);
-        Zip::indexed(&mut data.j11)
-            .and(&mut data.j12)
-            .and(&mut data.j22)
-            .and(&mut data.b1)
-            .and(&mut data.b2)
-            .par_for_each(|(i, j), j11, j12, j22, b1, b2| {
-                let (x, y) = (j as f32, i as f32);
-                let (u, v) = (u0[[i, j]], v0[[i, j]]);
-                // Where the particle at (x, y) is k/2 steps later (fwd[k])
-                // and earlier (bwd[k]).
-                let mut fwd = [(x, y); MAX_STEP + 1];
-                let mut bwd = [(x, y); MAX_STEP + 1];
-                for (dir, out) in [(0.25f32, &mut fwd), (-0.25, &mut bwd)] {
-                    let (mut px, mut py) = (x, y);
-                    for slot in out.iter_mut().take(kmax + 1).skip(1) {
-                        for _ in 0..2 {
-                            let (a1, c1) = (sample(u0, py, px), sample(v0, py, px));
-                            let (mx, my) = (px + 0.5 * dir * a1, py + 0.5 * dir * c1);
-                            px += dir * sample(u0, my, mx);
-                            py += dir * sample(v0, my, mx);
-                        }
-                        *slot = (px, py);
+        let data = Data::from_fn(h, w, |i, j| {
+            let (x, y) = (j as f32, i as f32);
+            let (u, v) = (u0[[i, j]], v0[[i, j]]);
+            // Where the particle at (x, y) is k/2 steps later (fwd[k])
+            // and earlier (bwd[k]).
+            let mut fwd = [(x, y); MAX_STEP + 1];
+            let mut bwd = [(x, y); MAX_STEP + 1];
+            for (dir, out) in [(0.25f32, &mut fwd), (-0.25, &mut bwd)] {
+                let (mut px, mut py) = (x, y);
+                for slot in out.iter_mut().take(kmax + 1).skip(1) {
+                    for _ in 0..2 {
+                        let (a1, c1) = (sample(u0, py, px), sample(v0, py, px));
+                        let (mx, my) = (px + 0.5 * dir * a1, py + 0.5 * dir * c1);
+                        px += dir * sample(u0, my, mx);
+                        py += dir * sample(v0, my, mx);
                     }
+                    *slot = (px, py);
                 }
-                let (mut s11, mut s12, mut s22, mut t1, mut t2) = (0.0, 0.0, 0.0, 0.0, 0.0);
-                for &(a, k) in terms {
-                    let b = a + k;
-                    let ((xa, ya), (xb, yb)) = (bwd[k], fwd[k]);
-                    // A particle whose path leaves the image has nothing
-                    // to compare (clamped samples would pull the flow to
-                    // the edge's).
-                    if [xa, xb].iter().any(|&q| q < 0.0 || q > xmax)
-                        || [ya, yb].iter().any(|&q| q < 0.0 || q > ymax)
-                    {
-                        continue;
-                    }
-                    // d(path end)/dw ≈ ±k/2 per component: the data term's
-                    // gradient in w is k times the mean image gradient.
-                    let kf = k as f32;
-                    let gx = 0.5 * kf * (sample(&grads[a].0, ya, xa) + sample(&grads[b].0, yb, xb));
-                    let gy = 0.5 * kf * (sample(&grads[a].1, ya, xa) + sample(&grads[b].1, yb, xb));
-                    let gt = sample(frames[b], yb, xb) - sample(frames[a], ya, xa);
-                    let c = gt - gx * u - gy * v;
-                    s11 += gx * gx;
-                    s12 += gx * gy;
-                    s22 += gy * gy;
-                    t1 += gx * c;
-                    t2 += gy * c;
+            }
+            let (mut s11, mut s12, mut s22, mut t1, mut t2) = (0.0, 0.0, 0.0, 0.0, 0.0);
+            for &(a, k) in terms {
+                let b = a + k;
+                let ((xa, ya), (xb, yb)) = (bwd[k], fwd[k]);
+                // A particle whose path leaves the image has nothing
+                // to compare (clamped samples would pull the flow to
+                // the edge's).
+                if [xa, xb].iter().any(|&q| q < 0.0 || q > xmax)
+                    || [ya, yb].iter().any(|&q| q < 0.0 || q > ymax)
+                {
+                    continue;
                 }
-                *j11 = s11 / n;
-                *j12 = s12 / n;
-                *j22 = s22 / n;
-                *b1 = t1 / n;
-                *b2 = t2 / n;
-            });
+                // d(path end)/dw ≈ ±k/2 per component: the data term's
+                // gradient in w is k times the mean image gradient.
+                let kf = k as f32;
+                let gx = 0.5 * kf * (sample(&grads[a].0, ya, xa) + sample(&grads[b].0, yb, xb));
+                let gy = 0.5 * kf * (sample(&grads[a].1, ya, xa) + sample(&grads[b].1, yb, xb));
+                let gt = sample(frames[b], yb, xb) - sample(frames[a], ya, xa);
+                let c = gt - gx * u - gy * v;
+                s11 += gx * gx;
+                s12 += gx * gy;
+                s22 += gy * gy;
+                t1 += gx * c;
+                t2 += gy * c;
+            }
+            [s11 / n, s12 / n, s22 / n, t1 / n, t2 / n]
+        });
         relax(f, &data, a2, s.div_weight, s.iterations);
         if s.median > 1 {
             f.u = median(&f.u, s.median);
