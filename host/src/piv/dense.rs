@@ -449,6 +449,18 @@ pub struct Steps<'a> {
 /// at the same flow, and a pair `k` steps apart measures it `k` times as
 /// finely.
 pub fn dense_frames(frames: &[Array2<f32>], steps: Steps<'_>, s: &DenseSettings) -> Flow {
+    dense_frames_from(frames, None, steps, s)
+}
+
+/// [`dense_frames`] started from `init` (per frame step, full
+/// resolution) at pyramid level [`DenseSettings::init_level`], or from rest
+/// at the coarsest level.
+pub fn dense_frames_from(
+    frames: &[Array2<f32>],
+    init: Option<&Flow>,
+    steps: Steps<'_>,
+    s: &DenseSettings,
+) -> Flow {
     let Some(first) = frames.first() else {
         return Flow {
             u: Array2::zeros((0, 0)),
@@ -473,11 +485,18 @@ pub fn dense_frames(frames: &[Array2<f32>], steps: Steps<'_>, s: &DenseSettings)
             p.push(d);
         });
     }
-    let top = pyr[0].len() - 1;
+    let init = init.filter(|i| i.u.dim() == (h, w) && i.v.dim() == (h, w));
+    let top = match init {
+        Some(_) => s.init_level.min(pyr[0].len() - 1),
+        None => pyr[0].len() - 1,
+    };
     let (th, tw) = pyr[0][top].dim();
-    let mut f = Flow {
-        u: Array2::zeros((th, tw)),
-        v: Array2::zeros((th, tw)),
+    let mut f = match init {
+        Some(i) => scaled_down(i, top, (th, tw)),
+        None => Flow {
+            u: Array2::zeros((th, tw)),
+            v: Array2::zeros((th, tw)),
+        },
     };
     let pairs = |ks: &[usize]| -> Vec<(usize, usize)> {
         ks.iter()
