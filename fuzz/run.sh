@@ -8,10 +8,9 @@
 #   fuzz/run.sh --runs N TARGET...  some targets only
 #   fuzz/run.sh --grow --runs N     keep what the run adds in fuzz/corpus
 #                                   (then minimise it with `cargo fuzz cmin`)
-#   fuzz/run.sh --dev --seconds 10  unoptimised targets (CI): a third of the
+#   fuzz/run.sh --dev --seconds 10  targets at opt-level 1 (CI): half the
 #                                   optimised build's time from a cold cache
-#                                   (140 s against 424 s on 2 cores), at a
-#                                   fraction of its executions per second
+#                                   (223 s against 424 s on 2 cores)
 #
 # Without --grow the inputs a run adds go to a temporary folder, so a
 # short run leaves the checkout as it was (the committed corpus is read,
