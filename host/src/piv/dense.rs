@@ -383,6 +383,33 @@ fn scaled_down(i: &Flow, top: usize, (th, tw): (usize, usize)) -> Flow {
     }
 }
 
+/// Where a pyramid `levels` (full resolution `(h, w)` first) is entered
+/// and with what flow: `init` (full resolution) scaled down to level
+/// `init_level`, or rest at the coarsest level when there is no `init`
+/// of that size.
+fn start(
+    init: Option<&Flow>,
+    (h, w): (usize, usize),
+    init_level: usize,
+    levels: &[Array2<f32>],
+) -> (usize, Flow) {
+    let coarsest = levels.len().saturating_sub(1);
+    let init = init.filter(|i| i.u.dim() == (h, w) && i.v.dim() == (h, w));
+    let top = match init {
+        Some(_) => init_level.min(coarsest),
+        None => coarsest,
+    };
+    let (th, tw) = levels[top].dim();
+    let f = match init {
+        Some(i) => scaled_down(i, top, (th, tw)),
+        None => Flow {
+            u: Array2::zeros((th, tw)),
+            v: Array2::zeros((th, tw)),
+        },
+    };
+    (top, f)
+}
+
 /// The dense flow from `a` to `b` (same size), starting from `init` (a
 /// dense field, e.g. a PIV field interpolated to every pixel) or from rest.
 pub fn dense_flow(
@@ -403,19 +430,7 @@ pub fn dense_flow(
         pa.push(da);
         pb.push(db);
     }
-    let init = init.filter(|i| i.u.dim() == (h, w) && i.v.dim() == (h, w));
-    let top = match init {
-        Some(_) => s.init_level.min(pa.len() - 1),
-        None => pa.len() - 1,
-    };
-    let (th, tw) = pa[top].dim();
-    let mut f = match init {
-        Some(i) => scaled_down(i, top, (th, tw)),
-        _ => Flow {
-            u: Array2::zeros((th, tw)),
-            v: Array2::zeros((th, tw)),
-        },
-    };
+    let (top, mut f) = start(init, (h, w), s.init_level, &pa);
     for l in (0..=top).rev() {
         level(&pa[l], &pb[l], &mut f, s);
         if l > 0 {
@@ -485,19 +500,7 @@ pub fn dense_frames_from(
             p.push(d);
         });
     }
-    let init = init.filter(|i| i.u.dim() == (h, w) && i.v.dim() == (h, w));
-    let top = match init {
-        Some(_) => s.init_level.min(pyr[0].len() - 1),
-        None => pyr[0].len() - 1,
-    };
-    let (th, tw) = pyr[0][top].dim();
-    let mut f = match init {
-        Some(i) => scaled_down(i, top, (th, tw)),
-        None => Flow {
-            u: Array2::zeros((th, tw)),
-            v: Array2::zeros((th, tw)),
-        },
-    };
+    let (top, mut f) = start(init, (h, w), s.init_level, &pyr[0]);
     let pairs = |ks: &[usize]| -> Vec<(usize, usize)> {
         ks.iter()
             .filter(|&&k| (1..=MAX_STEP).contains(&k))
