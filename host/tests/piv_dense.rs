@@ -215,6 +215,35 @@ fn epe_inside(
     s / f64::from(n)
 }
 
+/// Eight `n × n` frames of `pts` turning about the image's centre by `om`
+/// rad per frame.
+fn rotation(n: usize, pts: &[(f64, f64)], om: f64) -> Vec<Array2<f32>> {
+    let cx = (n as f64 - 1.0) / 2.0;
+    let cy = cx;
+    (0..8)
+        .map(|i| {
+            let a = om * (i as f64 - 3.5);
+            let (c, s) = (a.cos(), a.sin());
+            let moved: Vec<_> = pts
+                .iter()
+                .map(|&(x, y)| {
+                    let (dx, dy) = (x - cx, y - cy);
+                    (cx + c * dx - s * dy, cy + s * dx + c * dy)
+                })
+                .collect();
+            spots(n, &moved)
+        })
+        .collect()
+}
+
+/// The true displacement over one frame of [`rotation`]'s particle at
+/// `(x, y)` halfway through: a chord of its circle.
+fn chord(n: usize, om: f64) -> impl Fn(f64, f64) -> (f64, f64) {
+    let c = (n as f64 - 1.0) / 2.0;
+    let k = 2.0 * (om / 2.0).sin();
+    move |x, y| (-k * (y - c), k * (x - c))
+}
+
 #[test]
 fn frames_fit_one_flow_along_curved_paths() {
     use spiv_host::motion::ensemble;
@@ -239,30 +268,9 @@ fn frames_fit_one_flow_along_curved_paths() {
 
     // A solid-body rotation about the centre, 6 px per frame at 40 px
     // (paths three frames apart turn by 26°).
-    let (cx, cy) = (47.5, 47.5);
     let om = 6.0 / 40.0;
-    let frames: Vec<Array2<f32>> = (0..8)
-        .map(|i| {
-            let a = om * (i as f64 - 3.5);
-            let (c, s) = (a.cos(), a.sin());
-            let moved: Vec<_> = pts
-                .iter()
-                .map(|&(x, y)| {
-                    let (dx, dy) = (x - cx, y - cy);
-                    (cx + c * dx - s * dy, cy + s * dx + c * dy)
-                })
-                .collect();
-            spots(n, &moved)
-        })
-        .collect();
+    let (frames, chord) = (rotation(n, &pts, om), chord(n, om));
     let f = dense_frames(&frames, ensemble::STEPS, &ensemble::settings());
-    // The true displacement over one frame of the particle at (x, y)
-    // halfway through: a chord of the circle.
-    let chord = |x: f64, y: f64| {
-        let (dx, dy) = (x - cx, y - cy);
-        let k = 2.0 * (om / 2.0).sin();
-        (-k * dy, k * dx)
-    };
     let e = epe_inside(&f, 16, chord);
     let mean = epe_inside(&f, 16, |_, _| (0.0, 0.0));
     // Measured: 0.058 px of 3.67.
@@ -276,24 +284,8 @@ fn frames_from_a_flow_correct_it() {
     let n = 96;
     let pts = points(n, 700, 11);
     // A solid-body rotation, 5 px per frame at 40 px.
-    let (cx, cy) = (47.5, 47.5);
     let om = 5.0 / 40.0;
-    let frames: Vec<Array2<f32>> = (0..8)
-        .map(|i| {
-            let a = om * (i as f64 - 3.5);
-            let (c, s) = (a.cos(), a.sin());
-            let moved: Vec<_> = pts
-                .iter()
-                .map(|&(x, y)| {
-                    let (dx, dy) = (x - cx, y - cy);
-                    (cx + c * dx - s * dy, cy + s * dx + c * dy)
-                })
-                .collect();
-            spots(n, &moved)
-        })
-        .collect();
-    let k = 2.0 * (om / 2.0).sin();
-    let chord = |x: f64, y: f64| (-k * (y - cy), k * (x - cx));
+    let (frames, chord) = (rotation(n, &pts, om), chord(n, om));
     // Started from the rotation 30 % too fast and 0.5 px off to the right.
     let init = Flow {
         u: Array2::from_shape_fn((n, n), |(i, j)| {
@@ -302,7 +294,7 @@ fn frames_from_a_flow_correct_it() {
         v: Array2::from_shape_fn((n, n), |(i, j)| (1.3 * chord(j as f64, i as f64).1) as f32),
     };
     let s = ensemble::settings();
-    let wrong = epe_inside(&init, 16, chord);
+    let wrong = epe_inside(&init, 16, &chord);
     let f = dense_frames_from(&frames, Some(&init), ensemble::STEPS, &s);
     let e = epe_inside(&f, 16, chord);
     let mean = epe_inside(&f, 16, |_, _| (0.0, 0.0));

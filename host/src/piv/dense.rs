@@ -383,18 +383,14 @@ fn scaled_down(i: &Flow, top: usize, (th, tw): (usize, usize)) -> Flow {
     }
 }
 
-/// Where a pyramid `levels` (full resolution `(h, w)` first) is entered
-/// and with what flow: `init` (full resolution) scaled down to level
-/// `init_level`, or rest at the coarsest level when there is no `init`
-/// of that size.
-fn start(
-    init: Option<&Flow>,
-    (h, w): (usize, usize),
-    init_level: usize,
-    levels: &[Array2<f32>],
-) -> (usize, Flow) {
+/// Where a pyramid `levels` (full resolution first, at least one level)
+/// is entered and with what flow: `init` (full resolution) scaled down to
+/// level `init_level`, or rest at the coarsest level when there is no
+/// `init` of that size.
+fn start(init: Option<&Flow>, init_level: usize, levels: &[Array2<f32>]) -> (usize, Flow) {
     let coarsest = levels.len().saturating_sub(1);
-    let init = init.filter(|i| i.u.dim() == (h, w) && i.v.dim() == (h, w));
+    let full = levels[0].dim();
+    let init = init.filter(|i| i.u.dim() == full && i.v.dim() == full);
     let top = match init {
         Some(_) => init_level.min(coarsest),
         None => coarsest,
@@ -418,7 +414,6 @@ pub fn dense_flow(
     init: Option<&Flow>,
     s: &DenseSettings,
 ) -> Flow {
-    let (h, w) = a.dim();
     let mut pa = vec![normalise(a)];
     let mut pb = vec![normalise(b)];
     for _ in 0..s.levels {
@@ -430,7 +425,7 @@ pub fn dense_flow(
         pa.push(da);
         pb.push(db);
     }
-    let (top, mut f) = start(init, (h, w), s.init_level, &pa);
+    let (top, mut f) = start(init, s.init_level, &pa);
     for l in (0..=top).rev() {
         level(&pa[l], &pb[l], &mut f, s);
         if l > 0 {
@@ -500,7 +495,7 @@ pub fn dense_frames_from(
             p.push(d);
         });
     }
-    let (top, mut f) = start(init, (h, w), s.init_level, &pyr[0]);
+    let (top, mut f) = start(init, s.init_level, &pyr[0]);
     let pairs = |ks: &[usize]| -> Vec<(usize, usize)> {
         ks.iter()
             .filter(|&&k| (1..=MAX_STEP).contains(&k))
