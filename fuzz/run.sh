@@ -8,9 +8,13 @@
 #   fuzz/run.sh --runs N TARGET...  some targets only
 #   fuzz/run.sh --grow --runs N     keep what the run adds in fuzz/corpus
 #                                   (then minimise it with `cargo fuzz cmin`)
-#   fuzz/run.sh --dev --seconds 10  targets at opt-level 1 (CI): half the
+#   fuzz/run.sh --dev --seconds 10  targets at opt-level 1: half the
 #                                   optimised build's time from a cold cache
 #                                   (223 s against 424 s on 2 cores)
+#
+# Each target's checks are in harness/<target>.rs; `cargo test --workspace`
+# replays every committed corpus input through them
+# (tests/tests/fuzz_corpora.rs).
 #
 # Without --grow the inputs a run adds go to a temporary folder, so a
 # short run leaves the checkout as it was (the committed corpus is read,
