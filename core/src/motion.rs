@@ -676,6 +676,22 @@ fn sharpness(
                             base += wpr;
                             i += 1;
                         }
+                        let two = 2 * ((hi - i) / 2);
+                        let rows = plane.get(base..base + two * wpr);
+                        if let (Some(l), Some(r), Some(rows)) = (wl, wh, rows) {
+                            // Both source words in the row and every row in
+                            // the plane: no per-row checks.
+                            for (rr, pair) in rows.chunks_exact(2 * wpr).zip(&mut pairs[i / 2..]) {
+                                let (a, b) = rr.split_at(wpr);
+                                let at = |row: &[u64], k: usize| row.get(k).copied().unwrap_or(0);
+                                let left = wide::u64x2::new([at(a, l), at(b, l)]);
+                                let right = wide::u64x2::new([at(a, r), at(b, r)]);
+                                let w = (left >> s.b) | ((right << 1) << (63 - s.b));
+                                slices::csa(pair, w & wide::u64x2::splat(m));
+                            }
+                            base += two * wpr;
+                            i += two;
+                        }
                         while i + 1 < hi {
                             let (b1, p) = (base + wpr, i / 2);
                             let l = wide::u64x2::new([word(base, wl), word(b1, wl)]);
