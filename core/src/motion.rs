@@ -677,17 +677,23 @@ fn sharpness(
                             i += 1;
                         }
                         let two = 2 * ((hi - i) / 2);
-                        let rows = plane.get(base..base + two * wpr);
-                        if let (Some(l), Some(r), Some(rows)) = (wl, wh, rows) {
-                            // Both source words in the row and every row in
-                            // the plane: no per-row checks.
-                            for (rr, pair) in rows.chunks_exact(2 * wpr).zip(&mut pairs[i / 2..]) {
-                                let (a, b) = rr.split_at(wpr);
-                                let at = |row: &[u64], k: usize| row.get(k).copied().unwrap_or(0);
-                                let left = wide::u64x2::new([at(a, l), at(b, l)]);
-                                let right = wide::u64x2::new([at(a, r), at(b, r)]);
-                                let w = (left >> s.b) | ((right << 1) << (63 - s.b));
-                                slices::csa(pair, w & wide::u64x2::splat(m));
+                        if let Some(rows) = plane.get(base..base + two * wpr) {
+                            // Every row in the plane: one slice, no check
+                            // per word, and a source word outside the row
+                            // (`None`) is not read.
+                            let (b, m) = (s.b, wide::u64x2::splat(m));
+                            let pairs = &mut pairs[i / 2..];
+                            match (wl, wh) {
+                                (Some(l), Some(r)) => {
+                                    row_pairs::<true, true>(rows, wpr, (l, r), b, m, pairs)
+                                }
+                                (Some(l), None) => {
+                                    row_pairs::<true, false>(rows, wpr, (l, 0), b, m, pairs)
+                                }
+                                (None, Some(r)) => {
+                                    row_pairs::<false, true>(rows, wpr, (0, r), b, m, pairs)
+                                }
+                                (None, None) => {}
                             }
                             base += two * wpr;
                             i += two;
@@ -729,6 +735,35 @@ fn sharpness(
         r0 += nr as u16;
     }
     e
+}
+
+/// [`sharpness`]'s row pairs on x86: `rows` holds whole rows of `wpr`
+/// words, two per entry of `pairs`; each row's word is its words `l` (when
+/// `L`) and `r` (when `R`) funnel-shifted by `b`, masked by `m`, and added
+/// to the pair's carry-save counter. A word not read counts as zero.
+#[cfg(target_arch = "x86_64")]
+fn row_pairs<const L: bool, const R: bool>(
+    rows: &[u64],
+    wpr: usize,
+    (l, r): (usize, usize),
+    b: u32,
+    m: wide::u64x2,
+    pairs: &mut [[wide::u64x2; 4]],
+) {
+    for (two, pair) in rows.chunks_exact(2 * wpr).zip(pairs) {
+        let (x, y) = two.split_at(wpr);
+        let at = |row: &[u64], k: usize| row.get(k).copied().unwrap_or(0);
+        let mut w = wide::u64x2::ZERO;
+        if L {
+            w |= wide::u64x2::new([at(x, l), at(y, l)]) >> b;
+        }
+        if R {
+            // (hi << 1) << (63 − b) is hi << (64 − b) for b > 0 and 0 for
+            // b = 0.
+            w |= (wide::u64x2::new([at(x, r), at(y, r)]) << 1) << (63 - b);
+        }
+        slices::csa(pair, w & m);
+    }
 }
 
 #[cfg(test)]
