@@ -647,6 +647,7 @@ fn sharpness(
             let m = slices::low_bits(usize::from(node.width) - 64 * j);
             let mut counts = [Counter::default(); BLOCK_ROWS];
             for (ps, ss) in planes.chunks(15).zip(shifts.chunks(15)) {
+                #[cfg(not(target_arch = "x86_64"))]
                 let mut acc = [[0u64; 4]; BLOCK_ROWS];
                 #[cfg(target_arch = "x86_64")]
                 let mut pairs = [[wide::u64x2::ZERO; 4]; BLOCK_ROWS / 2];
@@ -664,15 +665,19 @@ fn sharpness(
                     let word = |base: usize, k: Option<usize>| {
                         k.and_then(|k| plane.get(base + k)).copied().unwrap_or(0)
                     };
-                    // Two rows per SSE2 operation where both lie in the
-                    // band (rows 2p and 2p + 1 are pair p's lanes); the
-                    // first row on its own when it is odd.
+                    // (hi << 1) << (63 − b) is hi << (64 − b) for b > 0
+                    // and 0 for b = 0.
+                    let one = |base: usize| {
+                        ((word(base, wl) >> s.b) | ((word(base, wh) << 1) << (63 - s.b))) & m
+                    };
+                    // Two rows per SSE2 operation (rows 2p and 2p + 1 are
+                    // pair p's lanes); a first row that is odd, or a last
+                    // that is even, alone in its lane.
                     #[cfg(target_arch = "x86_64")]
-                    let i = {
+                    {
                         let mut i = lo;
                         if i % 2 == 1 && i < hi {
-                            let w = (word(base, wl) >> s.b) | ((word(base, wh) << 1) << (63 - s.b));
-                            slices::csa(&mut acc[i], w & m);
+                            slices::csa(&mut pairs[i / 2], wide::u64x2::new([0, one(base)]));
                             base += wpr;
                             i += 1;
                         }
@@ -707,18 +712,17 @@ fn sharpness(
                             base += 2 * wpr;
                             i += 2;
                         }
-                        i
-                    };
+                        if i < hi {
+                            slices::csa(&mut pairs[i / 2], wide::u64x2::new([one(base), 0]));
+                        }
+                    }
                     #[cfg(not(target_arch = "x86_64"))]
-                    let i = lo;
-                    for a in &mut acc[i..hi] {
-                        // (hi << 1) << (63 − b) is hi << (64 − b) for b > 0
-                        // and 0 for b = 0.
-                        let w = (word(base, wl) >> s.b) | ((word(base, wh) << 1) << (63 - s.b));
-                        slices::csa(a, w & m);
+                    for a in &mut acc[lo..hi] {
+                        slices::csa(a, one(base));
                         base += wpr;
                     }
                 }
+                #[cfg(not(target_arch = "x86_64"))]
                 for (c, a) in counts.iter_mut().zip(&acc[..nr]) {
                     slices::add_nibble(c, *a);
                 }
