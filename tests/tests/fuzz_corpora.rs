@@ -22,6 +22,9 @@ mod tile_decode;
 #[path = "../../fuzz/harness/wire_stream.rs"]
 mod wire_stream;
 
+/// A target's name and its harness.
+type Target = (&'static str, fn(&[u8]));
+
 /// Runs `run` on every file of `fuzz/corpus/<target>`, naming the file
 /// that panics; returns how many inputs ran.
 fn replay(target: &str, run: fn(&[u8])) -> usize {
@@ -44,7 +47,7 @@ fn replay(target: &str, run: fn(&[u8])) -> usize {
 
 #[test]
 fn every_corpus_input_passes_its_harness() {
-    let targets: [(&str, fn(&[u8])); 7] = [
+    let targets: [Target; 7] = [
         ("wire_stream", wire_stream::run),
         ("tile_decode", tile_decode::run),
         ("downlink", downlink::run),
