@@ -1,8 +1,7 @@
 //! Every committed fuzz corpus input (`fuzz/corpus/<target>`) through its
 //! target's own harness (`fuzz/harness/<target>.rs`, the code libFuzzer
-//! runs): the inputs that once found a bug, and those that reach every
-//! branch the fuzzer found, replayed on every test run without the
-//! fuzzer's instrumented build. Debug and overflow assertions are on in
+//! runs): the minimised inputs that reach every branch the fuzzer found,
+//! replayed on every test run without the fuzzer's instrumented build. Debug and overflow assertions are on in
 //! the test profile, as in the fuzz build.
 
 use std::path::PathBuf;
