@@ -704,11 +704,8 @@ fn sharpness(
                             i += two;
                         }
                         while i + 1 < hi {
-                            let (b1, p) = (base + wpr, i / 2);
-                            let l = wide::u64x2::new([word(base, wl), word(b1, wl)]);
-                            let h = wide::u64x2::new([word(base, wh), word(b1, wh)]);
-                            let w = (l >> s.b) | ((h << 1) << (63 - s.b));
-                            slices::csa(&mut pairs[p], w & wide::u64x2::splat(m));
+                            let w = wide::u64x2::new([one(base), one(base + wpr)]);
+                            slices::csa(&mut pairs[i / 2], w);
                             base += 2 * wpr;
                             i += 2;
                         }

@@ -83,11 +83,7 @@ pub const SHARP: u64 = 12;
 
 /// A flow per frame step of `s` ticks as a velocity, px per tick.
 fn per_tick(f: &Flow, s: u64) -> Velocity {
-    let k = 1.0 / s as f32;
-    Velocity {
-        u: f.u.mapv(|x| x * k),
-        v: f.v.mapv(|x| x * k),
-    }
+    Velocity::from_displacement(&f.u, &f.v, s as f64)
 }
 
 /// Least mean zero-normalised correlation of a node's window between the
