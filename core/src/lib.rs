@@ -11,6 +11,9 @@
 //! | [`window`] | centred windows, bit-parallel window counts, TFP and TFI |
 //! | [`method`] | how a frame is made: adaptive, TFP, TFI, and its wire code |
 //! | [`motion`] | motion compensation: counting along a predicted path, refining the prediction by contrast maximisation |
+//! | [`light`] | each pixel's static light predicted from its own spikes, and the innovation events it did not predict |
+//! | [`warp`] | frames of warped events: each event added where a steady flow carries it at the frame's time |
+//! | [`rungs`] | what a pair of the time ladder needs: the last ticks' events in a ring, and the rung frames warped along the host's flow |
 //! | [`particle`] | the particle test against the local background, exact, with per-frame tables |
 //! | [`slices`] | bit-sliced window counts: 64 pixels' counters as eight bit planes |
 //! | [`segment`] | saturation time `t_bgmax` and particle/background segmentation |
@@ -39,6 +42,8 @@
 //! [`state::WorkspaceSizes`].
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 #![warn(missing_docs)]
+#[cfg(feature = "std")]
+extern crate std;
 
 #[cfg(feature = "std")]
 pub mod buffers;
@@ -50,6 +55,7 @@ pub mod gray;
 pub mod history;
 pub mod integrate;
 pub mod label;
+pub mod light;
 pub mod method;
 pub mod motion;
 pub mod params;
@@ -57,6 +63,7 @@ pub mod particle;
 pub mod plane;
 pub mod q;
 pub mod region;
+pub mod rungs;
 pub mod segment;
 pub mod sidecar;
 pub mod slices;
@@ -64,6 +71,7 @@ pub mod state;
 pub mod suppress;
 #[cfg(test)]
 mod testing;
+pub mod warp;
 pub mod window;
 pub mod wire;
 

@@ -14,6 +14,7 @@
 //! unrounded value (the core rounds exact rationals once, so the difference
 //! is at most ½ level plus `f64` rounding).
 
+pub mod light;
 pub mod motion;
 
 use spiv_core::Params;

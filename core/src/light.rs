@@ -1,0 +1,517 @@
+//! The static light of every pixel, predicted from its own spikes, and the
+//! *innovation events*: the spikes the prediction did not expect, and the
+//! predicted spikes that did not come.
+//!
+//! An integrate-and-fire pixel under steady light fires almost
+//! periodically: static light (background, glare, the sensor's fixed
+//! pattern) gives each pixel a period, and only light that moves — a
+//! particle — fires it off its beat. [`Light`] keeps, per pixel, the tick
+//! of its last spike, a running estimate of its period and how often that
+//! estimate was right, and its mean rate; from those it predicts the next
+//! spike one period after the last. Streaming and causal: each plane is
+//! taken once, in order, and every decision uses only what came before
+//! (and at most [`MAX_TOLERANCE`] ticks after the prediction it settles).
+//!
+//! Per pixel and tick, with `P` the period estimate in whole ticks, the
+//! pixel *periodic* once [`CONFIDENT`] intervals in a row agreed with it,
+//! and the tolerances `early = P/16`, `late = 1 + P/16` ([`tolerance`]:
+//! the sensor's jitter, a tick of phase and the photon noise of one
+//! spike's charge):
+//!
+//! - a spike of a periodic pixel `P − early ..= P + late` ticks after its
+//!   last spike was predicted: no event;
+//! - any other spike: event `+1` at its tick;
+//! - a periodic pixel silent `P + late` ticks after its last spike: event
+//!   `−1` at tick `last + P` (the prediction that did not come), settled
+//!   `late` ticks later, and one agreement less.
+//!
+//! Intervals shorter than the period (light added for a while: a
+//! particle, however slowly it crosses) leave the period as it was until
+//! they have lasted [`RELEARN_TICKS`]; a longer one costs two agreements,
+//! and the period is learnt again when none are left. A pixel that is not periodic (too dark to have shown its period
+//! yet, or too irregular) predicts no spike times: its static light is its
+//! mean rate ([`Light::rate`], spikes per tick averaged over
+//! [`RATE_TICKS`]), which the frames it adds to take off along the same
+//! paths its spikes take ([`crate::warp::subtract_rates`]). Events are
+//! sparse: light that fires on its beat makes none.
+//!
+//! Units: ticks (one plane), pixels of the stored row order; periods in
+//! 1/16 tick (Q4); rates in 1/65536 spike per tick (Q16).
+//!
+//! Memory: [`LIGHT_BYTES_PER_PIXEL`] bytes per pixel in four
+//! caller-supplied slices ([`LightState`]); nothing else.
+
+use crate::error::Error;
+use crate::plane::PlaneView;
+
+/// Late ticks within which a spike still counts as the predicted one, at
+/// the shortest periods ([`tolerance`]).
+pub const TOLERANCE: u16 = 1;
+
+/// Agreeing intervals after which a pixel's period predicts its spikes.
+pub const CONFIDENT: u8 = 2;
+
+/// Most agreements a pixel counts (a pixel that drifts off its period
+/// loses it after a few misses however long it was steady).
+pub const MAX_CONFIDENCE: u8 = 7;
+
+/// Longest period a pixel can hold, ticks: slower pixels are predicted by
+/// their rate.
+pub const MAX_PERIOD: u16 = 4095;
+
+/// Largest late [`tolerance`], ticks: the longest an event waits to be
+/// settled.
+pub const MAX_TOLERANCE: u16 = 16;
+
+/// Ticks of intervals shorter than the period, with no agreeing one
+/// between, after which the period is learnt again (static light that
+/// brightened); shorter runs of them are light added for a while — a
+/// particle, however slowly it crosses the pixel — and leave the period
+/// as it was.
+pub const RELEARN_TICKS: u16 = 512;
+
+/// Ticks the mean rate averages over (an exponential average, 1/256 of
+/// each new tick; over the first ticks the plain mean).
+pub const RATE_TICKS: u32 = 256;
+
+/// A settled period moves by 1/2^`SETTLED_SHIFT` of each agreeing
+/// interval's difference from it.
+pub const SETTLED_SHIFT: u32 = 4;
+
+/// One spike per tick in the rate's state (Q24).
+const RATE_ONE: i64 = 1 << 24;
+
+/// Bytes of state per pixel.
+pub const LIGHT_BYTES_PER_PIXEL: usize = 11;
+
+/// Flag bit of a pixel that has spiked at least once.
+const SPIKED: u8 = 0x80;
+/// Bits of the agreement count.
+const COUNT: u8 = 0x0f;
+
+/// One innovation event: pixel `index` (stored row-major, `row·width +
+/// col`) at `tick`, `sign` `+1` (an unexpected spike) or `−1` (a
+/// predicted spike that did not come).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Event {
+    /// Pixel, stored row-major.
+    pub index: u32,
+    /// Tick of the spike (or of the prediction).
+    pub tick: u32,
+    /// `+1` or `−1`.
+    pub sign: i8,
+}
+
+/// The per-pixel state, borrowed: each slice one entry per pixel.
+#[derive(Debug)]
+pub struct LightState<'a> {
+    /// Tick of the last spike, modulo 2^16.
+    pub last: &'a mut [u16],
+    /// Period estimate, Q4 ticks (0: none).
+    pub period: &'a mut [u16],
+    /// Mean rate, Q24 spikes per tick (the extra bits keep the running
+    /// average's rounding off its mean).
+    pub rate: &'a mut [u32],
+    /// Ticks of short intervals since the last agreeing one.
+    pub short: &'a mut [u16],
+    /// Bit 7: has spiked; bits 0–3: agreements with the period.
+    pub flags: &'a mut [u8],
+}
+
+/// The static-light model of a `width × height` sensor.
+#[derive(Debug)]
+pub struct Light<'a> {
+    width: u16,
+    height: u16,
+    clock: LightClock,
+    state: LightState<'a>,
+}
+
+/// Where a [`Light`] stands besides its per-pixel state: a model taken
+/// apart ([`Light::clock`]) and put together again over the same state
+/// ([`Light::resume`]) goes on as if never stopped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LightClock {
+    /// The tick the next plane gets.
+    pub next: u32,
+    /// Ticks taken so far (the rate's average is the plain mean until
+    /// [`RATE_TICKS`]).
+    pub seen: u32,
+}
+
+/// Ticks by which a spike of a pixel of period `p` ticks may come late
+/// and still be the predicted one: [`TOLERANCE`] (a tick of phase) and
+/// `p/16` (the photon noise of a spike's charge, about 3 % of the period
+/// at 1000 electrons per spike, twice over), at most [`MAX_TOLERANCE`].
+#[inline]
+pub fn tolerance(p: u16) -> u16 {
+    TOLERANCE.saturating_add(p / 16).min(MAX_TOLERANCE)
+}
+
+/// Ticks by which a spike may come early and still be the predicted one:
+/// `p/16` (none at the short periods of glare, where a particle's light
+/// brings a spike a tick early).
+#[inline]
+pub fn early_tolerance(p: u16) -> u16 {
+    (p / 16).min(MAX_TOLERANCE)
+}
+
+impl<'a> Light<'a> {
+    /// A model with nothing seen yet, over `state` (each slice at least
+    /// `width × height` entries; they are cleared). The first plane pushed
+    /// is tick `first`.
+    pub fn new(width: u16, height: u16, first: u32, state: LightState<'a>) -> Result<Self, Error> {
+        let px = crate::plane::plane_bytes(width, height).ok_or(Error::BadDimensions)? * 8;
+        let got = state
+            .last
+            .len()
+            .min(state.period.len())
+            .min(state.rate.len())
+            .min(state.short.len())
+            .min(state.flags.len());
+        if got < px {
+            return Err(Error::BufferTooSmall { needed: px, got });
+        }
+        state.last[..px].fill(0);
+        state.period[..px].fill(0);
+        state.rate[..px].fill(0);
+        state.short[..px].fill(0);
+        state.flags[..px].fill(0);
+        Ok(Light {
+            width,
+            height,
+            clock: LightClock {
+                next: first,
+                seen: 0,
+            },
+            state,
+        })
+    }
+
+    /// The model as it stood at `clock` over `state` (as [`Light::clock`]
+    /// and the state left it; the state is not cleared).
+    pub fn resume(
+        width: u16,
+        height: u16,
+        clock: LightClock,
+        state: LightState<'a>,
+    ) -> Result<Self, Error> {
+        let px = crate::plane::plane_bytes(width, height).ok_or(Error::BadDimensions)? * 8;
+        let got = state
+            .last
+            .len()
+            .min(state.period.len())
+            .min(state.rate.len())
+            .min(state.short.len())
+            .min(state.flags.len());
+        if got < px {
+            return Err(Error::BufferTooSmall { needed: px, got });
+        }
+        Ok(Light {
+            width,
+            height,
+            clock,
+            state,
+        })
+    }
+
+    /// Where the model stands (to [`Light::resume`] it).
+    pub fn clock(&self) -> LightClock {
+        self.clock
+    }
+
+    /// Width, px.
+    pub fn width(&self) -> u16 {
+        self.width
+    }
+
+    /// Height, px.
+    pub fn height(&self) -> u16 {
+        self.height
+    }
+
+    /// The tick the next plane gets.
+    pub fn next_tick(&self) -> u32 {
+        self.clock.next
+    }
+
+    /// Takes the next plane (tick [`Light::next_tick`]) and hands every
+    /// event it settles to `sink`: `+1` events of this tick and `−1`
+    /// events of earlier ticks (at most [`MAX_TOLERANCE`] earlier), in
+    /// pixel order.
+    pub fn push(&mut self, plane: &PlaneView<'_>, sink: impl FnMut(Event)) -> Result<(), Error> {
+        let t = self.clock.next;
+        let next = t.checked_add(1).ok_or(Error::TickOverflow)?;
+        self.push_at(plane, t, sink)?;
+        self.clock.next = next;
+        Ok(())
+    }
+
+    /// Takes `plane` as the next tick without reporting any event, the
+    /// tick counter wrapping: a model trained on planes before its first
+    /// reported tick ([`Light::new`] with `first` less the planes to train
+    /// on, wrapping).
+    pub fn train(&mut self, plane: &PlaneView<'_>) -> Result<(), Error> {
+        let t = self.clock.next;
+        self.push_at(plane, t, |_| {})?;
+        self.clock.next = t.wrapping_add(1);
+        Ok(())
+    }
+
+    fn push_at(
+        &mut self,
+        plane: &PlaneView<'_>,
+        t: u32,
+        mut sink: impl FnMut(Event),
+    ) -> Result<(), Error> {
+        if plane.width() != self.width || plane.height() != self.height {
+            return Err(Error::PlaneMismatch);
+        }
+        let t16 = t as u16;
+        let px = usize::from(self.width) * usize::from(self.height);
+        self.clock.seen = self.clock.seen.saturating_add(1);
+        // The rate's average: the plain mean over the first ticks.
+        let k = i64::from(self.clock.seen.min(RATE_TICKS));
+        let st = &mut self.state;
+        for (b, &byte) in plane.bytes().iter().enumerate() {
+            let base = b * 8;
+            for bit in 0..8 {
+                let i = base + bit;
+                if i >= px {
+                    break;
+                }
+                let spike = (byte >> bit) & 1 != 0;
+                let r = i64::from(st.rate[i]);
+                let d = if spike { RATE_ONE } else { 0 } - r;
+                // Rounded to nearest, so the average has no drift.
+                st.rate[i] = (r + (d + d.signum() * k / 2) / k) as u32;
+                let flags = st.flags[i];
+                if !spike && flags & SPIKED == 0 {
+                    continue;
+                }
+                let since = t16.wrapping_sub(st.last[i]);
+                let p = (st.period[i] >> 4).max(1);
+                let late = tolerance(p);
+                let periodic = flags & SPIKED != 0 && flags & COUNT >= CONFIDENT;
+                if spike {
+                    let matched = periodic
+                        && since.saturating_add(early_tolerance(p)) >= p
+                        && since <= p.saturating_add(late);
+                    if !matched {
+                        sink(Event {
+                            index: i as u32,
+                            tick: t,
+                            sign: 1,
+                        });
+                    }
+                    if flags & SPIKED != 0 {
+                        learn(st, i, since);
+                    }
+                    st.last[i] = t16;
+                    st.flags[i] |= SPIKED;
+                } else if periodic && since == p.saturating_add(late) {
+                    sink(Event {
+                        index: i as u32,
+                        tick: t.wrapping_sub(u32::from(late)),
+                        sign: -1,
+                    });
+                    st.flags[i] = (flags & !COUNT) | ((flags & COUNT) - 1);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Whether pixel `i` predicts its spikes by its period (else by its
+    /// rate); `false` outside the sensor.
+    pub fn periodic(&self, i: usize) -> bool {
+        self.state
+            .flags
+            .get(i)
+            .is_some_and(|&f| f & SPIKED != 0 && f & COUNT >= CONFIDENT)
+    }
+
+    /// The static rate of pixel `i` that its events do not carry, Q16
+    /// spikes per tick, as of the last plane pushed: its mean rate, or 0
+    /// for a periodic pixel (its predictions are events).
+    pub fn rate(&self, i: usize) -> u16 {
+        if self.periodic(i) {
+            return 0;
+        }
+        let r = self.state.rate.get(i).copied().unwrap_or(0);
+        ((r + 128) >> 8).min(u32::from(u16::MAX)) as u16
+    }
+}
+
+/// Updates pixel `i`'s period and agreements with a new interval of
+/// `since` ticks.
+fn learn(st: &mut LightState<'_>, i: usize, since: u16) {
+    let flags = st.flags[i];
+    let count = flags & COUNT;
+    let per = st.period[i];
+    let short = st.short[i];
+    let (per, count, short) = if since > MAX_PERIOD {
+        (0, 0, 0)
+    } else if count == 0 || per == 0 {
+        (since * 16, 1, 0)
+    } else {
+        let iv = since * 16;
+        let d = i32::from(iv) - i32::from(per);
+        // An interval agrees within a fifth of the period, and at least
+        // half a tick early or a tick late (the phase of a period that is
+        // not a whole number of ticks shows as a tick late).
+        let bound = i32::from(per) / 5;
+        let agrees = if d < 0 {
+            -d <= bound.max(8)
+        } else {
+            d <= bound.max(16)
+        };
+        if agrees {
+            // Learnt fast at first, then slowly: a particle that lingers
+            // on the pixel does not become its static light.
+            let shift = if count >= CONFIDENT { SETTLED_SHIFT } else { 1 };
+            let per = (i32::from(per) + (d >> shift)) as u16;
+            (per, (count + 1).min(MAX_CONFIDENCE), 0)
+        } else if d < 0 && short.saturating_add(since) < RELEARN_TICKS {
+            (per, count, short + since)
+        } else if d > 0 && count > 2 {
+            (per, count - 2, short)
+        } else {
+            (iv, 1, 0)
+        }
+    };
+    st.period[i] = per;
+    st.short[i] = short;
+    st.flags[i] = (flags & !COUNT) | count;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    struct Buf {
+        last: Vec<u16>,
+        period: Vec<u16>,
+        rate: Vec<u32>,
+        short: Vec<u16>,
+        flags: Vec<u8>,
+    }
+
+    impl Buf {
+        fn new(px: usize) -> Buf {
+            Buf {
+                last: vec![0; px],
+                period: vec![0; px],
+                rate: vec![0; px],
+                short: vec![0; px],
+                flags: vec![0; px],
+            }
+        }
+        fn state(&mut self) -> LightState<'_> {
+            LightState {
+                last: &mut self.last,
+                period: &mut self.period,
+                rate: &mut self.rate,
+                short: &mut self.short,
+                flags: &mut self.flags,
+            }
+        }
+    }
+
+    /// One pixel's events over its spike train (an 8×1 sensor, pixel 3).
+    fn events(train: &[u8]) -> (Vec<(u32, i8)>, bool, u16) {
+        let mut buf = Buf::new(8);
+        let mut light = Light::new(8, 1, 0, buf.state()).unwrap();
+        let mut out = Vec::new();
+        for &s in train {
+            let byte = [s << 3];
+            let plane = PlaneView::new(&byte, 8, 1).unwrap();
+            light
+                .push(&plane, |e| {
+                    assert_eq!(e.index, 3);
+                    out.push((e.tick, e.sign));
+                })
+                .unwrap();
+        }
+        let (p, r) = (light.periodic(3), light.rate(3));
+        (out, p, r)
+    }
+
+    #[test]
+    fn a_steady_pixel_goes_quiet_and_a_particle_stands_out() {
+        // Period 5: spikes until the period is learnt, then nothing.
+        let train: Vec<u8> = (0..60).map(|t| u8::from(t % 5 == 0)).collect();
+        let (ev, periodic, rate) = events(&train);
+        assert!(periodic);
+        assert_eq!(rate, 0);
+        assert!(ev.iter().all(|&(t, _)| t <= 10), "{ev:?}");
+        // An early spike at 32 (the beat is 30, 35, …): +1 there and the
+        // beat moves with it (37, 42, …).
+        let mut train: Vec<u8> = (0..60).map(|t| u8::from(t % 5 == 0)).collect();
+        for t in 32..60 {
+            train[t] = u8::from(t >= 32 && (t - 32) % 5 == 0);
+        }
+        let (ev, _, _) = events(&train);
+        let late: Vec<_> = ev.iter().filter(|e| e.0 > 10).collect();
+        assert_eq!(late, vec![&(32, 1)]);
+    }
+
+    #[test]
+    fn jitter_within_the_tolerance_is_no_event_and_a_silence_is() {
+        // Intervals of 5 and 6 (a period of 5.5): every spike within
+        // P..=P + 2 of the last.
+        let mut t = 0;
+        let mut train = vec![0u8; 80];
+        let mut k = 0;
+        while t < 80 {
+            train[t] = 1;
+            t += if k % 2 == 0 { 5 } else { 6 };
+            k += 1;
+        }
+        let (ev, periodic, _) = events(&train);
+        assert!(periodic);
+        assert!(ev.iter().all(|&(t, _)| t <= 12), "{ev:?}");
+        // The pixel goes dark after tick 40: one −1 at the prediction.
+        let mut dark = train.clone();
+        dark[41..].fill(0);
+        let (ev, _, _) = events(&dark);
+        let last_spike = dark.iter().rposition(|&s| s == 1).unwrap() as u32;
+        let after: Vec<_> = ev.iter().filter(|e| e.0 > last_spike).collect();
+        assert_eq!(after.len(), 1, "{ev:?}");
+        assert_eq!(after[0].1, -1);
+    }
+
+    #[test]
+    fn a_dark_pixel_is_predicted_by_its_rate() {
+        let mut train = vec![0u8; 200];
+        for t in [10, 60, 150] {
+            train[t] = 1;
+        }
+        let (ev, periodic, rate) = events(&train);
+        assert!(!periodic);
+        assert_eq!(ev, vec![(10, 1), (60, 1), (150, 1)]);
+        // Its mean rate over the 200 ticks: 3/200 spikes per tick (the
+        // running mean in integer steps, within 5 %).
+        let want = 3.0 / 200.0 * 65536.0;
+        assert!(
+            (f64::from(rate) - want).abs() < 0.05 * want,
+            "{rate} against {want}"
+        );
+    }
+
+    #[test]
+    fn planes_of_another_size_are_refused() {
+        let mut buf = Buf::new(16);
+        let mut light = Light::new(8, 2, 0, buf.state()).unwrap();
+        let byte = [0u8];
+        let plane = PlaneView::new(&byte, 8, 1).unwrap();
+        assert_eq!(light.push(&plane, |_| {}), Err(Error::PlaneMismatch));
+        let mut small = Buf::new(4);
+        assert!(matches!(
+            Light::new(8, 2, 0, small.state()),
+            Err(Error::BufferTooSmall { needed: 16, got: 4 })
+        ));
+    }
+}

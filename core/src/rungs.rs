@@ -1,0 +1,461 @@
+//! What a pair of the time ladder needs from the spikes, made where they
+//! are: the innovation events ([`crate::light`]) of the last ticks, held
+//! in a ring ([`EventRing`]), and from them either the events around the
+//! pair (a pair with no flow to follow: [`Rungs::reach`]) or the rung
+//! frames — for each separation `s`, frame A of the `s` ticks before the
+//! pair's midpoint and frame B of the `s` ticks after it, each warped
+//! along the host's flow to its own centre ([`rung_frames`],
+//! [`crate::warp`]). The sidecar's loop and the host's offline run call
+//! the same functions, so the host measures the same frames either way.
+//!
+//! Memory: the ring's two caller-supplied buffers and the frames'; no
+//! allocation. Events the ring cannot hold are counted
+//! ([`EventRing::lost`]), never silently dropped.
+
+use crate::error::Error;
+use crate::light::{Event, Light, MAX_TOLERANCE};
+use crate::warp::{scatter, subtract_rates, Flow, Window};
+
+/// Most rungs a pair asks for.
+pub const MAX_RUNGS: usize = 8;
+
+/// Bits of a ring entry below the pixel: the ticks between the event and
+/// the tick it was stored under (a prediction settled late), and the sign.
+const LOW_BITS: u32 = 6;
+/// Bit of a ring entry: the event is `−1`.
+const NEG: u32 = 0b01;
+
+/// Most pixels a ring entry can name.
+pub const MAX_PIXELS: u32 = 1 << (32 - LOW_BITS);
+
+/// The events of the last `depth` ticks, in two caller-supplied buffers:
+/// `entries` (one `u32` per event: pixel `<< 6`, the ticks it was settled
+/// late (5 bits) and a sign bit) used as a circular buffer, and `starts` (`depth + 1` entries: the
+/// running count of events stored before each tick, modulo 2^32).
+#[derive(Debug)]
+pub struct EventRing<'a> {
+    entries: &'a mut [u32],
+    starts: &'a mut [u32],
+    at: RingCursor,
+}
+
+/// Where an [`EventRing`] stands besides its buffers: a ring taken apart
+/// ([`EventRing::cursor`]) and put together again over the same buffers
+/// ([`EventRing::resume`]) goes on as if never stopped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RingCursor {
+    /// Ticks held, oldest first: `first..next`.
+    pub first: u32,
+    /// The next tick.
+    pub next: u32,
+    /// Events stored so far (the write position is `stored % capacity`).
+    pub stored: u32,
+    /// Events that did not fit.
+    pub lost: u32,
+    /// Ticks dropped to make room.
+    pub evicted: u32,
+}
+
+impl<'a> EventRing<'a> {
+    /// An empty ring over `entries` and `starts` (depth `starts.len() − 1`
+    /// ticks, at least 1), whose first tick will be `first`.
+    pub fn new(entries: &'a mut [u32], starts: &'a mut [u32], first: u32) -> Result<Self, Error> {
+        if starts.len() < 2 || entries.is_empty() {
+            return Err(Error::BufferTooSmall {
+                needed: 2,
+                got: starts.len().min(entries.len()),
+            });
+        }
+        starts.fill(0);
+        Ok(EventRing {
+            entries,
+            starts,
+            at: RingCursor {
+                first,
+                next: first,
+                stored: 0,
+                lost: 0,
+                evicted: 0,
+            },
+        })
+    }
+
+    /// The ring as it stood at `at` over `entries` and `starts` (as
+    /// [`EventRing::cursor`] and the buffers left it).
+    pub fn resume(
+        entries: &'a mut [u32],
+        starts: &'a mut [u32],
+        at: RingCursor,
+    ) -> Result<Self, Error> {
+        if starts.len() < 2 || entries.is_empty() {
+            return Err(Error::BufferTooSmall {
+                needed: 2,
+                got: starts.len().min(entries.len()),
+            });
+        }
+        Ok(EventRing {
+            entries,
+            starts,
+            at,
+        })
+    }
+
+    /// Where the ring stands (to [`EventRing::resume`] it).
+    pub fn cursor(&self) -> RingCursor {
+        self.at
+    }
+
+    /// Ticks the ring holds at most.
+    pub fn depth(&self) -> u32 {
+        (self.starts.len() - 1) as u32
+    }
+
+    /// The ticks held, `first..next`.
+    pub fn ticks(&self) -> core::ops::Range<u32> {
+        self.at.first..self.at.next
+    }
+
+    /// Events that did not fit (a tick with more events than the ring
+    /// holds keeps the first ones).
+    pub fn lost(&self) -> u32 {
+        self.at.lost
+    }
+
+    /// Ticks dropped from the old end before they left the depth, to make
+    /// room for new events.
+    pub fn evicted(&self) -> u32 {
+        self.at.evicted
+    }
+
+    fn slot(&self, tick: u32) -> usize {
+        (tick % self.starts.len() as u32) as usize
+    }
+
+    /// Stores the events `light` settles with the next plane: pushes
+    /// `plane` through `light` (tick [`Light::next_tick`], which must be
+    /// the ring's next tick).
+    pub fn push(
+        &mut self,
+        light: &mut Light<'_>,
+        plane: &crate::plane::PlaneView<'_>,
+    ) -> Result<(), Error> {
+        let t = light.next_tick();
+        if t != self.at.next {
+            return Err(Error::TickUnavailable);
+        }
+        // Open tick t: drop the oldest tick if the depth is full.
+        if self.at.next.wrapping_sub(self.at.first) >= self.depth() {
+            self.at.first = self.at.first.wrapping_add(1);
+        }
+        let s = self.slot(t);
+        self.starts[s] = self.at.stored;
+        let cap = self.entries.len() as u32;
+        let mut overflow = 0u32;
+        light.push(plane, |e| {
+            // Room: drop the oldest ticks until the event fits; a tick
+            // that alone fills the ring keeps its first events.
+            loop {
+                let oldest = self.starts[self.slot(self.at.first)];
+                if self.at.stored.wrapping_sub(oldest) < cap {
+                    break;
+                }
+                if self.at.first == t {
+                    overflow = overflow.saturating_add(1);
+                    return;
+                }
+                self.at.first = self.at.first.wrapping_add(1);
+                self.at.evicted = self.at.evicted.wrapping_add(1);
+            }
+            let late = t.wrapping_sub(e.tick).min(31);
+            let neg = if e.sign < 0 { NEG } else { 0 };
+            let k = (self.at.stored % cap) as usize;
+            self.entries[k] = e.index << LOW_BITS | late << 1 | neg;
+            self.at.stored = self.at.stored.wrapping_add(1);
+        })?;
+        self.at.lost = self.at.lost.saturating_add(overflow);
+        self.at.next = t.wrapping_add(1);
+        Ok(())
+    }
+
+    /// Calls `f` with every event of ticks `a..b` the ring holds (events
+    /// settled up to [`MAX_TOLERANCE`] ticks later included).
+    pub fn each(&self, a: u32, b: u32, mut f: impl FnMut(Event)) {
+        let cap = self.entries.len() as u32;
+        let lo = a.max(self.at.first);
+        let hi = b.saturating_add(u32::from(MAX_TOLERANCE)).min(self.at.next);
+        let mut t = lo;
+        while t < hi {
+            let s0 = self.starts[self.slot(t)];
+            let s1 = if t + 1 == self.at.next {
+                self.at.stored
+            } else {
+                self.starts[self.slot(t + 1)]
+            };
+            let mut k = s0;
+            while k != s1 {
+                let x = self.entries[(k % cap) as usize];
+                let tick = t.wrapping_sub((x >> 1) & 31);
+                if tick >= a && tick < b {
+                    f(Event {
+                        index: x >> LOW_BITS,
+                        tick,
+                        sign: if x & NEG != 0 { -1 } else { 1 },
+                    });
+                }
+                k = k.wrapping_add(1);
+            }
+            t += 1;
+        }
+    }
+}
+
+/// What the host asks of a pair (the control's rung part).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Rungs {
+    /// Separations of the rung frames, ticks (each 2..=255; `count` of
+    /// them in use).
+    pub separations: [u16; MAX_RUNGS],
+    /// Separations in use.
+    pub count: u8,
+    /// Ticks on each side of the midpoint whose events the pair carries
+    /// (0: none).
+    pub reach: u16,
+}
+
+impl Rungs {
+    /// No rung frames, the events within `reach` ticks of the midpoint.
+    pub const fn events(reach: u16) -> Rungs {
+        Rungs {
+            separations: [0; MAX_RUNGS],
+            count: 0,
+            reach,
+        }
+    }
+
+    /// The separations in use.
+    pub fn separations(&self) -> &[u16] {
+        &self.separations[..usize::from(self.count).min(MAX_RUNGS)]
+    }
+
+    /// Ticks after the midpoint the pair needs before it can be made
+    /// (its longest rung or its reach, then the events' tolerance).
+    pub fn ahead(&self) -> u32 {
+        let s = self.separations().iter().copied().max().unwrap_or(0);
+        u32::from(s.max(self.reach)) + u32::from(MAX_TOLERANCE)
+    }
+
+    /// Ticks before the midpoint the pair reads.
+    pub fn behind(&self) -> u32 {
+        let s = self.separations().iter().copied().max().unwrap_or(0);
+        u32::from(s.max(self.reach))
+    }
+
+    /// Checks the separations (2..=255, at most [`MAX_RUNGS`]).
+    pub fn check(&self) -> Result<(), Error> {
+        if usize::from(self.count) > MAX_RUNGS
+            || self.separations().iter().any(|&s| !(2..=255).contains(&s))
+        {
+            return Err(Error::BadParam(crate::error::ParamError::Window));
+        }
+        Ok(())
+    }
+}
+
+/// Makes the rung frames of the pair whose midpoint is tick `mid` (a tick
+/// boundary: A ends and B begins there) from the events in `ring`, warped
+/// along `flow`: for the `i`-th separation `s`, frame `2i` (A: ticks
+/// `mid − s..mid`, centred at `mid − s/2`) and `2i + 1` (B: `mid..mid + s`,
+/// at `mid + s/2`), each `width × height` samples of `frames`, in
+/// 1/[`crate::warp::SCALE`] spike less the static rate of
+/// `light`'s rate-predicted pixels over `s` ticks ([`subtract_rates`]).
+pub fn rung_frames(
+    ring: &EventRing<'_>,
+    light: &Light<'_>,
+    flow: &Flow<'_>,
+    mid: u32,
+    rungs: &Rungs,
+    frames: &mut [i16],
+) -> Result<(), Error> {
+    rungs.check()?;
+    flow.check()?;
+    let (w, h) = (light.width(), light.height());
+    let px = usize::from(w) * usize::from(h);
+    let seps = rungs.separations();
+    let needed = 2 * seps.len() * px;
+    if frames.len() < needed {
+        return Err(Error::BufferTooSmall {
+            needed,
+            got: frames.len(),
+        });
+    }
+    let frames = &mut frames[..needed];
+    frames.fill(0);
+    let longest = u32::from(seps.iter().copied().max().unwrap_or(0));
+    if longest == 0 {
+        return Ok(());
+    }
+    let first = mid.checked_sub(longest).ok_or(Error::TickUnavailable)?;
+    let end = mid.checked_add(longest).ok_or(Error::TickOverflow)?;
+    if first < ring.ticks().start || end.saturating_add(u32::from(MAX_TOLERANCE)) > ring.ticks().end
+    {
+        return Err(Error::TickUnavailable);
+    }
+    let windows = windows_of(mid, seps);
+    ring.each(first, end, |e| {
+        for (k, win) in windows.iter().enumerate().take(2 * seps.len()) {
+            if win.holds(e.tick) {
+                scatter(&mut frames[k * px..(k + 1) * px], w, h, flow, win, e);
+            }
+        }
+    });
+    for (k, win) in windows.iter().enumerate().take(2 * seps.len()) {
+        subtract_rates(&mut frames[k * px..(k + 1) * px], w, h, flow, win, |i| {
+            light.rate(i)
+        });
+    }
+    Ok(())
+}
+
+/// The windows of the rung frames around `mid`: A then B per separation.
+fn windows_of(mid: u32, seps: &[u16]) -> [Window; 2 * MAX_RUNGS] {
+    let mut out = [Window::new(0, 0); 2 * MAX_RUNGS];
+    for (i, &s) in seps.iter().enumerate().take(MAX_RUNGS) {
+        let s = u32::from(s);
+        out[2 * i] = Window::new(mid.saturating_sub(s), s);
+        out[2 * i + 1] = Window::new(mid, s);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::light::LightState;
+    use crate::plane::PlaneView;
+
+    struct Bufs {
+        last: Vec<u16>,
+        period: Vec<u16>,
+        rate: Vec<u32>,
+        short: Vec<u16>,
+        flags: Vec<u8>,
+    }
+
+    fn bufs(px: usize) -> Bufs {
+        Bufs {
+            last: vec![0; px],
+            period: vec![0; px],
+            rate: vec![0; px],
+            short: vec![0; px],
+            flags: vec![0; px],
+        }
+    }
+
+    /// A bright dot moving 1 px per 4 ticks right along row 2 of a 32×4
+    /// sensor over a dark background.
+    fn dot(t: u32) -> Vec<u8> {
+        let mut p = vec![0u8; 32 * 4 / 8];
+        let x = 4 + (t / 4) as usize;
+        let i = 2 * 32 + x;
+        p[i / 8] |= 1 << (i % 8);
+        p
+    }
+
+    #[test]
+    fn events_come_back_by_tick_and_rung_frames_pile_a_moving_dot_up() {
+        let mut b = bufs(128);
+        let mut light = Light::new(
+            32,
+            4,
+            0,
+            LightState {
+                last: &mut b.last,
+                period: &mut b.period,
+                rate: &mut b.rate,
+                short: &mut b.short,
+                flags: &mut b.flags,
+            },
+        )
+        .unwrap();
+        let (mut entries, mut starts) = (vec![0u32; 4096], vec![0u32; 65]);
+        let mut ring = EventRing::new(&mut entries, &mut starts, 0).unwrap();
+        for t in 0..50 {
+            ring.push(&mut light, &PlaneView::new(&dot(t), 32, 4).unwrap())
+                .unwrap();
+        }
+        assert_eq!(ring.ticks(), 0..50);
+        let mut n = 0;
+        ring.each(10, 20, |e| {
+            assert!((10..20).contains(&e.tick));
+            n += 1;
+        });
+        assert!(n >= 8, "{n}");
+        // The flow: 0.25 px/tick right everywhere (one node).
+        let (vx, vy, ax, ay) = ([1024i16], [0i16], [0i16], [0i16]);
+        let flow = Flow {
+            nx: 1,
+            ny: 1,
+            x0: 0,
+            y0: 0,
+            pitch: 16,
+            vx: &vx,
+            vy: &vy,
+            ax: &ax,
+            ay: &ay,
+        };
+        let mut rungs = Rungs::events(0);
+        rungs.separations[0] = 8;
+        rungs.count = 1;
+        let mut frames = vec![0i16; 2 * 128];
+        rung_frames(&ring, &light, &flow, 24, &rungs, &mut frames).unwrap();
+        // A: ticks 16..24, centre 20 → the dot at x = 4 + 5 = 9; B: 24..32,
+        // centre 28 → x = 11. Their positive samples sit there.
+        let peak = |f: &[i16]| {
+            f.iter()
+                .enumerate()
+                .max_by_key(|(_, &v)| v)
+                .map(|(k, _)| k)
+                .unwrap()
+        };
+        assert_eq!(peak(&frames[..128]), 2 * 32 + 9);
+        assert_eq!(peak(&frames[128..]), 2 * 32 + 11);
+        // Not enough planes for a 32-tick rung after 24.
+        rungs.separations[0] = 32;
+        assert_eq!(
+            rung_frames(&ring, &light, &flow, 24, &rungs, &mut frames),
+            Err(Error::TickUnavailable)
+        );
+    }
+
+    #[test]
+    fn a_full_ring_drops_old_ticks_and_counts_what_it_cannot_hold() {
+        let mut b = bufs(128);
+        let mut light = Light::new(
+            32,
+            4,
+            0,
+            LightState {
+                last: &mut b.last,
+                period: &mut b.period,
+                rate: &mut b.rate,
+                short: &mut b.short,
+                flags: &mut b.flags,
+            },
+        )
+        .unwrap();
+        // Every pixel fires every other tick: up to 128 events a tick.
+        let (mut entries, mut starts) = (vec![0u32; 100], vec![0u32; 9]);
+        let mut ring = EventRing::new(&mut entries, &mut starts, 0).unwrap();
+        for t in 0..20u32 {
+            let p = vec![if t % 2 == 0 { 0xff } else { 0 }; 16];
+            ring.push(&mut light, &PlaneView::new(&p, 32, 4).unwrap())
+                .unwrap();
+        }
+        assert!(ring.lost() > 0);
+        let mut n = 0;
+        ring.each(0, 20, |_| n += 1);
+        assert!(n <= 100);
+    }
+}
