@@ -90,9 +90,28 @@ pub enum FormatError {
         /// Columns in the file.
         width: u16,
     },
-    /// No width/height on the command line and no `scene.json` beside the file.
-    #[error("{0}: width and height unknown: give --width and --height, or keep scene.json beside the file")]
+    /// No width/height given and no `scene.json` beside the file.
+    #[error("{0}: width and height unknown: give the width and height, or keep scene.json beside the file")]
     NoSize(PathBuf),
+    /// A file that is not a spike recording (by its name or its first bytes).
+    #[error("{0}: not a spike recording (spiv reads .dat bit planes and .npz captures)")]
+    NotRecording(PathBuf),
+    /// A width and height that contradict the `scene.json` beside the file.
+    #[error(
+        "{path}: {given_w}x{given_h} px given, but scene.json beside it says {meta_w}x{meta_h} px"
+    )]
+    SizeAgainstMeta {
+        /// The recording.
+        path: PathBuf,
+        /// Width given, px.
+        given_w: u16,
+        /// Height given, px.
+        given_h: u16,
+        /// Width in `scene.json`, px.
+        meta_w: u16,
+        /// Height in `scene.json`, px.
+        meta_h: u16,
+    },
     /// An image that cannot be read or written.
     #[error("{path}: {msg}")]
     Image {

@@ -93,9 +93,12 @@ enum Source {
 }
 
 impl Recording {
-    /// Opens a `.dat` (size from `opts` or the `scene.json` beside it) or a
-    /// `.npz` capture (by extension).
+    /// Opens a `.dat` (size from `opts` or the `scene.json` beside it, and
+    /// the two must agree) or a `.npz` capture (by extension). A missing
+    /// file, and a file named or starting like an image, text or another
+    /// known format, is refused before any size is asked for.
     pub fn open(path: &Path, opts: &FileOptions) -> Result<Recording, FlowError> {
+        not_a_recording(path)?;
         let is_npz = path
             .extension()
             .is_some_and(|e| e.eq_ignore_ascii_case("npz"));
@@ -114,6 +117,16 @@ impl Recording {
         }
         let meta = Capture::beside(path)?;
         let (w, h) = match (opts.width, opts.height, &meta) {
+            (Some(w), Some(h), Some(m)) if (w, h) != (m.width, m.height) => {
+                return Err(FormatError::SizeAgainstMeta {
+                    path: path.to_path_buf(),
+                    given_w: w,
+                    given_h: h,
+                    meta_w: m.width,
+                    meta_h: m.height,
+                }
+                .into())
+            }
             (Some(w), Some(h), _) => (w, h),
             (None, None, Some(m)) => (m.width, m.height),
             _ => return Err(FormatError::NoSize(path.to_path_buf()).into()),
@@ -179,6 +192,47 @@ impl Recording {
             data,
         })
     }
+}
+
+/// Refuses a missing file (the I/O error names it) and one that is
+/// plainly not a spike recording: a name ending like an image, text or
+/// table, or first bytes of PNG, JPEG, GIF, TIFF, BMP, PDF or netCDF/HDF5.
+/// A `.dat` is raw bits, so any other content may be one.
+fn not_a_recording(path: &Path) -> Result<(), FormatError> {
+    let io = |source| FormatError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let meta = std::fs::metadata(path).map_err(io)?;
+    if meta.is_dir() {
+        return Err(FormatError::NotRecording(path.to_path_buf()));
+    }
+    const NOT: [&str; 16] = [
+        "png", "jpg", "jpeg", "gif", "tif", "tiff", "bmp", "txt", "csv", "json", "nc", "h5", "pdf",
+        "md", "flo", "npy",
+    ];
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
+    if NOT.iter().any(|n| ext.eq_ignore_ascii_case(n)) {
+        return Err(FormatError::NotRecording(path.to_path_buf()));
+    }
+    let mut head = [0u8; 8];
+    let n =
+        std::io::Read::read(&mut std::fs::File::open(path).map_err(io)?, &mut head).map_err(io)?;
+    const MAGIC: [&[u8]; 9] = [
+        b"\x89PNG",
+        b"\xff\xd8\xff",
+        b"GIF8",
+        b"II*\0",
+        b"MM\0*",
+        b"%PDF",
+        b"CDF\x01",
+        b"CDF\x02",
+        b"\x89HDF",
+    ];
+    if MAGIC.iter().any(|m| head[..n].starts_with(m)) {
+        return Err(FormatError::NotRecording(path.to_path_buf()));
+    }
+    Ok(())
 }
 
 /// What `spiv flow` does.
@@ -847,6 +901,12 @@ fn check(rec: &Recording, opts: &FlowOptions) -> Result<Vec<u64>, FlowError> {
     match &opts.pairs {
         None => Ok(ticks),
         Some(r) if r.start < r.end && r.end <= ticks.len() => Ok(ticks[r.clone()].to_vec()),
+        Some(r) if r.start >= r.end => Err(FlowError::Schedule(format!(
+            "pairs {}..{}: an empty range (the first pair, then one past the last; the schedule has pairs 0..{})",
+            r.start,
+            r.end,
+            ticks.len()
+        ))),
         Some(r) => Err(FlowError::Schedule(format!(
             "pairs {}..{}: the schedule has pairs 0..{}",
             r.start,

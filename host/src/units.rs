@@ -24,6 +24,10 @@ pub enum UnitsError {
     /// The tick rate.
     #[error("tick rate {0} Hz: must be finite, above 0 and at most {MAX_TICK_HZ}")]
     TickRate(f64),
+    /// Half a calibration: a pixel size without a tick rate, or the other
+    /// way round (the missing half is named).
+    #[error("half a calibration: {0} is missing (give both the pixel size and the tick rate, or neither)")]
+    Half(&'static str),
 }
 
 impl Calibration {
@@ -41,8 +45,8 @@ impl Calibration {
     }
 
     /// The calibration a run uses: each of the command line's values where
-    /// given, else the recording's metadata; `None` when either is
-    /// unknown.
+    /// given, else the recording's metadata; `None` when neither is
+    /// known, and an error naming the missing half when only one is.
     pub fn resolve(
         pixel_mm: Option<f64>,
         tick_hz: Option<f64>,
@@ -52,8 +56,14 @@ impl Calibration {
         let hz = tick_hz.or(meta.map(|m| m.tick_hz));
         match (px, hz) {
             (Some(p), Some(h)) => Calibration::new(p, h).map(Some),
-            (Some(p), None) => Calibration::new(p, 1.0).map(|_| None),
-            (None, Some(h)) => Calibration::new(1.0, h).map(|_| None),
+            (Some(p), None) => {
+                Calibration::new(p, 1.0)?;
+                Err(UnitsError::Half("the tick rate (Hz)"))
+            }
+            (None, Some(h)) => {
+                Calibration::new(1.0, h)?;
+                Err(UnitsError::Half("the pixel size (mm)"))
+            }
             (None, None) => Ok(None),
         }
     }
@@ -80,7 +90,7 @@ mod tests {
 
     /// 13 px over 13 ticks at 20 kHz with 0.02 mm pixels is 1 px/tick =
     /// 0.4 m/s; the command line wins over metadata, and half a
-    /// calibration is none.
+    /// calibration is refused, naming the missing half.
     #[test]
     fn velocities_and_resolution() {
         let c = Calibration::new(0.02, 20_000.0).unwrap();
@@ -91,7 +101,15 @@ mod tests {
             .unwrap()
             .unwrap();
         assert_eq!((r.pixel_mm, r.tick_hz), (0.05, 20_000.0));
-        assert_eq!(Calibration::resolve(Some(0.05), None, None), Ok(None));
+        assert_eq!(
+            Calibration::resolve(Some(0.05), None, None),
+            Err(UnitsError::Half("the tick rate (Hz)"))
+        );
+        let e = Calibration::resolve(None, Some(20_000.0), None).unwrap_err();
+        assert!(
+            e.to_string().contains("the pixel size (mm) is missing"),
+            "{e}"
+        );
         assert_eq!(Calibration::resolve(None, None, None), Ok(None));
         for bad in [0.0, -1.0, f64::NAN, f64::INFINITY, 2e3] {
             assert!(Calibration::new(bad, 1.0).is_err(), "{bad}");

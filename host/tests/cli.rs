@@ -669,4 +669,47 @@ fn flow_writes_vectors_per_pair_the_mean_field_and_plots() {
     assert!(e.contains("pixel size 0"), "{e}");
     let e = fails(&["flow", p(&dat), "--tick-hz", "NaN", "--out", p(&out)]);
     assert!(e.contains("tick rate NaN"), "{e}");
+    // Inputs checked against what they claim, each named on one line.
+    let e = fails(&["flow", p(&tmp.path().join("missing.dat"))]);
+    assert!(
+        e.contains("missing.dat") && e.contains("No such file"),
+        "{e}"
+    );
+    for name in ["notes.txt", "frame.png"] {
+        let f = tmp.path().join(name);
+        std::fs::write(&f, b"not spikes").unwrap();
+        let e = fails(&["flow", p(&f), "--width", "128", "--height", "96"]);
+        assert!(
+            e.contains(name) && e.contains("not a spike recording"),
+            "{e}"
+        );
+    }
+    let png = tmp.path().join("frame.dat");
+    std::fs::write(&png, b"\x89PNG\r\n\x1a\nmore").unwrap();
+    let e = fails(&["flow", p(&png), "--width", "128", "--height", "96"]);
+    assert!(e.contains("not a spike recording"), "{e}");
+    let e = fails(&["flow", p(&dat), "--width", "64", "--height", "192"]);
+    assert!(e.contains("64x192 px given") && e.contains("128x96"), "{e}");
+    let e = fails(&[
+        "flow",
+        p(&lone),
+        "--width",
+        "128",
+        "--height",
+        "96",
+        "--dt",
+        "13",
+        "--pixel-size",
+        "0.02",
+        "--out",
+        p(&out),
+    ]);
+    assert!(
+        e.contains("half a calibration: the tick rate (Hz) is missing"),
+        "{e}"
+    );
+    let e = fails(&["flow"]);
+    assert!(e.contains("<INPUT>"), "{e}");
+    let e = fails(&["piv", p(&dat), p(&dat)]);
+    assert!(e.contains("--out <OUT>"), "{e}");
 }

@@ -383,6 +383,12 @@ fn check(s: &Settings, (h, w): (usize, usize)) -> Result<(), PivError> {
             "window {bad} px: expected 4..=1024"
         )));
     }
+    if let Some(w) = s.windows.windows(2).find(|w| w[1] > w[0]) {
+        return Err(PivError::Settings(format!(
+            "windows {} then {} px: each pass refines the last, so a window may not grow",
+            w[0], w[1]
+        )));
+    }
     if !(0.0..=0.9).contains(&s.overlap) {
         return Err(PivError::Settings(format!(
             "overlap {}: expected 0..=0.9",
