@@ -303,7 +303,7 @@ fn reconstruct<'py>(
 }
 
 /// A field's nodes as `(ny, nx)` arrays: x, y, u, v and flags (0 valid, 1
-/// replaced from neighbours, 2 invalid: then u = v = 0, as in the CSV).
+/// replaced from neighbours, 2 masked or invalid: then u = v = NaN).
 type FieldArrays = (
     Array2<f64>,
     Array2<f64>,
@@ -318,14 +318,16 @@ fn field_arrays(vectors: &[Vector], grid: &Grid) -> FieldArrays {
 
 fn field_arrays_of(vectors: &[Vector], (ny, nx): (usize, usize)) -> FieldArrays {
     let at = |f: &dyn Fn(&Vector) -> f64| {
-        Array2::from_shape_fn((ny, nx), |(r, c)| vectors.get(r * nx + c).map_or(0.0, f))
+        Array2::from_shape_fn((ny, nx), |(r, c)| {
+            vectors.get(r * nx + c).map_or(f64::NAN, f)
+        })
     };
     let measured = |v: &Vector| v.state.is_measured();
     (
         at(&|v| v.x),
         at(&|v| v.y),
-        at(&|v| if measured(v) { v.u } else { 0.0 }),
-        at(&|v| if measured(v) { v.v } else { 0.0 }),
+        at(&|v| if measured(v) { v.u } else { f64::NAN }),
+        at(&|v| if measured(v) { v.v } else { f64::NAN }),
         Array2::from_shape_fn((ny, nx), |(r, c)| {
             vectors.get(r * nx + c).map_or(2, |v| v.state.flag())
         }),
@@ -356,7 +358,7 @@ fn sigma_arrays(sigma: &[(f64, f64)], (ny, nx): (usize, usize)) -> (Array2<f64>,
 ///
 /// Returns `(x, y, u, v, flags)`, each `(ny, nx)`: window centres in px
 /// (x right, y down), displacements in px per pair (v positive down the
-/// rows), flags 0 valid, 1 replaced, 2 invalid (u = v = 0). With
+/// rows), flags 0 valid, 1 replaced, 2 invalid (u = v = NaN). With
 /// `confidence=True` also each vector's `peak_ratio` and `correlation`
 /// (the normalised correlation at the peak), as `spiv piv`'s CSV columns
 /// (0 where no peak).
@@ -636,10 +638,10 @@ fn array3<T>(shape: (usize, usize, usize), v: Vec<T>) -> PyResult<Array3<T>> {
 fn flow<'py>(
     py: Python<'py>,
     path: PathBuf,
-    dt: Option<u32>,
-    every: Option<u32>,
-    start: Option<u64>,
-    end: Option<u64>,
+    dt: Option<i64>,
+    every: Option<i64>,
+    start: Option<i64>,
+    end: Option<i64>,
     method: &str,
     window: Option<u16>,
     dwell_cap: Option<f64>,
@@ -659,10 +661,10 @@ fn flow<'py>(
         .map(|m| image(m, "mask").map(|m| m.mapv(|v| v != 0.0)))
         .transpose()?;
     let req = FlowRequest {
-        dt,
-        every,
-        start,
-        end,
+        dt: ticks("dt", dt, 1)?,
+        every: ticks("every", every, 1)?,
+        start: ticks("start", start, 0)?,
+        end: ticks("end", end, 0)?,
         method: method_named(method)?,
         window,
         dwell_cap,
@@ -702,10 +704,10 @@ fn flow<'py>(
 fn flow_pairs<'py>(
     py: Python<'py>,
     path: PathBuf,
-    dt: Option<u32>,
-    every: Option<u32>,
-    start: Option<u64>,
-    end: Option<u64>,
+    dt: Option<i64>,
+    every: Option<i64>,
+    start: Option<i64>,
+    end: Option<i64>,
     method: &str,
     width: Option<u16>,
     height: Option<u16>,
@@ -713,10 +715,10 @@ fn flow_pairs<'py>(
     strip_head: u16,
 ) -> PyResult<Bound<'py, PyArray2<i64>>> {
     let req = FlowRequest {
-        dt,
-        every,
-        start,
-        end,
+        dt: ticks("dt", dt, 1)?,
+        every: ticks("every", every, 1)?,
+        start: ticks("start", start, 0)?,
+        end: ticks("end", end, 0)?,
         method: method_named(method)?,
         ..FlowRequest::default()
     };
@@ -731,6 +733,20 @@ fn flow_pairs<'py>(
     let dt = i64::from(o.dt);
     let a = Array2::from_shape_fn((ticks.len(), 2), |(i, j)| ticks[i] as i64 + dt * j as i64);
     Ok(a.into_pyarray(py))
+}
+
+/// A count of ticks from Python (any int): at least `min` and within the
+/// range of `T`, else a `SpivError` naming the argument.
+fn ticks<T: TryFrom<i64>>(name: &str, v: Option<i64>, min: i64) -> PyResult<Option<T>> {
+    v.map(|x| {
+        if x < min {
+            return Err(SpivError::new_err(format!(
+                "{name} {x}: expected a whole number of ticks, at least {min}"
+            )));
+        }
+        T::try_from(x).map_err(|_| SpivError::new_err(format!("{name} {x}: too many ticks")))
+    })
+    .transpose()
 }
 
 /// The `.dat` reading options of `flow` and `flow_pairs`.

@@ -5,7 +5,10 @@ and on bad input (the CLI's messages, never a crash)."""
 import csv
 import os
 import subprocess
+import struct
 import threading
+import warnings
+import zlib
 
 import numpy as np
 import pytest
@@ -20,6 +23,17 @@ def read_csv(path):
             "u_m_s", "v_m_s", "pairs")
     cols = {k: np.array([float(r[k]) for r in rows]) for k in keys if k in rows[0]}
     return cols
+
+
+def write_png(path, a):
+    """An 8-bit grayscale PNG of `a` (2-D uint8), with the standard library."""
+    h, w = a.shape
+    raw = b"".join(b"\x00" + a[r].tobytes() for r in range(h))
+    chunk = lambda t, b: (struct.pack(">I", len(b)) + t + b
+                          + struct.pack(">I", zlib.crc32(t + b) & 0xFFFFFFFF))
+    with open(path, "wb") as f:
+        f.write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0))
+                + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
 
 
 def cli_error(res):
@@ -145,8 +159,12 @@ def test_flow_gives_the_cli_mean_field(cli, tmp_path):
     assert got["methods"][-1] == "mc"
     np.testing.assert_array_equal(got["x"].ravel(), want["x"])
     np.testing.assert_array_equal(got["mean_flags"].ravel(), want["flag"])
-    np.testing.assert_allclose(got["mean_u"].ravel(), want["u"], atol=5.1e-7, rtol=0)
-    np.testing.assert_allclose(got["mean_v"].ravel(), want["v"], atol=5.1e-7, rtol=0)
+    # Where a node has no valid vector, the arrays hold NaN and the CSV
+    # u = v = 0 (its flag is authoritative) with NaN in its m/s columns.
+    none = want["flag"] == 2
+    assert np.all(np.isnan(got["mean_u"].ravel()[none]))
+    np.testing.assert_allclose(got["mean_u"].ravel()[~none], want["u"][~none], atol=5.1e-7, rtol=0)
+    np.testing.assert_allclose(got["mean_v"].ravel()[~none], want["v"][~none], atol=5.1e-7, rtol=0)
     assert np.abs(got["mean_u"][got["mean_flags"] == 0]).max() > 0.5  # it flows
     # Every vector's uncertainty, as mean.csv's columns; finite where valid.
     assert got["sigma_u"].shape == got["u"].shape == got["sigma_v"].shape
@@ -187,9 +205,70 @@ def test_flow_as_xarray_is_pivpys_layout_and_pivpy_computes_on_it(cli, tmp_path)
     ny, nx = got["u"].shape[1:]
     tu, tv = t["u"].reshape(ny, nx) * k, t["v"].reshape(ny, nx) * k
     tw = (np.gradient(tv, ds.x.values, axis=1) - np.gradient(tu, ds.y.values, axis=0))
-    truth_w, measured_w = np.median(tw[1:4, 1:-1]), np.median(w[1:4, 1:-1, :])
+    truth_w, measured_w = np.median(tw[1:4, 1:-1]), np.nanmedian(w[1:4, 1:-1, :])
     assert truth_w != 0 and abs(measured_w / truth_w - 1) < 0.1, (measured_w, truth_w)
-    np.testing.assert_allclose(ds.piv.average.u.values, ds.u.values.mean(axis=2), rtol=1e-12)
+    # Invalid vectors are NaN, so pivpy's average is the NaN-aware mean of
+    # what was measured, not pulled towards 0 by what was not.
+    assert np.all(np.isnan(ds.u.values[ds.chc.values == 2]))
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN nodes
+        nanmean = np.nanmean(ds.u.values, axis=2)
+    np.testing.assert_allclose(ds.piv.average.u.values, nanmean, rtol=1e-12)
+
+
+def test_invalid_is_nan_in_every_output(cli, tmp_path):
+    """A masked body makes nodes invalid in every pair: every output holds
+    NaN there (the CSVs keep u = v = 0 with flag 2, as the vector format
+    says, and NaN in their m/s columns), and pivpy's average of the
+    Dataset is the NaN-aware mean."""
+    import xarray as xr
+    from pivpy import pivpy  # noqa: F401  (registers the .piv accessor)
+
+    d = tmp_path / "rec"
+    cli("simulate", "--scene", "paper-linear", "--width", "128", "--height", "128",
+        "--ticks", "400", "--seed", "2", "--out", d)
+    mask = np.zeros((128, 128), dtype=bool)
+    mask[32:80, 40:90] = True
+    write_png(tmp_path / "mask.png", mask.astype(np.uint8) * 255)
+    cli("flow", d / "spikes.dat", "--mask", tmp_path / "mask.png", "--out", tmp_path / "out")
+    got = spiv.flow(d / "spikes.dat", mask=mask)
+    invalid = got["flags"] == 2
+    assert invalid[:, mask[got["y"].round().astype(int), got["x"].round().astype(int)]].all()
+    # numpy
+    for name in ("u", "v", "u_m_s", "v_m_s"):
+        assert np.all(np.isnan(got[name][invalid])), name
+        assert np.all(np.isfinite(got[name][~invalid])), name
+    none = got["mean_flags"] == 2
+    assert none.any()
+    for name in ("mean_u", "mean_v", "mean_u_m_s", "mean_v_m_s"):
+        assert np.all(np.isnan(got[name][none])), name
+    # CSVs
+    for i in range(got["u"].shape[0]):
+        c = read_csv(tmp_path / "out" / f"vectors_{i:05}.csv")
+        bad = c["flag"] == 2
+        np.testing.assert_array_equal(bad, invalid[i].ravel())
+        assert np.all(c["u"][bad] == 0) and np.all(c["v"][bad] == 0)
+        assert np.all(np.isnan(c["u_m_s"][bad])) and np.all(np.isnan(c["v_m_s"][bad]))
+        assert np.all(np.isfinite(c["u_m_s"][~bad]))
+    c = read_csv(tmp_path / "out" / "mean.csv")
+    assert np.all(np.isnan(c["u_m_s"][c["flag"] == 2]))
+    # flow.nc
+    with xr.open_dataset(tmp_path / "out" / "flow.nc") as nc:
+        for name in ("u", "v", "u_m_s", "v_m_s", "sigma_u"):
+            assert np.all(np.isnan(nc[name].values[invalid])), name
+        assert np.all(np.isnan(nc["mean_u"].values[none]))
+    # as_xarray, and pivpy on it
+    ds = spiv.flow(d / "spikes.dat", mask=mask, as_xarray=True)
+    bad = ds.chc.values == 2
+    for name in ("u", "v", "sigma_u", "sigma_v"):
+        assert np.all(np.isnan(ds[name].values[bad])), name
+        assert np.all(np.isfinite(ds[name].values[~bad])), name
+    assert np.all(np.isnan(ds.mean_u.values[none]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN nodes
+        nanmean = np.nanmean(ds.u.values, axis=2)
+    np.testing.assert_allclose(ds.piv.average.u.values, nanmean, rtol=1e-12)
+    assert np.all(np.isnan(ds.piv.average.u.values[none]))
 
 
 def test_flow_mask_leaves_a_body_invalid(cli, tmp_path):
@@ -313,10 +392,41 @@ def test_bad_input_raises_the_cli_message(cli, recording, tmp_path):
         spiv.read_dat(recording / "spikes.dat", width=128)
     with pytest.raises(spiv.SpivError, match="start"):
         spiv.read_dat(recording / "spikes.dat", start=10**9)
-    with pytest.raises(spiv.SpivError, match="--dt"):
+    with pytest.raises(spiv.SpivError, match="^dt 0: expected a whole number of ticks"):
         spiv.flow(recording / "spikes.dat", dt=0)
     with pytest.raises(TypeError):
         spiv.piv(a)
+
+
+def test_flow_checks_inputs_against_what_they_claim(recording, tmp_path):
+    """Each bad input is named in one line, before any work: a missing
+    file, a file that is no recording, a size against scene.json, half a
+    calibration, a dt of no ticks, an empty pair range, growing windows."""
+    dat = recording / "spikes.dat"
+    with pytest.raises(OSError, match="missing.dat: No such file"):
+        spiv.flow(tmp_path / "missing.dat")
+    for name, body in (("notes.txt", b"x,y\n"), ("frame.png", b"\x89PNG\r\n\x1a\n"),
+                       ("frame.dat", b"\x89PNG\r\n\x1a\n")):
+        (tmp_path / name).write_bytes(body)
+        with pytest.raises(spiv.SpivError, match=f"{name}: not a spike recording"):
+            spiv.flow(tmp_path / name, width=128, height=128)
+    with pytest.raises(spiv.SpivError, match="300x256 px given, but scene.json beside it says 128x128"):
+        spiv.flow(dat, width=300, height=256)
+    lone = tmp_path / "lone.dat"  # no scene.json beside it
+    lone.write_bytes(dat.read_bytes())
+    with pytest.raises(spiv.SpivError, match="half a calibration: the tick rate"):
+        spiv.flow(lone, width=128, height=128, dt=13, pixel_size=0.02)
+    with pytest.raises(spiv.SpivError, match="half a calibration: the pixel size"):
+        spiv.flow(lone, width=128, height=128, dt=13, tick_hz=20000.0)
+    with pytest.raises(spiv.SpivError, match="^dt -5: expected a whole number of ticks, at least 1"):
+        spiv.flow(dat, dt=-5)
+    with pytest.raises(spiv.SpivError, match="^pairs 0..0: an empty range"):
+        spiv.flow(dat, pairs=(0, 0))
+    with pytest.raises(spiv.SpivError, match="windows 32 then 64 px"):
+        spiv.flow(dat, windows=(32, 64))
+    a = np.zeros((128, 128), np.float32)
+    with pytest.raises(spiv.SpivError, match="windows 32 then 64 px"):
+        spiv.piv(a, a, windows=(32, 64))
 
 
 def test_heavy_work_releases_the_gil():

@@ -53,8 +53,18 @@ pub fn write_flow(
             col("sigma_v", sigma.iter().map(|s| s.1).collect(), 6),
         ];
         if let Some(k) = cal {
+            // NaN where nothing was measured: the flag says why.
             let ms = |f: fn(&spiv_formats::Vector) -> f64| {
-                vectors.iter().map(|v| k.m_per_s(f(v), dt)).collect()
+                vectors
+                    .iter()
+                    .map(|v| {
+                        if v.state.is_measured() {
+                            k.m_per_s(f(v), dt)
+                        } else {
+                            f64::NAN
+                        }
+                    })
+                    .collect()
             };
             c.push(col("u_m_s", ms(|v| v.u), 6));
             c.push(col("v_m_s", ms(|v| v.v), 6));

@@ -6,7 +6,7 @@ arrays (ny, nx) on the PIV grid: x to the right and y down the rows, in
 pixels (pixel centres on integers); u and v in pixels per pair, v positive
 down the rows, as in `spiv piv`'s CSV and OpenPIV's windef output before
 tools.transform_coordinates. Flags: 0 valid, 1 replaced from neighbours,
-2 invalid (then u = v = 0). Ticks are spike planes (1/20 000 s at 20 kHz).
+2 masked or invalid (then u = v = NaN). Ticks are spike planes (1/20 000 s at 20 kHz).
 """
 
 from os import PathLike

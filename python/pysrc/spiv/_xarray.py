@@ -22,7 +22,11 @@ def to_xarray(d):
     else:
         k, per, t = 1.0, 1.0, mid
         units = ["pix", "pix", "pix/dt", "pix/dt"]
-    u, v, su, sv = (d[n] * per for n in ("u", "v", "sigma_u", "sigma_v"))
+    # NaN where nothing was measured (flag 2), so that NaN-aware means
+    # (pivpy's averages) skip those nodes; an infinite uncertainty too.
+    finite = lambda a: np.where(np.isfinite(a), a, np.nan)
+    u, v = (d[n] * per for n in ("u", "v"))
+    su, sv = (finite(d[n]) * per for n in ("sigma_u", "sigma_v"))
     yxt, yx = ("y", "x", "t"), ("y", "x")
     tr = lambda a: np.transpose(a, (1, 2, 0))
     ds = xr.Dataset(
@@ -39,8 +43,8 @@ def to_xarray(d):
                        "long_name": "median of the valid v over t, positive down"}),
             "mean_chc": (yx, d["mean_flags"].astype(np.int32),
                          {"long_name": "0 valid, 2 no valid vector"}),
-            "mean_sigma_u": (yx, d["mean_sigma_u"] * per, {"units": units[2]}),
-            "mean_sigma_v": (yx, d["mean_sigma_v"] * per, {"units": units[3]}),
+            "mean_sigma_u": (yx, finite(d["mean_sigma_u"]) * per, {"units": units[2]}),
+            "mean_sigma_v": (yx, finite(d["mean_sigma_v"]) * per, {"units": units[3]}),
             "mean_pairs": (yx, d["mean_pairs"].astype(np.int32),
                            {"long_name": "pairs with a valid vector"}),
         },
@@ -71,7 +75,7 @@ def open_flow(path):
     cal = "tick_hz" in a and "pixel_size_mm" in a
     mid = f.time.values * float(a["tick_hz"]) if cal else f.time.values
     ny, nx = f.sizes["y"], f.sizes["x"]
-    measured = lambda name: np.nan_to_num(f[name].values, nan=0.0)
+    measured = lambda name: f[name].values
     sigma = lambda name: np.nan_to_num(f[name].values, nan=np.inf)
     d = {
         "ticks": np.stack([mid - dt / 2, mid + dt / 2], axis=1),
