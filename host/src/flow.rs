@@ -24,6 +24,7 @@
 //! samples).
 
 use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use ndarray::Array2;
 use spiv_core::{Method, Params};
@@ -652,6 +653,9 @@ pub struct FlowOutcome {
     /// Pixels under glare around the first pair (upright, `width × height`,
     /// [`glare`]).
     pub glare: Vec<bool>,
+    /// Pairs the schedule held; more than `pairs.len()` when the run was
+    /// stopped ([`run_flow_until`]).
+    pub scheduled: usize,
 }
 
 impl FlowOutcome {
@@ -743,6 +747,20 @@ pub fn run_flow(
     opts: &FlowOptions,
     progress: impl FnMut(usize, usize) + Send,
 ) -> Result<FlowOutcome, FlowError> {
+    run_flow_until(rec, opts, progress, &AtomicBool::new(false))
+}
+
+/// [`run_flow`], stopping between pairs once `stop` is set (Ctrl-C): every
+/// pair already measured is kept, in time order, each with its vectors
+/// exactly as a whole run gives them; [`FlowOutcome::scheduled`] says how
+/// many the schedule held. A pair being measured when `stop` is set is
+/// finished first, so a run stops within one pair's time.
+pub fn run_flow_until(
+    rec: &Recording,
+    opts: &FlowOptions,
+    progress: impl FnMut(usize, usize) + Send,
+    stop: &AtomicBool,
+) -> Result<FlowOutcome, FlowError> {
     use rayon::prelude::*;
     let ticks = check(rec, opts)?;
     let core = Params {
@@ -765,7 +783,7 @@ pub fn run_flow(
     };
     let chains: Vec<Result<Chain, FlowError>> = ticks
         .par_chunks(CHAIN)
-        .map(|chain| measure_chain(rec, opts, &core, chain, &tell))
+        .map(|chain| measure_chain(rec, opts, &core, chain, &tell, stop))
         .collect();
     let mut pairs = Vec::with_capacity(total);
     let mut first_frames = None;
@@ -784,6 +802,7 @@ pub fn run_flow(
         grid,
         mean_dense: dense.mean(w, h),
         glare: glare(rec, ticks[0] + u64::from(opts.dt) / 2)?,
+        scheduled: total,
     })
 }
 
@@ -844,6 +863,7 @@ fn measure_chain(
     core: &Params,
     chain: &[u64],
     tell: &(impl Fn() + Sync),
+    stop: &AtomicBool,
 ) -> Result<Chain, FlowError> {
     let mut prediction: Option<Field> = None;
     let mut out = Chain {
@@ -852,6 +872,9 @@ fn measure_chain(
         dense: DenseSum::default(),
     };
     for &ka in chain {
+        if stop.load(Ordering::Relaxed) {
+            break;
+        }
         let kb = ka + u64::from(opts.dt);
         let mut m = match (opts.method, opts.dwell_cap) {
             (Method::Mc, _) => ladder_pair(rec, [ka, kb], opts, prediction.take())?,

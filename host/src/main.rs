@@ -54,8 +54,15 @@ fn main() {
         Command::Piv(a) => cli::piv::run(a),
         Command::Receive(a) => cli::receive::run(a),
     };
-    if let Err(e) = result {
-        eprintln!("spiv: error: {e}");
-        std::process::exit(1);
+    match result {
+        Ok(()) => {}
+        Err(e @ cli::CliError::Interrupted(_)) => {
+            eprintln!("spiv: {e}");
+            std::process::exit(130);
+        }
+        Err(e) => {
+            eprintln!("spiv: error: {e}");
+            std::process::exit(1);
+        }
     }
 }

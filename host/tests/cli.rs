@@ -713,3 +713,69 @@ fn flow_writes_vectors_per_pair_the_mean_field_and_plots() {
     let e = fails(&["piv", p(&dat), p(&dat)]);
     assert!(e.contains("--out <OUT>"), "{e}");
 }
+
+/// Ctrl-C (SIGINT) stops `spiv flow` between pairs: exit status 130, one
+/// line saying how many pairs were measured, and those pairs written.
+#[test]
+fn ctrl_c_stops_flow_and_keeps_the_pairs_done() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let sim = tmp.path().join("long");
+    ok(&[
+        "simulate",
+        "--scene",
+        "uniform",
+        "--out",
+        p(&sim),
+        "--width",
+        "128",
+        "--height",
+        "96",
+        "--ticks",
+        "8000",
+        "--seed",
+        "4",
+    ]);
+    let out = tmp.path().join("flow");
+    let dat = sim.join("spikes.dat");
+    let child = Command::new(env!("CARGO_BIN_EXE_spiv"))
+        .args(["flow", p(&dat), "--out", p(&out)])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("spawn spiv");
+    // Past opening the recording (the handler is set before the first pair).
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let kill = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .expect("kill");
+    assert!(kill.success());
+    let o = child.wait_with_output().expect("wait");
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert_eq!(o.status.code(), Some(130), "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "one line: {err}");
+    assert!(!err.contains("panicked"), "{err}");
+    if err.contains("nothing written") {
+        assert!(
+            err.starts_with("spiv: interrupted before the first of"),
+            "{err}"
+        );
+        return;
+    }
+    // "spiv: interrupted: N of M pairs measured, written to DIR"
+    let words: Vec<&str> = err.split_whitespace().collect();
+    assert_eq!(&words[..2], ["spiv:", "interrupted:"], "{err}");
+    let (n, m): (usize, usize) = (words[2].parse().unwrap(), words[4].parse().unwrap());
+    assert!(n >= 1 && n < m, "{err}");
+    let csvs = std::fs::read_dir(&out)
+        .unwrap()
+        .filter(|e| {
+            let name = e.as_ref().unwrap().file_name();
+            name.to_string_lossy().starts_with("vectors_")
+        })
+        .count();
+    assert_eq!(csvs, n, "{err}");
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(s["pairs"].as_array().expect("pairs").len(), n);
+}

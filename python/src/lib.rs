@@ -28,7 +28,7 @@ use spiv_formats::dat::{unpack_upright, DatOptions, DatReader};
 use spiv_formats::grid::Grid;
 use spiv_formats::image::read_gray;
 use spiv_formats::{FormatError, State, Vector, MAX_FRAME_PIXELS};
-use spiv_host::flow::{run_flow, FlowError, FlowRequest, MeanField, Recording};
+use spiv_host::flow::{FlowError, FlowRequest, MeanField, Recording};
 use spiv_host::live::{open_downlink, run_live, LiveError, LiveOptions};
 use spiv_host::piv::options::PivOptions;
 use spiv_host::piv::{piv as run_piv, PivError};
@@ -615,7 +615,14 @@ fn array3<T>(shape: (usize, usize, usize), v: Vec<T>) -> PyResult<Array3<T>> {
 /// `scene.json` beside the file); `mask` (nonzero = left out, the frames'
 /// `(height, width)`) leaves a wall, a body or a region outside the flow
 /// out: nodes whose centre it covers are invalid in every pair; `pairs`
-/// `(a, b)` measures only pairs `a..b` of the schedule (`flow_pairs`).
+/// `(a, b)` measures only pairs `a..b` of the schedule (`flow_pairs`);
+/// `progress` a callable told `(pairs done, pairs)` as pairs finish, or
+/// `True` for a tqdm bar (needs tqdm).
+///
+/// Ctrl-C stops the run between pairs: `KeyboardInterrupt` is raised with
+/// the pairs measured so far as its `partial` attribute (the dict or
+/// Dataset this call returns, over those pairs; None if none was done).
+/// An exception raised by `progress` stops it the same way.
 ///
 /// Returns a dict: `ticks` `int64 (pairs, 2)`, `methods` (each pair's),
 /// `x`, `y` `(ny, nx)`, `u`, `v`, `flags`, and each vector's standard
@@ -633,7 +640,7 @@ fn array3<T>(shape: (usize, usize, usize), v: Vec<T>) -> PyResult<Array3<T>> {
 /// `y, x`, in m, s and m/s when calibrated (else px, ticks and px per
 /// pair), so `ds.piv.vorticity()` works.
 #[pyfunction]
-#[pyo3(signature = (path, dt=None, every=None, start=None, end=None, method="mc", window=None, dwell_cap=Some(spiv_host::dwell::DWELL_CAP), windows=None, width=None, height=None, flip=true, strip_head=0, dense=false, pixel_size=None, tick_hz=None, as_xarray=false, mask=None, pairs=None))]
+#[pyo3(signature = (path, dt=None, every=None, start=None, end=None, method="mc", window=None, dwell_cap=Some(spiv_host::dwell::DWELL_CAP), windows=None, width=None, height=None, flip=true, strip_head=0, dense=false, pixel_size=None, tick_hz=None, as_xarray=false, mask=None, pairs=None, progress=None))]
 #[allow(clippy::too_many_arguments)]
 fn flow<'py>(
     py: Python<'py>,
@@ -656,6 +663,7 @@ fn flow<'py>(
     as_xarray: bool,
     mask: Option<&Bound<'py, PyAny>>,
     pairs: Option<(usize, usize)>,
+    progress: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let mask = mask
         .map(|m| image(m, "mask").map(|m| m.mapv(|v| v != 0.0)))
@@ -676,20 +684,100 @@ fn flow<'py>(
         pairs: pairs.map(|(a, b)| a..b),
     };
     let fopts = file_options(width, height, flip, strip_head)?;
-    let (out, o) = py
+    let (rec, o) = py
         .detach(|| -> Result<_, Failure> {
             let rec = Recording::open(&path, &fopts)?;
             let o = req.options(&rec, &path)?;
-            Ok((run_flow(&rec, &o, |_, _| {})?, o))
+            Ok((rec, o))
         })
         .map_err(err)?;
-    let d = flow_dict(py, out)?;
-    calibrated(&d, o.calibration, f64::from(o.dt))?;
-    if !as_xarray {
-        return Ok(d.into_any());
+    let progress = match progress {
+        Some(p) if p.is_truthy()? && !p.is_callable() => Some(
+            py.import("spiv._progress")?
+                .getattr("tqdm_bar")?
+                .call1((o.pair_ticks().len(),))?,
+        ),
+        Some(p) if p.is_callable() => Some(p.clone()),
+        _ => None,
+    };
+    let (out, stopped) = interruptible(py, &rec, &o, progress.as_ref())?;
+    let dict = |out: spiv_host::flow::FlowOutcome| -> PyResult<Bound<'py, PyAny>> {
+        let d = flow_dict(py, out)?;
+        calibrated(&d, o.calibration, f64::from(o.dt))?;
+        if !as_xarray {
+            return Ok(d.into_any());
+        }
+        // pivpy's layout, built by xarray itself (python/pysrc/spiv/_xarray.py).
+        py.import("spiv._xarray")?.getattr("to_xarray")?.call1((d,))
+    };
+    if let Some(e) = stopped {
+        // The pairs measured before the interruption ride on the exception.
+        let partial = if out.pairs.is_empty() {
+            py.None().into_bound(py)
+        } else {
+            dict(out)?
+        };
+        e.value(py).setattr("partial", partial)?;
+        return Err(e);
     }
-    // pivpy's layout, built by xarray itself (python/pysrc/spiv/_xarray.py).
-    py.import("spiv._xarray")?.getattr("to_xarray")?.call1((d,))
+    dict(out)
+}
+
+/// Runs `run_flow` on a worker thread while this one, holding the GIL
+/// every 20 ms, reports progress (`progress(done, total)`) and checks for
+/// signals. Ctrl-C (or an exception from `progress`) stops the run
+/// between pairs: the outcome holds the pairs measured so far, and the
+/// exception is returned beside it to be raised.
+fn interruptible(
+    py: Python<'_>,
+    rec: &Recording,
+    o: &spiv_host::flow::FlowOptions,
+    progress: Option<&Bound<'_, PyAny>>,
+) -> PyResult<(spiv_host::flow::FlowOutcome, Option<PyErr>)> {
+    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+    let stop = AtomicBool::new(false);
+    let done = AtomicUsize::new(0);
+    let total = o.pair_ticks().len();
+    let mut stopped: Option<PyErr> = None;
+    let joined = std::thread::scope(|s| {
+        let worker = s.spawn(|| {
+            spiv_host::flow::run_flow_until(rec, o, |i, _| done.store(i, Ordering::Relaxed), &stop)
+        });
+        let mut told = 0;
+        loop {
+            let finished = py.detach(|| {
+                for _ in 0..4 {
+                    if worker.is_finished() {
+                        return true;
+                    }
+                    std::thread::sleep(std::time::Duration::from_millis(5));
+                }
+                worker.is_finished()
+            });
+            let n = done.load(Ordering::Relaxed);
+            if n != told && stopped.is_none() {
+                told = n;
+                if let Some(Err(e)) = progress.map(|p| p.call1((n, total))) {
+                    stop.store(true, Ordering::Relaxed);
+                    stopped = Some(e);
+                }
+            }
+            if stopped.is_none() {
+                if let Err(e) = py.check_signals() {
+                    stop.store(true, Ordering::Relaxed);
+                    stopped = Some(e);
+                }
+            }
+            if finished {
+                break;
+            }
+        }
+        py.detach(|| worker.join())
+    });
+    let out = joined
+        .map_err(|_| SpivError::new_err("the flow run failed unexpectedly (a worker panicked)"))?
+        .map_err(err)?;
+    Ok((out, stopped))
 }
 
 /// The pairs `flow` measures with these options: their frame ticks,

@@ -429,6 +429,38 @@ def test_flow_checks_inputs_against_what_they_claim(recording, tmp_path):
         spiv.piv(a, a, windows=(32, 64))
 
 
+def test_ctrl_c_stops_flow_between_pairs_and_keeps_them(cli, tmp_path):
+    """Ctrl-C (here `_thread.interrupt_main`, from the progress callback once
+    the first pair is done) stops the run within one pair per worker: a
+    clean KeyboardInterrupt, no panic, and the pairs done on it, each the
+    same as a whole run's."""
+    import _thread
+
+    d = tmp_path / "rec"
+    cli("simulate", "--scene", "uniform", "--width", "128", "--height", "96",
+        "--ticks", "1600", "--seed", "4", "--out", d)
+    total = len(spiv.flow_pairs(d / "spikes.dat"))
+    seen = []
+
+    def interrupt(done, n):
+        seen.append((done, n))
+        if len(seen) == 1:
+            _thread.interrupt_main()
+
+    with pytest.raises(KeyboardInterrupt) as e:
+        spiv.flow(d / "spikes.dat", progress=interrupt)
+    part = e.value.partial
+    assert part is not None and seen[0][1] == total
+    got = part["u"].shape[0]
+    assert 1 <= got < total and got <= seen[0][0] + (os.cpu_count() or 1), (got, seen)
+    calls = []
+    whole = spiv.flow(d / "spikes.dat", progress=lambda done, n: calls.append((done, n)))
+    assert calls[-1] == (total, total) and all(a[0] < b[0] for a, b in zip(calls, calls[1:]))
+    rows = [int(np.flatnonzero(whole["ticks"][:, 0] == t)[0]) for t in part["ticks"][:, 0]]
+    np.testing.assert_array_equal(part["u"], whole["u"][rows])
+    np.testing.assert_array_equal(part["flags"], whole["flags"][rows])
+
+
 def test_heavy_work_releases_the_gil():
     # Two PIV runs from two threads finish and agree (the GIL is released
     # inside, so they overlap; correctness, not timing, is tested here).

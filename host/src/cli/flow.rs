@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 use spiv_formats::dat::DatOptions;
-use spiv_host::flow::{run_flow, FlowRequest, Recording};
+use spiv_host::flow::{run_flow_until, FlowRequest, Recording};
 use spiv_host::reconstruct::FileOptions;
 use spiv_host::report::flow::{write_flow, RunInfo};
 
@@ -87,6 +87,9 @@ pub struct FlowArgs {
     /// Output folder (created if missing).
     #[arg(long, default_value = "spiv-flow")]
     out: PathBuf,
+    /// No progress bar (it is drawn only when stderr is a terminal).
+    #[arg(long)]
+    quiet: bool,
 }
 
 /// Runs it.
@@ -125,10 +128,21 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
     std::fs::create_dir_all(&a.out)
         .map_err(|e| CliError::Usage(format!("{}: {e}", a.out.display())))?;
     let pairs = o.pair_ticks().len() as u64;
-    let b = bar(pairs, "pairs");
+    let b = if a.quiet {
+        indicatif::ProgressBar::hidden()
+    } else {
+        bar(pairs, "pairs")
+    };
     let t0 = std::time::Instant::now();
-    let out = run_flow(&rec, &o, |i, _| b.set_position(i as u64)).map_err(flow_err)?;
+    let stop = super::interrupt()?;
+    let out = run_flow_until(&rec, &o, |i, _| b.set_position(i as u64), stop).map_err(flow_err)?;
     b.finish_and_clear();
+    if out.pairs.is_empty() {
+        return Err(CliError::Interrupted(format!(
+            "interrupted before the first of {} pairs was measured; nothing written",
+            out.scheduled
+        )));
+    }
     let command: Vec<String> = std::env::args().collect();
     let command = command.join(" ");
     let info = RunInfo {
@@ -179,6 +193,14 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
             "warning: the core's tables were full: {} regions and {} particle pixels were left as background (summary.json, lost_to_full_tables)",
             lost.regions, lost.pixels
         );
+    }
+    if out.pairs.len() < out.scheduled {
+        return Err(CliError::Interrupted(format!(
+            "interrupted: {} of {} pairs measured, written to {}",
+            out.pairs.len(),
+            out.scheduled,
+            a.out.display()
+        )));
     }
     Ok(())
 }

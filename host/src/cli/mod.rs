@@ -39,6 +39,32 @@ pub enum CliError {
     /// A bad option value.
     #[error("{0}")]
     Usage(String),
+    /// Stopped by Ctrl-C (exit status 130); what was done is said.
+    #[error("{0}")]
+    Interrupted(String),
+}
+
+/// A flag Ctrl-C sets (SIGINT, and SIGTERM, on the first press; the
+/// second press ends the process at once): long jobs poll it between
+/// pairs, keep what they measured and stop.
+pub fn interrupt() -> Result<&'static std::sync::atomic::AtomicBool, CliError> {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    static STOP: AtomicBool = AtomicBool::new(false);
+    static SET: std::sync::Once = std::sync::Once::new();
+    let mut failed = None;
+    SET.call_once(|| {
+        if let Err(e) = ctrlc::set_handler(|| {
+            if STOP.swap(true, Ordering::SeqCst) {
+                std::process::exit(130);
+            }
+        }) {
+            failed = Some(e.to_string());
+        }
+    });
+    match failed {
+        Some(e) => Err(CliError::Usage(format!("cannot catch Ctrl-C: {e}"))),
+        None => Ok(&STOP),
+    }
 }
 
 /// Parses `--encoding`.
@@ -74,7 +100,7 @@ fn bar(len: u64, what: &str) -> indicatif::ProgressBar {
     let b = indicatif::ProgressBar::new(len);
     b.set_style(
         indicatif::ProgressStyle::with_template(&format!(
-            "{what} {{bar:30}} {{pos}}/{{len}} {{elapsed}}"
+            "{what} {{bar:30}} {{pos}}/{{len}} {{elapsed}}, {{eta}} left"
         ))
         .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );

@@ -10,7 +10,7 @@ tools.transform_coordinates. Flags: 0 valid, 1 replaced from neighbours,
 """
 
 from os import PathLike
-from typing import Any, Dict, Literal, Optional, Sequence, Tuple, TypedDict, Union, overload
+from typing import Any, Callable, Dict, Literal, Optional, Sequence, Tuple, TypedDict, Union, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -201,6 +201,7 @@ def flow(
     as_xarray: bool = False,
     mask: Optional[npt.ArrayLike] = None,
     pairs: Optional[Tuple[int, int]] = None,
+    progress: Union[None, bool, Callable[[int, int], Any]] = None,
 ) -> Flow:  # an xarray.Dataset with as_xarray=True
     """The flow job on a .dat or .npz recording, as `spiv flow` (without its files).
 
@@ -220,7 +221,9 @@ def flow(
     ds.piv.vorticity() works. mask: nonzero pixels (height, width) left out; nodes
     whose centre it covers are invalid in every pair. pairs: (a, b) measures only
     pairs a..b of flow_pairs(); from a multiple of FLOW_CHAIN, exactly the vectors
-    a run of all pairs gives them.
+    a run of all pairs gives them. progress: a callable told (pairs done, pairs),
+    or True for a tqdm bar. Ctrl-C stops the run between pairs and raises
+    KeyboardInterrupt with the pairs measured so far as its .partial (None if none).
     """
 
 def open_flow(path: _Path) -> Any:
