@@ -12,9 +12,10 @@
 //!   spiv ([`write_netcdf3`]).
 //!
 //! Every netCDF reader reads both (netCDF-C; xarray with its netCDF4 or
-//! h5netcdf engines, and scipy for netCDF-3). Dimensions are `time`, `y`
-//! and `x`, each with its coordinate variable; the data variables are
-//! `f64` (or `i32` for flags) over `(time, y, x)` or `(y, x)`, with their
+//! h5netcdf engines, and scipy for netCDF-3). Dimensions are `t` (time,
+//! pivpy's name), `y` and `x`, each with its coordinate variable; the data
+//! variables are `f64` (or `i32` for flags and counts) over `(t, y, x)`,
+//! `(y, x)`, `(t,)`, `(y,)` or `(x,)` (auxiliary coordinates), with their
 //! attributes.
 
 use std::path::Path;
@@ -26,20 +27,26 @@ use crate::FormatError;
 /// The dimensions a variable spans.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Dims {
-    /// `(time, y, x)`: one field per time step.
+    /// `(t, y, x)`: one field per time step.
     TimeYx,
     /// `(y, x)`: one field.
     Yx,
-    /// `(time,)`.
+    /// `(t,)`.
     Time,
+    /// `(y,)`: one value per node row (an auxiliary coordinate).
+    Y,
+    /// `(x,)`: one value per node column.
+    X,
 }
 
 impl Dims {
     fn names(self) -> &'static [&'static str] {
         match self {
-            Dims::TimeYx => &["time", "y", "x"],
+            Dims::TimeYx => &["t", "y", "x"],
             Dims::Yx => &["y", "x"],
-            Dims::Time => &["time"],
+            Dims::Time => &["t"],
+            Dims::Y => &["y"],
+            Dims::X => &["x"],
         }
     }
 
@@ -49,6 +56,8 @@ impl Dims {
             Dims::TimeYx => t * ny * nx,
             Dims::Yx => ny * nx,
             Dims::Time => t,
+            Dims::Y => ny,
+            Dims::X => nx,
         }
     }
 }
@@ -153,10 +162,10 @@ pub fn write_netcdf4(path: &Path, s: &FieldSeries) -> Result<(), FormatError> {
     check_lengths(path, s)?;
     let write = || -> Result<(), netcdf::Error> {
         let mut f = netcdf::create(path)?;
-        for (name, (values, _)) in [("time", &s.time), ("y", &s.y), ("x", &s.x)] {
+        for (name, (values, _)) in [("t", &s.time), ("y", &s.y), ("x", &s.x)] {
             f.add_dimension(name, values.len())?;
         }
-        for (name, (values, attrs)) in [("time", &s.time), ("y", &s.y), ("x", &s.x)] {
+        for (name, (values, attrs)) in [("t", &s.time), ("y", &s.y), ("x", &s.x)] {
             let mut v = f.add_variable::<f64>(name, &[name])?;
             nc4_attrs(attrs, |k, a| v.put_attribute(k, a).map(|_| ()))?;
             v.put_values(values, ..)?;
@@ -166,7 +175,7 @@ pub fn write_netcdf4(path: &Path, s: &FieldSeries) -> Result<(), FormatError> {
             let chunk: Vec<usize> = dims
                 .iter()
                 .map(|&d| match d {
-                    "time" => 1,
+                    "t" => 1,
                     "y" => s.y.0.len().max(1),
                     _ => s.x.0.len().max(1),
                 })
@@ -231,7 +240,7 @@ pub fn write_netcdf3(path: &Path, s: &FieldSeries) -> Result<(), FormatError> {
     let write = || -> Result<(), netcdf3::error::WriteError> {
         let mut w = FileWriter::open(path)?;
         w.set_def(&ds, Version::Offset64Bit, 0)?;
-        w.write_var_f64("time", &s.time.0)?;
+        w.write_var_f64("t", &s.time.0)?;
         w.write_var_f64("y", &s.y.0)?;
         w.write_var_f64("x", &s.x.0)?;
         for v in &s.variables {
@@ -254,10 +263,10 @@ pub fn write_netcdf3(path: &Path, s: &FieldSeries) -> Result<(), FormatError> {
 /// The netCDF header of `s`.
 fn definition(s: &FieldSeries) -> Result<DataSet, netcdf3::InvalidDataSet> {
     let mut ds = DataSet::new();
-    ds.add_fixed_dim("time", s.time.0.len())?;
+    ds.add_fixed_dim("t", s.time.0.len())?;
     ds.add_fixed_dim("y", s.y.0.len())?;
     ds.add_fixed_dim("x", s.x.0.len())?;
-    for (name, (_, attrs)) in [("time", &s.time), ("y", &s.y), ("x", &s.x)] {
+    for (name, (_, attrs)) in [("t", &s.time), ("y", &s.y), ("x", &s.x)] {
         ds.add_var_f64(name, &[name])?;
         add_attrs(&mut ds, Some(name), attrs)?;
     }
@@ -347,7 +356,7 @@ mod tests {
         assert_eq!(r.read_var_i32("flag").unwrap(), vec![0, 1, 2, 0, 0, 2]);
         assert_eq!(r.read_var_f64("y").unwrap(), vec![16.0, 32.0, 48.0]);
         let ds = r.data_set();
-        assert_eq!(ds.dim_size("time"), Some(2));
+        assert_eq!(ds.dim_size("t"), Some(2));
         assert_eq!(
             ds.get_var_attr_as_string("u", "units").as_deref(),
             Some("px")
@@ -400,7 +409,7 @@ mod tests {
         }
         assert_eq!(
             u.dimensions().iter().map(|d| d.name()).collect::<Vec<_>>(),
-            ["time", "y", "x"]
+            ["t", "y", "x"]
         );
         assert!(u.fill_value::<f64>().unwrap().is_some_and(f64::is_nan));
         assert_eq!(

@@ -296,12 +296,17 @@ def test_flow_nc_opens_in_xarray_with_the_fields_and_units(cli, tmp_path):
     got = spiv.flow(d / "spikes.dat")
     with xr.open_dataset(tmp_path / "out" / "flow.nc") as ds:
         pairs, ny, nx = got["u"].shape
-        assert dict(ds.sizes) == {"time": pairs, "y": ny, "x": nx}
-        assert ds.u.dims == ("time", "y", "x") and ds.mean_u.dims == ("y", "x")
-        assert ds.u.attrs["units"] == "px" and ds.u_m_s.attrs["units"] == "m s-1"
+        assert dict(ds.sizes) == {"t": pairs, "y": ny, "x": nx}
+        assert ds.u.dims == ("t", "y", "x") and ds.mean_u.dims == ("y", "x")
+        assert ds.u.attrs["units"] == "1" and ds.u_m_s.attrs["units"] == "m s-1"
         assert ds.attrs["Conventions"] == "CF-1.8" and ds.attrs["dt_ticks"] == 13
-        np.testing.assert_array_equal(ds.x.values, got["x"][0])
-        np.testing.assert_array_equal(ds.y.values, got["y"][:, 0])
+        # Calibrated: x, y in m, the pixels beside them.
+        assert ds.x.attrs["units"] == "m"
+        np.testing.assert_allclose(ds.x.values, got["x"][0] * 0.02e-3, rtol=1e-12)
+        np.testing.assert_array_equal(ds.x_px.values, got["x"][0])
+        np.testing.assert_array_equal(ds.y_px.values, got["y"][:, 0])
+        assert ds.mean_pairs.dtype.kind == "i"
+        assert ds.sigma_u.attrs["long_name"] != ds.sigma_v.attrs["long_name"]
         np.testing.assert_array_equal(ds.flag.values, got["flags"])
         measured = got["flags"] < 2
         np.testing.assert_array_equal(ds.u.values[measured], got["u"][measured])
@@ -309,7 +314,7 @@ def test_flow_nc_opens_in_xarray_with_the_fields_and_units(cli, tmp_path):
         np.testing.assert_array_equal(ds.mean_pairs.values, got["mean_pairs"])
         np.testing.assert_allclose(ds.u_m_s.values[measured], got["u_m_s"][measured], rtol=1e-12)
         # Seconds since the first plane: each pair's midpoint tick / 20 kHz.
-        np.testing.assert_allclose(ds.time.values, got["ticks"].mean(axis=1) / 20000.0)
+        np.testing.assert_allclose(ds.t.values, got["ticks"].mean(axis=1) / 20000.0)
     # The file in pivpy's layout: pivpy's vorticity of it is that of the
     # run's own Dataset.
     from pivpy import pivpy  # noqa: F401  (registers the .piv accessor)
@@ -321,6 +326,28 @@ def test_flow_nc_opens_in_xarray_with_the_fields_and_units(cli, tmp_path):
     w = piv.piv.vorticity()["w"].values
     np.testing.assert_allclose(w, want.piv.vorticity()["w"].values, rtol=1e-9, atol=1e-12)
     assert np.isfinite(w).any() and np.abs(w[np.isfinite(w)]).max() > 0
+
+
+def test_flow_nc_passes_the_cf_checker(cli, tmp_path):
+    """flow.nc, calibrated and not, and spiv piv's .nc: no error from the CF
+    checker (compliance-checker, CF 1.8)."""
+    from compliance_checker.runner import CheckSuite, ComplianceChecker
+
+    d = tmp_path / "rec"
+    cli("simulate", "--scene", "paper-linear", "--width", "128", "--height", "128",
+        "--ticks", "300", "--seed", "2", "--out", d)
+    cli("flow", d / "spikes.dat", "--out", tmp_path / "cal")
+    lone = tmp_path / "lone.dat"
+    lone.write_bytes((d / "spikes.dat").read_bytes())
+    cli("flow", lone, "--width", 128, "--height", 128, "--dt", 13, "--out", tmp_path / "raw")
+    cli("piv", tmp_path / "cal" / "pair_a.png", tmp_path / "cal" / "pair_b.png",
+        "-o", tmp_path / "p.nc")
+    CheckSuite.load_all_available_checkers()
+    for nc in (tmp_path / "cal" / "flow.nc", tmp_path / "raw" / "flow.nc", tmp_path / "p.nc"):
+        report = tmp_path / "report.txt"
+        ok, errors = ComplianceChecker.run_checker(
+            str(nc), ["cf:1.8"], 0, "normal", output_filename=str(report), output_format="text")
+        assert not errors and ok, report.read_text()
 
 
 @pytest.mark.skipif(not os.environ.get("SPIV_BIN_NETCDF4"),
@@ -340,7 +367,7 @@ def test_flow_nc_as_netcdf4_opens_in_xarray(tmp_path):
     got = spiv.flow(d / "spikes.dat")
     with xr.open_dataset(nc, engine="netcdf4") as ds:
         assert ds.u.encoding["zlib"] and ds.u.encoding["chunksizes"][0] == 1
-        assert ds.u.dims == ("time", "y", "x") and ds.attrs["Conventions"] == "CF-1.8"
+        assert ds.u.dims == ("t", "y", "x") and ds.attrs["Conventions"] == "CF-1.8"
         measured = got["flags"] < 2
         np.testing.assert_array_equal(ds.flag.values, got["flags"])
         np.testing.assert_array_equal(ds.u.values[measured], got["u"][measured])

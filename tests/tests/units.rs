@@ -94,16 +94,26 @@ fn flow_nc_holds_every_pair_and_the_mean_as_measured() {
     let (g, p) = (&out.grid, out.pairs.len());
     {
         let ds = nc.data_set();
-        assert_eq!(ds.dim_size("time"), Some(p));
+        assert_eq!(ds.dim_size("t"), Some(p));
         assert_eq!(ds.dim_size("y"), Some(g.ny));
         assert_eq!(ds.dim_size("x"), Some(g.nx));
+        // UDUNITS units: pixels are counts; the flag and uncertainty named.
         assert_eq!(
             ds.get_var_attr_as_string("u", "units").as_deref(),
-            Some("px")
+            Some("1")
         );
         assert_eq!(
             ds.get_var_attr_as_string("u_m_s", "units").as_deref(),
             Some("m s-1")
+        );
+        assert_eq!(
+            ds.get_var_attr_as_string("u_m_s", "ancillary_variables")
+                .as_deref(),
+            Some("flag sigma_u")
+        );
+        assert_eq!(
+            ds.get_var_attr_as_string("x", "units").as_deref(),
+            Some("m")
         );
         assert_eq!(
             ds.get_global_attr_as_string("Conventions").as_deref(),
@@ -117,7 +127,16 @@ fn flow_nc_holds_every_pair_and_the_mean_as_measured() {
     let u = nc.read_var_f64("u").unwrap();
     let flag = nc.read_var_i32("flag").unwrap();
     let sigma_u = nc.read_var_f64("sigma_u").unwrap();
-    let time = nc.read_var_f64("time").unwrap();
+    let time = nc.read_var_f64("t").unwrap();
+    // Calibrated: node centres in m, and in px beside them.
+    let (x, x_px) = (
+        nc.read_var_f64("x").unwrap(),
+        nc.read_var_f64("x_px").unwrap(),
+    );
+    for (c, (&m, &px)) in x.iter().zip(&x_px).enumerate() {
+        assert_eq!(px, g.centre(0, c).0);
+        assert!((m - px * PIXEL_MM * 1e-3).abs() < 1e-15, "{m} {px}");
+    }
     let nodes = g.nx * g.ny;
     for (i, pr) in out.pairs.iter().enumerate() {
         let mid = (pr.ticks[0] + pr.ticks[1]) as f64 / 2.0;
@@ -152,12 +171,12 @@ fn flow_nc_holds_every_pair_and_the_mean_as_measured() {
     }
     let mean = out.mean();
     let mean_u = nc.read_var_f64("mean_u").unwrap();
-    let pairs = nc.read_var_f64("mean_pairs").unwrap();
+    let pairs = nc.read_var_i32("mean_pairs").unwrap();
     for (j, v) in mean.vectors.iter().enumerate() {
         if v.state.is_measured() {
             assert_eq!(mean_u[j], v.u);
         }
-        assert_eq!(pairs[j], f64::from(mean.pairs[j]));
+        assert_eq!(i64::from(pairs[j]), i64::from(mean.pairs[j]));
     }
 }
 
@@ -177,9 +196,16 @@ fn without_a_calibration_there_are_no_m_per_s_and_time_is_in_ticks() {
         dat: DatOptions::default(),
     };
     let rec = Recording::open(&dat, &fo).unwrap();
-    let req = FlowRequest {
+    // Half a calibration is refused, naming the missing half.
+    let half = FlowRequest {
         dt: Some(13),
         pixel_mm: Some(0.02),
+        ..FlowRequest::default()
+    };
+    let e = half.options(&rec, &dat).unwrap_err();
+    assert!(e.to_string().contains("the tick rate (Hz) is missing"), "{e}");
+    let req = FlowRequest {
+        dt: Some(13),
         ..FlowRequest::default()
     };
     let o = req.options(&rec, &dat).unwrap();
@@ -196,9 +222,14 @@ fn without_a_calibration_there_are_no_m_per_s_and_time_is_in_ticks() {
     let ds = nc.data_set();
     assert!(!ds.has_var("u_m_s") && ds.has_var("u"));
     assert_eq!(
-        ds.get_var_attr_as_string("time", "units").as_deref(),
-        Some("ticks")
+        ds.get_var_attr_as_string("t", "units").as_deref(),
+        Some("1")
     );
+    assert_eq!(
+        ds.get_var_attr_as_string("x", "units").as_deref(),
+        Some("1")
+    );
+    assert!(!ds.has_var("x_px"));
     let header = std::fs::read_to_string(dir.path().join("mean.csv")).unwrap();
     assert!(!header.lines().next().unwrap().contains("u_m_s"));
     // A calibration out of range is refused, not written.

@@ -1,7 +1,16 @@
-//! `flow.nc`: a flow run as one netCDF file with CF conventions (time, y,
-//! x): every pair's field, its flags and uncertainties, the robust mean
-//! field with its pair counts, in px per pair and — calibrated — in m/s,
-//! with the run's settings as attributes. xarray opens it as a Dataset.
+//! `flow.nc`: a flow run as one netCDF file with CF conventions (t, y, x):
+//! every pair's field, its flags and uncertainties, the robust mean field
+//! with its pair counts, in px per pair and — calibrated — in m/s, with
+//! the run's settings as attributes. xarray opens it as a Dataset, and
+//! the CF checker (`compliance-checker --test cf:1.8`) passes it.
+//!
+//! Units are UDUNITS units: pixels and ticks are counts (`1`, the long
+//! name says which). Calibrated, `x` and `y` are in m (with `x_px`, `y_px`
+//! as auxiliary coordinates) and `t` in s since the recording's first
+//! plane; uncalibrated, `x` and `y` are in px and `t` in ticks. Every
+//! displacement names its flag and uncertainty in `ancillary_variables`;
+//! NaN marks what was not measured (netCDF-4 also declares it as the
+//! `_FillValue`).
 
 use std::path::Path;
 
@@ -25,9 +34,10 @@ pub fn write_flow_nc(
     write_field_series(path, &flow_series(out, opts, info))
 }
 
-/// The run as a [`FieldSeries`]: `time` is each pair's midpoint (s since
+/// The run as a [`FieldSeries`]: `t` is each pair's midpoint (s since
 /// the recording's first plane when calibrated, else ticks), `y` and `x`
-/// the PIV nodes' centres (px from the top-left corner, y down).
+/// the PIV nodes' centres from the first pixel's centre (m when
+/// calibrated, with `y_px`, `x_px` beside them; else px), y down.
 pub fn flow_series(out: &FlowOutcome, opts: &FlowOptions, info: RunInfo<'_>) -> FieldSeries {
     let cal = opts.calibration;
     let dt = f64::from(opts.dt);
@@ -38,43 +48,66 @@ pub fn flow_series(out: &FlowOutcome, opts: &FlowOptions, info: RunInfo<'_>) -> 
             out.pairs.iter().map(|p| c.seconds(mid(p.ticks))).collect(),
             vec![
                 text("units", "s"),
-                text(
-                    "long_name",
-                    "time of the pair's midpoint since the first plane",
-                ),
-                text("axis", "T"),
+                text("long_name", "time since the first plane"),
             ],
         ),
         None => (
             out.pairs.iter().map(|p| mid(p.ticks)).collect(),
             vec![
-                text("units", "ticks"),
-                text("long_name", "tick of the pair's midpoint (uncalibrated)"),
-                text("axis", "T"),
+                text("units", "1"),
+                text("long_name", "tick (pair midpoint)"),
             ],
         ),
     };
-    let coord = |values: Vec<f64>, axis: &str, what: &str| -> (Vec<f64>, Vec<(String, Attr)>) {
-        (
-            values,
-            vec![
-                text("units", "px"),
-                text(
-                    "long_name",
-                    format!("{what} of the window centre, px from the first pixel's centre"),
-                ),
-                text("axis", axis),
-            ],
-        )
-    };
-    let ys = (0..grid.ny).map(|r| grid.centre(r, 0).1).collect();
-    let xs = (0..grid.nx).map(|c| grid.centre(0, c).0).collect();
+    let ys: Vec<f64> = (0..grid.ny).map(|r| grid.centre(r, 0).1).collect();
+    let xs: Vec<f64> = (0..grid.nx).map(|c| grid.centre(0, c).0).collect();
     let mut variables = pair_variables(out, cal.map(|c| (c, dt)));
     variables.extend(mean_variables(out, cal.map(|c| (c, dt))));
+    let (y, x) = match cal {
+        Some(c) => {
+            let metres = |v: &[f64], axis: &str, name: &str, long: &str| {
+                (
+                    v.iter().map(|&p| c.metres(p)).collect(),
+                    vec![
+                        text("units", "m"),
+                        text("standard_name", name),
+                        text("long_name", long),
+                        text("axis", axis),
+                    ],
+                )
+            };
+            for (name, dims, values, long) in [
+                ("y_px", Dims::Y, ys.clone(), "y, pixels (down)"),
+                ("x_px", Dims::X, xs.clone(), "x, pixels (right)"),
+            ] {
+                variables.push(variable(
+                    name,
+                    dims,
+                    Values::F64(values),
+                    vec![text("units", "1"), text("long_name", long)],
+                ));
+            }
+            for v in variables
+                .iter_mut()
+                .filter(|v| matches!(v.dims, Dims::TimeYx | Dims::Yx))
+            {
+                v.attrs.push(text("coordinates", "y_px x_px"));
+            }
+            (
+                metres(&ys, "Y", "projection_y_coordinate", "y (down)"),
+                metres(&xs, "X", "projection_x_coordinate", "x (right)"),
+            )
+        }
+        None => {
+            let px =
+                |v: Vec<f64>, long: &str| (v, vec![text("units", "1"), text("long_name", long)]);
+            (px(ys, "y, pixels (down)"), px(xs, "x, pixels (right)"))
+        }
+    };
     FieldSeries {
         time: (time, time_attrs),
-        y: coord(ys, "Y", "row (down)"),
-        x: coord(xs, "X", "column (right)"),
+        y,
+        x,
         variables,
         globals: globals(out, opts, info),
     }
@@ -107,9 +140,10 @@ fn variable(name: &str, dims: Dims, values: Values, attrs: Vec<(String, Attr)>) 
     }
 }
 
-/// The flag attributes (CF `flag_values`, `flag_meanings`).
+/// The flag attributes (CF `status_flag`, `flag_values`, `flag_meanings`).
 fn flag_attrs(what: &str) -> Vec<(String, Attr)> {
     vec![
+        text("standard_name", "status_flag"),
         text("long_name", what),
         ("flag_values".into(), Attr::I32(vec![0, 1, 2])),
         text("flag_meanings", "valid replaced invalid"),
@@ -117,27 +151,28 @@ fn flag_attrs(what: &str) -> Vec<(String, Attr)> {
 }
 
 /// Displacement variables `{prefix}u`, `{prefix}v` (px per pair) and,
-/// calibrated, `{prefix}u_m_s`, `{prefix}v_m_s`, over `dims`.
+/// calibrated, `{prefix}u_m_s`, `{prefix}v_m_s`, over `dims`, each naming
+/// `{prefix}flag` and, with `sigma`, `{prefix}sigma_u` or `_v` as its
+/// ancillary variables.
 fn displacement(
     prefix: &str,
     dims: Dims,
     (u, v): (Vec<f64>, Vec<f64>),
     cal: Option<(crate::units::Calibration, f64)>,
+    sigma: bool,
 ) -> Vec<Variable> {
-    let attrs = |comp: &str, units: &str| {
+    // Short long names, which label a plot's axis.
+    let what = if prefix.is_empty() { "" } else { "median " };
+    let attrs = |comp: &str, long: String, units: &str| {
+        let ancillary = if sigma {
+            format!("{prefix}flag {prefix}sigma_{comp}")
+        } else {
+            format!("{prefix}flag")
+        };
         vec![
             text("units", units),
-            text(
-                "long_name",
-                format!(
-                    "{comp} of the particles' motion{}",
-                    if prefix.is_empty() {
-                        ""
-                    } else {
-                        ", median over pairs"
-                    }
-                ),
-            ),
+            text("long_name", long),
+            text("ancillary_variables", ancillary),
         ]
     };
     let ms = cal.map(|(c, dt)| {
@@ -149,13 +184,13 @@ fn displacement(
             &format!("{prefix}u"),
             dims,
             Values::F64(u),
-            attrs("displacement right per pair", "px"),
+            attrs("u", format!("{what}u, px per pair"), "1"),
         ),
         variable(
             &format!("{prefix}v"),
             dims,
             Values::F64(v),
-            attrs("displacement down per pair", "px"),
+            attrs("v", format!("{what}v (down), px per pair"), "1"),
         ),
     ];
     if let Some((um, vm)) = ms {
@@ -163,13 +198,13 @@ fn displacement(
             &format!("{prefix}u_m_s"),
             dims,
             Values::F64(um),
-            attrs("velocity right", "m s-1"),
+            attrs("u", format!("{what}u"), "m s-1"),
         ));
         vars.push(variable(
             &format!("{prefix}v_m_s"),
             dims,
             Values::F64(vm),
-            attrs("velocity down", "m s-1"),
+            attrs("v", format!("{what}v (down)"), "m s-1"),
         ));
     }
     vars
@@ -192,7 +227,7 @@ fn pair_variables(
     };
     let u = stack(&|p, i| at(p, i, |v| v.u));
     let v = stack(&|p, i| at(p, i, |v| v.v));
-    let mut vars = displacement("", Dims::TimeYx, (u, v), cal);
+    let mut vars = displacement("", Dims::TimeYx, (u, v), cal, true);
     let flags = out
         .pairs
         .iter()
@@ -216,11 +251,8 @@ fn pair_variables(
             Dims::TimeYx,
             Values::F64(s),
             vec![
-                text("units", "px"),
-                text(
-                    "long_name",
-                    "standard uncertainty of the displacement per pair",
-                ),
+                text("units", "1"),
+                text("long_name", format!("{name}, px per pair")),
             ],
         ));
     }
@@ -243,6 +275,7 @@ fn mean_variables(
         Dims::Yx,
         (col(&|i| pick(i, |v| v.u)), col(&|i| pick(i, |v| v.v))),
         cal,
+        true,
     );
     let flags = (0..nodes)
         .map(|i| i32::from(mean.vectors.get(i).map_or(2, |v| v.state.flag())))
@@ -264,19 +297,21 @@ fn mean_variables(
             Dims::Yx,
             Values::F64(s),
             vec![
-                text("units", "px"),
-                text("long_name", "standard uncertainty of the median per pair"),
+                text("units", "1"),
+                text("long_name", format!("{name}, px per pair")),
             ],
         ));
     }
-    let pairs = col(&|i| f64::from(mean.pairs.get(i).copied().unwrap_or(0)));
+    let pairs = (0..nodes)
+        .map(|i| i32::try_from(mean.pairs.get(i).copied().unwrap_or(0)).unwrap_or(i32::MAX))
+        .collect();
     vars.push(variable(
         "mean_pairs",
         Dims::Yx,
-        Values::F64(pairs),
+        Values::I32(pairs),
         vec![
             text("units", "1"),
-            text("long_name", "pairs whose valid vector entered the median"),
+            text("long_name", "valid pairs in the median"),
         ],
     ));
     vars
@@ -324,7 +359,13 @@ pub fn piv_series(
 ) -> FieldSeries {
     let pick =
         |g: fn(&Vector) -> f64| -> Vec<f64> { vectors.iter().map(|v| measured(v, g)).collect() };
-    let mut variables = displacement("", Dims::TimeYx, (pick(|v| v.u), pick(|v| v.v)), None);
+    let mut variables = displacement(
+        "",
+        Dims::TimeYx,
+        (pick(|v| v.u), pick(|v| v.v)),
+        None,
+        false,
+    );
     variables.push(variable(
         "flag",
         Dims::TimeYx,
@@ -351,14 +392,20 @@ pub fn piv_series(
         ));
     }
     let axis =
-        |values: Vec<f64>, axis: &str| (values, vec![text("units", "px"), text("axis", axis)]);
+        |values: Vec<f64>, long: &str| (values, vec![text("units", "1"), text("long_name", long)]);
     FieldSeries {
         time: (
             vec![0.0],
             vec![text("units", "1"), text("long_name", "pair index")],
         ),
-        y: axis((0..grid.ny).map(|r| grid.centre(r, 0).1).collect(), "Y"),
-        x: axis((0..grid.nx).map(|c| grid.centre(0, c).0).collect(), "X"),
+        y: axis(
+            (0..grid.ny).map(|r| grid.centre(r, 0).1).collect(),
+            "y, pixels (down)",
+        ),
+        x: axis(
+            (0..grid.nx).map(|c| grid.centre(0, c).0).collect(),
+            "x, pixels (right)",
+        ),
         variables,
         globals: vec![
             text("Conventions", "CF-1.8"),

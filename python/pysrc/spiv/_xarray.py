@@ -73,14 +73,18 @@ def open_flow(path):
     a = f.attrs
     dt = float(a["dt_ticks"])
     cal = "tick_hz" in a and "pixel_size_mm" in a
-    mid = f.time.values * float(a["tick_hz"]) if cal else f.time.values
+    # flow.nc is (t, y, x) with `flag`, x and y in m when calibrated (px in
+    # x_px, y_px); the Dataset is pivpy's (y, x, t) with `chc`.
+    mid = f.t.values * float(a["tick_hz"]) if cal else f.t.values
     ny, nx = f.sizes["y"], f.sizes["x"]
+    xs = f.x_px.values if "x_px" in f.variables else f.x.values
+    ys = f.y_px.values if "y_px" in f.variables else f.y.values
     measured = lambda name: f[name].values
     sigma = lambda name: np.nan_to_num(f[name].values, nan=np.inf)
     d = {
         "ticks": np.stack([mid - dt / 2, mid + dt / 2], axis=1),
-        "x": np.broadcast_to(f.x.values, (ny, nx)),
-        "y": np.broadcast_to(f.y.values[:, None], (ny, nx)),
+        "x": np.broadcast_to(xs, (ny, nx)),
+        "y": np.broadcast_to(ys[:, None], (ny, nx)),
         "u": measured("u"), "v": measured("v"), "flags": f.flag.values,
         "sigma_u": sigma("sigma_u"), "sigma_v": sigma("sigma_v"),
         "mean_u": measured("mean_u"), "mean_v": measured("mean_v"),
