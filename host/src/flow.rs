@@ -817,10 +817,16 @@ pub const GLARE_TICKS: u16 = 128;
 pub const GLARE_FACTOR: f64 = 4.0;
 /// The lowest rate called glare, spikes per tick.
 pub const GLARE_MIN_RATE: f64 = 0.1;
+/// Glare is extended light: a bright pixel is glare only when at least
+/// half of the `(2R+1)²` pixels around it (R = this) are bright too. A
+/// particle that lingers (at a vortex centre, in a stagnation point) is
+/// a few pixels across and fails it; a glare band's edge passes.
+pub const GLARE_RADIUS: usize = 4;
 
 /// The pixels of `rec` under glare around tick `k` (upright, cropped):
 /// each pixel's spikes per tick over [`GLARE_TICKS`] ticks, against
-/// [`GLARE_FACTOR`] × the median pixel's and [`GLARE_MIN_RATE`].
+/// [`GLARE_FACTOR`] × the median pixel's and [`GLARE_MIN_RATE`], where
+/// the bright pixels are extended ([`GLARE_RADIUS`]).
 pub fn glare(rec: &Recording, k: u64) -> Result<Vec<bool>, FlowError> {
     let p = rec.around(k, GLARE_TICKS)?;
     let (w, h) = (usize::from(p.width), usize::from(p.height));
@@ -845,7 +851,62 @@ pub fn glare(rec: &Recording, k: u64) -> Result<Vec<bool>, FlowError> {
     sorted.sort_by(f64::total_cmp);
     let median = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
     let limit = (GLARE_FACTOR * median).max(GLARE_MIN_RATE);
-    Ok(rate.iter().map(|&r| n > 0 && r >= limit).collect())
+    let bright: Vec<bool> = rate.iter().map(|&r| n > 0 && r >= limit).collect();
+    Ok(extended(&bright, cw, h, GLARE_RADIUS))
+}
+
+/// The pixels of `bright` (`w × h`, row-major) with at least half of the
+/// `(2r+1)²` window around them bright too (the window clipped at the
+/// frame's edges, and the half taken of what remains), by a summed-area
+/// table.
+fn extended(bright: &[bool], w: usize, h: usize, r: usize) -> Vec<bool> {
+    let mut sum = vec![0u32; (w + 1) * (h + 1)];
+    for y in 0..h {
+        for x in 0..w {
+            sum[(y + 1) * (w + 1) + x + 1] = u32::from(bright[y * w + x])
+                + sum[y * (w + 1) + x + 1]
+                + sum[(y + 1) * (w + 1) + x]
+                - sum[y * (w + 1) + x];
+        }
+    }
+    (0..w * h)
+        .map(|i| {
+            let (y, x) = (i / w, i % w);
+            if !bright[i] {
+                return false;
+            }
+            let (y0, y1) = (y.saturating_sub(r), (y + r + 1).min(h));
+            let (x0, x1) = (x.saturating_sub(r), (x + r + 1).min(w));
+            let n = sum[y1 * (w + 1) + x1] + sum[y0 * (w + 1) + x0]
+                - sum[y0 * (w + 1) + x1]
+                - sum[y1 * (w + 1) + x0];
+            2 * n as usize >= (y1 - y0) * (x1 - x0)
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod glare_tests {
+    use super::extended;
+
+    /// A band stays glare to its edge; a lingering particle's few pixels
+    /// do not.
+    #[test]
+    fn only_extended_light_is_glare() {
+        let (w, h) = (40, 30);
+        let mut bright = vec![false; w * h];
+        for y in 20..30 {
+            for x in 0..w {
+                bright[y * w + x] = true;
+            }
+        }
+        for (y, x) in [(8, 10), (8, 11), (9, 10), (9, 11), (9, 12), (10, 11)] {
+            bright[y * w + x] = true;
+        }
+        let g = extended(&bright, w, h, 4);
+        assert!((20..30).all(|y| (0..w).all(|x| g[y * w + x])), "the band");
+        assert!(g.iter().take(20 * w).all(|&b| !b), "the particle");
+    }
 }
 
 /// One chain's pairs, the first pair's frames and its dense sums.

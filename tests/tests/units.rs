@@ -165,8 +165,18 @@ fn flow_nc_holds_every_pair_and_the_mean_as_measured() {
         let img = image::open(dir.path().join("out").join(png)).expect(png);
         assert_eq!(
             (img.width(), img.height()),
-            (2 * w as u32, 2 * h as u32 + 28),
+            spiv_host::report::plot::node_map_size((w as u32, h as u32)),
             "{png}"
+        );
+        // A colour bar right of the map: a column of many colours.
+        let rgb = img.to_rgb8();
+        let x = 2 * w as u32 + 58 + 20;
+        let mut colours: Vec<_> = (40..2 * h as u32).map(|y| *rgb.get_pixel(x, y)).collect();
+        colours.dedup();
+        assert!(
+            colours.len() > 20,
+            "{png}: {} colours in the bar",
+            colours.len()
         );
     }
     let mean = out.mean();
@@ -203,7 +213,10 @@ fn without_a_calibration_there_are_no_m_per_s_and_time_is_in_ticks() {
         ..FlowRequest::default()
     };
     let e = half.options(&rec, &dat).unwrap_err();
-    assert!(e.to_string().contains("the tick rate (Hz) is missing"), "{e}");
+    assert!(
+        e.to_string().contains("the tick rate (Hz) is missing"),
+        "{e}"
+    );
     let req = FlowRequest {
         dt: Some(13),
         ..FlowRequest::default()

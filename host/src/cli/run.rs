@@ -117,11 +117,14 @@ pub fn run(a: &RunArgs) -> Result<(), CliError> {
     plot::vectors(
         &a.out.join("vectors.png"),
         &ad.pair[0],
-        u32::from(w),
-        u32::from(h),
+        (u32::from(w), u32::from(h)),
         ad.full_scale,
         &wide.vectors,
         1.0,
+        plot::VectorCaption {
+            title: "motion-compensated pair, wide baseline",
+            unit: None,
+        },
     )
     .map_err(|e| CliError::Usage(e.to_string()))?;
     let summary = run_summary(&o, &job);

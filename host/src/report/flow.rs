@@ -92,14 +92,18 @@ pub fn write_flow(
         write_levels(&dir.join(name), w, h, f, out.full_scale)?;
     }
     let base = &out.first_frames[0];
+    let unit = cal.map(|c| (c.m_per_s(1.0, dt), "m/s"));
     plot::vectors(
         &dir.join("mean_field.png"),
         base,
-        w,
-        h,
+        (w, h),
         out.full_scale,
         &mean.vectors,
-        1.0,
+        plot::arrow_scale(&mean.vectors, out.grid.step),
+        plot::VectorCaption {
+            title: "mean field (median over pairs)",
+            unit,
+        },
     )?;
     let (speed, vorticity) = speed_and_vorticity(&mean.vectors, &out.grid);
     // Per pair, or per second when calibrated.
@@ -107,25 +111,29 @@ pub fn write_flow(
         Some(c) => (c.m_per_s(1.0, dt), c.tick_hz / dt, ("m/s", "1/s")),
         None => (1.0, 1.0, ("px per pair", "1/pair")),
     };
-    for (name, values, signed, title) in [
+    for (name, values, signed, title, unit) in [
         (
             "mean_speed.png",
             speed.iter().map(|v| v * k_speed).collect::<Vec<_>>(),
             false,
-            format!("mean speed, {}", units.0),
+            "mean speed",
+            units.0,
         ),
         (
             "mean_vorticity.png",
             vorticity.iter().map(|v| v * k_w).collect(),
             true,
-            format!("mean vorticity dv/dx - du/dy (y down), {}", units.1),
+            "mean vorticity (y down: + clockwise)",
+            units.1,
         ),
     ] {
         let scalar = plot::NodeScalar {
             values: &values,
-            name: &title,
+            name: title,
+            unit,
             signed,
             top: None,
+            mm_per_px: cal.map(|c| c.pixel_mm),
         };
         plot::node_map(&dir.join(name), (w, h), &out.grid, scalar, &out.glare)?;
     }
@@ -133,11 +141,14 @@ pub fn write_flow(
         plot::vectors(
             &dir.join("pair_vectors.png"),
             base,
-            w,
-            h,
+            (w, h),
             out.full_scale,
             &p.vectors,
-            1.0,
+            plot::arrow_scale(&p.vectors, out.grid.step),
+            plot::VectorCaption {
+                title: "first pair",
+                unit,
+            },
         )?;
     }
     let path = dir.join("summary.json");

@@ -59,12 +59,14 @@ pub fn write_movie(path: &Path, out: &FlowOutcome, opts: &FlowOptions) -> Result
             Some(c) => format!("t={:.4} s", c.seconds(p.ticks[0] as f64 + dt / 2.0)),
             None => format!("tick {}", p.ticks[0]),
         };
-        let name = format!("{}/{n} {t}, {unit}", i + 1);
+        let name = format!("speed, pair {}/{n}, {t}", i + 1);
         let scalar = NodeScalar {
             values: speed,
             name: &name,
+            unit,
             signed: false,
             top: Some(top),
+            mm_per_px: opts.calibration.map(|c| c.pixel_mm),
         };
         let (rgb, _) = plot::node_map_rgb(size, &out.grid, scalar, &out.glare)?;
         // NeuQuant at its fastest setting: the frames are flat colour cells.

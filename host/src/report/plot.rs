@@ -147,21 +147,49 @@ pub fn profile(
     root.present().map_err(|x| e(x.to_string()))
 }
 
-/// The vectors over their frame (gray levels `0..=full_scale`, upright),
-/// arrows scaled by `scale`; valid yellow, replaced orange, flag 2 a red dot.
+/// What a [`vectors`] plot says above its frame.
+#[derive(Debug, Clone, Copy)]
+pub struct VectorCaption<'a> {
+    /// The title (short: it must fit over the frame).
+    pub title: &'a str,
+    /// One px per pair of displacement in the unit shown by the scale
+    /// arrow, and that unit (`None`: px per pair).
+    pub unit: Option<(f64, &'a str)>,
+}
+
+/// The arrow scale that draws the median valid displacement of `field`
+/// (px per pair) as 0.6 of the node spacing `step` (px), never below 1.
+pub fn arrow_scale(field: &[Vector], step: usize) -> f64 {
+    let mut d: Vec<f64> = field
+        .iter()
+        .filter(|v| v.state == State::Valid)
+        .map(|v| v.u.hypot(v.v))
+        .filter(|x| x.is_finite() && *x > 0.0)
+        .collect();
+    d.sort_by(f64::total_cmp);
+    d.get(d.len() / 2)
+        .map_or(1.0, |&m| (0.6 * step as f64 / m).max(1.0))
+}
+
+/// The vectors over their frame (gray levels `0..=full_scale`, upright,
+/// scaled 2×), arrows `scale` times their displacement; valid yellow,
+/// replaced orange, flag 2 a red dot; above, the title and a scale arrow
+/// of a round length near the median valid displacement.
 pub fn vectors(
     path: &Path,
     frame: &[u16],
-    width: u32,
-    height: u32,
+    (width, height): (u32, u32),
     full_scale: u16,
     field: &[Vector],
     scale: f64,
+    caption: VectorCaption<'_>,
 ) -> Result<(), PlotError> {
     font();
     let e = err(path);
     let k = 2u32;
-    let root = BitMapBackend::new(path, (width * k, height * k)).into_drawing_area();
+    let top = CAPTION;
+    let root = BitMapBackend::new(path, (width * k, height * k + top as u32)).into_drawing_area();
+    root.fill(&WHITE).map_err(|x| e(x.to_string()))?;
     let fs = f64::from(full_scale.max(1));
     for i in 0..height {
         for j in 0..width {
@@ -169,7 +197,7 @@ pub fn vectors(
                 (f64::from(frame[(i * width + j) as usize]) / fs * 255.0).clamp(0.0, 255.0) as u8;
             for (di, dj) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
                 root.draw_pixel(
-                    ((j * k + dj) as i32, (i * k + di) as i32),
+                    ((j * k + dj) as i32, (i * k + di) as i32 + top),
                     &RGBColor(g, g, g),
                 )
                 .map_err(|x| e(x.to_string()))?;
@@ -177,24 +205,15 @@ pub fn vectors(
         }
     }
     let kk = f64::from(k);
-    for v in field {
-        let (x0, y0) = ((v.x + 0.5) * kk, (v.y + 0.5) * kk);
+    let arrow = |root: &DrawingArea<BitMapBackend, plotters::coord::Shift>,
+                 (x0, y0): (f64, f64),
+                 (dx, dy): (f64, f64),
+                 color: RGBColor|
+     -> Result<(), PlotError> {
         let p0 = (x0 as i32, y0 as i32);
-        if v.state == State::Invalid {
-            root.draw(&Circle::new(p0, 2, RED.filled()))
-                .map_err(|x| e(x.to_string()))?;
-            continue;
-        }
-        let color = if v.state == State::Valid {
-            RGBColor(255, 221, 0)
-        } else {
-            RGBColor(255, 140, 0)
-        };
-        let (dx, dy) = (v.u * scale * kk, v.v * scale * kk);
         let p1 = ((x0 + dx) as i32, (y0 + dy) as i32);
         root.draw(&PathElement::new(vec![p0, p1], color.stroke_width(2)))
             .map_err(|x| e(x.to_string()))?;
-        // Arrow head.
         let len = (dx * dx + dy * dy).sqrt().max(1e-9);
         let (ux, uy) = (dx / len, dy / len);
         let hl = (len * 0.3).min(8.0);
@@ -207,6 +226,60 @@ pub fn vectors(
             ))
             .map_err(|x| e(x.to_string()))?;
         }
+        Ok(())
+    };
+    for v in field {
+        let (x0, y0) = ((v.x + 0.5) * kk, (v.y + 0.5) * kk + f64::from(top));
+        if v.state == State::Invalid {
+            root.draw(&Circle::new((x0 as i32, y0 as i32), 2, RED.filled()))
+                .map_err(|x| e(x.to_string()))?;
+            continue;
+        }
+        let color = if v.state == State::Valid {
+            RGBColor(255, 221, 0)
+        } else {
+            RGBColor(255, 140, 0)
+        };
+        arrow(&root, (x0, y0), (v.u * scale * kk, v.v * scale * kk), color)?;
+    }
+    // The scale arrow: a round displacement near the median valid one.
+    let mut d: Vec<f64> = field
+        .iter()
+        .filter(|v| v.state == State::Valid)
+        .map(|v| v.u.hypot(v.v))
+        .filter(|x| x.is_finite() && *x > 0.0)
+        .collect();
+    d.sort_by(f64::total_cmp);
+    let (per, unit) = caption.unit.unwrap_or((1.0, "px per pair"));
+    let text = |t: String, x: i32| {
+        root.draw(&Text::new(t, (x, 6), ("sans-serif", 15).into_font()))
+            .map_err(|x| e(x.to_string()))
+    };
+    text(caption.title.to_string(), 6)?;
+    if let Some(&median) = d.get(d.len() / 2) {
+        let in_unit = ticks(0.0, 2.5 * median * per);
+        let reference = in_unit
+            .iter()
+            .copied()
+            .filter(|&t| t > 0.0)
+            .min_by(|a, b| {
+                (a / per - median)
+                    .abs()
+                    .total_cmp(&(b / per - median).abs())
+            })
+            .unwrap_or(median * per);
+        let len = reference / per * scale * kk;
+        let x = f64::from(width * k) - len - 150.0;
+        arrow(&root, (x.max(0.0), 14.0), (len, 0.0), RGBColor(0, 0, 0))?;
+        let step = if in_unit.len() > 1 {
+            in_unit[1] - in_unit[0]
+        } else {
+            reference
+        };
+        text(
+            format!("{} {unit}", tick_label(reference, step)),
+            (x.max(0.0) + len) as i32 + 8,
+        )?;
     }
     root.present().map_err(|x| e(x.to_string()))
 }
@@ -271,24 +344,36 @@ plotters::style::colors::colormaps::def_linear_colormap! {
 pub struct NodeScalar<'a> {
     /// One value per node, row-major (NaN: none).
     pub values: &'a [f64],
-    /// What it is and its unit, for the caption.
+    /// What it is, for the title (short: it must fit over the map).
     pub name: &'a str,
+    /// Its unit, for the colour bar.
+    pub unit: &'a str,
     /// Signed (a diverging map centred on 0) or not (viridis from 0).
     pub signed: bool,
     /// The end of the colour scale (`None`: the largest magnitude of
     /// `values`); frames of one movie share one.
     pub top: Option<f64>,
+    /// The pixel size, mm: the axes in mm (`None`: in px).
+    pub mm_per_px: Option<f64>,
 }
 
-/// Pixels of the caption above a [`node_map`].
+/// Pixels of the title above a [`node_map`].
 const CAPTION: i32 = 28;
+/// Pixels left of the map (the y axis and its labels).
+const LEFT: i32 = 58;
+/// Pixels below the map (the x axis, its labels and its name).
+const BOTTOM: i32 = 44;
+/// Pixels right of the map (the colour bar and its labels).
+const RIGHT: i32 = 96;
 /// Scale of a [`node_map`] over its frame.
 const SCALE: i32 = 2;
 
 /// A scalar field of the nodes of `grid` as cells of its colour over a
-/// `width × height` frame (scaled 2×), nodes without a value dark gray,
-/// `glare` pixels (upright, `width × height`) shaded and outlined in
-/// red, the range in the caption.
+/// `width × height` frame (scaled 2×), with axes (px, or mm when
+/// calibrated; y down, as the image), a colour bar in the scalar's unit
+/// and a short title; nodes without a value dark gray, `glare` pixels
+/// (upright, `width × height`) hatched in black, which no colour of the
+/// maps is.
 pub fn node_map(
     path: &Path,
     (width, height): (u32, u32),
@@ -325,7 +410,39 @@ pub fn node_map_rgb(
 /// The size of a [`node_map`] of a `width × height` frame, px.
 pub fn node_map_size((width, height): (u32, u32)) -> (u32, u32) {
     let k = SCALE as u32;
-    (width * k, height * k + CAPTION as u32)
+    (
+        width * k + (LEFT + RIGHT) as u32,
+        height * k + (CAPTION + BOTTOM) as u32,
+    )
+}
+
+/// Round tick values over `0..=span`: steps of 1, 2 or 5 × 10ⁿ, about
+/// five of them.
+fn ticks(lo: f64, hi: f64) -> Vec<f64> {
+    let span = hi - lo;
+    if !(span.is_finite() && span > 0.0) {
+        return vec![lo];
+    }
+    let raw = span / 5.0;
+    let mag = 10f64.powf(raw.log10().floor());
+    let step = [1.0, 2.0, 5.0, 10.0]
+        .into_iter()
+        .map(|m| m * mag)
+        .find(|&st| st >= raw)
+        .unwrap_or(10.0 * mag);
+    let first = (lo / step).ceil() as i64;
+    let last = (hi / step + 1e-9).floor() as i64;
+    (first..=last).map(|i| i as f64 * step).collect()
+}
+
+/// A tick label: as few decimals as the step needs.
+fn tick_label(v: f64, step: f64) -> String {
+    let d = if step >= 1.0 {
+        0
+    } else {
+        (-step.log10().floor()) as usize
+    };
+    format!("{v:.d$}")
 }
 
 fn draw_node_map<DB: DrawingBackend>(
@@ -338,7 +455,8 @@ fn draw_node_map<DB: DrawingBackend>(
     use plotters::style::colors::colormaps::ViridisRGB;
     font();
     let e = |x: DrawingAreaErrorKind<DB::ErrorType>| x.to_string();
-    let (k, caption) = (SCALE, CAPTION);
+    let (k, top_px, left) = (SCALE, CAPTION, LEFT);
+    let (mw, mh) = (width as i32 * k, height as i32 * k);
     root.fill(&WHITE).map_err(e)?;
     let finite = s.values.iter().copied().filter(|v| v.is_finite());
     let (lo, hi) = finite.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
@@ -347,52 +465,144 @@ fn draw_node_map<DB: DrawingBackend>(
     let top = s
         .top
         .unwrap_or(if s.signed { lo.abs().max(hi.abs()) } else { hi });
+    let colour = |v: f64| match (v.is_finite() && top > 0.0, s.signed) {
+        (false, _) => RGBColor(60, 60, 60),
+        (true, true) => BlueWhiteRed::get_color_normalized(v.clamp(-top, top), -top, top),
+        (true, false) => ViridisRGB::get_color_normalized(v.clamp(0.0, top), 0.0, top),
+    };
     let half = grid.step as f64 / 2.0;
     for r in 0..grid.ny {
         for c in 0..grid.nx {
             let v = s.values.get(r * grid.nx + c).copied().unwrap_or(f64::NAN);
-            let color = match (v.is_finite() && top > 0.0, s.signed) {
-                (false, _) => RGBColor(60, 60, 60),
-                (true, true) => BlueWhiteRed::get_color_normalized(v.clamp(-top, top), -top, top),
-                (true, false) => ViridisRGB::get_color_normalized(v.clamp(0.0, top), 0.0, top),
-            };
             let (x, y) = grid.centre(r, c);
             let corner = |dx: f64, dy: f64| {
                 (
-                    ((x + dx) * f64::from(k)) as i32,
-                    ((y + dy) * f64::from(k)) as i32 + caption,
+                    ((x + dx) * f64::from(k)) as i32 + left,
+                    ((y + dy) * f64::from(k)) as i32 + top_px,
                 )
             };
             root.draw(&Rectangle::new(
                 [corner(-half, -half), corner(half, half)],
-                color.filled(),
+                colour(v).filled(),
             ))
             .map_err(e)?;
         }
     }
-    // Glare: every other pixel of it red, so the field shows through.
+    // Glare: black diagonal hatching (no colour of either map is black),
+    // so the field shows between the lines.
     let (wu, hu) = (width as usize, height as usize);
     for (i, _) in glare.iter().enumerate().filter(|(_, &g)| g) {
         let (r, c) = (i / wu, i % wu);
-        if r < hu && (r + c) % 2 == 0 {
-            root.draw_pixel((c as i32 * k, r as i32 * k + caption), &RED)
-                .map_err(e)?;
+        if r < hu && (r + c) % 4 == 0 {
+            let (px, py) = (c as i32 * k + left, r as i32 * k + top_px);
+            for (dx, dy) in [(0, 0), (1, 1)] {
+                root.draw_pixel((px + dx, py + dy), &BLACK).map_err(e)?;
+            }
         }
     }
-    let range = match (lo.is_finite(), s.top) {
-        (false, _) => "no value".to_string(),
-        (true, None) => format!("{lo:.3} to {hi:.3}"),
-        (true, Some(t)) => format!("{lo:.3} to {hi:.3} of {t:.3}"),
+    // Axes: the frame, ticks and labels in mm (calibrated) or px.
+    root.draw(&Rectangle::new(
+        [(left - 1, top_px - 1), (left + mw, top_px + mh)],
+        BLACK.stroke_width(1),
+    ))
+    .map_err(e)?;
+    let (per, unit) = match s.mm_per_px {
+        Some(mm) => (mm, "mm"),
+        None => (1.0, "px"),
     };
+    let small = ("sans-serif", 12).into_font();
+    let step_of = |t: &[f64]| if t.len() > 1 { t[1] - t[0] } else { 1.0 };
+    let xt = ticks(0.0, f64::from(width) * per);
+    for &v in &xt {
+        let px = left + (v / per * f64::from(k)) as i32;
+        root.draw(&PathElement::new(
+            vec![(px, top_px + mh), (px, top_px + mh + 4)],
+            BLACK,
+        ))
+        .map_err(e)?;
+        root.draw(&Text::new(
+            tick_label(v, step_of(&xt)),
+            (px - 8, top_px + mh + 6),
+            small.clone(),
+        ))
+        .map_err(e)?;
+    }
+    root.draw(&Text::new(
+        format!("x, {unit}"),
+        (left + mw / 2 - 14, top_px + mh + 24),
+        small.clone(),
+    ))
+    .map_err(e)?;
+    let yt = ticks(0.0, f64::from(height) * per);
+    for &v in &yt {
+        let py = top_px + (v / per * f64::from(k)) as i32;
+        root.draw(&PathElement::new(
+            vec![(left - 5, py), (left - 1, py)],
+            BLACK,
+        ))
+        .map_err(e)?;
+        root.draw(&Text::new(
+            tick_label(v, step_of(&yt)),
+            (left - 40, py - 6),
+            small.clone(),
+        ))
+        .map_err(e)?;
+    }
+    root.draw(&Text::new(
+        format!("y, {unit} (down)"),
+        (2, top_px + mh + 24),
+        small.clone(),
+    ))
+    .map_err(e)?;
+    // The colour bar, in the scalar's unit.
+    let (bx, bw) = (left + mw + 14, 14);
+    let (b_lo, b_hi) = if s.signed { (-top, top) } else { (0.0, top) };
+    if top > 0.0 && top.is_finite() {
+        for i in 0..mh {
+            let v = b_hi - (b_hi - b_lo) * (f64::from(i) + 0.5) / f64::from(mh);
+            root.draw(&Rectangle::new(
+                [(bx, top_px + i), (bx + bw, top_px + i + 1)],
+                colour(v).filled(),
+            ))
+            .map_err(e)?;
+        }
+        let bt = ticks(b_lo, b_hi);
+        for &v in &bt {
+            let py = top_px + ((b_hi - v) / (b_hi - b_lo) * f64::from(mh)) as i32;
+            root.draw(&PathElement::new(
+                vec![(bx + bw, py), (bx + bw + 3, py)],
+                BLACK,
+            ))
+            .map_err(e)?;
+            root.draw(&Text::new(
+                tick_label(v, step_of(&bt)),
+                (bx + bw + 5, py - 6),
+                small.clone(),
+            ))
+            .map_err(e)?;
+        }
+    }
+    root.draw(&Rectangle::new(
+        [(bx, top_px), (bx + bw, top_px + mh)],
+        BLACK.stroke_width(1),
+    ))
+    .map_err(e)?;
+    root.draw(&Text::new(
+        s.unit.to_string(),
+        (bx, top_px + mh + 6),
+        small.clone(),
+    ))
+    .map_err(e)?;
     let marked = if glare.contains(&true) {
-        "; red: glare"
+        "; hatched: glare"
     } else {
         ""
     };
+    let empty = if lo.is_finite() { "" } else { " (no value)" };
     root.draw(&Text::new(
-        format!("{}: {range}{marked}", s.name),
+        format!("{}{empty}{marked}", s.name),
         (6, 6),
-        ("sans-serif", 16).into_font(),
+        ("sans-serif", 15).into_font(),
     ))
     .map_err(e)
 }
