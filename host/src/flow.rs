@@ -282,6 +282,11 @@ pub struct FlowOptions {
     /// exactly the vectors of those pairs in a run of all of them, so runs
     /// of such ranges can be spread over processes or machines.
     pub pairs: Option<std::ops::Range<usize>>,
+    /// Write the outputs with y up (files, Python arrays; the figures'
+    /// axes and vorticity): y = height − 1 − row and v positive up, so
+    /// that plots with y up show the camera's image upright and vorticity
+    /// is positive counterclockwise. The measurement is the same.
+    pub y_up: bool,
 }
 
 impl FlowOptions {
@@ -308,6 +313,7 @@ impl FlowOptions {
             calibration: rec.meta_calibration,
             mask: None,
             pairs: None,
+            y_up: false,
         };
         o.schedule(rec.planes);
         o
@@ -659,6 +665,26 @@ pub struct FlowOutcome {
 }
 
 impl FlowOutcome {
+    /// The outcome as its outputs show it: itself, or with `y_up` every
+    /// vector's y as `height − 1 − y` (pixel centres on integers, so the
+    /// bottom row's centre is 0) and its v negated (positive up).
+    pub fn oriented(&self, y_up: bool) -> std::borrow::Cow<'_, FlowOutcome> {
+        if !y_up {
+            return std::borrow::Cow::Borrowed(self);
+        }
+        let mut o = self.clone();
+        let top = f64::from(self.size.1) - 1.0;
+        for p in &mut o.pairs {
+            for v in &mut p.vectors {
+                v.y = top - v.y;
+                if v.state.is_measured() {
+                    v.v = -v.v;
+                }
+            }
+        }
+        std::borrow::Cow::Owned(o)
+    }
+
     /// What the core's tables lost over all pairs.
     pub fn lost(&self) -> LabelLoss {
         let mut l = LabelLoss::default();

@@ -617,7 +617,10 @@ fn array3<T>(shape: (usize, usize, usize), v: Vec<T>) -> PyResult<Array3<T>> {
 /// out: nodes whose centre it covers are invalid in every pair; `pairs`
 /// `(a, b)` measures only pairs `a..b` of the schedule (`flow_pairs`);
 /// `progress` a callable told `(pairs done, pairs)` as pairs finish, or
-/// `True` for a tqdm bar (needs tqdm).
+/// `True` for a tqdm bar (needs tqdm); `y_up` gives y up from the bottom
+/// row's centre and v positive up (so that vorticity is positive
+/// counterclockwise and plots with y up show the image upright), with
+/// `y_up` True in the dict.
 ///
 /// Ctrl-C stops the run between pairs: `KeyboardInterrupt` is raised with
 /// the pairs measured so far as its `partial` attribute (the dict or
@@ -640,7 +643,7 @@ fn array3<T>(shape: (usize, usize, usize), v: Vec<T>) -> PyResult<Array3<T>> {
 /// `y, x`, in m, s and m/s when calibrated (else px, ticks and px per
 /// pair), so `ds.piv.vorticity()` works.
 #[pyfunction]
-#[pyo3(signature = (path, dt=None, every=None, start=None, end=None, method="mc", window=None, dwell_cap=Some(spiv_host::dwell::DWELL_CAP), windows=None, width=None, height=None, flip=true, strip_head=0, dense=false, pixel_size=None, tick_hz=None, as_xarray=false, mask=None, pairs=None, progress=None))]
+#[pyo3(signature = (path, dt=None, every=None, start=None, end=None, method="mc", window=None, dwell_cap=Some(spiv_host::dwell::DWELL_CAP), windows=None, width=None, height=None, flip=true, strip_head=0, dense=false, pixel_size=None, tick_hz=None, as_xarray=false, mask=None, pairs=None, progress=None, y_up=false))]
 #[allow(clippy::too_many_arguments)]
 fn flow<'py>(
     py: Python<'py>,
@@ -664,6 +667,7 @@ fn flow<'py>(
     mask: Option<&Bound<'py, PyAny>>,
     pairs: Option<(usize, usize)>,
     progress: Option<&Bound<'py, PyAny>>,
+    y_up: bool,
 ) -> PyResult<Bound<'py, PyAny>> {
     let mask = mask
         .map(|m| image(m, "mask").map(|m| m.mapv(|v| v != 0.0)))
@@ -688,7 +692,7 @@ fn flow<'py>(
         .detach(|| -> Result<_, Failure> {
             let rec = Recording::open(&path, &fopts)?;
             let o = req.options(&rec, &path)?;
-            Ok((rec, o))
+            Ok((rec, spiv_host::flow::FlowOptions { y_up, ..o }))
         })
         .map_err(err)?;
     let progress = match progress {
@@ -702,7 +706,8 @@ fn flow<'py>(
     };
     let (out, stopped) = interruptible(py, &rec, &o, progress.as_ref())?;
     let dict = |out: spiv_host::flow::FlowOutcome| -> PyResult<Bound<'py, PyAny>> {
-        let d = flow_dict(py, out)?;
+        let d = flow_dict(py, out.oriented(y_up).into_owned())?;
+        d.set_item("y_up", y_up)?;
         calibrated(&d, o.calibration, f64::from(o.dt))?;
         if !as_xarray {
             return Ok(d.into_any());

@@ -271,6 +271,40 @@ def test_invalid_is_nan_in_every_output(cli, tmp_path):
     assert np.all(np.isnan(ds.piv.average.u.values[none]))
 
 
+def test_y_up_flips_y_and_v_and_the_sign_of_vorticity(cli, tmp_path):
+    """y_up=True: y from the bottom row's centre, v positive up, the same
+    in the CLI's files; pivpy's vorticity is the y-down one negated
+    (positive counterclockwise)."""
+    import xarray as xr
+    from pivpy import pivpy  # noqa: F401  (registers the .piv accessor)
+
+    d = tmp_path / "rec"
+    cli("simulate", "--scene", "vortex-array", "--width", "128", "--height", "96",
+        "--ticks", "300", "--seed", "2", "--out", d)
+    down = spiv.flow(d / "spikes.dat")
+    up = spiv.flow(d / "spikes.dat", y_up=True)
+    assert up["y_up"] and not down["y_up"]
+    np.testing.assert_array_equal(up["y"], 95 - down["y"])
+    np.testing.assert_array_equal(up["u"], down["u"])
+    np.testing.assert_array_equal(up["v"], -down["v"])
+    np.testing.assert_array_equal(up["mean_v"], -down["mean_v"])
+    w_down = spiv.flow(d / "spikes.dat", as_xarray=True).piv.vorticity()["w"].values
+    ds = spiv.flow(d / "spikes.dat", as_xarray=True, y_up=True)
+    assert ds.attrs["y_axis"] == "up" and "up" in ds.v.attrs["long_name"]
+    np.testing.assert_allclose(ds.piv.vorticity()["w"].values, -w_down, rtol=1e-12, atol=1e-15)
+    cli("flow", d / "spikes.dat", "--y-up", "--out", tmp_path / "up")
+    c = read_csv(tmp_path / "up" / "vectors_00000.csv")
+    np.testing.assert_array_equal(c["y"], up["y"].ravel())
+    ok = c["flag"] < 2
+    np.testing.assert_allclose(c["v"][ok], up["v"][0].ravel()[ok], atol=5.1e-7, rtol=0)
+    with xr.open_dataset(tmp_path / "up" / "flow.nc") as nc:
+        assert nc.attrs["y_axis"] == "up"
+        np.testing.assert_array_equal(nc.y_px.values, up["y"][:, 0])
+    xr.testing.assert_allclose(spiv.open_flow(tmp_path / "up" / "flow.nc"),
+                               spiv.flow(d / "spikes.dat", as_xarray=True, y_up=True),
+                               rtol=1e-12, atol=1e-15)
+
+
 def test_flow_mask_leaves_a_body_invalid(cli, tmp_path):
     d = tmp_path / "rec"
     cli("simulate", "--scene", "paper-linear", "--width", "128", "--height", "128",
@@ -329,8 +363,8 @@ def test_flow_nc_opens_in_xarray_with_the_fields_and_units(cli, tmp_path):
 
 
 def test_flow_nc_passes_the_cf_checker(cli, tmp_path):
-    """flow.nc, calibrated and not, and spiv piv's .nc: no error from the CF
-    checker (compliance-checker, CF 1.8)."""
+    """flow.nc, calibrated and not, with y up, and spiv piv's .nc: no error
+    from the CF checker (compliance-checker, CF 1.8)."""
     from compliance_checker.runner import CheckSuite, ComplianceChecker
 
     d = tmp_path / "rec"
@@ -340,10 +374,12 @@ def test_flow_nc_passes_the_cf_checker(cli, tmp_path):
     lone = tmp_path / "lone.dat"
     lone.write_bytes((d / "spikes.dat").read_bytes())
     cli("flow", lone, "--width", 128, "--height", 128, "--dt", 13, "--out", tmp_path / "raw")
+    cli("flow", d / "spikes.dat", "--y-up", "--out", tmp_path / "up")
     cli("piv", tmp_path / "cal" / "pair_a.png", tmp_path / "cal" / "pair_b.png",
         "-o", tmp_path / "p.nc")
     CheckSuite.load_all_available_checkers()
-    for nc in (tmp_path / "cal" / "flow.nc", tmp_path / "raw" / "flow.nc", tmp_path / "p.nc"):
+    for nc in (tmp_path / "cal" / "flow.nc", tmp_path / "raw" / "flow.nc",
+               tmp_path / "up" / "flow.nc", tmp_path / "p.nc"):
         report = tmp_path / "report.txt"
         ok, errors = ComplianceChecker.run_checker(
             str(nc), ["cf:1.8"], 0, "normal", output_filename=str(report), output_format="text")

@@ -90,6 +90,11 @@ pub struct FlowArgs {
     /// No progress bar (it is drawn only when stderr is a terminal).
     #[arg(long)]
     quiet: bool,
+    /// Write the outputs with y up: y = height − 1 − row (0 at the bottom
+    /// row's centre), v positive up, vorticity positive counterclockwise;
+    /// the figures keep the camera's image and label their axes so.
+    #[arg(long)]
+    y_up: bool,
 }
 
 /// Runs it.
@@ -125,6 +130,7 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
     }
     .options(&rec, &a.input)
     .map_err(flow_err)?;
+    let o = spiv_host::flow::FlowOptions { y_up: a.y_up, ..o };
     std::fs::create_dir_all(&a.out)
         .map_err(|e| CliError::Usage(format!("{}: {e}", a.out.display())))?;
     let pairs = o.pair_ticks().len() as u64;

@@ -71,22 +71,26 @@ pub fn write_flow(
         }
         c
     };
-    for (i, p) in out.pairs.iter().enumerate() {
+    // The files in the orientation asked for (y up or down); the figures
+    // draw the camera's image as it is and label their axes so.
+    let shown = out.oriented(opts.y_up);
+    for (i, p) in shown.pairs.iter().enumerate() {
         let path = dir.join(format!("vectors_{i:05}.csv"));
         write_vectors_with(&path, &p.vectors, &columns(&p.vectors, &p.sigma))?;
     }
     if let Some(d) = &out.mean_dense {
         spiv_formats::dense::write_dense(&dir.join("mean_dense.flo"), d)?;
     }
-    let mean = out.mean();
-    let mut mean_columns = columns(&mean.vectors, &mean.sigma);
+    let shown_mean = shown.mean();
+    let mut mean_columns = columns(&shown_mean.vectors, &shown_mean.sigma);
     mean_columns.push(col(
         "pairs",
-        mean.pairs.iter().map(|&n| f64::from(n)).collect(),
+        shown_mean.pairs.iter().map(|&n| f64::from(n)).collect(),
         0,
     ));
-    write_vectors_with(&dir.join("mean.csv"), &mean.vectors, &mean_columns)?;
-    super::netcdf::write_flow_nc(&dir.join("flow.nc"), out, opts, info)?;
+    write_vectors_with(&dir.join("mean.csv"), &shown_mean.vectors, &mean_columns)?;
+    super::netcdf::write_flow_nc(&dir.join("flow.nc"), &shown, opts, info)?;
+    let mean = out.mean();
     let (w, h) = (u32::from(out.size.0), u32::from(out.size.1));
     for (name, f) in ["pair_a.png", "pair_b.png"].iter().zip(&out.first_frames) {
         write_levels(&dir.join(name), w, h, f, out.full_scale)?;
@@ -105,7 +109,11 @@ pub fn write_flow(
             unit,
         },
     )?;
-    let (speed, vorticity) = speed_and_vorticity(&mean.vectors, &out.grid);
+    let (speed, mut vorticity) = speed_and_vorticity(&mean.vectors, &out.grid);
+    if opts.y_up {
+        // dv/dx − du/dy with y and v up: the camera's, negated.
+        vorticity.iter_mut().for_each(|w| *w = -*w);
+    }
     // Per pair, or per second when calibrated.
     let (k_speed, k_w, units) = match cal {
         Some(c) => (c.m_per_s(1.0, dt), c.tick_hz / dt, ("m/s", "1/s")),
@@ -123,7 +131,11 @@ pub fn write_flow(
             "mean_vorticity.png",
             vorticity.iter().map(|v| v * k_w).collect(),
             true,
-            "mean vorticity (y down: + clockwise)",
+            if opts.y_up {
+                "mean vorticity (y up: + counterclockwise)"
+            } else {
+                "mean vorticity (y down: + clockwise)"
+            },
             units.1,
         ),
     ] {
@@ -134,6 +146,7 @@ pub fn write_flow(
             signed,
             top: None,
             mm_per_px: cal.map(|c| c.pixel_mm),
+            y_up: opts.y_up,
         };
         plot::node_map(&dir.join(name), (w, h), &out.grid, scalar, &out.glare)?;
     }

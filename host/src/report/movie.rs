@@ -67,6 +67,7 @@ pub fn write_movie(path: &Path, out: &FlowOutcome, opts: &FlowOptions) -> Result
             signed: false,
             top: Some(top),
             mm_per_px: opts.calibration.map(|c| c.pixel_mm),
+            y_up: opts.y_up,
         };
         let (rgb, _) = plot::node_map_rgb(size, &out.grid, scalar, &out.glare)?;
         // NeuQuant at its fastest setting: the frames are flat colour cells.

@@ -59,10 +59,16 @@ pub fn flow_series(out: &FlowOutcome, opts: &FlowOptions, info: RunInfo<'_>) -> 
             ],
         ),
     };
-    let ys: Vec<f64> = (0..grid.ny).map(|r| grid.centre(r, 0).1).collect();
+    let (up, top) = (opts.y_up, f64::from(out.size.1) - 1.0);
+    let dir = if up { "up" } else { "down" };
+    let ys: Vec<f64> = (0..grid.ny)
+        .map(|r| grid.centre(r, 0).1)
+        .map(|y| if up { top - y } else { y })
+        .collect();
     let xs: Vec<f64> = (0..grid.nx).map(|c| grid.centre(0, c).0).collect();
-    let mut variables = pair_variables(out, cal.map(|c| (c, dt)));
-    variables.extend(mean_variables(out, cal.map(|c| (c, dt))));
+    let mut variables = pair_variables(out, cal.map(|c| (c, dt)), dir);
+    variables.extend(mean_variables(out, cal.map(|c| (c, dt)), dir));
+    let y_long = format!("y, pixels ({dir})");
     let (y, x) = match cal {
         Some(c) => {
             let metres = |v: &[f64], axis: &str, name: &str, long: &str| {
@@ -77,7 +83,7 @@ pub fn flow_series(out: &FlowOutcome, opts: &FlowOptions, info: RunInfo<'_>) -> 
                 )
             };
             for (name, dims, values, long) in [
-                ("y_px", Dims::Y, ys.clone(), "y, pixels (down)"),
+                ("y_px", Dims::Y, ys.clone(), y_long.as_str()),
                 ("x_px", Dims::X, xs.clone(), "x, pixels (right)"),
             ] {
                 variables.push(variable(
@@ -94,14 +100,14 @@ pub fn flow_series(out: &FlowOutcome, opts: &FlowOptions, info: RunInfo<'_>) -> 
                 v.attrs.push(text("coordinates", "y_px x_px"));
             }
             (
-                metres(&ys, "Y", "projection_y_coordinate", "y (down)"),
+                metres(&ys, "Y", "projection_y_coordinate", &format!("y ({dir})")),
                 metres(&xs, "X", "projection_x_coordinate", "x (right)"),
             )
         }
         None => {
             let px =
                 |v: Vec<f64>, long: &str| (v, vec![text("units", "1"), text("long_name", long)]);
-            (px(ys, "y, pixels (down)"), px(xs, "x, pixels (right)"))
+            (px(ys, &y_long), px(xs, "x, pixels (right)"))
         }
     };
     FieldSeries {
@@ -160,6 +166,7 @@ fn displacement(
     (u, v): (Vec<f64>, Vec<f64>),
     cal: Option<(crate::units::Calibration, f64)>,
     sigma: bool,
+    dir: &str,
 ) -> Vec<Variable> {
     // Short long names, which label a plot's axis.
     let what = if prefix.is_empty() { "" } else { "median " };
@@ -190,7 +197,7 @@ fn displacement(
             &format!("{prefix}v"),
             dims,
             Values::F64(v),
-            attrs("v", format!("{what}v (down), px per pair"), "1"),
+            attrs("v", format!("{what}v ({dir}), px per pair"), "1"),
         ),
     ];
     if let Some((um, vm)) = ms {
@@ -204,7 +211,7 @@ fn displacement(
             &format!("{prefix}v_m_s"),
             dims,
             Values::F64(vm),
-            attrs("v", format!("{what}v (down)"), "m s-1"),
+            attrs("v", format!("{what}v ({dir})"), "m s-1"),
         ));
     }
     vars
@@ -214,6 +221,7 @@ fn displacement(
 fn pair_variables(
     out: &FlowOutcome,
     cal: Option<(crate::units::Calibration, f64)>,
+    dir: &str,
 ) -> Vec<Variable> {
     let nodes = out.grid.nx * out.grid.ny;
     let stack = |f: &dyn Fn(&crate::flow::PairResult, usize) -> f64| -> Vec<f64> {
@@ -227,7 +235,7 @@ fn pair_variables(
     };
     let u = stack(&|p, i| at(p, i, |v| v.u));
     let v = stack(&|p, i| at(p, i, |v| v.v));
-    let mut vars = displacement("", Dims::TimeYx, (u, v), cal, true);
+    let mut vars = displacement("", Dims::TimeYx, (u, v), cal, true, dir);
     let flags = out
         .pairs
         .iter()
@@ -264,6 +272,7 @@ fn pair_variables(
 fn mean_variables(
     out: &FlowOutcome,
     cal: Option<(crate::units::Calibration, f64)>,
+    dir: &str,
 ) -> Vec<Variable> {
     let mean = out.mean();
     let nodes = out.grid.nx * out.grid.ny;
@@ -276,6 +285,7 @@ fn mean_variables(
         (col(&|i| pick(i, |v| v.u)), col(&|i| pick(i, |v| v.v))),
         cal,
         true,
+        dir,
     );
     let flags = (0..nodes)
         .map(|i| i32::from(mean.vectors.get(i).map_or(2, |v| v.state.flag())))
@@ -337,8 +347,13 @@ fn globals(out: &FlowOutcome, opts: &FlowOptions, info: RunInfo<'_>) -> Vec<(Str
         number("step_px", out.grid.step as f64),
         text(
             "coordinates_note",
-            "x right and y down from the image's top-left corner; v is positive down",
+            if opts.y_up {
+                "x right and y up from the image's bottom-left pixel centre; v is positive up"
+            } else {
+                "x right and y down from the image's top-left pixel centre; v is positive down"
+            },
         ),
+        text("y_axis", if opts.y_up { "up" } else { "down" }),
     ];
     if let Some(c) = opts.calibration {
         g.push(number("pixel_size_mm", c.pixel_mm));
@@ -365,6 +380,7 @@ pub fn piv_series(
         (pick(|v| v.u), pick(|v| v.v)),
         None,
         false,
+        "down",
     );
     variables.push(variable(
         "flag",

@@ -355,6 +355,9 @@ pub struct NodeScalar<'a> {
     pub top: Option<f64>,
     /// The pixel size, mm: the axes in mm (`None`: in px).
     pub mm_per_px: Option<f64>,
+    /// Label the y axis up from the bottom row (the image is drawn as the
+    /// camera saw it either way).
+    pub y_up: bool,
 }
 
 /// Pixels of the title above a [`node_map`].
@@ -535,7 +538,12 @@ fn draw_node_map<DB: DrawingBackend>(
     .map_err(e)?;
     let yt = ticks(0.0, f64::from(height) * per);
     for &v in &yt {
-        let py = top_px + (v / per * f64::from(k)) as i32;
+        let from_top = if s.y_up {
+            f64::from(height) - v / per
+        } else {
+            v / per
+        };
+        let py = top_px + (from_top * f64::from(k)) as i32;
         root.draw(&PathElement::new(
             vec![(left - 5, py), (left - 1, py)],
             BLACK,
@@ -549,7 +557,7 @@ fn draw_node_map<DB: DrawingBackend>(
         .map_err(e)?;
     }
     root.draw(&Text::new(
-        format!("y, {unit} (down)"),
+        format!("y, {unit} ({})", if s.y_up { "up" } else { "down" }),
         (2, top_px + mh + 24),
         small.clone(),
     ))

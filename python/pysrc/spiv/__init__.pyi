@@ -202,6 +202,7 @@ def flow(
     mask: Optional[npt.ArrayLike] = None,
     pairs: Optional[Tuple[int, int]] = None,
     progress: Union[None, bool, Callable[[int, int], Any]] = None,
+    y_up: bool = False,
 ) -> Flow:  # an xarray.Dataset with as_xarray=True
     """The flow job on a .dat or .npz recording, as `spiv flow` (without its files).
 
@@ -224,6 +225,8 @@ def flow(
     a run of all pairs gives them. progress: a callable told (pairs done, pairs),
     or True for a tqdm bar. Ctrl-C stops the run between pairs and raises
     KeyboardInterrupt with the pairs measured so far as its .partial (None if none).
+    y_up: y up from the bottom row's centre and v positive up, so that vorticity is
+    positive counterclockwise and plots with y up show the image upright.
     """
 
 def open_flow(path: _Path) -> Any:

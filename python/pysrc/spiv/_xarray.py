@@ -27,12 +27,14 @@ def to_xarray(d):
     finite = lambda a: np.where(np.isfinite(a), a, np.nan)
     u, v = (d[n] * per for n in ("u", "v"))
     su, sv = (finite(d[n]) * per for n in ("sigma_u", "sigma_v"))
+    up = bool(d.get("y_up", False))
+    vdir = "positive up" if up else "positive down"
     yxt, yx = ("y", "x", "t"), ("y", "x")
     tr = lambda a: np.transpose(a, (1, 2, 0))
     ds = xr.Dataset(
         {
             "u": (yxt, tr(u), {"units": units[2]}),
-            "v": (yxt, tr(v), {"units": units[3], "long_name": "v, positive down"}),
+            "v": (yxt, tr(v), {"units": units[3], "long_name": f"v, {vdir}"}),
             "chc": (yxt, tr(d["flags"]).astype(np.int32),
                     {"long_name": "0 valid, 1 replaced, 2 invalid"}),
             "sigma_u": (yxt, tr(su), {"units": units[2]}),
@@ -40,7 +42,7 @@ def to_xarray(d):
             "mean_u": (yx, d["mean_u"] * per, {"units": units[2],
                        "long_name": "median of the valid u over t"}),
             "mean_v": (yx, d["mean_v"] * per, {"units": units[3],
-                       "long_name": "median of the valid v over t, positive down"}),
+                       "long_name": f"median of the valid v over t, {vdir}"}),
             "mean_chc": (yx, d["mean_flags"].astype(np.int32),
                          {"long_name": "0 valid, 2 no valid vector"}),
             "mean_sigma_u": (yx, finite(d["mean_sigma_u"]) * per, {"units": units[2]}),
@@ -50,13 +52,14 @@ def to_xarray(d):
         },
         coords={
             "x": ("x", d["x"][0, :] * k, {"units": units[0]}),
-            "y": ("y", d["y"][:, 0] * k, {"units": units[1], "long_name": "y, down"}),
+            "y": ("y", d["y"][:, 0] * k, {"units": units[1], "long_name": "y, up" if up else "y, down"}),
             "t": ("t", t, {"units": "s" if cal else "ticks"}),
         },
     )
     ds.attrs["variables"] = ["x", "y", "u", "v"]
     ds.attrs["units"] = units
     ds.attrs["dt"] = dt
+    ds.attrs["y_axis"] = "up" if up else "down"
     ds.attrs["files"] = []
     return ds
 
@@ -90,6 +93,7 @@ def open_flow(path):
         "mean_u": measured("mean_u"), "mean_v": measured("mean_v"),
         "mean_flags": f.mean_flag.values, "mean_pairs": f.mean_pairs.values,
         "mean_sigma_u": sigma("mean_sigma_u"), "mean_sigma_v": sigma("mean_sigma_v"),
+        "y_up": a.get("y_axis") == "up",
         "pixel_size": float(a["pixel_size_mm"]) if cal else None,
         "tick_hz": float(a["tick_hz"]) if cal else None,
     }
