@@ -449,10 +449,15 @@ mod tests {
         assert!(ev.iter().all(|&(t, _)| t <= 10), "{ev:?}");
         // An early spike at 32 (the beat is 30, 35, …): +1 there and the
         // beat moves with it (37, 42, …).
-        let mut train: Vec<u8> = (0..60).map(|t| u8::from(t % 5 == 0)).collect();
-        for t in 32..60 {
-            train[t] = u8::from(t >= 32 && (t - 32) % 5 == 0);
-        }
+        let train: Vec<u8> = (0..60)
+            .map(|t| {
+                u8::from(if t < 32 {
+                    t % 5 == 0
+                } else {
+                    (t - 32) % 5 == 0
+                })
+            })
+            .collect();
         let (ev, _, _) = events(&train);
         let late: Vec<_> = ev.iter().filter(|e| e.0 > 10).collect();
         assert_eq!(late, vec![&(32, 1)]);

@@ -33,10 +33,18 @@ struct Pixel {
     rate: f64,
 }
 
+/// An event: pixel index, tick, sign (+1 unpredicted spike, −1 missed
+/// prediction).
+pub type Event = (u32, u32, i8);
+
+/// What [`events`] gives: the events, each pixel's mean rate (spikes per
+/// tick) and whether it ended periodic.
+pub type Events = (Vec<Event>, Vec<f64>, Vec<bool>);
+
 /// Every event of `vol` in tick order (ticks of the volume, the first
 /// `first`), and each pixel's mean rate and periodicity after the last
-/// tick: `(events as (index, tick, sign), rates, periodic)`.
-pub fn events(vol: &SpikeVolume) -> (Vec<(u32, u32, i8)>, Vec<f64>, Vec<bool>) {
+/// tick.
+pub fn events(vol: &SpikeVolume) -> Events {
     let px = vol.width * vol.rows;
     let mut pixels = vec![Pixel::default(); px];
     let mut out = Vec::new();
@@ -106,7 +114,7 @@ fn learn(p: &mut Pixel, since: i64) {
         p.period += d >> shift;
         p.count = (p.count + 1).min(MAX_CONFIDENCE);
         p.short = 0;
-    } else if d < 0 && p.short + since as u32 <= u32::from(RELEARN_TICKS) - 1 {
+    } else if d < 0 && p.short + (since as u32) < u32::from(RELEARN_TICKS) {
         p.short += since as u32;
     } else if d > 0 && p.count > 2 {
         p.count -= 2;
