@@ -661,7 +661,9 @@ pub fn make_frame<G: Gray>(
 /// upright rows (`caps[0]` the top band; missing entries: `p.n_max`; each
 /// clamped to `1..=p.n_max`): each band is reconstructed once, with its own
 /// limit and a margin of `p.margin` rows ([`reconstruct_rows`]). The one
-/// implementation of the dwell cap, for the sidecar and the host.
+/// implementation of the dwell cap, for the sidecar and the host. Returns
+/// the labelling's counts summed over the bands (saturating), so that
+/// what full tables lost is reported.
 pub fn capped_frame<G: Gray>(
     hist: &History<'_>,
     k: u32,
@@ -669,8 +671,9 @@ pub fn capped_frame<G: Gray>(
     caps: &[u16],
     ws: &mut Workspace<'_>,
     out: &mut [G],
-) -> Result<(), Error> {
+) -> Result<crate::label::LabelStats, Error> {
     p.validate(hist.depth())?;
+    let mut labels = crate::label::LabelStats::default();
     let h = hist.rows();
     for b in 0..h.div_ceil(CAP_BAND) {
         let cap = caps.get(usize::from(b)).copied().unwrap_or(p.n_max);
@@ -684,7 +687,11 @@ pub fn capped_frame<G: Gray>(
         // Upright band b is stored rows h − 32(b+1) .. h − 32b (bottom-up).
         let e1 = h - b * CAP_BAND;
         let e0 = e1.saturating_sub(CAP_BAND);
-        reconstruct_rows(hist, k, &q, ws, (e0, e1), out)?;
+        let l = reconstruct_rows(hist, k, &q, ws, (e0, e1), out)?.labels;
+        labels.regions = labels.regions.saturating_add(l.regions);
+        labels.noise_regions = labels.noise_regions.saturating_add(l.noise_regions);
+        labels.overflow_regions = labels.overflow_regions.saturating_add(l.overflow_regions);
+        labels.dropped_pixels = labels.dropped_pixels.saturating_add(l.dropped_pixels);
     }
-    Ok(())
+    Ok(labels)
 }

@@ -29,15 +29,16 @@ pub fn adaptive_banded(
     k: u64,
     core: &Params,
     caps: &[u16],
-) -> Result<Vec<u16>, ReconstructError> {
+) -> Result<(Vec<u16>, spiv_core::label::LabelStats), ReconstructError> {
     let (w, h) = (planes.width, planes.height);
     let mut ring = planes.ring(k, core.n_max)?;
     let tick = ring.tick;
     let hist = ring.history()?;
     let mut ws = spiv_core::buffers::WorkspaceBuf::whole(w, h);
     let mut out = vec![0u16; usize::from(w) * usize::from(h)];
-    spiv_core::sidecar::capped_frame(&hist, tick, core, caps, &mut ws.workspace()?, &mut out)?;
-    Ok(planes.output(&out))
+    let labels =
+        spiv_core::sidecar::capped_frame(&hist, tick, core, caps, &mut ws.workspace()?, &mut out)?;
+    Ok((planes.output(&out), labels))
 }
 
 /// [`band_caps`] for the bands [`adaptive_banded`] makes from `planes`:

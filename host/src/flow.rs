@@ -755,6 +755,8 @@ struct Measured {
     frame_ticks: f64,
     /// The dense flow, px per `dt`, when the pair was measured densely.
     dense: Option<crate::piv::dense::Flow>,
+    /// What the core's label tables lost in the pair's frames.
+    lost: LabelLoss,
 }
 
 /// Pairs per chain of [`run_flow`]: within a chain each pair starts from
@@ -1064,6 +1066,8 @@ fn ladder_pair(
         bootstrapped: false,
         rungs: m.rungs,
         frame_ticks,
+        // The ladder's frames are the host's: no label table to fill.
+        lost: LabelLoss::default(),
         dense: m.dense,
     })
 }
@@ -1082,15 +1086,18 @@ fn capped_pair(
     let (pred, bootstrapped) = match prediction {
         Some(p) => (p, false),
         None => {
-            let [a, b] = frames(rec, [ka, kb], Method::Tfp, BOOTSTRAP_WINDOW, core)?;
+            let ([a, b], _) = frames(rec, [ka, kb], Method::Tfp, BOOTSTRAP_WINDOW, core)?;
             (piv(&a, &b, opts.mask.as_ref(), &opts.piv)?, true)
         }
     };
     let dt = f64::from(opts.dt);
     let pa = rec.around(ka, core.n_max)?;
     let caps = caps_for(&pa, &pred.vectors(), dt, budget, core);
-    let a = adaptive_banded(&pa, ka, core, &caps)?;
-    let b = adaptive_banded(&rec.around(kb, core.n_max)?, kb, core, &caps)?;
+    let (a, la) = adaptive_banded(&pa, ka, core, &caps)?;
+    let (b, lb) = adaptive_banded(&rec.around(kb, core.n_max)?, kb, core, &caps)?;
+    let mut lost = LabelLoss::default();
+    lost.add(&la);
+    lost.add(&lb);
     let (w, h) = (usize::from(rec.crop_width), usize::from(rec.height));
     let frames = [to_f32(&a, w, h), to_f32(&b, w, h)];
     let field = piv(&frames[0], &frames[1], opts.mask.as_ref(), &opts.piv)?;
@@ -1104,6 +1111,7 @@ fn capped_pair(
         separation: Vec::new(),
         frame_ticks: dt,
         dense: None,
+        lost,
     })
 }
 
@@ -1115,7 +1123,7 @@ fn plain_pair(
     core: &Params,
     method: Method,
 ) -> Result<Measured, FlowError> {
-    let frames = frames(rec, ticks, method, opts.window, core)?;
+    let (frames, lost) = frames(rec, ticks, method, opts.window, core)?;
     let field = piv(&frames[0], &frames[1], opts.mask.as_ref(), &opts.piv)?;
     Ok(Measured {
         method,
@@ -1127,6 +1135,7 @@ fn plain_pair(
         separation: Vec::new(),
         frame_ticks: f64::from(opts.dt),
         dense: None,
+        lost,
     })
 }
 
@@ -1137,14 +1146,18 @@ fn frames(
     method: Method,
     n: u16,
     core: &Params,
-) -> Result<[Array2<f32>; 2], FlowError> {
+) -> Result<([Array2<f32>; 2], LabelLoss), FlowError> {
     let (w, h) = (usize::from(rec.crop_width), usize::from(rec.height));
     let mut out = [Array2::zeros((0, 0)), Array2::zeros((0, 0))];
+    let mut lost = LabelLoss::default();
     for (o, k) in out.iter_mut().zip(ticks) {
         let f = frame_from_planes(&rec.around(k, n)?, k, method, n, core)?;
+        if let Some(s) = &f.stats {
+            lost.add(&s.labels);
+        }
         *o = to_f32(&f.data, w, h);
     }
-    Ok(out)
+    Ok((out, lost))
 }
 
 fn pair_result(m: Measured, ticks: [u64; 2]) -> PairResult {
@@ -1155,7 +1168,7 @@ fn pair_result(m: Measured, ticks: [u64; 2]) -> PairResult {
         sigma: m.field.sigma.iter().copied().collect(),
         caps: m.caps,
         bootstrapped: m.bootstrapped,
-        lost: LabelLoss::default(),
+        lost: m.lost,
         rungs: m.rungs,
         separation: m.separation,
     }

@@ -780,3 +780,66 @@ fn ctrl_c_stops_flow_and_keeps_the_pairs_done() {
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     assert_eq!(s["pairs"].as_array().expect("pairs").len(), n);
 }
+
+/// A recording with more particles than the core's region table holds
+/// (456 blobs of 2×2 px in 128×96 px, a table of 192): `spiv flow
+/// --method adaptive` says so on stderr and in `summary.json`, with and
+/// without the dwell cap.
+#[test]
+fn full_label_tables_are_reported() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let (w, h, planes) = (128usize, 96usize, 300usize);
+    let mut data = Vec::with_capacity(planes * w * h / 8);
+    for t in 0..planes {
+        let mut plane = vec![0u8; w * h / 8];
+        if t % 2 == 0 {
+            for y in (1..h - 2).step_by(6) {
+                for x in (1..w - 2).step_by(6) {
+                    for (dy, dx) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
+                        // Stored bottom-up, bits least significant first.
+                        let p = (h - 1 - (y + dy)) * w + x + dx;
+                        plane[p / 8] |= 1 << (p % 8);
+                    }
+                }
+            }
+        }
+        data.extend(plane);
+    }
+    let dat = tmp.path().join("blobs.dat");
+    std::fs::write(&dat, data).unwrap();
+    for cap in ["8", "off"] {
+        let out = tmp.path().join(format!("out-{cap}"));
+        let o = spiv(&[
+            "flow",
+            p(&dat),
+            "--width",
+            "128",
+            "--height",
+            "96",
+            "--dt",
+            "13",
+            "--method",
+            "adaptive",
+            "--dwell-cap",
+            cap,
+            "--out",
+            p(&out),
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{err}");
+        assert!(
+            err.contains("warning: the core's tables were full"),
+            "{cap}: {err}"
+        );
+        let s: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap())
+                .unwrap();
+        let lost: u64 = s["pairs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| p["lost_to_full_tables"]["regions"].as_u64().unwrap())
+            .sum();
+        assert!(lost > 0, "{cap}: {s}");
+    }
+}

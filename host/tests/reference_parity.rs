@@ -309,7 +309,7 @@ fn the_dwell_capped_frame_spiv_run_ships_matches_the_reference() {
     let caps = [6u16, 12, 40];
     let k = 75u32;
     let planes = Planes::simulated(w, h, packed.clone());
-    let got = adaptive_banded(&planes, u64::from(k), &p, &caps).expect("banded");
+    let (got, _) = adaptive_banded(&planes, u64::from(k), &p, &caps).expect("banded");
     let vol = SpikeVolume::from_packed(&packed, usize::from(w), usize::from(h), 0);
     // Stored rows are bottom-up: upright band b is stored rows
     // h − 32(b + 1) .. h − 32b.

@@ -201,8 +201,8 @@ impl SpeedBench {
             let (_, ta, tb) = self.core_pair(Method::Tfp, 8)?;
             let tfp_field = piv(&ta, &tb, None, spike)?;
             let caps = crate::dwell::band_caps(&tfp_field.vectors(), h, self.dt(), cap, core);
-            let a = crate::dwell::adaptive_banded(&self.planes, self.ka, core, &caps)?;
-            let b = crate::dwell::adaptive_banded(&self.planes, self.kb, core, &caps)?;
+            let (a, _) = crate::dwell::adaptive_banded(&self.planes, self.ka, core, &caps)?;
+            let (b, _) = crate::dwell::adaptive_banded(&self.planes, self.kb, core, &caps)?;
             let rec_ms = t.elapsed().as_secs_f64() * 1e3;
             let (ms, rmse, _) = self.piv(&self.upright(&a), &self.upright(&b), spike)?;
             push(SpeedRow {
