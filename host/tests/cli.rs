@@ -843,3 +843,44 @@ fn full_label_tables_are_reported() {
         assert!(lost > 0, "{cap}: {s}");
     }
 }
+
+/// docs/cli.md names every option each subcommand's `--help` lists, in
+/// that subcommand's row, so the page cannot fall behind the code.
+#[test]
+fn docs_cli_names_every_option() {
+    let page = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/cli.md"))
+        .expect("docs/cli.md");
+    let options = |args: &[&str]| -> Vec<String> {
+        let help = ok(&[args, &["--help"]].concat());
+        let mut found: Vec<String> = help
+            .split(|c: char| !(c.is_ascii_alphanumeric() || c == '-'))
+            .filter(|w| w.starts_with("--") && w.len() > 2 && w != &"--help" && w != &"--version")
+            .map(str::to_string)
+            .collect();
+        found.sort();
+        found.dedup();
+        found
+    };
+    let row = |start: &str| -> &str {
+        page.lines()
+            .find(|l| l.starts_with(start))
+            .unwrap_or_else(|| panic!("docs/cli.md has no row starting {start}"))
+    };
+    for cmd in ["run", "simulate", "flow", "reconstruct", "piv", "receive"] {
+        let line = row(&format!("| `spiv {cmd}"));
+        for o in options(&[cmd]) {
+            assert!(line.contains(&o), "docs/cli.md: spiv {cmd} lacks {o}");
+        }
+    }
+    let bench = row("| `spiv bench");
+    for sub in ["paper", "blasius", "link", "speed", "turbulence", "flows"] {
+        for o in options(&["bench", sub]) {
+            let at = bench
+                .find(&format!("`spiv bench {sub}"))
+                .unwrap_or_else(|| panic!("docs/cli.md: no spiv bench {sub}"));
+            let own = &bench[at..];
+            let own = &own[..own[1..].find("`spiv bench").map_or(own.len(), |e| e + 1)];
+            assert!(own.contains(&o), "docs/cli.md: spiv bench {sub} lacks {o}");
+        }
+    }
+}
