@@ -6,7 +6,10 @@
 # frames (n_max = 128), and sending them (Rice tiles, COBS, CRC-32); then
 # the same strip with motion-compensated frames (refine on) after hearing
 # the committed control message (cortex-m4/data/control.bin); then the last
-# frame coded by each tile codec (Rice, Context, Sparse, SparseContext).
+# frame coded by each tile codec (Rice, Context, Sparse, SparseContext);
+# then the static-light model with its event ring over the strip's bottom
+# 32 stored rows (the glare band) and first 104 planes, and the rung frames
+# of 4, 8, 16 and 32 ticks warped along a uniform flow.
 # Also: the firmware's RAM, its parity line, and what the counts mean for a
 # 400 MHz Cortex-M7-class MCU at 20 kHz.
 #
@@ -62,18 +65,20 @@ awk '
   s == "spiv_mark_context_begin"   { st = "context";   next }
   s == "spiv_mark_sparse_begin"    { st = "sparse";    next }
   s == "spiv_mark_sparse_context_begin" { st = "sparse_context"; next }
+  s == "spiv_mark_light_begin"     { st = "light";     next }
+  s == "spiv_mark_rungs_begin"     { st = "rungs";     next }
   s == "spiv_mark_link_begin"   { saved = st; st = "link"; next }
   s == "spiv_mark_link_end"     { st = saved; next }
   s ~ /^spiv_mark_.*_end$/      { st = ""; next }
   st != ""                      { n[st]++ }
-  END { printf "%d %d %d %d %d %d %d %d %d %d %d %d\n", n["ingest"], n["frame"], n["send"], n["link"],
+  END { printf "%d %d %d %d %d %d %d %d %d %d %d %d %d %d\n", n["ingest"], n["frame"], n["send"], n["link"],
         n["mc_ingest"], n["mc_frame"], n["mc_send"], n["hear"],
-        n["rice"], n["context"], n["sparse"], n["sparse_context"] }
+        n["rice"], n["context"], n["sparse"], n["sparse_context"], n["light"], n["rungs"] }
 ' <"$fifo" >"$counts" &
 timeout 900 "${qemu[@]}" "${one[@]}" -d exec,nochain -D "$fifo" -kernel "$bin" >/dev/null
 wait
 read -r t_ingest t_frame t_send t_link t_mc_ingest t_mc_frame t_mc_send t_hear \
-  t_rice t_context t_sparse t_sparse_context <"$counts"
+  t_rice t_context t_sparse t_sparse_context t_light t_rungs <"$counts"
 codec_line=$(grep '^codecs ' <<<"$run")
 codec_bytes() { sed -n "s/.*\b$1=\([0-9]*\).*/\1/p" <<<"$codec_line"; }
 mc_bytes=$(sed -n 's/.*\bbytes=\([0-9]*\).*/\1/p' <<<"$mc_parity")
@@ -86,6 +91,8 @@ control_bytes=$(stat -c %s "$m4/data/control.bin")
 host=../target/release/examples/strip_kernels
 host_parity=$("$host")
 host_mc_parity=$("$host" mc)
+host_light_parity=$("$host" light)
+light_parity=$(sed -n 's/^light //p' <<<"$run")
 callgrind() {
   valgrind --tool=callgrind --toggle-collect="$1" \
     --callgrind-out-file=/dev/null "$host" ${2:-} 2>&1 | sed -n 's/.*I *refs: *//p' | tr -d ,
@@ -96,6 +103,11 @@ x_send=$(callgrind spiv_core::sidecar::Sidecar::send_frame)
 x_mc_frame=$(callgrind spiv_core::sidecar::Sidecar::make_frame mc)
 x_mc_send=$(callgrind spiv_core::sidecar::Sidecar::send_frame mc)
 x_refine=$(callgrind spiv_core::motion::refine mc)
+x_light=$(callgrind spiv_core::rungs::EventRing::push light)
+x_rungs=$(callgrind spiv_core::rungs::rung_frames light)
+light_events=$(sed -n 's/.*\bevents=\([0-9]*\).*/\1/p' <<<"$light_parity")
+light_px=$((128 * 32)); light_planes=104
+rung_px=$((light_px * 8))
 
 ratio() { awk -v a="$1" -v b="$2" -v d="$3" 'BEGIN { printf "%.*f", d, a / b }'; }
 echo
@@ -115,8 +127,11 @@ for c in rice context sparse sparse_context; do
   t=$(eval echo "\$t_$c"); b=$(codec_bytes "$c")
   printf '%-34s %16s %16s %16s\n' "codec $c" "$(ratio "$t" "$px" 1)" "" "per pixel ($(ratio "$t" "$b" 0) per coded byte; $b B = $(ratio $((8 * b)) "$px" 2) bits/px)"
 done
+printf '%-34s %16s %16s %16s\n' "static light + event ring" "$(ratio "$t_light" $((light_px * light_planes)) 1)" "$(ratio "$x_light" $((light_px * light_planes)) 1)" "per pixel-plane ($light_events events)"
+printf '%-34s %16s %16s %16s\n' "rung frames (4, 8, 16, 32 ticks)" "$(ratio "$t_rungs" "$rung_px" 1)" "$(ratio "$x_rungs" "$rung_px" 1)" "per frame pixel (8 frames)"
+printf '%-34s %16s %16s %16s\n' "  per event" "$(ratio "$t_rungs" "$light_events" 1)" "$(ratio "$x_rungs" "$light_events" 1)" "per event held"
 printf '%-34s %16s\n' "(parity CRC of the stream)" "$(ratio "$t_link" "$bytes" 1) per byte"
-echo "totals: Thumb-2 ingest $t_ingest, frame $t_frame, send $t_send, mc_frame $t_mc_frame, mc_send $t_mc_send, hear $t_hear, codecs rice $t_rice context $t_context sparse $t_sparse sparse_context $t_sparse_context; x86-64 ingest $x_ingest, frame $x_frame, send $x_send, mc_frame $x_mc_frame (refine $x_refine), mc_send $x_mc_send"
+echo "totals: Thumb-2 ingest $t_ingest, frame $t_frame, send $t_send, mc_frame $t_mc_frame, mc_send $t_mc_send, hear $t_hear, codecs rice $t_rice context $t_context sparse $t_sparse sparse_context $t_sparse_context, light $t_light, rungs $t_rungs; x86-64 ingest $x_ingest, frame $x_frame, send $x_send, mc_frame $x_mc_frame (refine $x_refine), mc_send $x_mc_send, light $x_light, rungs $x_rungs"
 
 # Static RAM of the firmware image.
 sec() {
@@ -165,12 +180,14 @@ same() {
 }
 same adaptive "$parity" "$host_parity" "$native" "$committed"
 same motion-compensated "$mc_parity" "$host_mc_parity" "$native_mc" "$committed_mc"
-echo "parity: Cortex-M4, host kernels, native firmware loop and cortex-m4/expected.txt (adaptive) and expected-mc.txt (motion-compensated) identical"
+committed_light=$(cat "$m4/expected-light.txt")
+same light "$light_parity" "$host_light_parity" "$committed_light" "$committed_light"
+echo "parity: Cortex-M4, host kernels, native firmware loop and cortex-m4/expected.txt (adaptive) and expected-mc.txt (motion-compensated) identical; light and rungs: Cortex-M4, host kernels and expected-light.txt identical"
 
 if [ "$check" = 1 ]; then
   base=$m4/cost-baseline.txt
   fail=0
-  for k in ingest frame send mc_frame mc_send rice context sparse sparse_context; do
+  for k in ingest frame send mc_frame mc_send rice context sparse sparse_context light rungs; do
     want=$(sed -n "s/^$k=//p" "$base")
     got=$(eval echo "\$t_$k")
     if [ "$got" -gt $((want + want / 10)) ]; then

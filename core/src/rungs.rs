@@ -134,7 +134,9 @@ impl<'a> EventRing<'a> {
 
     /// Stores the events `light` settles with the next plane: pushes
     /// `plane` through `light` (tick [`Light::next_tick`], which must be
-    /// the ring's next tick).
+    /// the ring's next tick). Kept out of line: `firmware-sim/cost.sh`
+    /// counts its instructions by its symbol.
+    #[inline(never)]
     pub fn push(
         &mut self,
         light: &mut Light<'_>,
@@ -270,6 +272,8 @@ impl Rungs {
 /// at `mid + s/2`), each `width × height` samples of `frames`, in
 /// 1/[`crate::warp::SCALE`] spike less the static rate of
 /// `light`'s rate-predicted pixels over `s` ticks ([`subtract_rates`]).
+/// Kept out of line for `firmware-sim/cost.sh`.
+#[inline(never)]
 pub fn rung_frames(
     ring: &EventRing<'_>,
     light: &Light<'_>,

@@ -7,9 +7,13 @@
 //! parity line the firmware prints. With the argument `mc`, the firmware's
 //! second run: motion-compensated frames (refine on) after hearing the
 //! committed control (`cortex-m4/data/control.bin`); its line without the
-//! firmware's `mc ` prefix.
+//! firmware's `mc ` prefix. With `light`, the firmware's third part: the
+//! static-light model and its event ring over the strip's bottom 32 stored
+//! rows and first 104 planes
+//! (`EventRing::push`), then the rung frames (`rung_frames`); its line
+//! without the firmware's `light ` prefix.
 //!
-//! `cargo run --release -p spiv-firmware-sim --example strip_kernels [mc]`
+//! `cargo run --release -p spiv-firmware-sim --example strip_kernels [mc|light]`
 
 use std::convert::Infallible;
 
@@ -43,7 +47,69 @@ impl Probe<u8> for Crcs {
     }
 }
 
+/// The firmware's `light()`: the same buffers' sizes, rungs, midpoint and
+/// flow (`cortex-m4/src/main.rs`).
+fn light() -> Result<(), spiv_core::Error> {
+    use spiv_core::light::{Light, LightState};
+    use spiv_core::plane::PlaneView;
+    use spiv_core::rungs::{rung_frames, EventRing, Rungs};
+    use spiv_core::warp::Flow;
+    const RUNGS: [u16; 4] = [4, 8, 16, 32];
+    // The strip's bottom 32 stored rows, its first 104 planes.
+    let (h, planes) = (32u16, 104);
+    let px = usize::from(W) * usize::from(h);
+    let (mut last, mut period, mut short) = (vec![0u16; px], vec![0u16; px], vec![0u16; px]);
+    let (mut rate, mut flags) = (vec![0u32; px], vec![0u8; px]);
+    let state = LightState {
+        last: &mut last,
+        period: &mut period,
+        rate: &mut rate,
+        short: &mut short,
+        flags: &mut flags,
+    };
+    let mut model = Light::new(W, h, 0, state)?;
+    let (mut entries, mut starts) = (vec![0u32; 16_384], vec![0u32; 105]);
+    let mut ring = EventRing::new(&mut entries, &mut starts, 0)?;
+    let plane_bytes = usize::from(W) * usize::from(H) / 8;
+    for plane in STRIP.chunks_exact(plane_bytes).take(planes) {
+        ring.push(&mut model, &PlaneView::new(&plane[..px / 8], W, h)?)?;
+    }
+    let vx = [2048i16; 4];
+    let zeros = [0i16; 4];
+    let flow = Flow {
+        nx: 2,
+        ny: 2,
+        x0: 0,
+        y0: 0,
+        pitch: 128 * 16,
+        vx: &vx,
+        vy: &zeros,
+        ax: &zeros,
+        ay: &zeros,
+    };
+    let mut rungs = Rungs::events(0);
+    rungs.separations[..RUNGS.len()].copy_from_slice(&RUNGS);
+    rungs.count = RUNGS.len() as u8;
+    let mut frames = vec![0i16; 2 * RUNGS.len() * px];
+    rung_frames(&ring, &model, &flow, 52, &rungs, &mut frames)?;
+    let bytes: Vec<u8> = frames.iter().flat_map(|v| v.to_le_bytes()).collect();
+    let periodic = (0..px).filter(|&i| model.periodic(i)).count();
+    let c = ring.cursor();
+    println!(
+        "events={} lost={} evicted={} periodic={} frames_crc={:08x}",
+        c.stored,
+        c.lost,
+        c.evicted,
+        periodic,
+        crc32(&bytes)
+    );
+    Ok(())
+}
+
 fn main() -> Result<(), SidecarError<Infallible>> {
+    if std::env::args().nth(1).as_deref() == Some("light") {
+        return light().map_err(SidecarError::Core);
+    }
     // `spiv-firmware-sim`'s defaults and the firmware's: first frame at
     // n_max/2, one pair, 8-bit frames, Rice tiles.
     let mut cfg = Config::new(0, DT);

@@ -37,12 +37,16 @@ use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
 use panic_semihosting as _;
 use spiv_core::downlink::DownlinkBuffers;
+use spiv_core::light::{Light, LightState};
 use spiv_core::motion::Refine;
+use spiv_core::plane::PlaneView;
 use spiv_core::region::Region;
+use spiv_core::rungs::{rung_frames, EventRing, Rungs};
 use spiv_core::sidecar::{
     Config, Memory, Probe, RefineBuffers, Sidecar, SidecarError, Stage, CAP_BAND,
 };
 use spiv_core::state::{Buffers, STATE_MILLIBYTES_PER_PIXEL};
+use spiv_core::warp::Flow;
 use spiv_core::wire::codec::{encode_tile, tile_scratch, Lossy};
 use spiv_core::wire::control::MAX_CONTROL_ENCODED;
 use spiv_core::wire::sender::{tile_rows, Link, SendBuffers, Slot};
@@ -92,6 +96,35 @@ const EMPTY_REGION: Region = Region {
     max_count: 0,
     root: 0,
 };
+
+/// The static-light model, its event ring and the rung frames ([`light`])
+/// over the strip's bottom 32 stored rows (the glare band) and its first
+/// [`LIGHT_PLANES`] planes: rows, pixels, events held, ticks of ring, rungs.
+const LIGHT_H: u16 = 32;
+const LIGHT_PX: usize = W as usize * LIGHT_H as usize;
+const LIGHT_PLANES: usize = 104;
+const LIGHT_EVENTS: usize = 16_384;
+const LIGHT_TICKS: usize = 105;
+const LIGHT_RUNGS: [u16; 4] = [4, 8, 16, 32];
+/// The pair's midpoint: the longest rung and the events' tolerance fit on
+/// both sides within the planes read.
+const LIGHT_MID: u32 = 52;
+/// The flow the rung frames are warped along: 0.5 px per tick right at
+/// every node of a 2 × 2 grid over the strip (Q12 px per tick).
+const LIGHT_VX: [i16; 4] = [2048; 4];
+
+/// What the light kernels use ([`light`]): the model's state, the ring and
+/// the frames.
+struct LightRam {
+    last: [u16; LIGHT_PX],
+    period: [u16; LIGHT_PX],
+    rate: [u32; LIGHT_PX],
+    short: [u16; LIGHT_PX],
+    flags: [u8; LIGHT_PX],
+    entries: [u32; LIGHT_EVENTS],
+    starts: [u32; LIGHT_TICKS],
+    frames: [i16; 2 * LIGHT_RUNGS.len() * LIGHT_PX],
+}
 
 /// Every byte of RAM the pipeline uses besides the stack.
 struct Ram {
@@ -224,6 +257,10 @@ markers!(
     spiv_mark_sparse_end = 22,
     spiv_mark_sparse_context_begin = 23,
     spiv_mark_sparse_context_end = 24,
+    spiv_mark_light_begin = 25,
+    spiv_mark_light_end = 26,
+    spiv_mark_rungs_begin = 27,
+    spiv_mark_rungs_end = 28,
 );
 
 #[entry]
@@ -317,7 +354,78 @@ fn run() -> Result<(), Failure> {
     mc.bootstrap = spiv_core::Method::Adaptive;
     mc.refine = Some(Refine::default());
     strip(ram, mc, true)?;
-    codecs(ram)
+    codecs(ram)?;
+    light()
+}
+
+/// The static-light model and its event ring over the strip's bottom 32
+/// stored rows for its first 104 planes, then the frames of rungs 4, 8, 16
+/// and 32 ticks around tick 52 warped along a uniform 0.5 px per tick,
+/// between cost markers. Prints
+/// `light events=… lost=… evicted=… periodic=… frames_crc=…` (the host's
+/// `strip_kernels light` prints the same after `light `).
+fn light() -> Result<(), Failure> {
+    let ram: &'static mut LightRam = cortex_m::singleton!(: LightRam = LightRam {
+        last: [0; LIGHT_PX],
+        period: [0; LIGHT_PX],
+        rate: [0; LIGHT_PX],
+        short: [0; LIGHT_PX],
+        flags: [0; LIGHT_PX],
+        entries: [0; LIGHT_EVENTS],
+        starts: [0; LIGHT_TICKS],
+        frames: [0; 2 * LIGHT_RUNGS.len() * LIGHT_PX],
+    })
+    .ok_or(Failure::Memory("light RAM taken twice"))?;
+    let state = LightState {
+        last: &mut ram.last,
+        period: &mut ram.period,
+        rate: &mut ram.rate,
+        short: &mut ram.short,
+        flags: &mut ram.flags,
+    };
+    let mut model = Light::new(W, LIGHT_H, 0, state)?;
+    let mut ring = EventRing::new(&mut ram.entries, &mut ram.starts, 0)?;
+    spiv_mark_light_begin();
+    for plane in STRIP.chunks_exact(PLANE_BYTES).take(LIGHT_PLANES) {
+        ring.push(
+            &mut model,
+            &PlaneView::new(&plane[..LIGHT_PX / 8], W, LIGHT_H)?,
+        )?;
+    }
+    spiv_mark_light_end();
+    let zeros = [0i16; 4];
+    let flow = Flow {
+        nx: 2,
+        ny: 2,
+        x0: 0,
+        y0: 0,
+        pitch: 128 * 16,
+        vx: &LIGHT_VX,
+        vy: &zeros,
+        ax: &zeros,
+        ay: &zeros,
+    };
+    let mut rungs = Rungs::events(0);
+    rungs.separations[..LIGHT_RUNGS.len()].copy_from_slice(&LIGHT_RUNGS);
+    rungs.count = LIGHT_RUNGS.len() as u8;
+    spiv_mark_rungs_begin();
+    rung_frames(&ring, &model, &flow, LIGHT_MID, &rungs, &mut ram.frames)?;
+    spiv_mark_rungs_end();
+    let mut digest = CRC32.digest();
+    for v in ram.frames.iter() {
+        digest.update(&v.to_le_bytes());
+    }
+    let periodic = (0..LIGHT_PX).filter(|&i| model.periodic(i)).count();
+    let c = ring.cursor();
+    hprintln!(
+        "light events={} lost={} evicted={} periodic={} frames_crc={:08x}",
+        c.stored,
+        c.lost,
+        c.evicted,
+        periodic,
+        digest.finalize()
+    );
+    Ok(())
 }
 
 /// Codes the last frame (the motion-compensated pair's second) with each
