@@ -653,7 +653,7 @@ fn flow<'py>(
     start: Option<i64>,
     end: Option<i64>,
     method: &str,
-    window: Option<u16>,
+    window: Option<i64>,
     dwell_cap: Option<f64>,
     windows: Option<Vec<usize>>,
     width: Option<u16>,
@@ -665,7 +665,7 @@ fn flow<'py>(
     tick_hz: Option<f64>,
     as_xarray: bool,
     mask: Option<&Bound<'py, PyAny>>,
-    pairs: Option<(usize, usize)>,
+    pairs: Option<(i64, i64)>,
     progress: Option<&Bound<'py, PyAny>>,
     y_up: bool,
 ) -> PyResult<Bound<'py, PyAny>> {
@@ -678,14 +678,23 @@ fn flow<'py>(
         start: ticks("start", start, 0)?,
         end: ticks("end", end, 0)?,
         method: method_named(method)?,
-        window,
+        window: ticks("window", window, 0)?,
         dwell_cap,
         windows,
         dense,
         pixel_mm: pixel_size,
         tick_hz,
         mask,
-        pairs: pairs.map(|(a, b)| a..b),
+        pairs: pairs
+            .map(|(a, b)| -> PyResult<_> {
+                let index = |x: i64| {
+                    usize::try_from(x).map_err(|_| {
+                        SpivError::new_err(format!("pairs ({a}, {b}): indices start at 0"))
+                    })
+                };
+                Ok(index(a)?..index(b)?)
+            })
+            .transpose()?,
     };
     let fopts = file_options(width, height, flip, strip_head)?;
     let (rec, o) = py

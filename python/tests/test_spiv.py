@@ -485,6 +485,10 @@ def test_flow_checks_inputs_against_what_they_claim(recording, tmp_path):
         spiv.flow(dat, dt=-5)
     with pytest.raises(spiv.SpivError, match="^pairs 0..0: an empty range"):
         spiv.flow(dat, pairs=(0, 0))
+    with pytest.raises(spiv.SpivError, match="indices start at 0"):
+        spiv.flow(dat, pairs=(-1, 2))
+    with pytest.raises(spiv.SpivError, match="^window -1: expected a whole number"):
+        spiv.flow(dat, window=-1)
     with pytest.raises(spiv.SpivError, match="windows 32 then 64 px"):
         spiv.flow(dat, windows=(32, 64))
     a = np.zeros((128, 128), np.float32)

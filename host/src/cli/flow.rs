@@ -92,7 +92,8 @@ pub struct FlowArgs {
     quiet: bool,
     /// Write the outputs with y up: y = height − 1 − row (0 at the bottom
     /// row's centre), v positive up, vorticity positive counterclockwise;
-    /// the figures keep the camera's image and label their axes so.
+    /// the figures keep the camera's image and label their axes so
+    /// (`mean_dense.flo` keeps the .flo convention, y down).
     #[arg(long)]
     y_up: bool,
 }
