@@ -1,6 +1,7 @@
 //! How a frame is made from the spike history: the paper's adaptive
-//! integration or one of its two baselines. The code is what a frame end
-//! carries on the wire ([`crate::wire::FrameEnd::method`]).
+//! integration, its two baselines (TFP, TFI), or adaptive integration on
+//! motion-compensated counts. The code is what a frame end carries on the
+//! wire ([`crate::wire::FrameEnd::method`]).
 
 /// How a frame is made.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

@@ -10,7 +10,11 @@
 //! | [`baseline`] | the wide baseline: a second compensated pair several pair separations apart, centred on the pair, kept per vector where the flow allows |
 //! | [`piv`] | the PIV engine, stage by stage: `filter`, `resample`, `deform`, `correlate`, `peak`, `validate` |
 //! | [`dwell`] | the dwell cap: window limits per band from a predicted field, and the banded adaptive frame |
-//! | [`flow`] | the main job on any spike recording (`spiv flow`): pairs through the core, PIV, the closed-loop dwell cap |
+//! | [`flow`] | the main job on any spike recording (`spiv flow`): each pair measured by the time ladder ([`motion`]) or, by `--method`, from plain frames through the core; the mean field, glare, outputs' orientation |
+//! | [`motion`] | the time ladder and the dense ensemble: a pair's 2-D flow from the spikes around it, with its uncertainty |
+//! | [`live`] | the live closed loop: frames from a sidecar, PIV on each pair, the motion sent back |
+//! | [`simulate`] | a simulation as a user asks for it, its sizes bounded |
+//! | [`units`] | a recording's calibration: px per pair to m/s |
 //! | [`predict`] | the prediction of motion-compensated frames: a field as row velocities, refined in the core, and the compensated frame |
 //! | [`pipeline`] | the main job (`spiv run`): scene → both cameras → sidecar → PIV → metrics |
 //! | [`metrics`] | the paper's row-profile RMAE / RMSE and confidence intervals |
