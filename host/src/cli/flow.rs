@@ -163,6 +163,34 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
         spiv_host::report::movie::write_movie(&a.out.join("flow.gif"), &out, &o)
             .map_err(|e| CliError::Usage(e.to_string()))?;
     }
+    println!("{}", run_line(a, &rec, &o, &out, info.seconds));
+    let lost = out.lost();
+    if !lost.is_none() {
+        eprintln!(
+            "warning: the core's tables were full: {} regions and {} particle pixels were left as background (summary.json, lost_to_full_tables)",
+            lost.regions, lost.pixels
+        );
+    }
+    if out.pairs.len() < out.scheduled {
+        return Err(CliError::Interrupted(format!(
+            "interrupted: {} of {} pairs measured, written to {}",
+            out.pairs.len(),
+            out.scheduled,
+            a.out.display()
+        )));
+    }
+    Ok(())
+}
+
+/// The one line a finished run prints: the recording, the pairs, the
+/// vectors valid, the time and where the files went.
+fn run_line(
+    a: &FlowArgs,
+    rec: &Recording,
+    o: &spiv_host::flow::FlowOptions,
+    out: &spiv_host::flow::FlowOutcome,
+    seconds: f64,
+) -> String {
     let (mut valid, mut all, mut empty) = (0, 0, 0);
     for p in &out.pairs {
         let (v, r, i) = p.counts();
@@ -170,7 +198,7 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
         all += v + r + i;
         empty += usize::from(!p.measured());
     }
-    println!(
+    format!(
         "{}: {}x{} px, {} planes; {} pair{} {} ticks apart every {} ({}{}): {valid}/{all} vectors valid{}; {:.2} s -> {}",
         a.input.display(),
         out.size.0,
@@ -191,25 +219,9 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
         } else {
             String::new()
         },
-        info.seconds,
+        seconds,
         a.out.display()
-    );
-    let lost = out.lost();
-    if !lost.is_none() {
-        eprintln!(
-            "warning: the core's tables were full: {} regions and {} particle pixels were left as background (summary.json, lost_to_full_tables)",
-            lost.regions, lost.pixels
-        );
-    }
-    if out.pairs.len() < out.scheduled {
-        return Err(CliError::Interrupted(format!(
-            "interrupted: {} of {} pairs measured, written to {}",
-            out.pairs.len(),
-            out.scheduled,
-            a.out.display()
-        )));
-    }
-    Ok(())
+    )
 }
 
 fn flow_err(e: spiv_host::flow::FlowError) -> CliError {

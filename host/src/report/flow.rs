@@ -109,6 +109,37 @@ pub fn write_flow(
             unit,
         },
     )?;
+    colour_maps(dir, out, opts, &mean)?;
+    if let Some(p) = out.pairs.first() {
+        plot::vectors(
+            &dir.join("pair_vectors.png"),
+            base,
+            (w, h),
+            out.full_scale,
+            &p.vectors,
+            plot::arrow_scale(&p.vectors, out.grid.step),
+            plot::VectorCaption {
+                title: "first pair",
+                unit,
+            },
+        )?;
+    }
+    let path = dir.join("summary.json");
+    let text = serde_json::to_string_pretty(&flow_summary(out, opts, info)).unwrap_or_default();
+    std::fs::write(&path, text).map_err(|e| WriteError::Io(path.display().to_string(), e))
+}
+
+/// `mean_speed.png` and `mean_vorticity.png` of the mean field `mean` of
+/// `out` (the camera's orientation; the vorticity's sign and the axes as
+/// `opts.y_up` says), per pair or per second when calibrated.
+fn colour_maps(
+    dir: &Path,
+    out: &FlowOutcome,
+    opts: &FlowOptions,
+    mean: &crate::flow::MeanField,
+) -> Result<(), WriteError> {
+    let (cal, dt) = (opts.calibration, f64::from(opts.dt));
+    let (w, h) = (u32::from(out.size.0), u32::from(out.size.1));
     let (speed, mut vorticity) = speed_and_vorticity(&mean.vectors, &out.grid);
     if opts.y_up {
         // dv/dx − du/dy with y and v up: the camera's, negated.
@@ -150,23 +181,7 @@ pub fn write_flow(
         };
         plot::node_map(&dir.join(name), (w, h), &out.grid, scalar, &out.glare)?;
     }
-    if let Some(p) = out.pairs.first() {
-        plot::vectors(
-            &dir.join("pair_vectors.png"),
-            base,
-            (w, h),
-            out.full_scale,
-            &p.vectors,
-            plot::arrow_scale(&p.vectors, out.grid.step),
-            plot::VectorCaption {
-                title: "first pair",
-                unit,
-            },
-        )?;
-    }
-    let path = dir.join("summary.json");
-    let text = serde_json::to_string_pretty(&flow_summary(out, opts, info)).unwrap_or_default();
-    std::fs::write(&path, text).map_err(|e| WriteError::Io(path.display().to_string(), e))
+    Ok(())
 }
 
 /// Per node of `grid`, the speed of `field` (px per pair) and its

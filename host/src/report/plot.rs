@@ -205,28 +205,8 @@ pub fn vectors(
         }
     }
     let kk = f64::from(k);
-    let arrow = |root: &DrawingArea<BitMapBackend, plotters::coord::Shift>,
-                 (x0, y0): (f64, f64),
-                 (dx, dy): (f64, f64),
-                 color: RGBColor|
-     -> Result<(), PlotError> {
-        let p0 = (x0 as i32, y0 as i32);
-        let p1 = ((x0 + dx) as i32, (y0 + dy) as i32);
-        root.draw(&PathElement::new(vec![p0, p1], color.stroke_width(2)))
-            .map_err(|x| e(x.to_string()))?;
-        let len = (dx * dx + dy * dy).sqrt().max(1e-9);
-        let (ux, uy) = (dx / len, dy / len);
-        let hl = (len * 0.3).min(8.0);
-        for s in [-1.0, 1.0] {
-            let hx = x0 + dx - hl * (ux - s * 0.5 * uy);
-            let hy = y0 + dy - hl * (uy + s * 0.5 * ux);
-            root.draw(&PathElement::new(
-                vec![p1, (hx as i32, hy as i32)],
-                color.stroke_width(2),
-            ))
-            .map_err(|x| e(x.to_string()))?;
-        }
-        Ok(())
+    let arrow = |root: &DrawingArea<BitMapBackend, plotters::coord::Shift>, p0, d, color| {
+        draw_arrow(root, p0, d, color).map_err(|x| e(x.to_string()))
     };
     for v in field {
         let (x0, y0) = ((v.x + 0.5) * kk, (v.y + 0.5) * kk + f64::from(top));
@@ -503,104 +483,9 @@ fn draw_node_map<DB: DrawingBackend>(
             }
         }
     }
-    // Axes: the frame, ticks and labels in mm (calibrated) or px.
-    root.draw(&Rectangle::new(
-        [(left - 1, top_px - 1), (left + mw, top_px + mh)],
-        BLACK.stroke_width(1),
-    ))
-    .map_err(e)?;
-    let (per, unit) = match s.mm_per_px {
-        Some(mm) => (mm, "mm"),
-        None => (1.0, "px"),
-    };
-    let small = ("sans-serif", 12).into_font();
-    let step_of = |t: &[f64]| if t.len() > 1 { t[1] - t[0] } else { 1.0 };
-    let xt = ticks(0.0, f64::from(width) * per);
-    for &v in &xt {
-        let px = left + (v / per * f64::from(k)) as i32;
-        root.draw(&PathElement::new(
-            vec![(px, top_px + mh), (px, top_px + mh + 4)],
-            BLACK,
-        ))
-        .map_err(e)?;
-        root.draw(&Text::new(
-            tick_label(v, step_of(&xt)),
-            (px - 8, top_px + mh + 6),
-            small.clone(),
-        ))
-        .map_err(e)?;
-    }
-    root.draw(&Text::new(
-        format!("x, {unit}"),
-        (left + mw / 2 - 14, top_px + mh + 24),
-        small.clone(),
-    ))
-    .map_err(e)?;
-    let yt = ticks(0.0, f64::from(height) * per);
-    for &v in &yt {
-        let from_top = if s.y_up {
-            f64::from(height) - v / per
-        } else {
-            v / per
-        };
-        let py = top_px + (from_top * f64::from(k)) as i32;
-        root.draw(&PathElement::new(
-            vec![(left - 5, py), (left - 1, py)],
-            BLACK,
-        ))
-        .map_err(e)?;
-        root.draw(&Text::new(
-            tick_label(v, step_of(&yt)),
-            (left - 40, py - 6),
-            small.clone(),
-        ))
-        .map_err(e)?;
-    }
-    root.draw(&Text::new(
-        format!("y, {unit} ({})", if s.y_up { "up" } else { "down" }),
-        (2, top_px + mh + 24),
-        small.clone(),
-    ))
-    .map_err(e)?;
-    // The colour bar, in the scalar's unit.
-    let (bx, bw) = (left + mw + 14, 14);
+    draw_axes(root, (width, height), &s).map_err(e)?;
     let (b_lo, b_hi) = if s.signed { (-top, top) } else { (0.0, top) };
-    if top > 0.0 && top.is_finite() {
-        for i in 0..mh {
-            let v = b_hi - (b_hi - b_lo) * (f64::from(i) + 0.5) / f64::from(mh);
-            root.draw(&Rectangle::new(
-                [(bx, top_px + i), (bx + bw, top_px + i + 1)],
-                colour(v).filled(),
-            ))
-            .map_err(e)?;
-        }
-        let bt = ticks(b_lo, b_hi);
-        for &v in &bt {
-            let py = top_px + ((b_hi - v) / (b_hi - b_lo) * f64::from(mh)) as i32;
-            root.draw(&PathElement::new(
-                vec![(bx + bw, py), (bx + bw + 3, py)],
-                BLACK,
-            ))
-            .map_err(e)?;
-            root.draw(&Text::new(
-                tick_label(v, step_of(&bt)),
-                (bx + bw + 5, py - 6),
-                small.clone(),
-            ))
-            .map_err(e)?;
-        }
-    }
-    root.draw(&Rectangle::new(
-        [(bx, top_px), (bx + bw, top_px + mh)],
-        BLACK.stroke_width(1),
-    ))
-    .map_err(e)?;
-    root.draw(&Text::new(
-        s.unit.to_string(),
-        (bx, top_px + mh + 6),
-        small.clone(),
-    ))
-    .map_err(e)?;
+    draw_colour_bar(root, (mw, mh), (b_lo, b_hi), s.unit, &colour).map_err(e)?;
     let marked = if glare.contains(&true) {
         "; hatched: glare"
     } else {
@@ -613,4 +498,141 @@ fn draw_node_map<DB: DrawingBackend>(
         ("sans-serif", 15).into_font(),
     ))
     .map_err(e)
+}
+
+/// A pixel of a [`node_map`]'s frame area: left of it, above it.
+fn map_origin() -> (i32, i32) {
+    (LEFT, CAPTION)
+}
+
+/// The frame around a [`node_map`], its ticks and labels in mm
+/// (calibrated) or px, y down or up as `s` says.
+fn draw_axes<DB: DrawingBackend>(
+    root: &DrawingArea<DB, plotters::coord::Shift>,
+    (width, height): (u32, u32),
+    s: &NodeScalar<'_>,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let k = SCALE;
+    let (left, top_px) = map_origin();
+    let (mw, mh) = (width as i32 * k, height as i32 * k);
+    root.draw(&Rectangle::new(
+        [(left - 1, top_px - 1), (left + mw, top_px + mh)],
+        BLACK.stroke_width(1),
+    ))?;
+    let (per, unit) = match s.mm_per_px {
+        Some(mm) => (mm, "mm"),
+        None => (1.0, "px"),
+    };
+    let small = ("sans-serif", 12).into_font();
+    let step_of = |t: &[f64]| if t.len() > 1 { t[1] - t[0] } else { 1.0 };
+    let xt = ticks(0.0, f64::from(width) * per);
+    for &v in &xt {
+        let px = left + (v / per * f64::from(k)) as i32;
+        root.draw(&PathElement::new(
+            vec![(px, top_px + mh), (px, top_px + mh + 4)],
+            BLACK,
+        ))?;
+        root.draw(&Text::new(
+            tick_label(v, step_of(&xt)),
+            (px - 8, top_px + mh + 6),
+            small.clone(),
+        ))?;
+    }
+    root.draw(&Text::new(
+        format!("x, {unit}"),
+        (left + mw / 2 - 14, top_px + mh + 24),
+        small.clone(),
+    ))?;
+    let yt = ticks(0.0, f64::from(height) * per);
+    for &v in &yt {
+        let from_top = if s.y_up {
+            f64::from(height) - v / per
+        } else {
+            v / per
+        };
+        let py = top_px + (from_top * f64::from(k)) as i32;
+        root.draw(&PathElement::new(
+            vec![(left - 5, py), (left - 1, py)],
+            BLACK,
+        ))?;
+        root.draw(&Text::new(
+            tick_label(v, step_of(&yt)),
+            (left - 40, py - 6),
+            small.clone(),
+        ))?;
+    }
+    root.draw(&Text::new(
+        format!("y, {unit} ({})", if s.y_up { "up" } else { "down" }),
+        (2, top_px + mh + 24),
+        small,
+    ))?;
+    Ok(())
+}
+
+/// The colour bar right of a `mw × mh` map: `colour` from `lo` (bottom)
+/// to `hi` (top), ticks and `unit` below it.
+fn draw_colour_bar<DB: DrawingBackend>(
+    root: &DrawingArea<DB, plotters::coord::Shift>,
+    (mw, mh): (i32, i32),
+    (lo, hi): (f64, f64),
+    unit: &str,
+    colour: &dyn Fn(f64) -> RGBColor,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let (left, top_px) = map_origin();
+    let (bx, bw) = (left + mw + 14, 14);
+    let small = ("sans-serif", 12).into_font();
+    if hi > lo && hi.is_finite() && lo.is_finite() {
+        for i in 0..mh {
+            let v = hi - (hi - lo) * (f64::from(i) + 0.5) / f64::from(mh);
+            root.draw(&Rectangle::new(
+                [(bx, top_px + i), (bx + bw, top_px + i + 1)],
+                colour(v).filled(),
+            ))?;
+        }
+        let bt = ticks(lo, hi);
+        let step = if bt.len() > 1 { bt[1] - bt[0] } else { 1.0 };
+        for &v in &bt {
+            let py = top_px + ((hi - v) / (hi - lo) * f64::from(mh)) as i32;
+            root.draw(&PathElement::new(
+                vec![(bx + bw, py), (bx + bw + 3, py)],
+                BLACK,
+            ))?;
+            root.draw(&Text::new(
+                tick_label(v, step),
+                (bx + bw + 5, py - 6),
+                small.clone(),
+            ))?;
+        }
+    }
+    root.draw(&Rectangle::new(
+        [(bx, top_px), (bx + bw, top_px + mh)],
+        BLACK.stroke_width(1),
+    ))?;
+    root.draw(&Text::new(unit.to_string(), (bx, top_px + mh + 6), small))?;
+    Ok(())
+}
+
+/// An arrow from `(x0, y0)` by `(dx, dy)` px, 2 px wide, its head 0.3 of
+/// its length (at most 8 px).
+fn draw_arrow<DB: DrawingBackend>(
+    root: &DrawingArea<DB, plotters::coord::Shift>,
+    (x0, y0): (f64, f64),
+    (dx, dy): (f64, f64),
+    color: RGBColor,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let p0 = (x0 as i32, y0 as i32);
+    let p1 = ((x0 + dx) as i32, (y0 + dy) as i32);
+    root.draw(&PathElement::new(vec![p0, p1], color.stroke_width(2)))?;
+    let len = (dx * dx + dy * dy).sqrt().max(1e-9);
+    let (ux, uy) = (dx / len, dy / len);
+    let hl = (len * 0.3).min(8.0);
+    for s in [-1.0, 1.0] {
+        let hx = x0 + dx - hl * (ux - s * 0.5 * uy);
+        let hy = y0 + dy - hl * (uy + s * 0.5 * ux);
+        root.draw(&PathElement::new(
+            vec![p1, (hx as i32, hy as i32)],
+            color.stroke_width(2),
+        ))?;
+    }
+    Ok(())
 }
