@@ -12,7 +12,7 @@ cores, spiv on one core (OpenPIV's numpy pipeline runs on one).
 
 Both engines use the same windows, so vector k of each is compared to truth
 vector k (OpenPIV labels a window's centre half a pixel lower-right than the
-pixel-centre convention of FORMATS.md; the windows are identical).
+pixel-centre convention of docs/formats.md; the windows are identical).
 """
 import argparse
 import csv

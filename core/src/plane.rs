@@ -1,5 +1,5 @@
 //! Zero-copy view of one bit-packed spike plane in the Vidar layout
-//! (FORMATS.md): `width*height/8` bytes, pixel `p = row*width + col` over the
+//! (docs/formats.md): `width*height/8` bytes, pixel `p = row*width + col` over the
 //! **stored** rows, least significant bit first. Stored rows are the image
 //! upside down; this view never flips (file readers do).
 

@@ -23,7 +23,7 @@
 //!
 //! Units: ticks (one spike plane each), pixels, velocities in 1/4096 px per
 //! tick, gray levels `0..=full_scale`. Planes are Vidar bit planes in stored
-//! row order, `width·height/8` bytes (docs/protocol.md, FORMATS.md).
+//! row order, `width·height/8` bytes (docs/protocol.md, docs/formats.md).
 //!
 //! The header `include/spiv_core.h` is generated from this file by cbindgen
 //! (`SPIV_BLESS=1 cargo test -p spiv-ffi --test header`; the same test

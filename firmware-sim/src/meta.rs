@@ -1,4 +1,4 @@
-//! `scene.json` of a simulated recording (FORMATS.md): the layout
+//! `scene.json` of a simulated recording (docs/formats.md): the layout
 //! ([`spiv_formats::capture::Capture`]) and the scene, sensor and camera
 //! that made it.
 

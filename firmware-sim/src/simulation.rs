@@ -1,5 +1,5 @@
 //! `spiv simulate`: one scene through both cameras, written as the files of
-//! FORMATS.md — `spikes.dat`, `scene.json`, `frame_a.png`, `frame_b.png`,
+//! docs/formats.md — `spikes.dat`, `scene.json`, `frame_a.png`, `frame_b.png`,
 //! `truth.csv`, `profile.csv`.
 //!
 //! Only the ticks the requested frames need are generated: a pair (k_a, k_b)

@@ -1,4 +1,4 @@
-//! The layout half of `scene.json` (FORMATS.md), written beside every `.dat`
+//! The layout half of `scene.json` (docs/formats.md), written beside every `.dat`
 //! spiv writes: what a reader needs to take the planes apart — size, row
 //! order, clock, pixel size, the pair — and nothing about how the scene was
 //! made (the simulator adds that, `spiv_firmware_sim::meta`). Unknown fields

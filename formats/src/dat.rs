@@ -1,4 +1,4 @@
-//! Vidar `.dat` spike streams (FORMATS.md): no header, planes of `W*H/8`
+//! Vidar `.dat` spike streams (docs/formats.md): no header, planes of `W*H/8`
 //! bytes back to back, pixel `p = row*W + col` over the stored rows, LSB
 //! first, stored rows upside down (image row r is stored row H−1−r).
 //!

@@ -1,6 +1,6 @@
 //! The grid a vector field lives on: interrogation windows of `size` px
 //! every `step` px from the top-left corner, as many as fit whole, each
-//! vector at its window's centre (FORMATS.md: the centre of columns
+//! vector at its window's centre (docs/formats.md: the centre of columns
 //! `j0..j0+size−1` is `x = j0 + (size−1)/2`). PIV measures on it, the
 //! simulator's truth and the metrics compare on it.
 
@@ -37,7 +37,7 @@ impl Grid {
         (c * self.step, r * self.step)
     }
 
-    /// Centre of window (r, c) as FORMATS.md defines it: (x, y) px with the
+    /// Centre of window (r, c) as docs/formats.md defines it: (x, y) px with the
     /// centre of pixel (i, j) at (j, i).
     pub fn centre(&self, r: usize, c: usize) -> (f64, f64) {
         let half = (self.size as f64 - 1.0) / 2.0;

@@ -1,7 +1,7 @@
 //! # spiv-formats — the files of spike-camera PIV
 //!
 //! Read and written by the simulator and the host alike; knows neither
-//! (FORMATS.md):
+//! (docs/formats.md):
 //!
 //! | module | owns |
 //! |---|---|

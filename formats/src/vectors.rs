@@ -1,4 +1,4 @@
-//! Vector fields (`x,y,u,v,flag`) and profiles (`y,u`) as CSV (FORMATS.md).
+//! Vector fields (`x,y,u,v,flag`) and profiles (`y,u`) as CSV (docs/formats.md).
 
 use std::fmt::Write as _;
 use std::path::Path;

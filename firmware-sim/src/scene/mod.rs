@@ -645,7 +645,7 @@ impl Scene {
         }
     }
 
-    /// Ground truth at vector positions `(x, y)` (FORMATS.md: pixel (row i,
+    /// Ground truth at vector positions `(x, y)` (docs/formats.md: pixel (row i,
     /// column j) has its centre at (x = j, y = i)) for a pair `dt` ticks apart:
     /// `(x, y, u, v)` in px, u right, v down.
     pub fn truth(&self, points: &[(f64, f64)], dt: f64) -> Vec<(f64, f64, f64, f64)> {

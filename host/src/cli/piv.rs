@@ -18,7 +18,7 @@ pub struct PivArgs {
     a: PathBuf,
     /// Second image.
     b: PathBuf,
-    /// Output CSV (x,y,u,v,flag; FORMATS.md), then each vector's confidence:
+    /// Output CSV (x,y,u,v,flag; docs/formats.md), then each vector's confidence:
     /// peak_ratio and correlation (0 where no peak); a name ending in `.nc`
     /// writes the same as netCDF (CF conventions, one time step).
     #[arg(short = 'o', long = "out")]

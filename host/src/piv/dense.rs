@@ -667,7 +667,7 @@ impl Flow {
         }
     }
 
-    /// The flow at pixel `(x, y)` (FORMATS.md coordinates: pixel centres on
+    /// The flow at pixel `(x, y)` (docs/formats.md coordinates: pixel centres on
     /// integers), bilinear.
     pub fn at(&self, x: f64, y: f64) -> (f64, f64) {
         (
