@@ -1,4 +1,4 @@
-//! One adaptive frame at any tick k (SPEC section 5): segmentation, region
+//! One adaptive frame at any tick k (docs/spec.md §5): segmentation, region
 //! labelling, adaptive windows, background suppression and the output
 //! mapping, strip by strip.
 //!
@@ -73,7 +73,7 @@ pub fn reconstruct_adaptive<G: Gray>(
 /// extra rows on both sides, so regions crossing the range's edges are
 /// whole. Calling it band by band with a different `p.n_max` each gives a
 /// frame whose window limit varies with the row (the dwell cap, beyond the
-/// paper: SPEC 5).
+/// paper: docs/spec.md §5).
 pub fn reconstruct_rows<G: Gray>(
     hist: &History<'_>,
     k: u32,

@@ -1,5 +1,5 @@
 //! The ingest: a ring of the last `depth` spike planes of a band of rows,
-//! stored as words of 64 pixels (SPEC section 5: "a history ring of planes").
+//! stored as words of 64 pixels (docs/spec.md §5: "a history ring of planes").
 //!
 //! Ingesting a plane copies its band into the ring slot of its tick — a word
 //! copy, 64 pixels at a time, and the only per-tick work: window counts, TFI

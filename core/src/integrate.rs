@@ -1,4 +1,4 @@
-//! Adaptive integration (paper section 2.3; SPEC section 5): for each particle
+//! Adaptive integration (paper section 2.3; docs/spec.md §5): for each particle
 //! region, `S(n)` = mean count per region pixel and `B(n)` = mean count per
 //! pixel of its 2-px ring, over the centred windows n = 1, 2, 4, …, n_max,
 //! then every integer in `[n/2, 2n]` around the best;
@@ -1143,7 +1143,7 @@ mod tests {
     use super::*;
     use crate::history::History;
 
-    /// The search as SPEC 5 reads it: every doubling window, then every
+    /// The search as docs/spec.md §5 reads it: every doubling window, then every
     /// integer of [n/2, 2n] in order, by the exact comparison alone.
     fn search_every(
         sums: &impl Fn(u16) -> (u64, u64),

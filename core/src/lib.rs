@@ -2,7 +2,7 @@
 //!
 //! `#![no_std]`, no allocator, no panics on any input. Everything a sidecar MCU or
 //! FPGA next to a spike sensor must do to turn 1-bit spike planes into particle
-//! frames that suit PIV (Li et al. 2025, read as `SPEC.md` section 5 fixes it):
+//! frames that suit PIV (Li et al. 2025, read as `docs/spec.md` §5 fixes it):
 //!
 //! | module | owns |
 //! |---|---|

@@ -1,4 +1,4 @@
-//! Algorithm parameters (SPEC section 5) with their defaults and ranges.
+//! Algorithm parameters (docs/spec.md §5) with their defaults and ranges.
 
 use crate::error::{Error, ParamError};
 use crate::q::{Beta, KSig, Sigma};

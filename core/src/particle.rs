@@ -1,4 +1,4 @@
-//! The particle test of the segmentation (SPEC 5): a count `c` over a
+//! The particle test of the segmentation (docs/spec.md §5): a count `c` over a
 //! window is particle against the local background `b` when `c > b` and
 //! `(c − b)² > k_sig²·var(b)`, with the count noise of an integrate-and-fire
 //! pixel `var(b) = 1/4 + (σ_fpn·b)² + b/g`. Exact rationals in `u128`, and

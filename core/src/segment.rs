@@ -1,5 +1,5 @@
 //! Saturation time `t_bgmax` and iterative particle/background segmentation
-//! (paper section 2.2; SPEC section 5).
+//! (paper section 2.2; docs/spec.md §5).
 //!
 //! Starting at n = n0 and doubling up to n_max, for every pixel still
 //! *active* (neither particle nor saturated):

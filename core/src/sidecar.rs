@@ -1,5 +1,5 @@
 //! The sidecar loop: spike planes in, one by one, into the history ring; at
-//! the scheduled ticks (SPEC section 8: pairs `(k, k + dt)`, one pair every
+//! the scheduled ticks (docs/spec.md §8: pairs `(k, k + dt)`, one pair every
 //! `every` ticks) a frame through the core — adaptive, TFP or TFI — sent by
 //! the [`Sender`] (tiles coded by [`crate::wire::codec`], framed by
 //! [`crate::wire`]) into the caller's [`Link`]; now and then a status.

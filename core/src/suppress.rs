@@ -1,4 +1,4 @@
-//! Background suppression (paper eq. 3; SPEC section 5):
+//! Background suppression (paper eq. 3; docs/spec.md §5):
 //! `alpha = beta / t_bgmax`, and a background pixel shows its rate over the
 //! window t_bgmax divided by alpha:
 //! `bg = FS·(c_t/t)·t/(beta·N_fs) = FS·c_t/(beta·N_fs)` with t = t_bgmax.

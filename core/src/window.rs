@@ -1,5 +1,5 @@
 //! Centred windows over the spike history, bit-parallel window counts, and
-//! the two classic reconstructions TFP and TFI (SPEC section 5).
+//! the two classic reconstructions TFP and TFI (docs/spec.md §5).
 //!
 //! `c_n(x, y, k)` counts the spikes of a pixel over the `n` ticks
 //! `[k − ⌊n/2⌋, k − ⌊n/2⌋ + n)`. Windows are nested as `n` grows. Near the ends

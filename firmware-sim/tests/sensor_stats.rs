@@ -1,4 +1,4 @@
-//! Statistical tests of the simulated cameras against SPEC section 3.
+//! Statistical tests of the simulated cameras against docs/spec.md §3.
 
 use spiv_firmware_sim::scene::{Scene, SceneKind, SceneParams};
 use spiv_firmware_sim::sensor::{FrameCamera, FrameCameraParams, Reset, SensorParams, SpikeSensor};

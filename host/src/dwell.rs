@@ -1,4 +1,4 @@
-//! The dwell cap (beyond the paper, SPEC 5): PIV of the TFP pair predicts
+//! The dwell cap (beyond the paper, docs/spec.md §5): PIV of the TFP pair predicts
 //! each band's fastest particle, and each 32-row band's adaptive window is
 //! capped so that particle blurs by at most a budget of pixels. One
 //! implementation of the banded frame ([`spiv_core::sidecar::capped_frame`])

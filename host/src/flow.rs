@@ -9,7 +9,7 @@
 //!   separations growing from 4 ticks as long as the flow and the recording
 //!   allow; each vector keeps the most certain measurement and its
 //!   uncertainty, per pair (`dt` ticks).
-//! - `adaptive` with a dwell cap (SPEC 5): a time-resolved loop; the field
+//! - `adaptive` with a dwell cap (docs/spec.md §5): a time-resolved loop; the field
 //!   of the previous pair predicts each 32-row band's fastest particle, and
 //!   the band's adaptive window is capped so it blurs by at most the budget.
 //!   The first pair — and any pair after one whose field is not usable

@@ -183,7 +183,7 @@ pub fn mc_transfer(
     Ok(Some((control, t)))
 }
 
-/// Beyond the paper (SPEC 5): adaptive window limits per band of 32 upright
+/// Beyond the paper (docs/spec.md §5): adaptive window limits per band of 32 upright
 /// rows from the TFP pair's PIV, so the fastest particle near a band blurs
 /// by at most `budget` px. The TFP pair goes through the link like any
 /// other (a sidecar sends it on request); the limits would go back down

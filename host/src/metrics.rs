@@ -1,4 +1,4 @@
-//! The paper's metrics (SPEC section 7): PIV vectors averaged along x for
+//! The paper's metrics (docs/spec.md §7): PIV vectors averaged along x for
 //! each row of vectors give a profile u(y) in pixels per pair; over the rows
 //! (and pairs) of a region, `RMAE = Σ|v − v̂| / Σ|v|` and
 //! `RMSE = sqrt(mean((v − v̂)²))`, separately for the glare band and the

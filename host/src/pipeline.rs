@@ -33,7 +33,7 @@ pub struct Job {
     pub piv: Settings,
     /// PIV settings of the motion-compensated pair.
     pub mc_piv: Settings,
-    /// Beyond the paper (SPEC 5): cap each band's adaptive window so that
+    /// Beyond the paper (docs/spec.md §5): cap each band's adaptive window so that
     /// the fastest particle the TFP pair's PIV sees there blurs by at most
     /// this many px (`None`: the paper's algorithm, one n_max everywhere).
     pub dwell_cap: Option<f64>,

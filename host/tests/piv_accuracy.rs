@@ -1,5 +1,5 @@
 //! Accuracy of the PIV engine on frame-camera pairs of the simulated scenes
-//! (no glare) with known truth. Bounds (SPEC 6): uniform
+//! (no glare) with known truth. Bounds (docs/spec.md §6): uniform
 //! displacements 0–1 px: RMS ≤ 0.05 px, |bias| ≤ 0.02 px per component;
 //! shear and vortex with ≥ 8 particles per 32-px window: outliers (error
 //! > 1 px) < 1 %; displacements up to 12 px: RMS ≤ 0.06 px.

@@ -4,7 +4,7 @@
 //! the simulator's ground truth where there is one.
 //!
 //! Bounds: the mean field's row-profile RMAE outside the glare rows (the
-//! paper's metric, SPEC 7), about 2× what each method measured on
+//! paper's metric, docs/spec.md §7), about 2× what each method measured on
 //! paper-linear seed 1, 600 planes (motion-compensated, the default, 0.008
 //! — 0.0035 since compensated counts have their own noise model; TFP n = 8
 //! 0.027; dwell-capped adaptive 0.029) and on the short recording (mc

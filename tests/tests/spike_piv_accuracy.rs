@@ -1,7 +1,7 @@
 //! Spike-frame PIV against the simulator's ground truth, end to end on the
 //! path `spiv run` ships: simulated camera → sidecar firmware (fixed-point
 //! core, dwell caps, lossless wire) → receiver → PIV → the paper's row
-//! profile metrics (SPEC 7).
+//! profile metrics (docs/spec.md §7).
 //!
 //! Bounds: the mean over two seeds of the glare-row and other-row RMAE of
 //! the adaptive frames, about 1.5× what they measure today (README), so a

@@ -1,4 +1,4 @@
-//! The wire format between sidecar and host (SPEC section 8), pinned:
+//! The wire format between sidecar and host (docs/spec.md §8), pinned:
 //!
 //! ```text
 //! message  = COBS(header | payload | crc32) 0x00

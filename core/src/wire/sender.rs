@@ -1,4 +1,4 @@
-//! The sending half of a sidecar: the pair schedule (SPEC section 8) and the
+//! The sending half of a sidecar: the pair schedule (docs/spec.md §8) and the
 //! messages that carry a frame — tiles coded by [`crate::wire::codec`], framed
 //! by [`crate::wire`], then a frame end and, now and then, a status. The
 //! simulated firmware on the host and firmware on a real MCU run this same

@@ -1,4 +1,4 @@
-//! Velocity fields of the scenes (SPEC section 4), in pixels per tick, image
+//! Velocity fields of the scenes (docs/spec.md §4), in pixels per tick, image
 //! coordinates: `x` right, `row` down (row i has its centre at i + 0.5), the
 //! wall at the bottom edge, `y = H − row` the height above it.
 //!

@@ -1,4 +1,4 @@
-//! Scenes (SPEC section 4): a flow ([`flow`]), Gaussian particle images
+//! Scenes (docs/spec.md §4): a flow ([`flow`]), Gaussian particle images
 //! advected with it, and a glare band `I(y) = I0·exp(−y²/2σ²)` along the
 //! wall. Light is in thresholds per tick; geometry in pixels of the upright
 //! image (row 0 at the top, the wall at the bottom edge); time in ticks.
@@ -91,7 +91,7 @@ pub fn ms_to_px_per_tick(v: f64) -> f64 {
     v * 1000.0 / PIXEL_MM / TICK_HZ
 }
 
-/// Every parameter of a scene; [`SceneParams::new`] gives the SPEC defaults.
+/// Every parameter of a scene; [`SceneParams::new`] gives the defaults of docs/spec.md §4.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SceneParams {
     /// Which scene.
@@ -167,7 +167,7 @@ fn default_drift() -> f64 {
 }
 
 impl SceneParams {
-    /// The SPEC defaults of scene `kind`.
+    /// The defaults (docs/spec.md §4) of scene `kind`.
     pub fn new(kind: SceneKind) -> SceneParams {
         let base = SceneParams {
             kind,

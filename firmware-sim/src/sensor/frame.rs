@@ -1,4 +1,4 @@
-//! The frame camera (SPEC sections 3–4): one exposure of `te` ticks ending at
+//! The frame camera (docs/spec.md §3–4): one exposure of `te` ticks ending at
 //! the frame's tick, full scale at `fs_light` thresholds/tick (full well =
 //! fs_light·phi0·te electrons), shot noise, read noise (default full well/400,
 //! ~52 dB like the paper's Phantom), an 8- or 12-bit ADC, and clipping above
@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::scene::Scene;
 
-/// Frame camera parameters (SPEC section 4 defaults).
+/// Frame camera parameters (docs/spec.md §4 defaults).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct FrameCameraParams {
     /// Exposure, ticks (ending at the frame's tick).

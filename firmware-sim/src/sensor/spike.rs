@@ -1,4 +1,4 @@
-//! The spike sensor (SPEC section 3). Per pixel and tick (light sampled at
+//! The spike sensor (docs/spec.md §3). Per pixel and tick (light sampled at
 //! the tick's centre): `A += Poisson((r + dark)·phi0)` photoelectrons; when
 //! `A ≥ phi(x, y)` the pixel emits a spike and resets — to zero (the paper)
 //! or by subtracting phi (excess clamped below 2·phi). At most one spike per
@@ -31,7 +31,7 @@ pub enum Reset {
     Subtract,
 }
 
-/// Spike sensor parameters with the SPEC section 3 defaults.
+/// Spike sensor parameters with the docs/spec.md §3 defaults.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct SensorParams {
     /// Photoelectrons per threshold, phi0.

@@ -7,7 +7,7 @@
 //! centre halfway through ([`Scene::truth`]). Per family and seed it
 //! reports the end-point error (EPE, px per pair) of the measured (valid or
 //! replaced) vectors in the glare rows (centres within 2σ of the wall,
-//! SPEC 7; the bottom rows where a scene has no glare) and in the other
+//! docs/spec.md §7; the bottom rows where a scene has no glare) and in the other
 //! rows, the share of vectors flagged invalid, the share of true error
 //! components within one standard uncertainty (valid vectors; the frame
 //! camera's and TFP's PIV report one too), the dense EPE (the field

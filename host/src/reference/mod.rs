@@ -1,4 +1,4 @@
-//! The `f64` reference of the core's algorithm (SPEC section 5), written for
+//! The `f64` reference of the core's algorithm (docs/spec.md §5), written for
 //! clarity rather than speed: spikes unpacked to one byte per pixel and tick,
 //! counts by plain loops, tile medians by sorting, backgrounds, the particle
 //! test and SNR in `f64` (with the square root), regions by flood fill, rings
@@ -136,7 +136,7 @@ pub fn count_variance(b: f64, sigma_fpn: f64, g: f64) -> f64 {
 }
 
 /// Count noise of a motion-compensated count with mean `b` that sums the
-/// spikes of `segs` pixels along the path (SPEC 5's pixel noise per
+/// spikes of `segs` pixels along the path (docs/spec.md §5's pixel noise per
 /// segment: a segment of mean μ = b/S varies by {μ}(1 − {μ}) — μ(1 − μ)
 /// when dim, 1/6 on average when bright — never below one pixel's 1/4 in
 /// all; fixed-pattern noise averages over the S thresholds). One segment
@@ -164,7 +164,7 @@ pub fn levels(p: &Params) -> Vec<u16> {
     v
 }
 
-/// The adaptive frame at tick `k` (full-scale `fs`), the way SPEC section 5 reads.
+/// The adaptive frame at tick `k` (full-scale `fs`), the way docs/spec.md §5 reads.
 pub fn adaptive_frame(vol: &SpikeVolume, k: u32, p: &Params, fs: f64) -> RefFrame {
     adaptive_rows(vol, k, p, fs, (0, vol.rows))
 }
