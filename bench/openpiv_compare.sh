@@ -22,8 +22,8 @@ $SPIV simulate --scene uniform --shift 3.3,-1.7 --out "$CASES/uniform-3.3px" --s
 $SPIV simulate --scene paper-linear --out "$CASES/paper-linear" --seed 3 >/dev/null
 $SPIV simulate --scene vortex --out "$CASES/vortex" --seed 4 >/dev/null
 $SPIV simulate --scene uniform --shift 2.6,1.4 --width 1024 --height 1024 --out "$CASES/uniform-1024" --seed 5 >/dev/null
-# Issue 17: eddies below the window, displacements beyond its quarter rule
-# (spiv reports its dense stage's field where window PIV fails as a whole).
+# Eddies below the window and displacements beyond its quarter rule, where
+# window PIV fails as a whole (spiv reports its dense stage's field there).
 $SPIV simulate --scene turbulence --out "$CASES/turbulence" --seed 1 >/dev/null
 $SPIV simulate --scene large-shift --out "$CASES/large-shift" --seed 1 >/dev/null
 # The same turbulence through the spike camera: TFP n=8 frames at the
