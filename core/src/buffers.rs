@@ -212,3 +212,40 @@ impl<G: Gray> SidecarBuf<G> {
         }
     }
 }
+
+/// Storage of the static-light model's per-pixel state
+/// ([`crate::light::LightState`], [`crate::light::LIGHT_BYTES_PER_PIXEL`]
+/// bytes per pixel).
+#[derive(Debug, Clone)]
+pub struct LightBuf {
+    last: Vec<u16>,
+    period: Vec<u16>,
+    rate: Vec<u32>,
+    short: Vec<u16>,
+    flags: Vec<u8>,
+}
+
+impl LightBuf {
+    /// Zeroed state for `pixels` pixels (a fresh model).
+    pub fn new(pixels: usize) -> Self {
+        LightBuf {
+            last: vec![0; pixels],
+            period: vec![0; pixels],
+            rate: vec![0; pixels],
+            short: vec![0; pixels],
+            flags: vec![0; pixels],
+        }
+    }
+
+    /// The state borrowed for [`crate::light::Light::new`] or
+    /// [`crate::light::Light::resume`].
+    pub fn state(&mut self) -> crate::light::LightState<'_> {
+        crate::light::LightState {
+            last: &mut self.last,
+            period: &mut self.period,
+            rate: &mut self.rate,
+            short: &mut self.short,
+            flags: &mut self.flags,
+        }
+    }
+}

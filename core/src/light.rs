@@ -163,31 +163,19 @@ impl<'a> Light<'a> {
     /// `width × height` entries; they are cleared). The first plane pushed
     /// is tick `first`.
     pub fn new(width: u16, height: u16, first: u32, state: LightState<'a>) -> Result<Self, Error> {
-        let px = crate::plane::plane_bytes(width, height).ok_or(Error::BadDimensions)? * 8;
-        let got = state
-            .last
-            .len()
-            .min(state.period.len())
-            .min(state.rate.len())
-            .min(state.short.len())
-            .min(state.flags.len());
-        if got < px {
-            return Err(Error::BufferTooSmall { needed: px, got });
-        }
-        state.last[..px].fill(0);
-        state.period[..px].fill(0);
-        state.rate[..px].fill(0);
-        state.short[..px].fill(0);
-        state.flags[..px].fill(0);
-        Ok(Light {
-            width,
-            height,
-            clock: LightClock {
-                next: first,
-                seen: 0,
-            },
-            state,
-        })
+        let clock = LightClock {
+            next: first,
+            seen: 0,
+        };
+        let mut light = Light::resume(width, height, clock, state)?;
+        let px = usize::from(width) * usize::from(height);
+        let s = &mut light.state;
+        s.last[..px].fill(0);
+        s.period[..px].fill(0);
+        s.rate[..px].fill(0);
+        s.short[..px].fill(0);
+        s.flags[..px].fill(0);
+        Ok(light)
     }
 
     /// The model as it stood at `clock` over `state` (as [`Light::clock`]
@@ -390,39 +378,11 @@ fn learn(st: &mut LightState<'_>, i: usize, since: u16) {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    struct Buf {
-        last: Vec<u16>,
-        period: Vec<u16>,
-        rate: Vec<u32>,
-        short: Vec<u16>,
-        flags: Vec<u8>,
-    }
-
-    impl Buf {
-        fn new(px: usize) -> Buf {
-            Buf {
-                last: vec![0; px],
-                period: vec![0; px],
-                rate: vec![0; px],
-                short: vec![0; px],
-                flags: vec![0; px],
-            }
-        }
-        fn state(&mut self) -> LightState<'_> {
-            LightState {
-                last: &mut self.last,
-                period: &mut self.period,
-                rate: &mut self.rate,
-                short: &mut self.short,
-                flags: &mut self.flags,
-            }
-        }
-    }
+    use crate::buffers::LightBuf;
 
     /// One pixel's events over its spike train (an 8×1 sensor, pixel 3).
     fn events(train: &[u8]) -> (Vec<(u32, i8)>, bool, u16) {
-        let mut buf = Buf::new(8);
+        let mut buf = LightBuf::new(8);
         let mut light = Light::new(8, 1, 0, buf.state()).unwrap();
         let mut out = Vec::new();
         for &s in train {
@@ -508,12 +468,12 @@ mod tests {
 
     #[test]
     fn planes_of_another_size_are_refused() {
-        let mut buf = Buf::new(16);
+        let mut buf = LightBuf::new(16);
         let mut light = Light::new(8, 2, 0, buf.state()).unwrap();
         let byte = [0u8];
         let plane = PlaneView::new(&byte, 8, 1).unwrap();
         assert_eq!(light.push(&plane, |_| {}), Err(Error::PlaneMismatch));
-        let mut small = Buf::new(4);
+        let mut small = LightBuf::new(4);
         assert!(matches!(
             Light::new(8, 2, 0, small.state()),
             Err(Error::BufferTooSmall { needed: 16, got: 4 })

@@ -336,26 +336,8 @@ fn windows_of(mid: u32, seps: &[u16]) -> [Window; 2 * MAX_RUNGS] {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::light::LightState;
+    use crate::buffers::LightBuf;
     use crate::plane::PlaneView;
-
-    struct Bufs {
-        last: Vec<u16>,
-        period: Vec<u16>,
-        rate: Vec<u32>,
-        short: Vec<u16>,
-        flags: Vec<u8>,
-    }
-
-    fn bufs(px: usize) -> Bufs {
-        Bufs {
-            last: vec![0; px],
-            period: vec![0; px],
-            rate: vec![0; px],
-            short: vec![0; px],
-            flags: vec![0; px],
-        }
-    }
 
     /// A bright dot moving 1 px per 4 ticks right along row 2 of a 32×4
     /// sensor over a dark background.
@@ -369,20 +351,8 @@ mod tests {
 
     #[test]
     fn events_come_back_by_tick_and_rung_frames_pile_a_moving_dot_up() {
-        let mut b = bufs(128);
-        let mut light = Light::new(
-            32,
-            4,
-            0,
-            LightState {
-                last: &mut b.last,
-                period: &mut b.period,
-                rate: &mut b.rate,
-                short: &mut b.short,
-                flags: &mut b.flags,
-            },
-        )
-        .unwrap();
+        let mut b = LightBuf::new(128);
+        let mut light = Light::new(32, 4, 0, b.state()).unwrap();
         let (mut entries, mut starts) = (vec![0u32; 4096], vec![0u32; 65]);
         let mut ring = EventRing::new(&mut entries, &mut starts, 0).unwrap();
         for t in 0..50 {
@@ -435,20 +405,8 @@ mod tests {
 
     #[test]
     fn a_full_ring_drops_old_ticks_and_counts_what_it_cannot_hold() {
-        let mut b = bufs(128);
-        let mut light = Light::new(
-            32,
-            4,
-            0,
-            LightState {
-                last: &mut b.last,
-                period: &mut b.period,
-                rate: &mut b.rate,
-                short: &mut b.short,
-                flags: &mut b.flags,
-            },
-        )
-        .unwrap();
+        let mut b = LightBuf::new(128);
+        let mut light = Light::new(32, 4, 0, b.state()).unwrap();
         // Every pixel fires every other tick: up to 128 events a tick.
         let (mut entries, mut starts) = (vec![0u32; 100], vec![0u32; 9]);
         let mut ring = EventRing::new(&mut entries, &mut starts, 0).unwrap();

@@ -6,39 +6,11 @@
 //! rates that reached it.
 
 use proptest::prelude::*;
-use spiv_core::light::{Light, LightState, MAX_TOLERANCE};
+use spiv_core::buffers::LightBuf;
+use spiv_core::light::{Light, MAX_TOLERANCE};
 use spiv_core::rungs::{rung_frames, EventRing, Rungs, MAX_RUNGS};
 use spiv_core::warp::{scatter, Flow, Window, SCALE};
 use spiv_core::PlaneView;
-
-struct Bufs {
-    last: Vec<u16>,
-    period: Vec<u16>,
-    rate: Vec<u32>,
-    short: Vec<u16>,
-    flags: Vec<u8>,
-}
-
-impl Bufs {
-    fn new(px: usize) -> Bufs {
-        Bufs {
-            last: vec![0; px],
-            period: vec![0; px],
-            rate: vec![0; px],
-            short: vec![0; px],
-            flags: vec![0; px],
-        }
-    }
-    fn state(&mut self) -> LightState<'_> {
-        LightState {
-            last: &mut self.last,
-            period: &mut self.period,
-            rate: &mut self.rate,
-            short: &mut self.short,
-            flags: &mut self.flags,
-        }
-    }
-}
 
 /// `ticks` planes of a `w × h` sensor, each pixel firing with its own rate
 /// (some never, some every tick) from `seed`.
@@ -93,7 +65,7 @@ proptest! {
     ) {
         let px = usize::from(w) * usize::from(h);
         let data = stream(w, h, ticks, seed);
-        let mut b = Bufs::new(px);
+        let mut b = LightBuf::new(px);
         let mut light = Light::new(w, h, 0, b.state()).unwrap();
         let (mut entries, mut starts) = (vec![0u32; cap], vec![0u32; depth + 1]);
         let mut ring = EventRing::new(&mut entries, &mut starts, 0).unwrap();
@@ -155,7 +127,7 @@ proptest! {
     ) {
         let px = usize::from(w) * usize::from(h);
         let data = stream(w, h, 100, seed);
-        let mut b = Bufs::new(px);
+        let mut b = LightBuf::new(px);
         let mut light = Light::new(w, h, 0, b.state()).unwrap();
         let (mut entries, mut starts) = (vec![0u32; 100 * px], vec![0u32; 101]);
         let mut ring = EventRing::new(&mut entries, &mut starts, 0).unwrap();

@@ -50,7 +50,8 @@ impl Probe<u8> for Crcs {
 /// The firmware's `light()`: the same buffers' sizes, rungs, midpoint and
 /// flow (`cortex-m4/src/main.rs`).
 fn light() -> Result<(), spiv_core::Error> {
-    use spiv_core::light::{Light, LightState};
+    use spiv_core::buffers::LightBuf;
+    use spiv_core::light::Light;
     use spiv_core::plane::PlaneView;
     use spiv_core::rungs::{rung_frames, EventRing, Rungs};
     use spiv_core::warp::Flow;
@@ -58,16 +59,8 @@ fn light() -> Result<(), spiv_core::Error> {
     // The strip's bottom 32 stored rows, its first 104 planes.
     let (h, planes) = (32u16, 104);
     let px = usize::from(W) * usize::from(h);
-    let (mut last, mut period, mut short) = (vec![0u16; px], vec![0u16; px], vec![0u16; px]);
-    let (mut rate, mut flags) = (vec![0u32; px], vec![0u8; px]);
-    let state = LightState {
-        last: &mut last,
-        period: &mut period,
-        rate: &mut rate,
-        short: &mut short,
-        flags: &mut flags,
-    };
-    let mut model = Light::new(W, h, 0, state)?;
+    let mut state = LightBuf::new(px);
+    let mut model = Light::new(W, h, 0, state.state())?;
     let (mut entries, mut starts) = (vec![0u32; 16_384], vec![0u32; 105]);
     let mut ring = EventRing::new(&mut entries, &mut starts, 0)?;
     let plane_bytes = usize::from(W) * usize::from(H) / 8;

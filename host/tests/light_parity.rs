@@ -3,7 +3,8 @@
 //! tolerance that module states, on a simulated scene with glare and on
 //! random flows.
 
-use spiv_core::light::{Light, LightState};
+use spiv_core::buffers::LightBuf;
+use spiv_core::light::Light;
 use spiv_core::plane::PlaneView;
 use spiv_core::rungs::{rung_frames, EventRing, Rungs};
 use spiv_core::warp::{Flow, SCALE};
@@ -11,35 +12,6 @@ use spiv_firmware_sim::scene::{SceneKind, SceneParams};
 use spiv_firmware_sim::simulation::{simulate_planes, Request};
 use spiv_host::reference::light::{events, frame, NodeFlow};
 use spiv_host::reference::SpikeVolume;
-
-struct Bufs {
-    last: Vec<u16>,
-    period: Vec<u16>,
-    rate: Vec<u32>,
-    short: Vec<u16>,
-    flags: Vec<u8>,
-}
-
-impl Bufs {
-    fn new(px: usize) -> Bufs {
-        Bufs {
-            last: vec![0; px],
-            period: vec![0; px],
-            rate: vec![0; px],
-            short: vec![0; px],
-            flags: vec![0; px],
-        }
-    }
-    fn state(&mut self) -> LightState<'_> {
-        LightState {
-            last: &mut self.last,
-            period: &mut self.period,
-            rate: &mut self.rate,
-            short: &mut self.short,
-            flags: &mut self.flags,
-        }
-    }
-}
 
 /// The vortex array over its glare band, 128 × 64 px, 400 ticks.
 fn scene() -> (Vec<u8>, u16, u16) {
@@ -76,7 +48,7 @@ fn rotation() -> (Vec<i16>, Vec<i16>, Vec<i16>, Vec<i16>) {
 fn events_rates_and_rung_frames_hold_to_the_reference() {
     let (data, w, h) = scene();
     let px = usize::from(w) * usize::from(h);
-    let mut b = Bufs::new(px);
+    let mut b = LightBuf::new(px);
     let mut light = Light::new(w, h, 0, b.state()).unwrap();
     let (mut entries, mut starts) = (vec![0u32; 400 * px], vec![0u32; 401]);
     let mut ring = EventRing::new(&mut entries, &mut starts, 0).unwrap();
