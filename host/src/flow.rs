@@ -665,16 +665,22 @@ pub struct FlowOutcome {
 }
 
 impl FlowOutcome {
-    /// The outcome as its outputs show it: itself, or with `y_up` every
-    /// vector's y as `height − 1 − y` (pixel centres on integers, so the
-    /// bottom row's centre is 0) and its v negated (positive up).
+    /// The outcome as its outputs show it: itself, or with `y_up` a copy
+    /// turned by [`FlowOutcome::flip_y`].
     pub fn oriented(&self, y_up: bool) -> std::borrow::Cow<'_, FlowOutcome> {
         if !y_up {
             return std::borrow::Cow::Borrowed(self);
         }
         let mut o = self.clone();
+        o.flip_y();
+        std::borrow::Cow::Owned(o)
+    }
+
+    /// Every vector's y as `height − 1 − y` (pixel centres on integers, so
+    /// the bottom row's centre is 0) and its v negated (positive up).
+    pub fn flip_y(&mut self) {
         let top = f64::from(self.size.1) - 1.0;
-        for p in &mut o.pairs {
+        for p in &mut self.pairs {
             for v in &mut p.vectors {
                 v.y = top - v.y;
                 if v.state.is_measured() {
@@ -682,7 +688,6 @@ impl FlowOutcome {
                 }
             }
         }
-        std::borrow::Cow::Owned(o)
     }
 
     /// What the core's tables lost over all pairs.

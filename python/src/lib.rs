@@ -714,8 +714,11 @@ fn flow<'py>(
         _ => None,
     };
     let (out, stopped) = interruptible(py, &rec, &o, progress.as_ref())?;
-    let dict = |out: spiv_host::flow::FlowOutcome| -> PyResult<Bound<'py, PyAny>> {
-        let d = flow_dict(py, out.oriented(y_up).into_owned())?;
+    let dict = |mut out: spiv_host::flow::FlowOutcome| -> PyResult<Bound<'py, PyAny>> {
+        if y_up {
+            out.flip_y();
+        }
+        let d = flow_dict(py, out)?;
         d.set_item("y_up", y_up)?;
         calibrated(&d, o.calibration, f64::from(o.dt))?;
         if !as_xarray {

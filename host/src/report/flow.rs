@@ -90,7 +90,9 @@ pub fn write_flow(
     ));
     write_vectors_with(&dir.join("mean.csv"), &shown_mean.vectors, &mean_columns)?;
     super::netcdf::write_flow_nc(&dir.join("flow.nc"), &shown, opts, info)?;
-    let mean = out.mean();
+    // The figures' mean is the camera's: the one just written unless it
+    // was turned.
+    let mean = if opts.y_up { out.mean() } else { shown_mean };
     let (w, h) = (u32::from(out.size.0), u32::from(out.size.1));
     for (name, f) in ["pair_a.png", "pair_b.png"].iter().zip(&out.first_frames) {
         write_levels(&dir.join(name), w, h, f, out.full_scale)?;
