@@ -35,8 +35,9 @@ use spiv_formats::npz::read_npz_spikes;
 use spiv_formats::{FormatError, State, Vector};
 
 use crate::dwell::{adaptive_banded, caps_for};
+use crate::motion::control::Ask;
 use crate::motion::ladder::{self, LadderSettings, Rung};
-use crate::motion::Innovation;
+use crate::motion::make::{PairMaker, LIGHT_TRAIN};
 use crate::piv::validate::median;
 use crate::piv::{piv, to_f32, Field, PivError, Settings, NO_SIGMA};
 use crate::reconstruct::{frame_from_planes, FileOptions, Planes, ReconstructError};
@@ -62,6 +63,10 @@ pub enum FlowError {
     /// A schedule the recording cannot hold, or a bad option.
     #[error("{0}")]
     Schedule(String),
+    /// The core refused (a plane of the wrong size, a sensor too large
+    /// for its event ring).
+    #[error("core: {0}")]
+    Core(#[from] spiv_core::Error),
 }
 
 /// A spike recording, opened: its size and where its planes come from.
@@ -278,15 +283,21 @@ pub struct FlowOptions {
     /// next one.
     pub mask: Option<Array2<bool>>,
     /// Only the pairs with these indices in [`FlowOptions::pair_ticks`]
-    /// (`None`: all). A range that starts at a multiple of [`CHAIN`] gives
-    /// exactly the vectors of those pairs in a run of all of them, so runs
-    /// of such ranges can be spread over processes or machines.
+    /// (`None`: all). A range that starts at a multiple of
+    /// [`FlowOptions::segment`] (motion-compensated pairs) or of [`CHAIN`]
+    /// (the others) gives exactly the vectors of those pairs in a run of
+    /// all of them with the same segments, so runs of such ranges can be
+    /// spread over processes or machines.
     pub pairs: Option<std::ops::Range<usize>>,
     /// Write the outputs with y up (files, Python arrays; the figures'
     /// axes and vorticity): y = height − 1 − row and v positive up, so
     /// that plots with y up show the camera's image upright and vorticity
     /// is positive counterclockwise. The measurement is the same.
     pub y_up: bool,
+    /// Motion-compensated pairs: pairs per loop (`None`: one loop over
+    /// every pair, as the sidecar runs). Each loop starts from nothing,
+    /// [`WARMUP`] pairs before its first, and loops run in parallel.
+    pub segment: Option<usize>,
 }
 
 impl FlowOptions {
@@ -314,6 +325,7 @@ impl FlowOptions {
             mask: None,
             pairs: None,
             y_up: false,
+            segment: None,
         };
         o.schedule(rec.planes);
         o
@@ -403,6 +415,8 @@ pub struct FlowRequest {
     pub mask: Option<Array2<bool>>,
     /// Only these pairs of the schedule ([`FlowOptions::pairs`]).
     pub pairs: Option<std::ops::Range<usize>>,
+    /// Pairs per independent loop ([`FlowOptions::segment`]).
+    pub segment: Option<usize>,
 }
 
 impl Default for FlowRequest {
@@ -421,6 +435,7 @@ impl Default for FlowRequest {
             tick_hz: None,
             mask: None,
             pairs: None,
+            segment: None,
         }
     }
 }
@@ -484,6 +499,12 @@ impl FlowRequest {
         o.mask = self.mask.clone();
         o.ladder.mask = self.mask.clone();
         o.pairs = self.pairs.clone();
+        if self.segment == Some(0) {
+            return Err(FlowError::Schedule(
+                "segment 0: expected at least 1 pair per loop".into(),
+            ));
+        }
+        o.segment = self.segment;
         Ok(o)
     }
 }
@@ -814,10 +835,17 @@ pub fn run_flow_until(
             p(n, total);
         }
     };
-    let chains: Vec<Result<Chain, FlowError>> = ticks
-        .par_chunks(CHAIN)
-        .map(|chain| measure_chain(rec, opts, &core, chain, &tell, stop))
-        .collect();
+    let chains: Vec<Result<Chain, FlowError>> = match (opts.method, opts.segment) {
+        (Method::Mc, None) => vec![ladder_loop(rec, opts, &ticks, &tell, stop)],
+        (Method::Mc, Some(n)) => ticks
+            .par_chunks(n.max(1))
+            .map(|seg| ladder_loop(rec, opts, seg, &tell, stop))
+            .collect(),
+        _ => ticks
+            .par_chunks(CHAIN)
+            .map(|chain| measure_chain(rec, opts, &core, chain, &tell, stop))
+            .collect(),
+    };
     let mut pairs = Vec::with_capacity(total);
     let mut first_frames = None;
     let mut dense = DenseSum::default();
@@ -943,10 +971,25 @@ mod glare_tests {
 }
 
 /// One chain's pairs, the first pair's frames and its dense sums.
+#[derive(Default)]
 struct Chain {
     pairs: Vec<PairResult>,
     first_frames: Option<[Vec<u16>; 2]>,
     dense: DenseSum,
+}
+
+impl Chain {
+    /// Adds a measured pair at `ticks` (frames shown up to `full_scale`).
+    fn take(&mut self, mut m: Measured, ticks: [u64; 2], opts: &FlowOptions, full_scale: u16) {
+        if opts.dense {
+            let measured = m.dense.take();
+            self.dense.add(&m, measured, f64::from(opts.dt));
+        }
+        if self.first_frames.is_none() {
+            self.first_frames = Some(m.frames.clone().map(|f| gray(&f, full_scale)));
+        }
+        self.pairs.push(pair_result(m, ticks));
+    }
 }
 
 /// The pairs whose first ticks are `chain`, in order: each from the
@@ -971,7 +1014,6 @@ fn measure_chain(
         }
         let kb = ka + u64::from(opts.dt);
         let mut m = match (opts.method, opts.dwell_cap) {
-            (Method::Mc, _) => ladder_pair(rec, [ka, kb], opts, prediction.take())?,
             (Method::Adaptive, Some(budget)) => {
                 capped_pair(rec, [ka, kb], opts, core, budget, prediction.take())?
             }
@@ -980,15 +1022,126 @@ fn measure_chain(
         if let Some(mask) = &opts.mask {
             masked_out(&mut m.field, mask);
         }
-        if opts.dense {
-            let measured = m.dense.take();
-            out.dense.add(&m, measured, f64::from(opts.dt));
-        }
         prediction = m.field.usable().then(|| m.field.clone());
-        if out.first_frames.is_none() {
-            out.first_frames = Some(m.frames.clone().map(|f| gray(&f, core.full_scale)));
+        out.take(m, [ka, kb], opts, core.full_scale);
+        tell();
+    }
+    Ok(out)
+}
+
+/// Warm-up pairs a loop of motion-compensated pairs measures before its
+/// first reported pair (as room allows), `every` ticks apart: the first
+/// carries its events and starts the ladder from nothing, the next follow
+/// its field, so the first reported pair is measured as the rest are.
+pub const WARMUP: usize = 2;
+
+/// Ticks of spikes the core's static-light model sees before a loop's
+/// first pair reads any (from the recording's start when it has fewer;
+/// a loop that starts with the recording is trained on its first planes
+/// played backwards instead: [`PairMaker::train`]).
+pub const LIGHT_WARMUP: u64 = 512;
+
+/// Planes read from the recording at once.
+const READ_PLANES: u64 = 64;
+
+/// The pairs whose first ticks are `seg`, measured in one loop as the
+/// sidecar makes and the host measures them: the core's static-light
+/// model and event ring take the recording's planes in order
+/// ([`PairMaker`]); each pair, once the planes of its longest rung are
+/// in, is made as the estimator asked after the pair before ([`Ask`]) and
+/// measured by the time ladder; [`WARMUP`] pairs before the first are
+/// measured but not reported.
+fn ladder_loop(
+    rec: &Recording,
+    opts: &FlowOptions,
+    seg: &[u64],
+    tell: &(impl Fn() + Sync),
+    stop: &AtomicBool,
+) -> Result<Chain, FlowError> {
+    let cfg = &opts.ladder;
+    let dt = u64::from(opts.dt);
+    let every = u64::from(opts.every.max(1));
+    let half = dt.div_ceil(2);
+    let longest = u64::from(cfg.separations.iter().copied().max().unwrap_or(0));
+    let reach = u64::from(cfg.bootstrap_reach);
+    let ahead = longest.max(reach) + u64::from(spiv_core::light::MAX_TOLERANCE);
+    let end = opts.end.min(rec.planes);
+    let Some(&m0) = seg.first().map(|ka| ka + half).as_ref() else {
+        return Ok(Chain::default());
+    };
+    // Warm-up pairs where the shortest rungs fit before the first.
+    let least = 2 * u64::from(cfg.bootstrap_longest);
+    let all: Vec<(u64, bool)> = (1..=WARMUP as u64)
+        .rev()
+        .filter_map(|k| m0.checked_sub(k * every))
+        .filter(|&m| m >= least)
+        .map(|m| (m, false))
+        .chain(seg.iter().map(|&ka| (ka + half, true)))
+        .collect();
+    if end > u64::from(u32::MAX) {
+        return Err(FlowError::Schedule(format!(
+            "{end} planes: the core counts ticks in 32 bits"
+        )));
+    }
+    let (sw, h) = (rec.width, rec.height);
+    let (w, hu) = (usize::from(rec.crop_width), usize::from(h));
+    let pb = (usize::from(sw) * usize::from(h) / 8).max(1);
+    let first_read = all[0].0.saturating_sub(longest.max(reach) + LIGHT_WARMUP);
+    let depth = (longest.max(reach) + ahead + 2) as usize;
+    let mut maker = PairMaker::new((sw, h), w, rec.flip, first_read as u32, depth)?;
+    if first_read == 0 {
+        let n = (LIGHT_TRAIN as u64).min(end.saturating_sub(1));
+        let pl = rec.stretch(1, n)?;
+        let planes: Vec<&[u8]> = pl.data.chunks_exact(pb).collect();
+        maker.train(&planes, LIGHT_TRAIN)?;
+    }
+    let mut ask = Ask::cold(cfg);
+    let mut out = Chain::default();
+    let mut read = first_read;
+    for &(mid, reported) in &all {
+        if stop.load(Ordering::Relaxed) {
+            break;
         }
-        out.pairs.push(pair_result(m, [ka, kb]));
+        let build = (mid + ahead).min(end);
+        while read < build {
+            let n = READ_PLANES.min(build - read);
+            let planes = rec.stretch(read, n)?;
+            for plane in planes.data.chunks_exact(pb) {
+                maker.push(plane)?;
+            }
+            read += n;
+        }
+        let input = maker.input(mid as u32, &ask, cfg.bootstrap_reach)?;
+        let mut m = ladder::measure(&input, mid, dt as f64, cfg, (w, hu))?;
+        if let Some(mask) = &opts.mask {
+            masked_out(&mut m.field, mask);
+        }
+        ask = Ask::after(&m, dt as f64, cfg);
+        if !reported {
+            continue;
+        }
+        let (frames, frame_ticks) = match m.frames {
+            Some(f) => (f.frames, f64::from(f.separation)),
+            None => {
+                let zero = Array2::zeros((hu, w));
+                ([zero.clone(), zero], dt as f64)
+            }
+        };
+        let ka = mid - half;
+        let measured = Measured {
+            method: Method::Mc,
+            separation: m.separation.iter().copied().collect(),
+            field: m.field,
+            frames,
+            caps: Vec::new(),
+            bootstrapped: false,
+            rungs: m.rungs,
+            frame_ticks,
+            // The ladder's frames carry no label table.
+            lost: LabelLoss::default(),
+            dense: m.dense,
+        };
+        out.take(measured, [ka, ka + dt], opts, opts.core.full_scale);
         tell();
     }
     Ok(out)
@@ -1031,50 +1184,6 @@ fn check(rec: &Recording, opts: &FlowOptions) -> Result<Vec<u64>, FlowError> {
             ticks.len()
         ))),
     }
-}
-
-/// A motion-compensated pair: the time ladder around its midpoint, over
-/// the planes within the longest rung's reach that lie before `opts.end`,
-/// started from `prediction` (the previous pair's usable field, px per
-/// pair) when there is one.
-fn ladder_pair(
-    rec: &Recording,
-    [ka, kb]: [u64; 2],
-    opts: &FlowOptions,
-    prediction: Option<Field>,
-) -> Result<Measured, FlowError> {
-    let mid = (ka + kb).div_ceil(2);
-    let reach = u64::from(opts.ladder.separations.iter().copied().max().unwrap_or(0));
-    let first = mid.saturating_sub(reach);
-    let last = (mid + reach).min(opts.end);
-    let planes = rec.stretch(first, last.saturating_sub(first))?;
-    let inn = Innovation::of(&planes);
-    let dt = f64::from(opts.dt);
-    // The previous pair's usable field, as velocities, starts the ladder
-    // past its unestimated rungs; the ladder drops it when its first rung
-    // does not confirm it.
-    let start = prediction.map(|p| ladder::per_ticks(&p, 1.0 / dt));
-    let m = ladder::measure_from(&inn, mid, dt, &opts.ladder, start)?;
-    let (frames, frame_ticks) = match m.frames {
-        Some(f) => (f.frames, f64::from(f.separation)),
-        None => {
-            let zero = Array2::zeros((inn.height, inn.width));
-            ([zero.clone(), zero], dt)
-        }
-    };
-    Ok(Measured {
-        method: Method::Mc,
-        separation: m.separation.iter().copied().collect(),
-        field: m.field,
-        frames,
-        caps: Vec::new(),
-        bootstrapped: false,
-        rungs: m.rungs,
-        frame_ticks,
-        // The ladder's frames are the host's: no label table to fill.
-        lost: LabelLoss::default(),
-        dense: m.dense,
-    })
 }
 
 /// An adaptive pair with its windows capped per band by `prediction` (the

@@ -89,6 +89,9 @@ pub enum JobError {
     /// A pair did not come through the link.
     #[error("the sidecar link delivered no {0} pair")]
     NoPair(&'static str),
+    /// `spiv flow`.
+    #[error(transparent)]
+    Flow(#[from] crate::flow::FlowError),
 }
 
 /// The kinds of frames compared.

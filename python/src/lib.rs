@@ -616,6 +616,8 @@ fn array3<T>(shape: (usize, usize, usize), v: Vec<T>) -> PyResult<Array3<T>> {
 /// `(height, width)`) leaves a wall, a body or a region outside the flow
 /// out: nodes whose centre it covers are invalid in every pair; `pairs`
 /// `(a, b)` measures only pairs `a..b` of the schedule (`flow_pairs`);
+/// `segment` splits the pairs into independent loops of that many pairs,
+/// each from nothing (run in parallel; `spiv.dask` spreads them).
 /// `progress` a callable told `(pairs done, pairs)` as pairs finish, or
 /// `True` for a tqdm bar (needs tqdm); `y_up` gives y up from the bottom
 /// row's centre and v positive up (so that vorticity is positive
@@ -643,7 +645,7 @@ fn array3<T>(shape: (usize, usize, usize), v: Vec<T>) -> PyResult<Array3<T>> {
 /// `y, x`, in m, s and m/s when calibrated (else px, ticks and px per
 /// pair), so `ds.piv.vorticity()` works.
 #[pyfunction]
-#[pyo3(signature = (path, dt=None, every=None, start=None, end=None, method="mc", window=None, dwell_cap=Some(spiv_host::dwell::DWELL_CAP), windows=None, width=None, height=None, flip=true, strip_head=0, dense=false, pixel_size=None, tick_hz=None, as_xarray=false, mask=None, pairs=None, progress=None, y_up=false))]
+#[pyo3(signature = (path, dt=None, every=None, start=None, end=None, method="mc", window=None, dwell_cap=Some(spiv_host::dwell::DWELL_CAP), windows=None, width=None, height=None, flip=true, strip_head=0, dense=false, pixel_size=None, tick_hz=None, as_xarray=false, mask=None, pairs=None, progress=None, y_up=false, segment=None))]
 #[allow(clippy::too_many_arguments)]
 fn flow<'py>(
     py: Python<'py>,
@@ -668,6 +670,7 @@ fn flow<'py>(
     pairs: Option<(i64, i64)>,
     progress: Option<&Bound<'py, PyAny>>,
     y_up: bool,
+    segment: Option<usize>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let mask = mask
         .map(|m| image(m, "mask").map(|m| m.mapv(|v| v != 0.0)))
@@ -695,6 +698,7 @@ fn flow<'py>(
                 Ok(index(a)?..index(b)?)
             })
             .transpose()?,
+        segment,
     };
     let fopts = file_options(width, height, flip, strip_head)?;
     let (rec, o) = py
@@ -798,10 +802,10 @@ fn interruptible(
 }
 
 /// The pairs `flow` measures with these options: their frame ticks,
-/// `int64 (pairs, 2)`. `flow(..., pairs=(a, b))` measures pairs `a..b` of
-/// them; when `a` is a multiple of `FLOW_CHAIN` (pairs that follow one
-/// another's field, the first from nothing) those pairs' vectors are
-/// exactly the ones a run of all pairs gives, which is how `spiv.dask`
+/// `int64 (pairs, 2)`. `flow(..., pairs=(a, b), segment=FLOW_SEGMENT)`
+/// measures pairs `a..b` of them; when `a` is a multiple of
+/// `FLOW_SEGMENT` those pairs' vectors are exactly the ones
+/// `flow(..., segment=FLOW_SEGMENT)` gives, which is how `spiv.dask`
 /// spreads a recording over workers.
 #[pyfunction]
 #[pyo3(signature = (path, dt=None, every=None, start=None, end=None, method="mc", width=None, height=None, flip=true, strip_head=0))]
@@ -1175,7 +1179,7 @@ fn spiv(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(flow, m)?)?;
     m.add_function(wrap_pyfunction!(flow_pairs, m)?)?;
     m.add_function(wrap_pyfunction!(flow_mean, m)?)?;
-    m.add("FLOW_CHAIN", spiv_host::flow::CHAIN)?;
+    m.add("FLOW_SEGMENT", spiv_host::flow::CHAIN)?;
     m.add_function(wrap_pyfunction!(receive, m)?)?;
     Ok(())
 }

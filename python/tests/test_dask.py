@@ -1,5 +1,5 @@
 """`spiv.dask.flow` on a LocalCluster of 2 worker processes gives exactly
-the Dataset `spiv.flow` gives on one machine."""
+the Dataset `spiv.flow(..., segment=FLOW_SEGMENT)` gives on one machine."""
 
 import numpy as np
 import pytest
@@ -20,15 +20,15 @@ def client():
 @pytest.fixture(scope="module")
 def long_recording(tmp_path_factory):
     """paper-linear, 128x128, 900 ticks: with pairs every 26 ticks, 3
-    chains of pairs."""
+    segments of pairs."""
     d = tmp_path_factory.mktemp("long")
     spiv.simulate("paper-linear", seed=4, width=128, height=128, ticks=900, out=d)
     return d / "spikes.dat"
 
 
 def test_two_workers_give_the_one_machine_dataset(client, long_recording):
-    want = spiv.flow(long_recording, every=26, as_xarray=True)
-    assert want.sizes["t"] > 2 * spiv.FLOW_CHAIN  # three chains, three tasks
+    want = spiv.flow(long_recording, every=26, segment=spiv.FLOW_SEGMENT, as_xarray=True)
+    assert want.sizes["t"] > 2 * spiv.FLOW_SEGMENT  # three segments, three tasks
     with get_task_stream(client) as ts:
         got = spiv.dask.flow(long_recording, client, every=26)
     assert len({t["worker"] for t in ts.data}) == 2  # both workers measured
@@ -39,11 +39,13 @@ def test_two_workers_give_the_one_machine_dataset(client, long_recording):
 
 def test_a_list_of_recordings_and_a_tick_range(client, long_recording, recording):
     got = spiv.dask.flow([long_recording, recording / "spikes.dat"], client,
-                         chains_per_task=2, end=700)
+                         segments_per_task=2, end=700)
     assert isinstance(got, list) and len(got) == 2
-    xr.testing.assert_identical(got[0], spiv.flow(long_recording, end=700, as_xarray=True))
+    seg = spiv.FLOW_SEGMENT
     xr.testing.assert_identical(
-        got[1], spiv.flow(recording / "spikes.dat", end=700, as_xarray=True))
+        got[0], spiv.flow(long_recording, end=700, segment=seg, as_xarray=True))
+    xr.testing.assert_identical(
+        got[1], spiv.flow(recording / "spikes.dat", end=700, segment=seg, as_xarray=True))
 
 
 def test_flow_mean_joins_pairs_as_flow_does(long_recording):
@@ -59,8 +61,8 @@ def test_flow_mean_joins_pairs_as_flow_does(long_recording):
 def test_bad_options_are_refused(client, long_recording):
     with pytest.raises(ValueError, match="dense is not an option"):
         spiv.dask.flow(long_recording, client, dense=True)
-    with pytest.raises(ValueError, match="chains_per_task 0"):
-        spiv.dask.flow(long_recording, client, chains_per_task=0)
+    with pytest.raises(ValueError, match="segments_per_task 0"):
+        spiv.dask.flow(long_recording, client, segments_per_task=0)
     with pytest.raises(spiv.SpivError, match="the schedule has pairs"):
         spiv.flow(long_recording, pairs=(1000, 1001))
     with pytest.raises(OSError):

@@ -207,11 +207,13 @@ fn the_real_capture_runs_end_to_end() {
     assert_eq!(out.pairs.len(), 1);
     assert_eq!(out.pairs[0].ticks, [95, 105]);
     assert_eq!(out.first_frames[0].len(), 250 * 250);
-    // No particles, no flow PIV can see: the pair says it measured
-    // nothing rather than returning a field.
+    // A real scene with no truth to hold it to: every vector finite, and
+    // every measured one with a finite uncertainty.
     for p in &out.pairs {
         assert!(p.vectors.iter().all(|v| v.u.is_finite() && v.v.is_finite()));
-        assert!(!p.measured(), "{:?}", p.counts());
+        for (v, s) in p.vectors.iter().zip(&p.sigma) {
+            assert_eq!(v.state.is_measured(), s.0.is_finite() && s.1.is_finite());
+        }
     }
     // The plain adaptive frames of the same pairs do correlate somewhere.
     let adaptive = FlowOptions {
@@ -278,28 +280,28 @@ fn pairs_at_the_recording_ends_say_they_are_less_certain() {
     assert!(wf > 0.7 && wm > 0.7, "{wf} {wm}");
 }
 
-/// `spiv flow` on every core gives what it gives on one: chains of pairs
-/// run in parallel, each pair inside a chain starts from the one before,
-/// and the chains are fixed by the schedule, not by the cores.
+/// `spiv flow` on every core gives what it gives on one: its loop of
+/// pairs runs in order and each pair's PIV is the same on any number of
+/// threads. Split into segments (`FlowOptions::segment`, as `spiv.dask`
+/// spreads them over workers), each segment starts from nothing with its
+/// own warm-up pairs, and a run of one segment's pairs gives exactly that
+/// segment's vectors.
 #[test]
 fn all_cores_give_the_same_output_as_one() {
     let dir = tempfile::tempdir().unwrap();
     simulate(dir.path(), Some((128, 96)), 800, None);
     let rec = open(&dir.path().join("spikes.dat"));
     let o = FlowOptions::new(&rec, rec.meta_dt.unwrap());
-    assert!(
-        o.pair_ticks().len() > spiv_host::flow::CHAIN,
-        "{:?}",
-        o.pair_ticks()
-    );
-    let on = |threads: usize| {
+    let seg = 4;
+    assert!(o.pair_ticks().len() > seg, "{:?}", o.pair_ticks());
+    let on = |threads: usize, o: &FlowOptions| {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()
             .unwrap();
-        pool.install(|| run_flow(&rec, &o, |_, _| {}).unwrap())
+        pool.install(|| run_flow(&rec, o, |_, _| {}).unwrap())
     };
-    let (one, two) = (on(1), on(2));
+    let (one, two) = (on(1, &o), on(2, &o));
     assert_eq!(one.pairs.len(), two.pairs.len());
     for (a, b) in one.pairs.iter().zip(&two.pairs) {
         assert_eq!(a.ticks, b.ticks);
@@ -307,19 +309,25 @@ fn all_cores_give_the_same_output_as_one() {
         assert_eq!(a.sigma, b.sigma);
     }
     assert_eq!(one.mean().vectors, two.mean().vectors);
-    // Runs of whole chains (as `spiv.dask` spreads them over workers) give
-    // exactly the pairs of the whole run; their robust mean is its mean.
-    let n = one.pairs.len();
+    // Segments: on any number of threads the same; runs of whole
+    // segments give exactly their pairs; their robust mean is the mean.
+    let segmented = FlowOptions {
+        segment: Some(seg),
+        ..o.clone()
+    };
+    let whole = on(2, &segmented);
+    assert_eq!(whole.pairs.len(), one.pairs.len());
+    let n = whole.pairs.len();
     let mut joined = Vec::new();
-    for a in (0..n).step_by(spiv_host::flow::CHAIN) {
+    for a in (0..n).step_by(seg) {
         let part = FlowOptions {
-            pairs: Some(a..(a + spiv_host::flow::CHAIN).min(n)),
-            ..o.clone()
+            pairs: Some(a..(a + seg).min(n)),
+            ..segmented.clone()
         };
-        joined.extend(run_flow(&rec, &part, |_, _| {}).unwrap().pairs);
+        joined.extend(on(1, &part).pairs);
     }
     assert_eq!(joined.len(), n);
-    for (a, b) in one.pairs.iter().zip(&joined) {
+    for (a, b) in whole.pairs.iter().zip(&joined) {
         assert_eq!(
             (a.ticks, &a.vectors, &a.sigma),
             (b.ticks, &b.vectors, &b.sigma)
@@ -330,8 +338,8 @@ fn all_cores_give_the_same_output_as_one() {
         .map(|p| (p.vectors.as_slice(), p.sigma.as_slice()))
         .collect();
     let mean = spiv_host::flow::MeanField::of(&fields);
-    assert_eq!(mean.vectors, one.mean().vectors);
-    assert_eq!(mean.pairs, one.mean().pairs);
+    assert_eq!(mean.vectors, whole.mean().vectors);
+    assert_eq!(mean.pairs, whole.mean().pairs);
     // A range outside the schedule is refused in one line.
     let past = FlowOptions {
         pairs: Some(n..n + 1),

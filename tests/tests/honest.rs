@@ -13,7 +13,9 @@ use spiv_firmware_sim::scene::{Scene, SceneKind, SceneParams};
 use spiv_firmware_sim::simulation::{simulate_planes, Request};
 use spiv_formats::State;
 use spiv_host::flow::{run_flow, FlowOptions, PairResult, Recording};
-use spiv_host::motion::{measure_from, Innovation, LadderSettings};
+use spiv_host::motion::control::Ask;
+use spiv_host::motion::make::input_of;
+use spiv_host::motion::{measure, LadderSettings};
 use spiv_host::piv::{Field, NO_SIGMA};
 use spiv_host::reconstruct::Planes;
 
@@ -133,9 +135,9 @@ fn motion_beyond_reach_is_not_confidently_wrong() {
 }
 
 /// The vortex array's true velocities at the ladder's nodes, times `k`.
-fn predicted(scene: &Scene, inn: &Innovation, k: f64) -> Field {
+fn predicted(scene: &Scene, (w, h): (usize, usize), k: f64) -> Field {
     let cfg = LadderSettings::default();
-    let grid = cfg.piv.grid(inn.width, inn.height).expect("grid");
+    let grid = cfg.piv.grid(w, h).expect("grid");
     let shape = (grid.ny, grid.nx);
     let mut u = Array2::zeros(shape);
     let mut v = Array2::zeros(shape);
@@ -156,8 +158,10 @@ fn predicted(scene: &Scene, inn: &Innovation, k: f64) -> Field {
     }
 }
 
-/// A prediction twice the truth, and one with its sign flipped: the
-/// ladder climbing from it does not confirm it. Every valid or replaced
+/// A pair made along a flow twice the truth, and one with its sign
+/// flipped (its rung frames warped along it, its events beside them): its
+/// first rung does not confirm the flow, and the ladder climbs from the
+/// events instead. Every valid or replaced
 /// vector lies nearer the truth than the prediction, and at most 2 % of
 /// them miss by more than 4σ + 0.1 px: the remainder is the bottom grid
 /// row in the glare band, where the glare's fixed pattern pulls the
@@ -172,17 +176,18 @@ fn a_wrong_prediction_is_not_confirmed() {
     let dt = p.pair_dt;
     let (_, scene, data) = simulated(p.clone(), 7, 160);
     let planes = Planes::simulated(p.width, p.height, data);
-    let inn = Innovation::of(&planes);
+    let size = (usize::from(p.width), usize::from(p.height));
+    let cfg = LadderSettings::default();
     for k in [2.0, -1.0] {
-        let start = predicted(&scene, &inn, k);
-        let m = measure_from(
-            &inn,
-            80,
-            f64::from(dt),
-            &LadderSettings::default(),
-            Some(start),
-        )
-        .expect("measures");
+        let ask = Ask {
+            flow: Some(predicted(&scene, size, k)),
+            rungs: vec![16, 32, 64],
+            reach: cfg.bootstrap_reach,
+        };
+        let input = input_of(&planes, 80, &ask, cfg.bootstrap_reach).expect("made");
+        assert_eq!(input.rungs.len(), 3);
+        let m = measure(&input, 80, f64::from(dt), &cfg, size).expect("measures");
+        assert_eq!(m.confirmed, Some(false), "prediction × {k} confirmed");
         let pr = PairResult {
             method: spiv_core::Method::Mc,
             ticks: [75, 85],

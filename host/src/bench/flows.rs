@@ -222,12 +222,7 @@ pub fn family_rows(
     let mut opts = FlowOptions::new(&rec, pair[1] - pair[0]);
     opts.dense = dense;
     let t0 = Instant::now();
-    let out = run_flow(&rec, &opts, |_, _| {}).map_err(|e| match e {
-        crate::flow::FlowError::Piv(p) => JobError::Piv(p),
-        crate::flow::FlowError::Reconstruct(r) => JobError::Reconstruct(r),
-        crate::flow::FlowError::Format(f) => JobError::Format(f),
-        crate::flow::FlowError::Schedule(s) => JobError::Piv(crate::piv::PivError::Settings(s)),
-    })?;
+    let out = run_flow(&rec, &opts, |_, _| {})?;
     let ms = t0.elapsed().as_secs_f64() * 1e3 / out.pairs.len().max(1) as f64;
     if let Some(path) = vectors {
         dump(path, fam, seed, &sim.scene, dt, &out)?;

@@ -123,6 +123,7 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
         pixel_mm: a.pixel_size,
         tick_hz: a.tick_hz,
         pairs: None,
+        segment: None,
         mask: a
             .mask
             .as_deref()
@@ -231,5 +232,6 @@ fn flow_err(e: spiv_host::flow::FlowError) -> CliError {
         FlowError::Reconstruct(r) => CliError::Reconstruct(r),
         FlowError::Piv(p) => CliError::Piv(p),
         FlowError::Schedule(s) => CliError::Usage(s),
+        FlowError::Core(c) => CliError::Usage(format!("core: {c}")),
     }
 }

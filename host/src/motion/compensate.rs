@@ -1,17 +1,14 @@
-//! Motion-compensated innovation frames: each pixel sums the innovation
-//! ([`super::Innovation`]) along the path a particle there would follow
-//! through the predicted (steady) velocity field, so a particle moving as
-//! predicted piles its unexpected spikes up where it is at the frame's
-//! time, while static light (background, glare, the sensor's fixed
-//! pattern) adds about nothing. Paths are integrated through the field
-//! (midpoint rule, steps of at most one tick), so a particle turning in a
-//! vortex is followed round the turn, not along its tangent.
+//! The flows the estimator works with: [`Velocity`], a velocity per pixel
+//! (the host's steady field, its paths integrated through it), and
+//! [`WarpFlow`], the node grid the core's warp follows
+//! ([`spiv_core::warp::Flow`]: a velocity and an acceleration along the
+//! path per node, in the core's fixed point and stored row order), made
+//! from a field of node velocities or from a [`Velocity`].
 
 use ndarray::Array2;
-use rayon::prelude::*;
+use spiv_core::warp::Flow as CoreFlow;
 
-use super::spikes::SCALE;
-use super::Innovation;
+use crate::piv::{validate, Field};
 
 /// A velocity per pixel, px per tick (u right, v down), upright.
 #[derive(Debug, Clone)]
@@ -98,122 +95,172 @@ impl Velocity {
     }
 }
 
-/// The frame of the recording ticks `t0..t0 + n` (clipped to what `inn`
-/// holds) showing each particle where it is at time `centre` (ticks; a
-/// spike of tick `t` is taken at `t + 0.5`): pixel `x` sums, over the
-/// ticks, the innovation at the pixel nearest to where a particle at `x`
-/// at `centre` is at `t + 0.5` ([`Velocity::advect`]), in spikes. Paths
-/// that leave the image add nothing.
-pub fn compensated(
-    inn: &Innovation,
-    centre: f64,
-    (t0, n): (u64, u64),
-    vel: &Velocity,
-) -> Array2<f32> {
-    let (w, h) = (inn.width, inn.height);
-    let span = inn.range();
-    let a = t0.max(span.start);
-    let b = t0.saturating_add(n).min(span.end);
-    // The ticks after the centre in time order, those before it in reverse
-    // order: each path is walked outwards from the centre both ways.
-    let offset = |t: u64| t as f64 + 0.5 - centre;
-    let planes = |ts: &mut dyn Iterator<Item = u64>| -> Vec<(&[i8], f64)> {
-        ts.filter_map(|t| Some((inn.plane((t - span.start) as usize)?, offset(t))))
-            .collect()
-    };
-    let after = planes(&mut (a..b).filter(|&t| offset(t) >= 0.0));
-    let before = planes(&mut (a..b).rev().filter(|&t| offset(t) < 0.0));
-    let mut out = Array2::<f32>::zeros((h, w));
-    // Without motion every path stays on its pixel: plain sums.
-    if vel.u.iter().chain(vel.v.iter()).all(|&x| x == 0.0) {
-        let mut acc = vec![0i32; w * h];
-        for (plane, _) in after.iter().chain(&before) {
-            for (a, &x) in acc.iter_mut().zip(plane.iter()) {
-                *a += i32::from(x);
-            }
-        }
-        for (o, a) in out.iter_mut().zip(acc) {
-            *o = a as f32 / SCALE;
-        }
-        return out;
-    }
-    out.axis_iter_mut(ndarray::Axis(0))
-        .into_par_iter()
-        .enumerate()
-        .for_each(|(r, mut row)| {
-            for (c, o) in row.iter_mut().enumerate() {
-                let mut s = 0i32;
-                for side in [&after, &before] {
-                    let (mut p, mut at) = ((c as f64, r as f64), 0.0);
-                    for &(plane, d) in side.iter() {
-                        p = vel.advect(p, d - at);
-                        at = d;
-                        let (x, y) = (p.0.round(), p.1.round());
-                        if x >= 0.0 && y >= 0.0 && x < w as f64 && y < h as f64 {
-                            s += i32::from(plane[y as usize * w + x as usize]);
-                        }
-                    }
-                }
-                *o = s as f32 / SCALE;
-            }
-        });
-    out
+
+/// A flow on a grid of nodes as the core's warp takes it
+/// ([`spiv_core::warp::Flow`]), owned: node positions and spacing in
+/// 1/16 px, velocities Q12 px/tick and accelerations along the path
+/// `(v·∇)v` Q16 px/tick², all in the stored row order (y down the stored
+/// rows).
+#[derive(Debug, Clone, PartialEq)]
+pub struct WarpFlow {
+    nx: u16,
+    ny: u16,
+    x0: i32,
+    y0: i32,
+    pitch: u16,
+    vx: Vec<i16>,
+    vy: Vec<i16>,
+    ax: Vec<i16>,
+    ay: Vec<i16>,
 }
 
-/// The pair of frames a rung of separation `s` makes around `mid` (a tick
-/// boundary): A from the ticks `mid − s..mid` showing the particles at
-/// `mid − s/2`, B from `mid..mid + s` at `mid + s/2`; each as
-/// [`compensated`] makes it. A steady field moves a particle alike in both,
-/// so each pixel's path is walked once for the two.
-pub fn compensated_pair(inn: &Innovation, mid: u64, s: u64, vel: &Velocity) -> [Array2<f32>; 2] {
-    let (w, h) = (inn.width, inn.height);
-    let span = inn.range();
-    if mid < span.start + s || mid + s > span.end {
-        let sf = s as f64;
-        return [
-            compensated(inn, mid as f64 - sf / 2.0, (mid.saturating_sub(s), s), vel),
-            compensated(inn, mid as f64 + sf / 2.0, (mid, s), vel),
-        ];
+impl WarpFlow {
+    /// No motion.
+    pub fn still() -> WarpFlow {
+        WarpFlow {
+            nx: 0,
+            ny: 0,
+            x0: 0,
+            y0: 0,
+            pitch: 16,
+            vx: Vec::new(),
+            vy: Vec::new(),
+            ax: Vec::new(),
+            ay: Vec::new(),
+        }
     }
-    // Offsets from the frame's centre, walked outwards: the later half of
-    // A's ticks (and of B's) in time order, then the earlier half reversed.
-    let a0 = (mid - s - span.start) as usize;
-    let half = (s / 2) as usize;
-    let order: Vec<(usize, f64)> = (half..s as usize)
-        .chain((0..half).rev())
-        .map(|i| (i, i as f64 + 0.5 - s as f64 / 2.0))
-        .collect();
-    let planes: Vec<(&[i8], &[i8], f64)> = order
-        .iter()
-        .filter_map(|&(i, d)| Some((inn.plane(a0 + i)?, inn.plane(a0 + i + s as usize)?, d)))
-        .collect();
-    let mut a = Array2::<f32>::zeros((h, w));
-    let mut b = Array2::<f32>::zeros((h, w));
-    a.axis_iter_mut(ndarray::Axis(0))
-        .into_par_iter()
-        .zip(b.axis_iter_mut(ndarray::Axis(0)))
-        .enumerate()
-        .for_each(|(r, (mut ra, mut rb))| {
-            for (c, (oa, ob)) in ra.iter_mut().zip(rb.iter_mut()).enumerate() {
-                let (mut sa, mut sb) = (0i32, 0i32);
-                let (mut p, mut at) = ((c as f64, r as f64), 0.0);
-                for &(pa, pb, d) in &planes {
-                    // The walk restarts from the pixel for the earlier half.
-                    if d < 0.0 && at > 0.0 {
-                        (p, at) = ((c as f64, r as f64), 0.0);
-                    }
-                    p = vel.advect(p, d - at);
-                    at = d;
-                    let (x, y) = (p.0.round(), p.1.round());
-                    if x >= 0.0 && y >= 0.0 && x < w as f64 && y < h as f64 {
-                        let i = y as usize * w + x as usize;
-                        sa += i32::from(pa[i]);
-                        sb += i32::from(pb[i]);
-                    }
-                }
-                *oa = sa as f32 / SCALE;
-                *ob = sb as f32 / SCALE;
+
+    /// Whether this is [`WarpFlow::still`].
+    pub fn is_still(&self) -> bool {
+        self.nx == 0 || self.ny == 0
+    }
+
+    /// The core's view.
+    pub fn view(&self) -> CoreFlow<'_> {
+        CoreFlow {
+            nx: self.nx,
+            ny: self.ny,
+            x0: self.x0,
+            y0: self.y0,
+            pitch: self.pitch,
+            vx: &self.vx,
+            vy: &self.vy,
+            ax: &self.ax,
+            ay: &self.ay,
+        }
+    }
+
+    /// Node rows and columns, `(ny, nx)`.
+    pub fn nodes(&self) -> (usize, usize) {
+        (usize::from(self.ny), usize::from(self.nx))
+    }
+
+    /// Node `(r, c)` (stored order) as `((vx, vy), (ax, ay))` in the core's
+    /// units.
+    pub fn node(&self, r: usize, c: usize) -> ((i16, i16), (i16, i16)) {
+        let k = r * usize::from(self.nx) + c;
+        ((self.vx[k], self.vy[k]), (self.ax[k], self.ay[k]))
+    }
+
+    /// The layout `(x0, y0, pitch)`, 1/16 px.
+    pub fn layout(&self) -> (i32, i32, u16) {
+        (self.x0, self.y0, self.pitch)
+    }
+
+    /// The flow whose nodes hold the upright velocities `u`, `v` (px per
+    /// tick, `ny × nx`), node `(0, 0)` at upright `first` (x, y px), nodes
+    /// `pitch` px apart (a whole number of 1/16 px, at most 256 px), over
+    /// an image `h` rows high whose rows are stored bottom-up when `flip`.
+    /// Accelerations are `(v·∇)v` from central differences between nodes
+    /// (one-sided at the edges). Values beyond the core's range saturate;
+    /// a non-finite value counts as 0.
+    pub fn from_nodes(
+        first: (f64, f64),
+        pitch: f64,
+        u: &Array2<f64>,
+        v: &Array2<f64>,
+        h: usize,
+        flip: bool,
+    ) -> WarpFlow {
+        let (ny, nx) = u.dim();
+        if nx == 0 || ny == 0 || nx > usize::from(u16::MAX) || ny > usize::from(u16::MAX) {
+            return WarpFlow::still();
+        }
+        let fin = |x: f64| if x.is_finite() { x } else { 0.0 };
+        let d = |f: &Array2<f64>, r: usize, c: usize, along_x: bool| -> f64 {
+            let n = if along_x { nx } else { ny };
+            let i = if along_x { c } else { r };
+            if n < 2 {
+                return 0.0;
             }
-        });
-    [a, b]
+            let (lo, hi) = (i.saturating_sub(1), (i + 1).min(n - 1));
+            let at = |k: usize| {
+                if along_x {
+                    fin(f[[r, k]])
+                } else {
+                    fin(f[[k, c]])
+                }
+            };
+            (at(hi) - at(lo)) / ((hi - lo) as f64 * pitch)
+        };
+        let q = |x: f64, k: f64| (fin(x) * k).round().clamp(-32768.0, 32767.0) as i16;
+        let n = nx * ny;
+        let (mut vx, mut vy, mut ax, mut ay) =
+            (vec![0; n], vec![0; n], vec![0; n], vec![0; n]);
+        for r in 0..ny {
+            for c in 0..nx {
+                let (uu, vv) = (fin(u[[r, c]]), fin(v[[r, c]]));
+                let a_x = uu * d(u, r, c, true) + vv * d(u, r, c, false);
+                let a_y = uu * d(v, r, c, true) + vv * d(v, r, c, false);
+                // Stored order: rows reversed and y negated when flipped.
+                let (sr, sgn) = if flip { (ny - 1 - r, -1.0) } else { (r, 1.0) };
+                let k = sr * nx + c;
+                vx[k] = q(uu, 4096.0);
+                vy[k] = q(sgn * vv, 4096.0);
+                ax[k] = q(a_x, 65536.0);
+                ay[k] = q(sgn * a_y, 65536.0);
+            }
+        }
+        let q4 = |x: f64| (x * 16.0).round() as i32;
+        let last_y = first.1 + (ny - 1) as f64 * pitch;
+        let y0 = if flip {
+            (h as f64 - 1.0) - last_y
+        } else {
+            first.1
+        };
+        WarpFlow {
+            nx: nx as u16,
+            ny: ny as u16,
+            x0: q4(first.0),
+            y0: q4(y0),
+            pitch: q4(pitch).clamp(16, i32::from(spiv_core::warp::MAX_PITCH)) as u16,
+            vx,
+            vy,
+            ax,
+            ay,
+        }
+    }
+
+    /// The flow of a field of node velocities (px per tick): its holes
+    /// filled from their neighbours ([`validate::extended`]), on its grid.
+    pub fn from_field(f: &Field, h: usize, flip: bool) -> WarpFlow {
+        let (u, v) = validate::extended(&f.u, &f.v, &f.state);
+        let first = f.grid.centre(0, 0);
+        WarpFlow::from_nodes(first, f.grid.step as f64, &u, &v, h, flip)
+    }
+
+    /// The flow of a velocity per pixel, sampled every `pitch` px from
+    /// pixel (0, 0).
+    pub fn from_velocity(vel: &Velocity, pitch: usize, flip: bool) -> WarpFlow {
+        let (h, w) = vel.u.dim();
+        let pitch = pitch.max(1);
+        if h == 0 || w == 0 {
+            return WarpFlow::still();
+        }
+        let (ny, nx) = ((h - 1) / pitch + 1, (w - 1) / pitch + 1);
+        let at = |f: &Array2<f32>, r: usize, c: usize| f64::from(f[[r * pitch, c * pitch]]);
+        let u = Array2::from_shape_fn((ny, nx), |(r, c)| at(&vel.u, r, c));
+        let v = Array2::from_shape_fn((ny, nx), |(r, c)| at(&vel.v, r, c));
+        WarpFlow::from_nodes((0.0, 0.0), pitch as f64, &u, &v, h, flip)
+    }
 }

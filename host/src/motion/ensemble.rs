@@ -47,7 +47,9 @@ use crate::piv::dense::{dense_frames, dense_frames_from, DenseSettings, Flow, St
 use crate::piv::{Field, State};
 use spiv_formats::grid::Grid;
 
-use super::{compensated, Innovation, Velocity};
+use super::compensate::WarpFlow;
+use super::events::Events;
+use super::Velocity;
 
 /// Ticks per frame of the ensemble.
 pub const FRAME: u64 = 6;
@@ -80,6 +82,10 @@ pub fn settings() -> DenseSettings {
 /// with 18; large-shift (1–3) 0.760, 0.631, 0.645 (24: 0.657). A third
 /// pass gained nothing (0.755 → 0.763, turbulence 1–3).
 pub const SHARP: u64 = 12;
+
+/// Node spacing of the first pass's flow as the second pass's frames
+/// follow it ([`WarpFlow::from_velocity`]), px.
+pub const FLOW_PITCH: usize = 4;
 
 /// A flow per frame step of `s` ticks as a velocity, px per tick.
 fn per_tick(f: &Flow, s: u64) -> Velocity {
@@ -138,8 +144,8 @@ impl Ensemble {
 /// Measures the flow at `mid` (a tick boundary) from the frames within
 /// `reach` ticks of it, reported on `grid`; `None` when fewer than two
 /// pairs of frames fit (no spread, so no uncertainty).
-pub fn measure(inn: &Innovation, mid: u64, grid: &Grid, reach: u64) -> Option<Ensemble> {
-    let span = inn.range();
+pub fn measure(ev: &Events, mid: u64, grid: &Grid, reach: u64) -> Option<Ensemble> {
+    let span = ev.range();
     if mid < span.start || mid > span.end {
         return None;
     }
@@ -149,18 +155,17 @@ pub fn measure(inn: &Innovation, mid: u64, grid: &Grid, reach: u64) -> Option<En
     if back == 0 || ahead == 0 || back + ahead < 3 * s {
         return None;
     }
-    let (h, w) = (inn.height, inn.width);
-    let zero = Velocity::zero(h, w);
+    let still = WarpFlow::still();
     let starts: Vec<u64> = ((mid - back)..(mid + ahead)).step_by(s as usize).collect();
     let frames: Vec<Array2<f32>> = starts
         .par_iter()
-        .map(|&t| compensated(inn, t as f64 + s as f64 / 2.0, (t, s), &zero))
+        .map(|&t| ev.frame(t as f64 + s as f64 / 2.0, (t, s), &still))
         .collect();
     let first = dense_frames(&frames, STEPS, &settings());
     // The second pass: longer frames on the same centres, each summing its
     // spikes along the first pass's paths, so a particle shows with twice
     // the spikes and little blur; the flow starts from the first pass's.
-    let along = per_tick(&first, s);
+    let along = WarpFlow::from_velocity(&per_tick(&first, s), FLOW_PITCH, ev.flip);
     let (lo, hi) = (mid - back, mid + ahead);
     let sharp: Vec<Array2<f32>> = starts
         .par_iter()
@@ -168,7 +173,7 @@ pub fn measure(inn: &Innovation, mid: u64, grid: &Grid, reach: u64) -> Option<En
             let c = t + s / 2;
             let a = c.saturating_sub(SHARP / 2).max(lo);
             let b = (c + SHARP / 2).min(hi);
-            compensated(inn, c as f64, (a, b - a), &along)
+            ev.frame(c as f64, (a, b - a), &along)
         })
         .collect();
     let flow = dense_frames_from(&sharp, Some(&first), STEPS, &settings());

@@ -46,9 +46,10 @@ use crate::piv::{
 use crate::piv::dense::Flow;
 use crate::piv::Grid;
 
-use super::compensate::compensated_pair;
+use super::compensate::WarpFlow;
 use super::ensemble;
-use super::{compensated, Innovation, Velocity};
+use super::events::Events;
+use super::Velocity;
 
 /// Separations of the rungs, ticks, shortest first.
 pub const SEPARATIONS: [u32; 6] = [4, 8, 16, 32, 64, 128];
@@ -132,6 +133,11 @@ pub struct Measurement {
     /// The dense flow per pixel, px per `dt` ticks, when the dense
     /// ensemble ([`ensemble`]) measured the pair.
     pub dense: Option<Flow>,
+    /// Whether the first rung confirmed the flow the rung frames followed
+    /// (`None`: the pair had no such flow).
+    pub confirmed: Option<bool>,
+    /// The dense ensemble measured the pair.
+    pub ensemble: bool,
 }
 
 /// A rung's compensated frames (upright, in spikes).
@@ -143,98 +149,132 @@ pub struct RungFrames {
     pub frames: [Array2<f32>; 2],
 }
 
-/// Measures the flow at time `mid` (a tick boundary: A ends and B begins
-/// there) from `inn`, in px per `dt` ticks.
-pub fn measure(
-    inn: &Innovation,
-    mid: u64,
-    dt: f64,
-    cfg: &LadderSettings,
-) -> Result<Measurement, PivError> {
-    measure_from(inn, mid, dt, cfg, None)
+/// What a pair's frames come from, as the core made them
+/// ([`spiv_core::rungs`]): the events around its midpoint, or the rung
+/// frames warped along a flow, or both.
+#[derive(Debug, Clone, Default)]
+pub struct PairInput {
+    /// The events around the midpoint, when the pair carries them (a pair
+    /// made with no flow to follow, or one that asked for them).
+    pub events: Option<Events>,
+    /// The flow the rung frames follow: node velocities (px per tick) on
+    /// the grid of the ladder's PIV.
+    pub start: Option<Field>,
+    /// The rung frames along `start`, shortest separation first: the
+    /// separation (ticks) and frames A (before the midpoint) and B (after
+    /// it), upright, in spikes.
+    pub rungs: Vec<(u32, [Array2<f32>; 2])>,
 }
 
-/// [`measure`] starting from a predicted field instead of the unestimated
-/// rungs: `start` holds velocities per node (px per tick, on the grid of
-/// `cfg.piv`), and the ladder climbs from its first rung longer than
-/// [`LadderSettings::bootstrap_longest`], compensated and predicted by
-/// it. When that rung's vectors do not confirm the start ([`confirms`]),
-/// the start is dropped and the ladder climbs from its unestimated rungs
-/// as [`measure`] does; every kept vector's uncertainty includes its
-/// change from the estimate that predicted its rung.
-pub fn measure_from(
-    inn: &Innovation,
-    mid: u64,
+impl PairInput {
+    /// A pair of only its events.
+    pub fn of_events(events: Events) -> PairInput {
+        PairInput {
+            events: Some(events),
+            ..PairInput::default()
+        }
+    }
+}
+
+/// The state of one pair's climb: the kept vectors, where each came from,
+/// the estimate the next rung follows, and the rungs so far.
+struct Climb {
+    best: Option<Field>,
+    separation: Option<Array2<u32>>,
+    estimate: Option<Field>,
+    change: Option<Array2<(f64, f64)>>,
+    rungs: Vec<Rung>,
+    frames: Option<RungFrames>,
     dt: f64,
-    cfg: &LadderSettings,
-    start: Option<Field>,
-) -> Result<Measurement, PivError> {
-    let (w, h) = (inn.width, inn.height);
-    let span = inn.range();
-    // Velocities (px/tick) per node: the kept ones, and the estimate they
-    // make once validated and filled.
-    let mut best: Option<Field> = None;
-    let mut separation: Option<Array2<u32>> = None;
-    let predicted = start.is_some();
-    let mut estimate: Option<Field> = start;
-    let mut rungs: Vec<Rung> = Vec::new();
-    let mut frames: Option<RungFrames> = None;
-    // Per node, the kept vector's difference from the estimate that
-    // predicted its rung (px/tick).
-    let mut change: Option<Array2<(f64, f64)>> = None;
-    for &s in &cfg.separations {
-        let s64 = u64::from(s.max(2));
-        if mid < span.start + s64 || mid + s64 > span.end {
-            break;
+}
+
+impl Climb {
+    fn new(estimate: Option<Field>, dt: f64) -> Climb {
+        Climb {
+            best: None,
+            separation: None,
+            estimate,
+            change: None,
+            rungs: Vec::new(),
+            frames: None,
+            dt,
         }
-        if estimate.is_none() && s > cfg.bootstrap_longest {
-            break;
-        }
-        if predicted && s <= cfg.bootstrap_longest {
-            continue;
-        }
-        let sf = s64 as f64;
-        let t0 = std::time::Instant::now();
-        let (f, [a, b]) = match &estimate {
-            None => bootstrap_rung(inn, mid, s64, cfg)?,
-            Some(e) => compensated_rung(inn, mid, s64, e, cfg)?,
-        };
-        let ms = t0.elapsed().as_secs_f64() * 1e3;
+    }
+
+    /// Adds rung `s`'s field `f` (over `s` ticks) and frames; returns
+    /// whether the rung measured (its field is usable).
+    fn add(&mut self, s: u32, f: &Field, frames: [Array2<f32>; 2], ms: f64, longest_bootstrap: u32) -> bool {
         let counts = f.counts();
         let measured = f.usable();
-        let rung = per_tick(&f, sf);
-        if predicted && rungs.is_empty() {
-            if let Some(e) = &estimate {
-                if !confirms(&rung, e) {
-                    return measure_from(inn, mid, dt, cfg, None);
-                }
-            }
+        let rung = per_tick(f, f64::from(s.max(2)));
+        if self.estimate.is_some() && s > longest_bootstrap {
+            unconfirmed(&mut self.best, &self.separation, &rung, longest_bootstrap);
         }
-        if estimate.is_some() && measured {
-            unconfirmed(&mut best, &separation, &rung, cfg.bootstrap_longest);
+        let kept = keep(&mut self.best, &mut self.separation, &rung, s);
+        changes(&mut self.change, &self.separation, &rung, self.estimate.as_ref(), s);
+        if self.rungs.iter().all(|r| r.kept < kept) {
+            self.frames = Some(RungFrames { separation: s, frames });
         }
-        let kept = keep(&mut best, &mut separation, &rung, s);
-        changes(&mut change, &separation, &rung, estimate.as_ref(), s);
-        if rungs.iter().all(|r| r.kept < kept) {
-            frames = Some(RungFrames {
-                separation: s,
-                frames: [a, b],
-            });
-        }
-        rungs.push(Rung {
+        self.rungs.push(Rung {
             separation: s,
             counts,
             kept,
             ms,
         });
-        if !measured {
-            if estimate.is_some() {
-                break;
-            }
-            continue;
+        if measured {
+            self.estimate = self.best.as_ref().map(|b| finished(b, self.dt));
         }
-        estimate = best.as_ref().map(|b| finished(b, dt));
+        measured
     }
+}
+
+/// Measures the flow at time `mid` (a tick boundary: A ends and B begins
+/// there) from `input`, in px per `dt` ticks.
+///
+/// With rung frames along a flow (`input.start`), each rung is measured by
+/// PIV predicted by the estimate so far (the start, then the kept field),
+/// shortest first; the first rung must confirm the start ([`confirms`]).
+/// A start it does not confirm is dropped: the pair climbs from its
+/// events as an unestimated pair does when it carries them, else from the
+/// first rung's own field. Without rung frames, the pair climbs from its
+/// events: the uncompensated rungs up to
+/// [`LadderSettings::bootstrap_longest`], then rungs compensated along
+/// the estimate so far, as far as the events reach. Every kept vector's
+/// uncertainty includes its change from the estimate that predicted its
+/// rung.
+pub fn measure(
+    input: &PairInput,
+    mid: u64,
+    dt: f64,
+    cfg: &LadderSettings,
+    (w, h): (usize, usize),
+) -> Result<Measurement, PivError> {
+    let mut confirmed = None;
+    let climb = match (&input.start, input.rungs.is_empty()) {
+        (Some(start), false) => {
+            // With its events too, the pair climbs from them first and the
+            // rung frames go on from where they left it.
+            let from = match &input.events {
+                Some(ev) => cold(ev, mid, dt, cfg)?,
+                None => Climb::new(Some(start.clone()), dt),
+            };
+            let (c, ok) = warm(input, start, from, dt, cfg)?;
+            confirmed = Some(ok);
+            c
+        }
+        _ => match &input.events {
+            Some(ev) => cold(ev, mid, dt, cfg)?,
+            None => Climb::new(None, dt),
+        },
+    };
+    let Climb {
+        best,
+        separation,
+        change,
+        rungs,
+        frames,
+        ..
+    } = climb;
     let velocity = match best {
         Some(mut b) => {
             if let Some(c) = &change {
@@ -245,9 +285,9 @@ pub fn measure_from(
             f
         }
         None => {
-            return match ensemble_pair(inn, mid, dt, cfg, &rungs)? {
-                Some(m) => Ok(m),
-                None => nothing(w, h, cfg),
+            return match ensemble_pair(input, mid, dt, cfg, &rungs)? {
+                Some(m) => Ok(Measurement { confirmed, ..m }),
+                None => nothing(w, h, cfg, rungs, confirmed),
             }
         }
     };
@@ -255,8 +295,8 @@ pub fn measure_from(
     flag_uncertain(&mut field);
     let (_, _, invalid) = field.counts();
     if !field.usable() || invalid as f64 > ENSEMBLE_FLAGGED * field.grid.len() as f64 {
-        if let Some(m) = ensemble_pair(inn, mid, dt, cfg, &rungs)? {
-            return Ok(m);
+        if let Some(m) = ensemble_pair(input, mid, dt, cfg, &rungs)? {
+            return Ok(Measurement { confirmed, ..m });
         }
     }
     let mut separation = separation.unwrap_or_else(|| Array2::zeros(field.u.dim()));
@@ -271,7 +311,93 @@ pub fn measure_from(
         rungs,
         frames,
         dense: None,
+        confirmed,
+        ensemble: false,
     })
+}
+
+/// The climb over the rung frames along `start`, on from `from` (the
+/// climb of the pair's events, or nothing yet); whether the first rung
+/// confirmed the start (when it did not, `from` as it was).
+fn warm(
+    input: &PairInput,
+    start: &Field,
+    from: Climb,
+    dt: f64,
+    cfg: &LadderSettings,
+) -> Result<(Climb, bool), PivError> {
+    let _ = dt;
+    let mut climb = from;
+    let mut confirmed = true;
+    let mut distrust: Option<Array2<bool>> = None;
+    for (k, (s, [a, b])) in input.rungs.iter().enumerate() {
+        let t0 = std::time::Instant::now();
+        let e = climb.estimate.clone().unwrap_or_else(|| start.clone());
+        let mut f = predicted_rung(a, b, u64::from(*s), &e, cfg)?;
+        let ms = t0.elapsed().as_secs_f64() * 1e3;
+        if k == 0 {
+            let first = per_tick(&f, f64::from((*s).max(2)));
+            if !confirms(&first, start) {
+                confirmed = false;
+                if input.events.is_some() {
+                    return Ok((climb, false));
+                }
+                // No events to start again from: the first rung's own
+                // field is the estimate from here on.
+                climb.estimate = None;
+            } else {
+                distrust = Some(departed(&first, start));
+            }
+        } else if let Some(d) = &distrust {
+            // Where the first rung left the flow, the longer rungs' frames
+            // were warped along a wrong path: their vectors there are not
+            // kept.
+            for (st, &no) in f.state.iter_mut().zip(d.iter()) {
+                if no {
+                    *st = State::Invalid;
+                }
+            }
+        }
+        let measured = climb.add(*s, &f, [a.clone(), b.clone()], ms, cfg.bootstrap_longest);
+        if !measured {
+            break;
+        }
+    }
+    Ok((climb, confirmed))
+}
+
+/// The climb of a pair from its events alone.
+fn cold(ev: &Events, mid: u64, dt: f64, cfg: &LadderSettings) -> Result<Climb, PivError> {
+    let span = ev.range();
+    let mut climb = Climb::new(None, dt);
+    for &s in &cfg.separations {
+        let s64 = u64::from(s.max(2));
+        if mid < span.start + s64 || mid + s64 > span.end {
+            break;
+        }
+        if climb.estimate.is_none() && s > cfg.bootstrap_longest {
+            break;
+        }
+        let t0 = std::time::Instant::now();
+        let (f, frames) = match &climb.estimate {
+            None => bootstrap_rung(ev, mid, s64, cfg)?,
+            Some(e) => {
+                let flow = WarpFlow::from_field(e, ev.height, ev.flip);
+                let sf = s64 as f64;
+                let a = ev.frame(mid as f64 - sf / 2.0, (mid - s64, s64), &flow);
+                let b = ev.frame(mid as f64 + sf / 2.0, (mid, s64), &flow);
+                let f = predicted_rung(&a, &b, s64, e, cfg)?;
+                (f, [a, b])
+            }
+        };
+        let ms = t0.elapsed().as_secs_f64() * 1e3;
+        let had_estimate = climb.estimate.is_some();
+        let measured = climb.add(s, &f, frames, ms, cfg.bootstrap_longest);
+        if !measured && had_estimate {
+            break;
+        }
+    }
+    Ok(climb)
 }
 
 /// Largest share of flagged vectors in the ladder's field with which it
@@ -288,15 +414,18 @@ pub const ENSEMBLE_FLAGGED: f64 = 0.2;
 /// flow, after the window rungs `rungs`; `None` when it does not fit or
 /// its field is not usable (the ladder's own result stands).
 fn ensemble_pair(
-    inn: &Innovation,
+    input: &PairInput,
     mid: u64,
     dt: f64,
     cfg: &LadderSettings,
     rungs: &[Rung],
 ) -> Result<Option<Measurement>, PivError> {
-    let grid = grid_of(inn.width, inn.height, cfg)?;
+    let Some(ev) = &input.events else {
+        return Ok(None);
+    };
+    let grid = grid_of(ev.width, ev.height, cfg)?;
     let t0 = std::time::Instant::now();
-    let Some(e) = ensemble::measure(inn, mid, &grid, u64::from(cfg.bootstrap_reach)) else {
+    let Some(e) = ensemble::measure(ev, mid, &grid, u64::from(cfg.bootstrap_reach)) else {
         return Ok(None);
     };
     let mut field = flow_map(&e.field, &e.velocity, dt);
@@ -330,6 +459,8 @@ fn ensemble_pair(
             frames: e.centre_pair(),
         }),
         dense: Some(dense),
+        confirmed: None,
+        ensemble: true,
     }))
 }
 
@@ -341,14 +472,22 @@ fn grid_of(w: usize, h: usize, cfg: &LadderSettings) -> Result<Grid, PivError> {
 
 /// The measurement of a pair no rung fits: every vector of the grid
 /// invalid, with no uncertainty.
-fn nothing(w: usize, h: usize, cfg: &LadderSettings) -> Result<Measurement, PivError> {
+fn nothing(
+    w: usize,
+    h: usize,
+    cfg: &LadderSettings,
+    rungs: Vec<Rung>,
+    confirmed: Option<bool>,
+) -> Result<Measurement, PivError> {
     let grid = grid_of(w, h, cfg)?;
     Ok(Measurement {
         field: Field::unmeasured(grid),
         separation: Array2::zeros((grid.ny, grid.nx)),
-        rungs: Vec::new(),
+        rungs,
         frames: None,
         dense: None,
+        confirmed,
+        ensemble: false,
     })
 }
 
@@ -369,22 +508,23 @@ pub fn per_ticks(f: &Field, k: f64) -> Field {
 /// rungs; returns its field over `s` ticks and the pair around the
 /// midpoint.
 fn bootstrap_rung(
-    inn: &Innovation,
+    ev: &Events,
     mid: u64,
     s: u64,
     cfg: &LadderSettings,
 ) -> Result<(Field, [Array2<f32>; 2]), PivError> {
-    let span = inn.range();
+    let span = ev.range();
     let reach = u64::from(cfg.bootstrap_reach).max(s);
     // Stretch starts from the first whole one within reach, aligned on mid.
     let back = ((mid - span.start).min(reach) / s) * s;
     let ahead = ((span.end - mid).min(reach) / s) * s;
-    let zero = Velocity::zero(inn.height, inn.width);
+    let still = WarpFlow::still();
     let starts: Vec<u64> = ((mid - back)..(mid + ahead)).step_by(s as usize).collect();
-    let frames: Vec<Array2<f32>> = starts
+    let mut frames: Vec<Array2<f32>> = starts
         .par_iter()
-        .map(|&t| compensated(inn, t as f64 + s as f64 / 2.0, (t, s), &zero))
+        .map(|&t| ev.frame(t as f64 + s as f64 / 2.0, (t, s), &still))
         .collect();
+    without_static(&mut frames);
     let pairs: Vec<(&Array2<f32>, &Array2<f32>)> =
         frames.windows(2).map(|p| (&p[0], &p[1])).collect();
     let settings = Settings {
@@ -399,32 +539,50 @@ fn bootstrap_rung(
     Ok((f, centre))
 }
 
-/// Rung `s` with the estimate `e` (velocities per node): A from the `s`
-/// ticks before the midpoint and B from the `s` after, compensated along
-/// `e`'s paths, PIV predicted by `e`'s displacement over `s` along them.
-fn compensated_rung(
-    inn: &Innovation,
-    mid: u64,
+/// Takes each pixel's mean over `frames` (consecutive uncompensated
+/// frames) off every one of them: what the events still hold of static
+/// light (the beat of a pixel its period does not quite follow) is the
+/// same in every frame, and frames one after the other would correlate on
+/// it where nothing moves; a particle moves across the frames and keeps
+/// most of its own.
+fn without_static(frames: &mut [Array2<f32>]) {
+    let Some(first) = frames.first() else {
+        return;
+    };
+    let mut mean = Array2::<f32>::zeros(first.dim());
+    for f in frames.iter() {
+        mean += f;
+    }
+    mean /= frames.len() as f32;
+    for f in frames.iter_mut() {
+        *f -= &mean;
+    }
+}
+
+/// PIV of rung `s`'s frames `a`, `b` (warped along a flow to their own
+/// centres, `s` ticks apart), predicted by the estimate `e` (velocities per
+/// node): its displacement over `s` along its paths.
+fn predicted_rung(
+    a: &Array2<f32>,
+    b: &Array2<f32>,
     s: u64,
     e: &Field,
     cfg: &LadderSettings,
-) -> Result<(Field, [Array2<f32>; 2]), PivError> {
-    let sf = s as f64;
-    let vel = dense_velocity(e, inn.height, inn.width);
+) -> Result<Field, PivError> {
+    let (h, w) = a.dim();
+    let vel = dense_velocity(e, h, w);
     // The mask is not applied here: innovation frames hold nothing where
     // nothing moves, so a still body or wall adds no particles, and the
     // predicted deformation would move the frames against a mask drawn on
     // the undeformed image (leaving the masked pixels out here cost the
     // field away from the body 30 % in `tests/tests/masks.rs`, zeroing
     // them 28 %). The flow job makes masked nodes invalid afterwards.
-    let [a, b] = compensated_pair(inn, mid, s, &vel);
-    let init = flow_map(e, &vel, sf);
+    let init = flow_map(e, &vel, s as f64);
     let settings = Settings {
         rescue: false,
         ..cfg.piv.clone()
     };
-    let f = piv_predicted(&a, &b, None, &settings, Some(&init))?;
-    Ok((f, [a, b]))
+    piv_predicted(a, b, None, &settings, Some(&init))
 }
 
 /// The node velocities of `e` interpolated to every pixel of an `h × w`
@@ -527,6 +685,33 @@ fn confirms(rung: &Field, e: &Field) -> bool {
         return false;
     }
     validate::median(&mut change) <= START_CHANGE * validate::median(&mut speed) + START_FLOOR
+}
+
+/// Standard uncertainties of the first rung's vector by which it may
+/// leave the start at a node before the node counts as departed.
+const DEPARTED_SIGMAS: f64 = 3.0;
+
+/// The nodes where the first rung's valid vector (`rung`, px/tick) left
+/// the start `e` by more than [`START_CHANGE`] of the start's speed there
+/// plus the larger of [`START_FLOOR`] and [`DEPARTED_SIGMAS`] of the
+/// vector's own uncertainty: [`confirms`], node by node, beyond the
+/// rung's noise.
+fn departed(rung: &Field, e: &Field) -> Array2<bool> {
+    let mut out = Array2::from_elem(rung.u.dim(), false);
+    if rung.grid != e.grid {
+        return out;
+    }
+    for idx in ndarray::indices(rung.u.dim()) {
+        if rung.state[idx] == State::Valid && e.state[idx] != State::Invalid {
+            let change = (rung.u[idx] - e.u[idx]).hypot(rung.v[idx] - e.v[idx]);
+            let speed = e.u[idx].hypot(e.v[idx]);
+            let (su, sv) = rung.sigma[idx];
+            let noise = DEPARTED_SIGMAS * su.hypot(sv);
+            let noise = if noise.is_finite() { noise } else { 0.0 };
+            out[idx] = change > START_CHANGE * speed + START_FLOOR.max(noise);
+        }
+    }
+    out
 }
 
 /// Records, for each node whose kept vector came from rung `s` (`f`),

@@ -1,20 +1,29 @@
 //! The host's motion estimate: a pair's 2-D flow measured from the spikes
 //! themselves, over as many planes as the recording holds around it.
 //!
-//! - [`spikes`]: the spikes as each pixel's innovation — spikes less what
-//!   its own static light predicts;
-//! - [`compensate`]: innovation summed along predicted paths;
+//! - [`events`]: the spikes as the core's innovation events — spikes less
+//!   what each pixel's own static light predicts — and the frames the
+//!   core's warp makes of them;
+//! - [`compensate`]: the flows frames follow, per pixel and on the core's
+//!   node grid;
+//! - [`make`]: what the core makes of a stream of planes, in process —
+//!   the sidecar's static-light model and event ring, and each pair's
+//!   input as the estimator asked;
 //! - [`ladder`]: disjoint compensated frames at growing separations, PIV
 //!   on each, the most certain vector per node;
+//! - [`control`]: the loop between pairs — what the next pair is made
+//!   with, from what the estimator measured;
 //! - [`ensemble`]: where window PIV cannot start the ladder, the dense
 //!   stage's one flow fitted to every pair of consecutive short frames,
 //!   each pair's disagreement with it the uncertainty.
 
 pub mod compensate;
+pub mod control;
 pub mod ensemble;
+pub mod events;
 pub mod ladder;
-pub mod spikes;
+pub mod make;
 
-pub use compensate::{compensated, Velocity};
-pub use ladder::{measure, measure_from, LadderSettings, Measurement};
-pub use spikes::Innovation;
+pub use compensate::{Velocity, WarpFlow};
+pub use events::Events;
+pub use ladder::{measure, LadderSettings, Measurement, PairInput};

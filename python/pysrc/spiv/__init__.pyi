@@ -203,6 +203,7 @@ def flow(
     pairs: Optional[Tuple[int, int]] = None,
     progress: Union[None, bool, Callable[[int, int], Any]] = None,
     y_up: bool = False,
+    segment: Optional[int] = None,
 ) -> Flow:  # an xarray.Dataset with as_xarray=True
     """The flow job on a .dat or .npz recording, as `spiv flow` (without its files).
 
@@ -221,8 +222,10 @@ def flow(
     mean_sigma_v, mean_pairs on (y, x); m, s and m/s when calibrated), so
     ds.piv.vorticity() works. mask: nonzero pixels (height, width) left out; nodes
     whose centre it covers are invalid in every pair. pairs: (a, b) measures only
-    pairs a..b of flow_pairs(); from a multiple of FLOW_CHAIN, exactly the vectors
-    a run of all pairs gives them. progress: a callable told (pairs done, pairs),
+    pairs a..b of flow_pairs(). segment: independent loops of that many pairs,
+    each from nothing, run in parallel; with segment=FLOW_SEGMENT and pairs from a
+    multiple of it, exactly the vectors flow(..., segment=FLOW_SEGMENT) gives them.
+    progress: a callable told (pairs done, pairs),
     or True for a tqdm bar. Ctrl-C stops the run between pairs and raises
     KeyboardInterrupt with the pairs measured so far as its .partial (None if none).
     y_up: y up from the bottom row's centre and v positive up, so that vorticity is
@@ -233,9 +236,9 @@ def open_flow(path: _Path) -> Any:
     """spiv flow's flow.nc as the xarray Dataset flow(as_xarray=True) gives
     (pivpy's layout; SI units when calibrated)."""
 
-#: Pairs per chain of `flow`: each starts from the previous pair's field, the
-#: first from nothing; a run from a multiple of it matches a whole run.
-FLOW_CHAIN: int
+#: Pairs per segment of `spiv.dask.flow`: a run of pairs from a multiple of it,
+#: with segment=FLOW_SEGMENT, matches a whole run with the same segments.
+FLOW_SEGMENT: int
 
 def flow_pairs(
     path: _Path,

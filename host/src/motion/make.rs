@@ -1,0 +1,195 @@
+//! What the core makes of a stream of spike planes, in process: the
+//! sidecar's static-light model ([`spiv_core::light`]) and event ring
+//! ([`spiv_core::rungs`]) over owned buffers, and from them each pair's
+//! [`PairInput`] as the estimator asked for it ([`Ask`]) — the same
+//! frames a sidecar sends.
+
+use spiv_core::light::{Light, LightClock, MAX_TOLERANCE};
+use spiv_core::plane::PlaneView;
+use spiv_core::rungs::{rung_frames, EventRing, RingCursor};
+use spiv_core::Error;
+
+use super::compensate::WarpFlow;
+use super::control::Ask;
+use super::events::{upright, Events, LightBuf};
+use super::ladder::PairInput;
+use crate::reconstruct::Planes;
+
+/// Pixel-ticks of the ring's depth per event it holds: a quarter of an
+/// event per pixel and tick on average (the scenes of `spiv bench flows`
+/// make 0.02–0.05); past that the ring drops its oldest ticks, and the
+/// rungs that reach them are not made.
+pub const RING_PIXEL_TICKS_PER_EVENT: usize = 4;
+
+/// Planes the static-light model is trained on before the first plane of
+/// a stream that starts with its recording ([`PairMaker::train`]).
+pub const LIGHT_TRAIN: usize = 512;
+
+/// The sidecar's state over a stream of planes, owned.
+#[derive(Debug)]
+pub struct PairMaker {
+    width: u16,
+    height: u16,
+    crop: usize,
+    flip: bool,
+    light: LightBuf,
+    clock: LightClock,
+    entries: Vec<u32>,
+    starts: Vec<u32>,
+    cursor: RingCursor,
+    frames: Vec<i16>,
+}
+
+impl PairMaker {
+    /// A maker for planes of `width × height` (stored order, bottom-up
+    /// when `flip`; frames cropped to `crop` columns), the first plane
+    /// tick `first`, its ring `depth` ticks deep.
+    pub fn new(
+        (width, height): (u16, u16),
+        crop: usize,
+        flip: bool,
+        first: u32,
+        depth: usize,
+    ) -> Result<PairMaker, Error> {
+        let px = usize::from(width) * usize::from(height);
+        if px as u64 >= u64::from(spiv_core::rungs::MAX_PIXELS) {
+            return Err(Error::BadDimensions);
+        }
+        let mut light = LightBuf::new(px);
+        let clock = Light::new(width, height, first, light.state())?.clock();
+        let depth = depth.max(1);
+        let mut entries = vec![0u32; (depth * px / RING_PIXEL_TICKS_PER_EVENT).max(1)];
+        let mut starts = vec![0u32; depth + 1];
+        let cursor = EventRing::new(&mut entries, &mut starts, first)?.cursor();
+        Ok(PairMaker {
+            width,
+            height,
+            crop: crop.min(usize::from(width)),
+            flip,
+            light,
+            clock,
+            entries,
+            starts,
+            cursor,
+            frames: Vec::new(),
+        })
+    }
+
+    /// Trains the static-light model, reporting no event, on `len` ticks
+    /// just before the stream's first: `planes` (the planes after the
+    /// first, in recording order) played backwards, and back and forth
+    /// again while `len` asks for more — the recording's start mirrored
+    /// in time stands in for the light a sidecar that ran before the
+    /// recording would have seen, and a mirror joins its planes without a
+    /// jump.
+    pub fn train(&mut self, planes: &[&[u8]], len: usize) -> Result<(), Error> {
+        let n = planes.len();
+        if n == 0 || len == 0 {
+            return Ok(());
+        }
+        let start = LightClock {
+            next: self.clock.next.wrapping_sub(len as u32),
+            ..self.clock
+        };
+        let mut light = Light::resume(self.width, self.height, start, self.light.state())?;
+        // Tick −k (k = 1 the last before the stream) plays plane k of a
+        // triangle wave over the planes: 1, 2, …, n, n − 1, …, 1, 2, …
+        let at = |k: usize| -> usize {
+            if n == 1 {
+                return 0;
+            }
+            let m = (k - 1) % (2 * (n - 1));
+            if m < n {
+                m
+            } else {
+                2 * (n - 1) - m
+            }
+        };
+        for k in (1..=len).rev() {
+            light.train(&PlaneView::new(planes[at(k)], self.width, self.height)?)?;
+        }
+        self.clock = light.clock();
+        Ok(())
+    }
+
+    /// Takes the next plane.
+    pub fn push(&mut self, plane: &[u8]) -> Result<(), Error> {
+        let view = PlaneView::new(plane, self.width, self.height)?;
+        let mut light = Light::resume(self.width, self.height, self.clock, self.light.state())?;
+        let mut ring = EventRing::resume(&mut self.entries, &mut self.starts, self.cursor)?;
+        ring.push(&mut light, &view)?;
+        self.clock = light.clock();
+        self.cursor = ring.cursor();
+        Ok(())
+    }
+
+    /// The ticks the ring holds.
+    pub fn ticks(&self) -> std::ops::Range<u32> {
+        self.cursor.first..self.cursor.next
+    }
+
+    /// Events the ring could not hold, and ticks it dropped to make room.
+    pub fn lost(&self) -> (u32, u32) {
+        (self.cursor.lost, self.cursor.evicted)
+    }
+
+    /// What the pair whose midpoint is tick `mid` carries, as `ask` asks:
+    /// its rung frames warped along the ask's flow (the separations the
+    /// ticks held reach: `s` before `mid` and `s` plus the events'
+    /// settling after it), and its events within the ask's reach — or
+    /// within `reach` when no rung frame is made.
+    pub fn input(&mut self, mid: u32, ask: &Ask, reach: u32) -> Result<PairInput, Error> {
+        let (w, h) = (usize::from(self.width), usize::from(self.height));
+        let px = w * h;
+        let held = self.ticks();
+        let fits = |s: u32| {
+            mid >= held.start.saturating_add(s)
+                && u64::from(mid) + u64::from(s) + u64::from(MAX_TOLERANCE) <= u64::from(held.end)
+        };
+        let rungs = ask.core_rungs(fits);
+        let light = Light::resume(self.width, self.height, self.clock, self.light.state())?;
+        let ring = EventRing::resume(&mut self.entries, &mut self.starts, self.cursor)?;
+        let mut input = PairInput::default();
+        if let (Some(field), true) = (&ask.flow, rungs.count > 0) {
+            let flow = WarpFlow::from_field(field, h, self.flip);
+            self.frames.resize(2 * usize::from(rungs.count) * px, 0);
+            rung_frames(&ring, &light, &flow.view(), mid, &rungs, &mut self.frames)?;
+            let frame = |k: usize| upright(&self.frames[k * px..(k + 1) * px], w, h, self.crop, self.flip);
+            input.rungs = rungs
+                .separations()
+                .iter()
+                .enumerate()
+                .map(|(i, &s)| (u32::from(s), [frame(2 * i), frame(2 * i + 1)]))
+                .collect();
+            input.start = Some(field.clone());
+        }
+        let r = if input.rungs.is_empty() {
+            reach.max(1)
+        } else {
+            u32::from(rungs.reach)
+        };
+        if r > 0 {
+            let (a, b) = (mid.saturating_sub(r), mid.saturating_add(r).min(held.end));
+            input.events = Some(Events::from_ring(&ring, &light, (a, b), self.crop, self.flip));
+        }
+        Ok(input)
+    }
+}
+
+/// The input of the one pair at `mid` of `planes` (a whole stretch held in
+/// memory) as the core makes it when asked `ask`: the model trained on the
+/// stretch's planes played backwards, then every plane taken in order.
+pub fn input_of(planes: &Planes, mid: u64, ask: &Ask, reach: u32) -> Result<PairInput, Error> {
+    let (w, h) = (planes.width, planes.height);
+    let pb = (usize::from(w) * usize::from(h) / 8).max(1);
+    let n = planes.data.len() / pb;
+    let first = u32::try_from(planes.first).map_err(|_| Error::TickOverflow)?;
+    let mut m = PairMaker::new((w, h), usize::from(planes.crop_width), planes.flip, first, n + 1)?;
+    let all: Vec<&[u8]> = planes.data.chunks_exact(pb).collect();
+    m.train(&all[1.min(all.len())..], LIGHT_TRAIN)?;
+    for p in &all {
+        m.push(p)?;
+    }
+    let mid = u32::try_from(mid).map_err(|_| Error::TickOverflow)?;
+    m.input(mid, ask, reach)
+}
