@@ -35,9 +35,10 @@ use spiv_formats::npz::read_npz_spikes;
 use spiv_formats::{FormatError, State, Vector};
 
 use crate::dwell::{adaptive_banded, caps_for};
-use crate::motion::control::Ask;
+use crate::motion::control::{Ask, Delivery, Downlink};
 use crate::motion::ladder::{self, LadderSettings, Rung};
 use crate::motion::make::{PairMaker, LIGHT_TRAIN};
+use crate::motion::uplink::{pair_bytes, PairBytes};
 use crate::piv::validate::median;
 use crate::piv::{piv, to_f32, Field, PivError, Settings, NO_SIGMA};
 use crate::reconstruct::{frame_from_planes, FileOptions, Planes, ReconstructError};
@@ -67,6 +68,9 @@ pub enum FlowError {
     /// for its event ring).
     #[error("core: {0}")]
     Core(#[from] spiv_core::Error),
+    /// Coding a pair's frames for the wire ([`FlowOptions::wire_bytes`]).
+    #[error("wire: {0}")]
+    Wire(#[from] spiv_core::wire::WireError),
 }
 
 /// A spike recording, opened: its size and where its planes come from.
@@ -298,6 +302,14 @@ pub struct FlowOptions {
     /// every pair, as the sidecar runs). Each loop starts from nothing,
     /// [`WARMUP`] pairs before its first, and loops run in parallel.
     pub segment: Option<usize>,
+    /// How each motion-compensated pair's ask reaches the core that makes
+    /// the next pairs: at once (the default, as `spiv flow` runs), or late
+    /// and with losses, as a live downlink delivers it.
+    pub delivery: Delivery,
+    /// Count what each motion-compensated pair's frames and events cost
+    /// on the wire ([`PairResult::bytes`]; off by default: the coding
+    /// costs time and `spiv flow` sends nothing).
+    pub wire_bytes: bool,
 }
 
 impl FlowOptions {
@@ -326,6 +338,8 @@ impl FlowOptions {
             pairs: None,
             y_up: false,
             segment: None,
+            delivery: Delivery::default(),
+            wire_bytes: false,
         };
         o.schedule(rec.planes);
         o
@@ -555,6 +569,9 @@ pub struct PairResult {
     /// Motion-compensated pairs: the separation (ticks) of the rung each
     /// vector came from (0: replaced or invalid).
     pub separation: Vec<u32>,
+    /// Motion-compensated pairs with [`FlowOptions::wire_bytes`]: what the
+    /// core's frames and events of the pair cost on the wire.
+    pub bytes: Option<PairBytes>,
 }
 
 /// Particles a frame lost to the core's full tables: they are rendered as
@@ -783,6 +800,7 @@ struct Measured {
     dense: Option<crate::piv::dense::Flow>,
     /// What the core's label tables lost in the pair's frames.
     lost: LabelLoss,
+    bytes: Option<PairBytes>,
 }
 
 /// Pairs per chain of [`run_flow`]: within a chain each pair starts from
@@ -1030,10 +1048,13 @@ fn measure_chain(
 }
 
 /// Warm-up pairs a loop of motion-compensated pairs measures before its
-/// first reported pair (as room allows), `every` ticks apart: the first
-/// carries its events and starts the ladder from nothing, the next follow
-/// its field, so the first reported pair is measured as the rest are.
-pub const WARMUP: usize = 2;
+/// first reported pair (as room allows), `every` ticks before it: it
+/// carries its events and starts the ladder from nothing, so the first
+/// reported pair is made with rung frames along a field, as the rest are.
+/// It is not rescued by the dense ensemble when its field is usable
+/// (`ladder::measure`'s `rescue`): the first reported pair's first rung
+/// confirms or drops that field.
+pub const WARMUP: usize = 1;
 
 /// Ticks of spikes the core's static-light model sees before a loop's
 /// first pair reads any (from the recording's start when it has fewer;
@@ -1095,10 +1116,10 @@ fn ladder_loop(
         let planes: Vec<&[u8]> = pl.data.chunks_exact(pb).collect();
         maker.train(&planes, LIGHT_TRAIN)?;
     }
-    let mut ask = Ask::cold(cfg);
+    let mut link = Downlink::new(opts.delivery, cfg);
     let mut out = Chain::default();
     let mut read = first_read;
-    for &(mid, reported) in &all {
+    for (i, &(mid, reported)) in all.iter().enumerate() {
         if stop.load(Ordering::Relaxed) {
             break;
         }
@@ -1111,12 +1132,15 @@ fn ladder_loop(
             }
             read += n;
         }
-        let input = maker.input(mid as u32, &ask, cfg.bootstrap_reach)?;
-        let mut m = ladder::measure(&input, mid, dt as f64, cfg, (w, hu))?;
+        let input = maker.input(mid as u32, link.ask_for(i), cfg.bootstrap_reach)?;
+        let bytes = (opts.wire_bytes && reported)
+            .then(|| pair_bytes(&input))
+            .transpose()?;
+        let mut m = ladder::measure(&input, mid, dt as f64, cfg, (w, hu), reported)?;
         if let Some(mask) = &opts.mask {
             masked_out(&mut m.field, mask);
         }
-        ask = Ask::after(&m, dt as f64, cfg);
+        link.send(i, Ask::after(&m, dt as f64, cfg));
         if !reported {
             continue;
         }
@@ -1140,6 +1164,7 @@ fn ladder_loop(
             // The ladder's frames carry no label table.
             lost: LabelLoss::default(),
             dense: m.dense,
+            bytes,
         };
         out.take(measured, [ka, ka + dt], opts, opts.core.full_scale);
         tell();
@@ -1226,6 +1251,7 @@ fn capped_pair(
         frame_ticks: dt,
         dense: None,
         lost,
+        bytes: None,
     })
 }
 
@@ -1250,6 +1276,7 @@ fn plain_pair(
         frame_ticks: f64::from(opts.dt),
         dense: None,
         lost,
+        bytes: None,
     })
 }
 
@@ -1285,6 +1312,7 @@ fn pair_result(m: Measured, ticks: [u64; 2]) -> PairResult {
         lost: m.lost,
         rungs: m.rungs,
         separation: m.separation,
+        bytes: m.bytes,
     }
 }
 

@@ -95,7 +95,7 @@ pub struct FlowsRow {
 
 /// Errors of a field against the truth.
 #[derive(Debug, Default)]
-struct Score {
+pub(crate) struct Score {
     glare: (f64, usize),
     other: (f64, usize),
     flagged: usize,
@@ -105,7 +105,13 @@ struct Score {
 }
 
 impl Score {
-    fn add(&mut self, scene: &Scene, dt: f64, vs: &[Vector], sigma: Option<&[(f64, f64)]>) {
+    pub(crate) fn add(
+        &mut self,
+        scene: &Scene,
+        dt: f64,
+        vs: &[Vector],
+        sigma: Option<&[(f64, f64)]>,
+    ) {
         let h = f64::from(scene.params.height);
         let band = 2.0 * scene.params.glare_sigma;
         let pts: Vec<(f64, f64)> = vs.iter().map(|v| (v.x, v.y)).collect();
@@ -134,7 +140,20 @@ impl Score {
         }
     }
 
-    fn row(&self, family: &str, seed: u64, method: &str, dense: Option<f64>, ms: f64) -> FlowsRow {
+    /// Mean EPE of every measured vector, glare and other rows together.
+    pub(crate) fn measured_epe(&self) -> Option<f64> {
+        let n = self.glare.1 + self.other.1;
+        (n > 0).then(|| (self.glare.0 + self.other.0) / n as f64)
+    }
+
+    pub(crate) fn row(
+        &self,
+        family: &str,
+        seed: u64,
+        method: &str,
+        dense: Option<f64>,
+        ms: f64,
+    ) -> FlowsRow {
         let mean = |(s, n): (f64, usize)| (n > 0).then(|| s / n as f64);
         FlowsRow {
             family: family.into(),

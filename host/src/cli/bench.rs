@@ -1,7 +1,7 @@
-//! `spiv bench (paper | blasius | speed | link | turbulence | flows)`: the
+//! `spiv bench (paper | blasius | speed | link | turbulence | flows | live)`: the
 //! paper's comparison over seeds, the Blasius validation, speed against
 //! error, the link, PIV against eddies below the window, and `spiv flow`
-//! on every scene family.
+//! on every scene family, and the live loop beside it.
 
 use std::path::{Path, PathBuf};
 
@@ -84,6 +84,24 @@ enum Which {
         #[arg(long)]
         dense: bool,
     },
+    /// Every scene family through the live loop (asks 1 and 3 pairs
+    /// late, or 1 late with 10 % lost) beside `spiv flow` on the same
+    /// recording: EPE in glare and other rows after the third pair,
+    /// flagged share, bytes per pair on the wire against the raw spikes.
+    Live {
+        /// Seeds: "101-110" (the report's), "1-5" (tuning), or a list.
+        #[arg(long, default_value = "101-110")]
+        seeds: String,
+        /// Families (default: all), comma separated.
+        #[arg(long, value_delimiter = ',')]
+        families: Option<Vec<String>>,
+        /// Pairs scored per recording, after the first three (1–200).
+        #[arg(long, default_value_t = 8)]
+        pairs: usize,
+        /// Also write every row as JSON.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
 }
 
 /// Runs it.
@@ -111,6 +129,12 @@ pub fn run(a: &BenchArgs) -> Result<(), CliError> {
             vectors.as_deref(),
             *dense,
         ),
+        Which::Live {
+            seeds,
+            families,
+            pairs,
+            json,
+        } => live(seeds, families.as_deref(), *pairs, json.as_ref()),
     }
 }
 
@@ -133,15 +157,11 @@ fn parse_seeds(s: &str) -> Result<Vec<u64>, CliError> {
     Ok(out)
 }
 
-fn flows(
-    seeds: &str,
+/// The families named by `--families` (all without it).
+fn chosen_families(
     only: Option<&[String]>,
-    json_out: Option<&PathBuf>,
-    vectors: Option<&Path>,
-    dense: bool,
-) -> Result<(), CliError> {
-    use spiv_host::bench::flows::{families, family_rows, FlowsRow, SPIV_FLOW, SPIV_FLOW_DENSE};
-    let seeds = parse_seeds(seeds)?;
+) -> Result<Vec<spiv_host::bench::flows::Family>, CliError> {
+    use spiv_host::bench::flows::families;
     let fams: Vec<_> = families()
         .into_iter()
         .filter(|f| only.is_none_or(|o| o.iter().any(|n| n.trim() == f.name)))
@@ -153,6 +173,102 @@ fn flows(
             names.join(", ")
         )));
     }
+    Ok(fams)
+}
+
+fn live(
+    seeds: &str,
+    only: Option<&[String]>,
+    pairs: usize,
+    json_out: Option<&PathBuf>,
+) -> Result<(), CliError> {
+    use spiv_host::bench::live::{live_rows, modes, LiveRow};
+    if !(1..=200).contains(&pairs) {
+        return Err(CliError::Usage(format!(
+            "--pairs {pairs}: expected 1..=200"
+        )));
+    }
+    let seeds = parse_seeds(seeds)?;
+    let fams = chosen_families(only)?;
+    let b = bar((fams.len() * seeds.len()) as u64, "recordings");
+    let mut rows: Vec<LiveRow> = Vec::new();
+    for f in &fams {
+        for &seed in &seeds {
+            rows.extend(live_rows(f, seed, pairs).map_err(CliError::Job)?);
+            b.inc(1);
+        }
+    }
+    b.finish_and_clear();
+    println!(
+        "seeds {:?}; EPE px per pair of measured vectors, pairs after the third (mean over seeds); bytes: a pair's frames and events on the wire",
+        seeds
+    );
+    println!(
+        "{:<17} {:<18} {:>9} {:>9} {:>8} {:>12} {:>9}",
+        "family", "mode", "glare", "other", "flagged", "bytes/pair", "raw/wire"
+    );
+    let mean = |xs: Vec<Option<f64>>| {
+        let v: Vec<f64> = xs.into_iter().flatten().collect();
+        (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+    };
+    let f3 = |x: Option<f64>| x.map_or("-".to_string(), |x| format!("{x:.3}"));
+    for f in &fams {
+        for (mode, _) in modes(0) {
+            let rs: Vec<&LiveRow> = rows
+                .iter()
+                .filter(|r| r.family == f.name && r.mode == mode)
+                .collect();
+            let bytes = mean(rs.iter().map(|r| Some(r.bytes_per_pair)).collect()).unwrap_or(0.0);
+            let raw = mean(rs.iter().map(|r| Some(r.raw_per_pair)).collect()).unwrap_or(0.0);
+            println!(
+                "{:<17} {:<18} {:>9} {:>9} {:>7.1}% {:>12.0} {:>8.1}x",
+                f.name,
+                mode,
+                f3(mean(rs.iter().map(|r| r.glare).collect())),
+                f3(mean(rs.iter().map(|r| r.other).collect())),
+                100.0 * mean(rs.iter().map(|r| Some(r.flagged)).collect()).unwrap_or(0.0),
+                bytes,
+                if bytes > 0.0 { raw / bytes } else { 0.0 },
+            );
+        }
+    }
+    if pairs >= 150 {
+        // Drift: the last 50 scored pairs against pairs 51–100.
+        println!("drift: EPE of the last 50 pairs / pairs 51-100 (mean over seeds)");
+        for f in &fams {
+            for (mode, _) in modes(0) {
+                let ratios: Vec<Option<f64>> = rows
+                    .iter()
+                    .filter(|r| r.family == f.name && r.mode == mode)
+                    .map(|r| {
+                        let n = r.per_pair.len();
+                        match (r.epe_over(n.saturating_sub(50)..n), r.epe_over(50..100)) {
+                            (Some(a), Some(b)) if b > 0.0 => Some(a / b),
+                            _ => None,
+                        }
+                    })
+                    .collect();
+                println!("{:<17} {:<18} {:>9}", f.name, mode, f3(mean(ratios)));
+            }
+        }
+    }
+    if let Some(p) = json_out {
+        std::fs::write(p, serde_json::to_string_pretty(&rows).unwrap_or_default())
+            .map_err(|e| CliError::Usage(format!("{}: {e}", p.display())))?;
+    }
+    Ok(())
+}
+
+fn flows(
+    seeds: &str,
+    only: Option<&[String]>,
+    json_out: Option<&PathBuf>,
+    vectors: Option<&Path>,
+    dense: bool,
+) -> Result<(), CliError> {
+    use spiv_host::bench::flows::{family_rows, FlowsRow, SPIV_FLOW, SPIV_FLOW_DENSE};
+    let seeds = parse_seeds(seeds)?;
+    let fams = chosen_families(only)?;
     let b = bar((fams.len() * seeds.len()) as u64, "recordings");
     let mut rows: Vec<FlowsRow> = Vec::new();
     for f in &fams {

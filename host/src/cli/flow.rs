@@ -233,5 +233,6 @@ fn flow_err(e: spiv_host::flow::FlowError) -> CliError {
         FlowError::Piv(p) => CliError::Piv(p),
         FlowError::Schedule(s) => CliError::Usage(s),
         FlowError::Core(c) => CliError::Usage(format!("core: {c}")),
+        FlowError::Wire(w) => CliError::Usage(format!("wire: {w}")),
     }
 }

@@ -95,7 +95,6 @@ impl Velocity {
     }
 }
 
-
 /// A flow on a grid of nodes as the core's warp takes it
 /// ([`spiv_core::warp::Flow`]), owned: node positions and spacing in
 /// 1/16 px, velocities Q12 px/tick and accelerations along the path
@@ -205,8 +204,7 @@ impl WarpFlow {
         };
         let q = |x: f64, k: f64| (fin(x) * k).round().clamp(-32768.0, 32767.0) as i16;
         let n = nx * ny;
-        let (mut vx, mut vy, mut ax, mut ay) =
-            (vec![0; n], vec![0; n], vec![0; n], vec![0; n]);
+        let (mut vx, mut vy, mut ax, mut ay) = (vec![0; n], vec![0; n], vec![0; n], vec![0; n]);
         for r in 0..ny {
             for c in 0..nx {
                 let (uu, vv) = (fin(u[[r, c]]), fin(v[[r, c]]));

@@ -7,6 +7,10 @@
 //! The sidecar's loop and `spiv flow` follow the same asks, so the frames
 //! are the same either way.
 
+use std::collections::VecDeque;
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use spiv_core::rungs::{Rungs, MAX_RUNGS};
 
 use super::ladder::{per_ticks, LadderSettings, Measurement};
@@ -87,5 +91,138 @@ impl Ask {
             }
         }
         r
+    }
+}
+
+/// How the estimator's asks reach the core. `spiv flow` delivers each at
+/// once ([`Delivery::default`]); a live downlink delivers them late by
+/// whole pairs, and loses some (a control the wire's CRC rejects is lost
+/// the same way). The core makes each pair with the last ask it has.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Delivery {
+    /// Pairs by which an ask arrives late: the ask measured after pair
+    /// `i` makes pair `i + 1 + late` on (0: the next pair).
+    pub late: usize,
+    /// Share of asks lost, 0–1.
+    pub loss: f64,
+    /// Seed of the losses.
+    pub seed: u64,
+}
+
+/// The asks on their way to the core ([`Delivery`]).
+#[derive(Debug)]
+pub struct Downlink {
+    delivery: Delivery,
+    rng: ChaCha8Rng,
+    sent: VecDeque<(usize, Ask)>,
+    current: Ask,
+    lost: usize,
+}
+
+impl Downlink {
+    /// Nothing sent yet: the core makes its pairs [`Ask::cold`].
+    pub fn new(delivery: Delivery, cfg: &LadderSettings) -> Downlink {
+        Downlink {
+            delivery,
+            rng: ChaCha8Rng::seed_from_u64(delivery.seed),
+            sent: VecDeque::new(),
+            current: Ask::cold(cfg),
+            lost: 0,
+        }
+    }
+
+    /// What the core makes pair `i` (counted from the loop's first) with.
+    pub fn ask_for(&mut self, i: usize) -> &Ask {
+        while let Some((at, _)) = self.sent.front() {
+            if *at > i {
+                break;
+            }
+            if let Some((_, a)) = self.sent.pop_front() {
+                self.current = a;
+            }
+        }
+        &self.current
+    }
+
+    /// Sends `ask`, measured after pair `i`.
+    pub fn send(&mut self, i: usize, ask: Ask) {
+        let loss = self.delivery.loss.clamp(0.0, 1.0);
+        if loss > 0.0 && self.rng.gen::<f64>() < loss {
+            self.lost += 1;
+            return;
+        }
+        self.sent.push_back((i + 1 + self.delivery.late, ask));
+    }
+
+    /// Asks lost so far.
+    pub fn lost(&self) -> usize {
+        self.lost
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn marked(reach: u32) -> Ask {
+        Ask {
+            flow: None,
+            rungs: Vec::new(),
+            reach,
+        }
+    }
+
+    /// An ask sent after pair `i` makes pair `i + 1 + late` on; until
+    /// then the core keeps the last one it has (cold at first).
+    #[test]
+    fn asks_arrive_late_by_whole_pairs() {
+        let cfg = LadderSettings::default();
+        let mut d = Downlink::new(
+            Delivery {
+                late: 2,
+                ..Delivery::default()
+            },
+            &cfg,
+        );
+        let mut seen = Vec::new();
+        for i in 0..6 {
+            seen.push(d.ask_for(i).reach);
+            d.send(i, marked(100 + i as u32));
+        }
+        let cold = cfg.bootstrap_reach;
+        assert_eq!(seen, vec![cold, cold, cold, 100, 101, 102]);
+        assert_eq!(d.lost(), 0);
+    }
+
+    /// Lost asks leave the core on the last one that arrived; the share
+    /// lost follows `loss`, and the same seed loses the same asks.
+    #[test]
+    fn lost_asks_keep_the_last_one() {
+        let cfg = LadderSettings::default();
+        let run = |seed| {
+            let mut d = Downlink::new(
+                Delivery {
+                    late: 0,
+                    loss: 0.25,
+                    seed,
+                },
+                &cfg,
+            );
+            let mut seen = Vec::new();
+            for i in 0..400 {
+                seen.push(d.ask_for(i).reach);
+                d.send(i, marked(1000 + i as u32));
+            }
+            (seen, d.lost())
+        };
+        let (seen, lost) = run(7);
+        assert!((70..130).contains(&lost), "{lost} of 400 lost at 25 %");
+        // Each pair uses the newest ask that arrived, a stale one exactly
+        // where the one before it was lost (the last ask sent is never
+        // used).
+        let stale = seen.windows(2).filter(|w| w[1] == w[0]).count();
+        assert!(stale == lost || stale + 1 == lost, "{stale} {lost}");
+        assert!(seen.windows(2).all(|w| w[1] >= w[0]));
+        assert_eq!(run(7), (seen, lost));
     }
 }

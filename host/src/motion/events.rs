@@ -99,6 +99,12 @@ impl Events {
         self.events.is_empty()
     }
 
+    /// The static rate of every stored pixel, 1/65536 spike per tick, as
+    /// of the end of the stretch.
+    pub fn rates(&self) -> &[u16] {
+        &self.rates
+    }
+
     /// The events of tick `t` (0 = the first held): stored pixel and sign.
     pub fn tick(&self, t: usize) -> &[(u32, i8)] {
         match (self.starts.get(t), self.starts.get(t + 1)) {
@@ -190,4 +196,3 @@ impl LightBuf {
         self.last.len() * LIGHT_BYTES_PER_PIXEL
     }
 }
-

@@ -203,7 +203,14 @@ impl Climb {
 
     /// Adds rung `s`'s field `f` (over `s` ticks) and frames; returns
     /// whether the rung measured (its field is usable).
-    fn add(&mut self, s: u32, f: &Field, frames: [Array2<f32>; 2], ms: f64, longest_bootstrap: u32) -> bool {
+    fn add(
+        &mut self,
+        s: u32,
+        f: &Field,
+        frames: [Array2<f32>; 2],
+        ms: f64,
+        longest_bootstrap: u32,
+    ) -> bool {
         let counts = f.counts();
         let measured = f.usable();
         let rung = per_tick(f, f64::from(s.max(2)));
@@ -211,9 +218,18 @@ impl Climb {
             unconfirmed(&mut self.best, &self.separation, &rung, longest_bootstrap);
         }
         let kept = keep(&mut self.best, &mut self.separation, &rung, s);
-        changes(&mut self.change, &self.separation, &rung, self.estimate.as_ref(), s);
+        changes(
+            &mut self.change,
+            &self.separation,
+            &rung,
+            self.estimate.as_ref(),
+            s,
+        );
         if self.rungs.iter().all(|r| r.kept < kept) {
-            self.frames = Some(RungFrames { separation: s, frames });
+            self.frames = Some(RungFrames {
+                separation: s,
+                frames,
+            });
         }
         self.rungs.push(Rung {
             separation: s,
@@ -242,12 +258,18 @@ impl Climb {
 /// the estimate so far, as far as the events reach. Every kept vector's
 /// uncertainty includes its change from the estimate that predicted its
 /// rung.
+///
+/// A field that is not usable is measured again by the dense ensemble;
+/// with `rescue`, so is a usable one with more than [`ENSEMBLE_FLAGGED`]
+/// of its vectors flagged (a pair that only starts the next one leaves
+/// `rescue` off: the next pair's first rung confirms or drops its field).
 pub fn measure(
     input: &PairInput,
     mid: u64,
     dt: f64,
     cfg: &LadderSettings,
     (w, h): (usize, usize),
+    rescue: bool,
 ) -> Result<Measurement, PivError> {
     let mut confirmed = None;
     let climb = match (&input.start, input.rungs.is_empty()) {
@@ -294,7 +316,8 @@ pub fn measure(
     let mut field = flow_map(&velocity, &dense_velocity(&velocity, h, w), dt);
     flag_uncertain(&mut field);
     let (_, _, invalid) = field.counts();
-    if !field.usable() || invalid as f64 > ENSEMBLE_FLAGGED * field.grid.len() as f64 {
+    let flagged = invalid as f64 > ENSEMBLE_FLAGGED * field.grid.len() as f64;
+    if !field.usable() || (rescue && flagged) {
         if let Some(m) = ensemble_pair(input, mid, dt, cfg, &rungs)? {
             return Ok(Measurement { confirmed, ..m });
         }
@@ -602,10 +625,44 @@ fn flow_map(e: &Field, vel: &Velocity, ticks: f64) -> Field {
         let (du, dv) = vel.displacement((x, y), ticks);
         o.u[idx] = du;
         o.v[idx] = dv;
-        let (a, b) = e.sigma[idx];
+        let (a, b) = path_sigma(e, idx, (du, dv));
         o.sigma[idx] = (a * ticks, b * ticks);
     }
     o
+}
+
+/// The uncertainty of the displacement that starts at node `idx` and
+/// moves by `(du, dv)` px: a displacement integrates the velocities along
+/// its path, so it is at least as uncertain as the measured nodes the
+/// straight path passes within half a grid step of (their root mean
+/// square), not only its own node. A path shorter than a step keeps the
+/// node's own.
+fn path_sigma(e: &Field, idx: (usize, usize), (du, dv): (f64, f64)) -> (f64, f64) {
+    let own = e.sigma[idx];
+    let step = e.grid.step as f64;
+    let len = du.hypot(dv);
+    if e.state[idx] == State::Invalid || len < step || !len.is_finite() {
+        return own;
+    }
+    let (x0, y0) = e.grid.centre(idx.0, idx.1);
+    let (mut n, mut su, mut sv) = (0usize, 0.0f64, 0.0f64);
+    for (r, c) in ndarray::indices(e.u.dim()) {
+        let (x, y) = e.grid.centre(r, c);
+        // Distance from the node to the segment (x0, y0) → (x0 + du, y0 + dv).
+        let t = (((x - x0) * du + (y - y0) * dv) / (len * len)).clamp(0.0, 1.0);
+        let d = (x - x0 - t * du).hypot(y - y0 - t * dv);
+        let (a, b) = e.sigma[[r, c]];
+        if d <= 0.5 * step && e.state[[r, c]] != State::Invalid && a.is_finite() && b.is_finite() {
+            n += 1;
+            su += a * a;
+            sv += b * b;
+        }
+    }
+    if n == 0 {
+        return own;
+    }
+    let (ru, rv) = ((su / n as f64).sqrt(), (sv / n as f64).sqrt());
+    (own.0.max(ru), own.1.max(rv))
 }
 
 /// The velocities a rung measured: each vector's displacement over `s`
@@ -729,7 +786,9 @@ fn changes(
     previous: Option<&Field>,
     s: u32,
 ) {
-    let c = change.get_or_insert_with(|| Array2::from_elem(f.u.dim(), (0.0, 0.0)));
+    // NaN: no estimate predicted the node's kept rung (the first rung of a
+    // climb from nothing).
+    let c = change.get_or_insert_with(|| Array2::from_elem(f.u.dim(), (f64::NAN, f64::NAN)));
     let (Some(sp), Some(p)) = (sep.as_ref(), previous) else {
         return;
     };
@@ -757,7 +816,8 @@ const CHANGE: f64 = 0.25;
 const FLOOR: f64 = 0.015;
 
 /// Scales each kept vector's correlation uncertainty by [`CORRELATION`]
-/// and adds its change from the estimate that predicted its rung ([`changes`]) times
+/// (where a change is known: a vector of a climb's first rung from
+/// nothing keeps it whole) and adds its change from the estimate that predicted its rung ([`changes`]) times
 /// [`CHANGE`] in quadrature. The constants were fitted on
 /// `spiv bench flows --seeds 1-3 --vectors` (every family but turbulence,
 /// whose errors no local model covers) for 60–76 % of error components
@@ -765,6 +825,11 @@ const FLOOR: f64 = 0.015;
 /// to 83 % (the paper's linear and quadratic profiles).
 fn with_change(b: &mut Field, change: &Array2<(f64, f64)>) {
     for (sg, &(cu, cv)) in b.sigma.iter_mut().zip(change.iter()) {
+        if cu.is_nan() || cv.is_nan() {
+            // No change to carry part of the noise: the correlation
+            // statistics' uncertainty stands whole.
+            continue;
+        }
         *sg = (
             (CORRELATION * sg.0).hypot(CHANGE * cu),
             (CORRELATION * sg.1).hypot(CHANGE * cv),
@@ -830,7 +895,10 @@ fn with_resolution(f: &mut Field, dt: f64) {
 
 /// Flags (invalid, no uncertainty) every vector of `f` (px per pair) whose
 /// standard uncertainty exceeds [`SIGMA_SHARE`] of the median measured
-/// displacement or [`SIGMA_FLOOR`], whichever is larger.
+/// displacement or [`SIGMA_FLOOR`], whichever is larger. When a valid
+/// vector goes, the replaced ones are filled again from the valid ones
+/// left (their values and uncertainties leaned on it) and flagged by the
+/// same bound.
 fn flag_uncertain(f: &mut Field) {
     let mut d: Vec<f64> =
         f.u.iter()
@@ -840,8 +908,27 @@ fn flag_uncertain(f: &mut Field) {
             .map(|((u, v), _)| u.hypot(*v))
             .collect();
     let bound = (SIGMA_SHARE * validate::median(&mut d)).max(SIGMA_FLOOR);
+    let mut dropped = false;
     for (st, sg) in f.state.iter_mut().zip(f.sigma.iter_mut()) {
         if *st != State::Invalid && sg.0.hypot(sg.1) > bound {
+            dropped |= *st == State::Valid;
+            *st = State::Invalid;
+            *sg = NO_SIGMA;
+        }
+    }
+    if !dropped {
+        return;
+    }
+    let replaced = f.state.mapv(|st| st == State::Replaced);
+    for (st, &r) in f.state.iter_mut().zip(replaced.iter()) {
+        if r {
+            *st = State::Invalid;
+        }
+    }
+    validate::replace(&mut f.u, &mut f.v, &mut f.state, &replaced, 4);
+    validate::replaced_uncertainty(&f.u, &f.v, &f.state, &mut f.sigma);
+    for (st, sg) in f.state.iter_mut().zip(f.sigma.iter_mut()) {
+        if *st == State::Replaced && sg.0.hypot(sg.1) > bound {
             *st = State::Invalid;
             *sg = NO_SIGMA;
         }

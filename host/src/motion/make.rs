@@ -154,7 +154,15 @@ impl PairMaker {
             let flow = WarpFlow::from_field(field, h, self.flip);
             self.frames.resize(2 * usize::from(rungs.count) * px, 0);
             rung_frames(&ring, &light, &flow.view(), mid, &rungs, &mut self.frames)?;
-            let frame = |k: usize| upright(&self.frames[k * px..(k + 1) * px], w, h, self.crop, self.flip);
+            let frame = |k: usize| {
+                upright(
+                    &self.frames[k * px..(k + 1) * px],
+                    w,
+                    h,
+                    self.crop,
+                    self.flip,
+                )
+            };
             input.rungs = rungs
                 .separations()
                 .iter()
@@ -170,7 +178,13 @@ impl PairMaker {
         };
         if r > 0 {
             let (a, b) = (mid.saturating_sub(r), mid.saturating_add(r).min(held.end));
-            input.events = Some(Events::from_ring(&ring, &light, (a, b), self.crop, self.flip));
+            input.events = Some(Events::from_ring(
+                &ring,
+                &light,
+                (a, b),
+                self.crop,
+                self.flip,
+            ));
         }
         Ok(input)
     }
@@ -184,7 +198,13 @@ pub fn input_of(planes: &Planes, mid: u64, ask: &Ask, reach: u32) -> Result<Pair
     let pb = (usize::from(w) * usize::from(h) / 8).max(1);
     let n = planes.data.len() / pb;
     let first = u32::try_from(planes.first).map_err(|_| Error::TickOverflow)?;
-    let mut m = PairMaker::new((w, h), usize::from(planes.crop_width), planes.flip, first, n + 1)?;
+    let mut m = PairMaker::new(
+        (w, h),
+        usize::from(planes.crop_width),
+        planes.flip,
+        first,
+        n + 1,
+    )?;
     let all: Vec<&[u8]> = planes.data.chunks_exact(pb).collect();
     m.train(&all[1.min(all.len())..], LIGHT_TRAIN)?;
     for p in &all {

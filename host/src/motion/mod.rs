@@ -13,6 +13,7 @@
 //!   on each, the most certain vector per node;
 //! - [`control`]: the loop between pairs — what the next pair is made
 //!   with, from what the estimator measured;
+//! - [`uplink`]: what a pair's frames and events cost on the wire;
 //! - [`ensemble`]: where window PIV cannot start the ladder, the dense
 //!   stage's one flow fitted to every pair of consecutive short frames,
 //!   each pair's disagreement with it the uncertainty.
@@ -23,6 +24,7 @@ pub mod ensemble;
 pub mod events;
 pub mod ladder;
 pub mod make;
+pub mod uplink;
 
 pub use compensate::{Velocity, WarpFlow};
 pub use events::Events;
