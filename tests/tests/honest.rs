@@ -186,7 +186,7 @@ fn a_wrong_prediction_is_not_confirmed() {
         };
         let input = input_of(&planes, 80, &ask, cfg.bootstrap_reach).expect("made");
         assert_eq!(input.rungs.len(), 3);
-        let m = measure(&input, 80, f64::from(dt), &cfg, size).expect("measures");
+        let m = measure(&input, 80, f64::from(dt), &cfg, size, true).expect("measures");
         assert_eq!(m.confirmed, Some(false), "prediction × {k} confirmed");
         let pr = PairResult {
             method: spiv_core::Method::Mc,
@@ -198,6 +198,7 @@ fn a_wrong_prediction_is_not_confirmed() {
             lost: Default::default(),
             rungs: m.rungs.clone(),
             separation: Vec::new(),
+            bytes: None,
         };
         let (v, r, i) = pr.counts();
         let pts: Vec<(f64, f64)> = pr.vectors.iter().map(|v| (v.x, v.y)).collect();
