@@ -873,7 +873,15 @@ fn docs_cli_names_every_option() {
         }
     }
     let bench = row("| `spiv bench");
-    for sub in ["paper", "blasius", "link", "speed", "turbulence", "flows"] {
+    for sub in [
+        "paper",
+        "blasius",
+        "link",
+        "speed",
+        "turbulence",
+        "flows",
+        "live",
+    ] {
         for o in options(&["bench", sub]) {
             let at = bench
                 .find(&format!("`spiv bench {sub}"))
