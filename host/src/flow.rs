@@ -1054,7 +1054,7 @@ fn measure_chain(
 /// It is not rescued by the dense ensemble when its field is usable
 /// (`ladder::measure`'s `rescue`): the first reported pair's first rung
 /// confirms or drops that field.
-pub const WARMUP: usize = 1;
+pub const WARMUP: usize = 2;
 
 /// Ticks of spikes the core's static-light model sees before a loop's
 /// first pair reads any (from the recording's start when it has fewer;
