@@ -406,8 +406,8 @@ pub fn replaced_uncertainty(
 /// left: the field a predictor interpolates between window centres. Left
 /// at zero, such a vector would pull the predictor of its measured
 /// neighbours towards zero over a whole grid step (a window beside a mask
-/// was measured 0.4–0.55 px short in a 2.3 px shift). The filled nodes
-/// are then relaxed to the harmonic fill of their hole ([`relax`]):
+/// was measured 0.4–0.55 px short in a 2.3 px shift). A hole with a rim
+/// all round is then relaxed to the harmonic fill of its rim ([`relax`]):
 /// growing inwards from every side, the fronts meet in a seam (a 6 × 7
 /// hole in a linear shear of 1 px per node row was filled with a 4 px
 /// step across its middle). All zero when nothing was measured.
@@ -425,73 +425,66 @@ pub fn extended(
         &Array2::from_elem((ny, nx), true),
         ny + nx,
     );
-    let free = state.mapv(|s| s == State::Invalid);
-    if free.iter().any(|&f| f) && state.iter().any(|&s| s != State::Invalid) {
-        relax(&mut u, &free, state);
-        relax(&mut v, &free, state);
+    let free = enclosed(state);
+    if free.iter().any(|&f| f) {
+        relax(&mut u, &free);
+        relax(&mut v, &free);
     }
     (u, v)
 }
 
-/// Relaxes the `free` nodes of `f` (Gauss–Seidel, the others held) until
-/// along each axis where a node has both neighbours it is their mean: the
-/// harmonic fill of each hole from its rim, with no curvature across the
-/// grid's border (a linear extrapolation there) and none mixed at its
-/// corners — exact for a field linear in x and y. Sweeps stop when no node moves by more than 1e-9 of
-/// the field's largest value, or after 64 per node of the grid's longer
-/// side.
-fn relax(f: &mut Array2<f64>, free: &Array2<bool>, state: &Array2<State>) {
+/// The invalid nodes of holes that do not reach the grid's border
+/// (4-connected): a hole with a rim all round.
+fn enclosed(state: &Array2<State>) -> Array2<bool> {
+    let (ny, nx) = state.dim();
+    let hole = |r: usize, c: usize| state[[r, c]] == State::Invalid;
+    // Flood from the invalid border nodes: what it reaches is open.
+    let mut open = Array2::from_elem((ny, nx), false);
+    let mut stack: Vec<(usize, usize)> = ndarray::indices((ny, nx))
+        .into_iter()
+        .filter(|&(r, c)| (r == 0 || c == 0 || r + 1 == ny || c + 1 == nx) && hole(r, c))
+        .collect();
+    while let Some((r, c)) = stack.pop() {
+        if open[[r, c]] {
+            continue;
+        }
+        open[[r, c]] = true;
+        for (rr, cc) in [
+            (r.wrapping_sub(1), c),
+            (r + 1, c),
+            (r, c.wrapping_sub(1)),
+            (r, c + 1),
+        ] {
+            if rr < ny && cc < nx && hole(rr, cc) && !open[[rr, cc]] {
+                stack.push((rr, cc));
+            }
+        }
+    }
+    Array2::from_shape_fn((ny, nx), |(r, c)| hole(r, c) && !open[[r, c]])
+}
+
+/// Relaxes the `free` nodes of `f` (enclosed: each has four neighbours)
+/// to the mean of their four neighbours, the others held (Gauss–Seidel):
+/// the harmonic fill of each hole from its rim, exact for a field linear
+/// in x and y and, by the maximum principle, within the rim's values.
+/// Sweeps stop when no node moves by more than 1e-9 of the field's
+/// largest value, or after 64 per node of the grid's longer side.
+fn relax(f: &mut Array2<f64>, free: &Array2<bool>) {
     let (ny, nx) = f.dim();
-    let held = f.clone();
     let range = f.iter().fold(0.0f64, |m, x| m.max(x.abs())).max(1e-12);
     for _ in 0..64 * ny.max(nx) {
         let mut moved = 0.0f64;
         for (r, c) in ndarray::indices((ny, nx)) {
-            if !free[[r, c]] {
+            if !free[[r, c]] || r == 0 || c == 0 || r + 1 == ny || c + 1 == nx {
                 continue;
             }
-            let (mut s, mut n) = (0.0, 0usize);
-            if r > 0 && r + 1 < ny {
-                s += 0.5 * (f[[r - 1, c]] + f[[r + 1, c]]);
-                n += 1;
-            }
-            if c > 0 && c + 1 < nx {
-                s += 0.5 * (f[[r, c - 1]] + f[[r, c + 1]]);
-                n += 1;
-            }
-            let new = if n > 0 {
-                s / n as f64
-            } else if ny > 1 && nx > 1 {
-                // A corner: no mixed curvature (the plane through the
-                // three nodes beside it).
-                let rr = if r > 0 { r - 1 } else { r + 1 };
-                let cc = if c > 0 { c - 1 } else { c + 1 };
-                f[[rr, c]] + f[[r, cc]] - f[[rr, cc]]
-            } else {
-                continue;
-            };
+            let new = 0.25 * (f[[r - 1, c]] + f[[r + 1, c]] + f[[r, c - 1]] + f[[r, c + 1]]);
             moved = moved.max((new - f[[r, c]]).abs());
             f[[r, c]] = new;
         }
         if moved <= 1e-9 * range {
             break;
         }
-    }
-    // The fill stays within one span of the measured values beyond them,
-    // else (a configuration the sweeps do not settle) the neighbours'
-    // fill stands.
-    let (lo, hi) = f
-        .iter()
-        .zip(state.iter())
-        .filter(|(_, s)| **s != State::Invalid)
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), (x, _)| {
-            (a.min(*x), b.max(*x))
-        });
-    let span = (hi - lo).max(1e-9);
-    if f.iter()
-        .any(|x| !x.is_finite() || *x < lo - span || *x > hi + span)
-    {
-        *f = held;
     }
 }
 
@@ -519,22 +512,16 @@ mod tests {
             assert!((x - u[idx]).abs() < 1e-6, "{idx:?}: {x} against {}", u[idx]);
         }
         assert!(ev.iter().all(|&x| (x - 0.5).abs() < 1e-9));
-        // A hole on the border (the bottom rows and a corner) continues
-        // the shear across it.
+        // A hole open to the border (the bottom rows) keeps the
+        // neighbours' fill: within the values around it.
         let mut st = Array2::from_elem((ny, nx), State::Valid);
         for r in 11..ny {
-            for c in 0..6 {
+            for c in 0..nx {
                 st[[r, c]] = State::Invalid;
             }
         }
-        let (eu, _) = extended(&u.mapv(|x| x), &v, &st);
-        for (idx, &x) in eu.indexed_iter() {
-            assert!(
-                (x - u[idx]).abs() < 1e-4,
-                "border {idx:?}: {x} against {}",
-                u[idx]
-            );
-        }
+        let (eu, _) = extended(&u, &v, &st);
+        assert!(eu.iter().all(|&x| (0.0..=17.5).contains(&x)), "{eu:?}");
     }
 
     #[test]
