@@ -892,3 +892,50 @@ fn docs_cli_names_every_option() {
         }
     }
 }
+
+/// `spiv bench live` on one family and seed: a row per delivery mode, the
+/// JSON rows with their bytes against the raw spikes, and one clear line
+/// for a pair count out of range.
+#[test]
+fn bench_live_reports_every_mode() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("live.json");
+    let out = ok(&[
+        "bench",
+        "live",
+        "--seeds",
+        "1",
+        "--families",
+        "uniform",
+        "--pairs",
+        "1",
+        "--json",
+        p(&json),
+    ]);
+    for mode in [
+        "spiv flow",
+        "1 pair late",
+        "3 pairs late",
+        "1 late, 10 % lost",
+    ] {
+        assert!(
+            out.lines()
+                .any(|l| l.starts_with("uniform") && l.contains(mode)),
+            "{out}"
+        );
+    }
+    let rows: Vec<serde_json::Value> =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(rows.len(), 4);
+    for r in &rows {
+        let (b, raw) = (
+            r["bytes_per_pair"].as_f64().unwrap(),
+            r["raw_per_pair"].as_f64().unwrap(),
+        );
+        assert!(b > 0.0 && b < raw, "{r}");
+        // Uniform 0.56 px per pair: measured to a few hundredths.
+        assert!(r["other"].as_f64().unwrap() < 0.05, "{r}");
+    }
+    let err = fails(&["bench", "live", "--pairs", "0"]);
+    assert!(err.contains("--pairs 0"), "{err}");
+}

@@ -93,7 +93,12 @@ pub fn live_rows(fam: &Family, seed: u64, pairs: usize) -> Result<Vec<LiveRow>, 
     let every = 4 * dt;
     let wanted = SKIPPED + pairs;
     // The longest rung's reach on both sides, and the pairs between.
-    let reach = 2 * (crate::motion::ladder::SEPARATIONS[5] + 16);
+    let longest = crate::motion::ladder::SEPARATIONS
+        .iter()
+        .copied()
+        .max()
+        .unwrap_or(0);
+    let reach = 2 * (longest + u32::from(spiv_core::light::MAX_TOLERANCE));
     let mut req = Request::new(p.clone(), seed);
     req.ticks = Some(reach + every * (wanted as u32 + 2));
     let (data, sim) = simulate_planes(&req)?;
