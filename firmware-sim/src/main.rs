@@ -107,7 +107,7 @@ struct Args {
     #[arg(long, value_name = "MS", default_value_t = 0)]
     control_wait: u64,
     /// Faults per control message on the downlink (as --fault).
-    #[arg(long, value_name = "SPEC")]
+    #[arg(long, value_name = "FAULTS")]
     control_fault: Option<String>,
     /// Adaptive/TFI window limit n_max, or the TFP window, ticks.
     #[arg(long)]
