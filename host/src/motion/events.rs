@@ -11,7 +11,7 @@
 //! `spiv bench flows`) and one `u16` per pixel.
 
 use ndarray::Array2;
-use spiv_core::light::{Event, Light, LightState, LIGHT_BYTES_PER_PIXEL};
+use spiv_core::light::{Event, Light};
 use spiv_core::rungs::EventRing;
 use spiv_core::warp::{scatter, subtract_rates, Window, SCALE};
 
@@ -155,44 +155,4 @@ pub fn upright(acc: &[i16], sw: usize, h: usize, w: usize, flip: bool) -> Array2
         let sr = if flip { h - 1 - r } else { r };
         f32::from(acc[sr * sw + c]) * k
     })
-}
-
-/// The core's static-light model and event ring, owned (a host's
-/// [`Light`] and [`EventRing`] borrow these buffers).
-#[derive(Debug)]
-pub struct LightBuf {
-    last: Vec<u16>,
-    period: Vec<u16>,
-    rate: Vec<u32>,
-    short: Vec<u16>,
-    flags: Vec<u8>,
-}
-
-impl LightBuf {
-    /// Buffers for `px` pixels.
-    pub fn new(px: usize) -> LightBuf {
-        LightBuf {
-            last: vec![0; px],
-            period: vec![0; px],
-            rate: vec![0; px],
-            short: vec![0; px],
-            flags: vec![0; px],
-        }
-    }
-
-    /// The state the core borrows.
-    pub fn state(&mut self) -> LightState<'_> {
-        LightState {
-            last: &mut self.last,
-            period: &mut self.period,
-            rate: &mut self.rate,
-            short: &mut self.short,
-            flags: &mut self.flags,
-        }
-    }
-
-    /// Bytes held.
-    pub fn bytes(&self) -> usize {
-        self.last.len() * LIGHT_BYTES_PER_PIXEL
-    }
 }

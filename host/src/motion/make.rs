@@ -4,6 +4,7 @@
 //! [`PairInput`] as the estimator asked for it ([`Ask`]) — the same
 //! frames a sidecar sends.
 
+use spiv_core::buffers::LightBuf;
 use spiv_core::light::{Light, LightClock, MAX_TOLERANCE};
 use spiv_core::plane::PlaneView;
 use spiv_core::rungs::{rung_frames, EventRing, RingCursor};
@@ -11,7 +12,7 @@ use spiv_core::Error;
 
 use super::compensate::WarpFlow;
 use super::control::Ask;
-use super::events::{upright, Events, LightBuf};
+use super::events::{upright, Events};
 use super::ladder::PairInput;
 use crate::reconstruct::Planes;
 
