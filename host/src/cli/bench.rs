@@ -138,6 +138,17 @@ pub fn run(a: &BenchArgs) -> Result<(), CliError> {
     }
 }
 
+/// The mean of the values present, `None` when none is.
+fn mean(xs: Vec<Option<f64>>) -> Option<f64> {
+    let v: Vec<f64> = xs.into_iter().flatten().collect();
+    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+}
+
+/// Three decimals, or "-" for nothing.
+fn f3(x: Option<f64>) -> String {
+    x.map_or("-".to_string(), |x| format!("{x:.3}"))
+}
+
 /// Seeds from "A-B", "N" or "A,B,C": each 1..=1_000_000, at most 1000.
 fn parse_seeds(s: &str) -> Result<Vec<u64>, CliError> {
     let bad = || CliError::Usage(format!("--seeds {s}: expected A-B, N or a list like 1,2,7"));
@@ -207,11 +218,6 @@ fn live(
         "{:<17} {:<18} {:>9} {:>9} {:>8} {:>12} {:>9}",
         "family", "mode", "glare", "other", "flagged", "bytes/pair", "raw/wire"
     );
-    let mean = |xs: Vec<Option<f64>>| {
-        let v: Vec<f64> = xs.into_iter().flatten().collect();
-        (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
-    };
-    let f3 = |x: Option<f64>| x.map_or("-".to_string(), |x| format!("{x:.3}"));
     for f in &fams {
         for (mode, _) in modes(0) {
             let rs: Vec<&LiveRow> = rows
@@ -288,11 +294,6 @@ fn flows(
         "{:<17} {:<mw$} {:>9} {:>9} {:>8} {:>9} {:>9} {:>10} {:>9}",
         "family", "method", "glare", "other", "flagged", "coverage", "dense", "mean |d|", "ms/pair"
     );
-    let mean = |xs: Vec<Option<f64>>| {
-        let v: Vec<f64> = xs.into_iter().flatten().collect();
-        (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
-    };
-    let f3 = |x: Option<f64>| x.map_or("-".to_string(), |x| format!("{x:.3}"));
     for f in &fams {
         let flow = if dense { SPIV_FLOW_DENSE } else { SPIV_FLOW };
         for method in ["frame camera", "TFP 8", flow] {
