@@ -35,7 +35,7 @@ use spiv_formats::npz::read_npz_spikes;
 use spiv_formats::{FormatError, State, Vector};
 
 use crate::dwell::{adaptive_banded, caps_for};
-use crate::motion::control::{Ask, Delivery, Downlink};
+use crate::motion::control::{Ask, AskLink, Delivery};
 use crate::motion::ladder::{self, LadderSettings, Rung};
 use crate::motion::make::{PairMaker, LIGHT_TRAIN};
 use crate::motion::uplink::{pair_bytes, PairBytes};
@@ -1116,7 +1116,7 @@ fn ladder_loop(
         let planes: Vec<&[u8]> = pl.data.chunks_exact(pb).collect();
         maker.train(&planes, LIGHT_TRAIN)?;
     }
-    let mut link = Downlink::new(opts.delivery, cfg);
+    let mut link = AskLink::new(opts.delivery, cfg);
     let mut out = Chain::default();
     let mut read = first_read;
     for (i, &(mid, reported)) in all.iter().enumerate() {

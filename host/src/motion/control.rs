@@ -111,7 +111,7 @@ pub struct Delivery {
 
 /// The asks on their way to the core ([`Delivery`]).
 #[derive(Debug)]
-pub struct Downlink {
+pub struct AskLink {
     delivery: Delivery,
     rng: ChaCha8Rng,
     sent: VecDeque<(usize, Ask)>,
@@ -119,10 +119,10 @@ pub struct Downlink {
     lost: usize,
 }
 
-impl Downlink {
+impl AskLink {
     /// Nothing sent yet: the core makes its pairs [`Ask::cold`].
-    pub fn new(delivery: Delivery, cfg: &LadderSettings) -> Downlink {
-        Downlink {
+    pub fn new(delivery: Delivery, cfg: &LadderSettings) -> AskLink {
+        AskLink {
             delivery,
             rng: ChaCha8Rng::seed_from_u64(delivery.seed),
             sent: VecDeque::new(),
@@ -177,7 +177,7 @@ mod tests {
     #[test]
     fn asks_arrive_late_by_whole_pairs() {
         let cfg = LadderSettings::default();
-        let mut d = Downlink::new(
+        let mut d = AskLink::new(
             Delivery {
                 late: 2,
                 ..Delivery::default()
@@ -200,7 +200,7 @@ mod tests {
     fn lost_asks_keep_the_last_one() {
         let cfg = LadderSettings::default();
         let run = |seed| {
-            let mut d = Downlink::new(
+            let mut d = AskLink::new(
                 Delivery {
                     late: 0,
                     loss: 0.25,

@@ -47,8 +47,15 @@ impl Link for Count {
     }
 }
 
+/// A sender's payload and message buffers, allocated once per pair.
+struct Buffers {
+    payload: Vec<u8>,
+    wire: Vec<u8>,
+}
+
 /// Bytes of `frame` (`width × height` levels) sent as `Context` tiles.
 fn frame_bytes<G: spiv_core::gray::Gray>(
+    bufs: &mut Buffers,
     frame: &mut [G],
     width: usize,
     height: usize,
@@ -60,13 +67,11 @@ fn frame_bytes<G: spiv_core::gray::Gray>(
     );
     let rows = tile_rows(w, h, wide, Lossy::DEFAULT.block);
     let mut sender = Sender::new(w, h, rows)?;
-    let mut payload = vec![0u8; MAX_PAYLOAD];
-    let mut wire = vec![0u8; MAX_ENCODED];
-    let mut scratch: Vec<u16> = Vec::new();
     let mut buf = SendBuffers {
-        payload: &mut payload,
-        wire: &mut wire,
-        scratch: &mut scratch,
+        payload: &mut bufs.payload,
+        wire: &mut bufs.wire,
+        // `Context` tiles need no scratch.
+        scratch: &mut [],
     };
     let info = FrameInfo {
         slot: Slot {
@@ -98,6 +103,10 @@ fn frame_bytes<G: spiv_core::gray::Gray>(
 /// What `input` costs on the wire.
 pub fn pair_bytes(input: &PairInput) -> Result<PairBytes, WireError> {
     let mut out = PairBytes::default();
+    let mut bufs = Buffers {
+        payload: vec![0u8; MAX_PAYLOAD],
+        wire: vec![0u8; MAX_ENCODED],
+    };
     for (_, frames) in &input.rungs {
         for f in frames {
             let (h, w) = f.dim();
@@ -107,7 +116,7 @@ pub fn pair_bytes(input: &PairInput) -> Result<PairBytes, WireError> {
                 .iter()
                 .map(|&x| (x - low).round().clamp(0.0, f32::from(u16::MAX)) as u16)
                 .collect();
-            out.rung_frames += 2 + frame_bytes(&mut levels, w, h, true)?;
+            out.rung_frames += 2 + frame_bytes(&mut bufs, &mut levels, w, h, true)?;
         }
     }
     if let Some(ev) = &input.events {
@@ -120,10 +129,10 @@ pub fn pair_bytes(input: &PairInput) -> Result<PairBytes, WireError> {
                     *p = if sign > 0 { 2 } else { 1 };
                 }
             }
-            out.events += frame_bytes(&mut plane, w, h, false)?;
+            out.events += frame_bytes(&mut bufs, &mut plane, w, h, false)?;
         }
         let mut rates = ev.rates().to_vec();
-        out.rates += frame_bytes(&mut rates, w, h, true)?;
+        out.rates += frame_bytes(&mut bufs, &mut rates, w, h, true)?;
     }
     Ok(out)
 }
