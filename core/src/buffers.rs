@@ -222,6 +222,7 @@ pub struct LightBuf {
     period: Vec<u16>,
     rate: Vec<u32>,
     short: Vec<u16>,
+    lead: Vec<i8>,
     flags: Vec<u8>,
 }
 
@@ -233,6 +234,7 @@ impl LightBuf {
             period: vec![0; pixels],
             rate: vec![0; pixels],
             short: vec![0; pixels],
+            lead: vec![0; pixels],
             flags: vec![0; pixels],
         }
     }
@@ -245,6 +247,7 @@ impl LightBuf {
             period: &mut self.period,
             rate: &mut self.rate,
             short: &mut self.short,
+            lead: &mut self.lead,
             flags: &mut self.flags,
         }
     }

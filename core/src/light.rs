@@ -19,14 +19,24 @@
 //! spike's charge):
 //!
 //! - a spike of a periodic pixel `P − early ..= P + late` ticks after its
-//!   last spike was predicted: no event;
+//!   last spike was predicted — unless the train has run ahead of its
+//!   period chain: each such spike adds its interval's deviation from the
+//!   Q4 period to the pixel's *lead* (leaking an eighth per spike), and
+//!   once the lead is more than [`LEAD`] (a tick and a half) and `early`
+//!   ahead, the spike is an extra one (event `+1`) and the lead gives a
+//!   period back. At short periods (glare: a period of 2.3 ticks fires
+//!   intervals of 2 and 3) a particle's light shortens no interval by a
+//!   whole tick, and shows only in the sum;
 //! - any other spike: event `+1` at its tick;
 //! - a periodic pixel silent `P + late` ticks after its last spike: event
 //!   `−1` at tick `last + P` (the prediction that did not come), settled
 //!   `late` ticks later, and one agreement less.
 //!
-//! Intervals shorter than the period (light added for a while: a
-//! particle, however slowly it crosses) leave the period as it was until
+//! An interval within a tick (or a fifth of the period, when that is more)
+//! of the period agrees with it and moves it by a sixteenth of the
+//! difference, rounded with a dither so that the period is the mean
+//! interval ([`dithered_step`]). Intervals shorter than that (light added
+//! for a while: a particle, however slowly it crosses) leave the period as it was until
 //! they have lasted [`RELEARN_TICKS`]; a longer one costs two agreements,
 //! and the period is learnt again when none are left. A pixel that is not periodic (too dark to have shown its period
 //! yet, or too irregular) predicts no spike times: its static light is its
@@ -38,7 +48,7 @@
 //! Units: ticks (one plane), pixels of the stored row order; periods in
 //! 1/16 tick (Q4); rates in 1/65536 spike per tick (Q16).
 //!
-//! Memory: [`LIGHT_BYTES_PER_PIXEL`] bytes per pixel in four
+//! Memory: [`LIGHT_BYTES_PER_PIXEL`] bytes per pixel in six
 //! caller-supplied slices ([`LightState`]); nothing else.
 
 use crate::error::Error;
@@ -59,6 +69,17 @@ pub const MAX_CONFIDENCE: u8 = 7;
 /// their rate.
 pub const MAX_PERIOD: u16 = 4095;
 
+/// Lead, Q4 ticks, by which a periodic pixel's spikes may run ahead of
+/// its period chain, summed over its spikes ([`LEAD_LEAK`]), before one of
+/// them counts as extra: a tick and a half. At short periods (glare) every
+/// interval is a whole number of ticks around a fractional period, so a
+/// particle's light shows only in the sum.
+pub const LEAD: i32 = 24;
+
+/// The lead keeps 1 − 1/2^`LEAD_LEAK` of itself per spike (the sensor's
+/// phase noise does not add up).
+pub const LEAD_LEAK: u32 = 3;
+
 /// Largest late [`tolerance`], ticks: the longest an event waits to be
 /// settled.
 pub const MAX_TOLERANCE: u16 = 16;
@@ -74,15 +95,28 @@ pub const RELEARN_TICKS: u16 = 512;
 /// each new tick; over the first ticks the plain mean).
 pub const RATE_TICKS: u32 = 256;
 
-/// A settled period moves by 1/2^`SETTLED_SHIFT` of each agreeing
-/// interval's difference from it.
+/// A settled period of at least 16 ticks moves by 1/2^`SETTLED_SHIFT` of
+/// each agreeing interval's difference from it; a shorter one by a
+/// smaller share ([`settled_shift`]).
 pub const SETTLED_SHIFT: u32 = 4;
+
+/// The shift by which a settled period of `per` (Q4) learns: [`SETTLED_SHIFT`]
+/// and one more for each halving of the period below 16 ticks (8 at a
+/// period of 1 tick), so that it learns over about 256 ticks at any
+/// period. Per spike, a glare pixel's period would otherwise learn a
+/// slow particle that lingers a hundred ticks as its own light.
+#[inline]
+pub fn settled_shift(per: u16) -> u32 {
+    let whole = (per >> 4).max(1);
+    let log2 = 15 - whole.leading_zeros();
+    SETTLED_SHIFT + 4u32.saturating_sub(log2)
+}
 
 /// One spike per tick in the rate's state (Q24).
 const RATE_ONE: i64 = 1 << 24;
 
 /// Bytes of state per pixel.
-pub const LIGHT_BYTES_PER_PIXEL: usize = 11;
+pub const LIGHT_BYTES_PER_PIXEL: usize = 12;
 
 /// Flag bit of a pixel that has spiked at least once.
 const SPIKED: u8 = 0x80;
@@ -115,6 +149,8 @@ pub struct LightState<'a> {
     pub rate: &'a mut [u32],
     /// Ticks of short intervals since the last agreeing one.
     pub short: &'a mut [u16],
+    /// The train's lead on its period chain, Q4 ticks ([`LEAD`]).
+    pub lead: &'a mut [i8],
     /// Bit 7: has spiked; bits 0–3: agreements with the period.
     pub flags: &'a mut [u8],
 }
@@ -174,6 +210,7 @@ impl<'a> Light<'a> {
         s.period[..px].fill(0);
         s.rate[..px].fill(0);
         s.short[..px].fill(0);
+        s.lead[..px].fill(0);
         s.flags[..px].fill(0);
         Ok(light)
     }
@@ -193,6 +230,7 @@ impl<'a> Light<'a> {
             .min(state.period.len())
             .min(state.rate.len())
             .min(state.short.len())
+            .min(state.lead.len())
             .min(state.flags.len());
         if got < px {
             return Err(Error::BufferTooSmall { needed: px, got });
@@ -284,10 +322,17 @@ impl<'a> Light<'a> {
                 let late = tolerance(p);
                 let periodic = flags & SPIKED != 0 && flags & COUNT >= CONFIDENT;
                 if spike {
-                    let matched = periodic
-                        && since.saturating_add(early_tolerance(p)) >= p
+                    let early = early_tolerance(p);
+                    let in_window = periodic
+                        && since.saturating_add(early) >= p
                         && since <= p.saturating_add(late);
-                    if !matched {
+                    let (extra, lead) = if in_window {
+                        ahead(st.lead[i], since, st.period[i], early)
+                    } else {
+                        (true, 0)
+                    };
+                    st.lead[i] = lead;
+                    if extra {
                         sink(Event {
                             index: i as u32,
                             tick: t,
@@ -295,7 +340,7 @@ impl<'a> Light<'a> {
                         });
                     }
                     if flags & SPIKED != 0 {
-                        learn(st, i, since);
+                        learn(st, i, since, t16);
                     }
                     st.last[i] = t16;
                     st.flags[i] |= SPIKED;
@@ -333,9 +378,41 @@ impl<'a> Light<'a> {
     }
 }
 
+/// Whether a spike `since` ticks after the last, within its periodic
+/// pixel's window (period `per`, Q4; early tolerance `early` ticks), is an
+/// extra one, and the train's new lead (Q4 ticks, [`LEAD`]): the lead
+/// gains the spike's deviation from the period and leaks 1/2^[`LEAD_LEAK`]
+/// of itself; past [`LEAD`] and the early tolerance ahead, the spike is
+/// extra (`+1`) and the lead gives back one period.
+#[inline]
+fn ahead(lead: i8, since: u16, per: u16, early: u16) -> (bool, i8) {
+    let mut acc = i32::from(lead) + i32::from(since) * 16 - i32::from(per);
+    acc -= acc >> LEAD_LEAK;
+    let extra = acc < -(LEAD + 16 * i32::from(early));
+    if extra {
+        acc += i32::from(per);
+    }
+    (
+        extra,
+        acc.clamp(i32::from(i8::MIN), i32::from(i8::MAX)) as i8,
+    )
+}
+
+/// A step of `d` (Q4) scaled by 2^−`shift` and rounded by the dither of
+/// tick `t`: `⌊(d + u) / 2^shift⌋` with `u` the top `shift` bits of the
+/// tick's multiplicative hash, so that over many ticks the step is `d /
+/// 2^shift` on average. (A plain shift floors: it pulled every period down
+/// by up to a tick, and a glare pixel of period 2.1 ticks came to expect
+/// 1, so each of its 3-tick intervals was an event of static light.)
+#[inline]
+pub fn dithered_step(d: i32, shift: u32, t: u16) -> i32 {
+    let u = (u32::from(t).wrapping_mul(0x9E37_79B9) >> (32 - shift)) as i32;
+    (d + u) >> shift
+}
+
 /// Updates pixel `i`'s period and agreements with a new interval of
-/// `since` ticks.
-fn learn(st: &mut LightState<'_>, i: usize, since: u16) {
+/// `since` ticks, ending at tick `t` (mod 2^16).
+fn learn(st: &mut LightState<'_>, i: usize, since: u16, t: u16) {
     let flags = st.flags[i];
     let count = flags & COUNT;
     let per = st.period[i];
@@ -347,20 +424,19 @@ fn learn(st: &mut LightState<'_>, i: usize, since: u16) {
     } else {
         let iv = since * 16;
         let d = i32::from(iv) - i32::from(per);
-        // An interval agrees within a fifth of the period, and at least
-        // half a tick early or a tick late (the phase of a period that is
-        // not a whole number of ticks shows as a tick late).
-        let bound = i32::from(per) / 5;
-        let agrees = if d < 0 {
-            -d <= bound.max(8)
-        } else {
-            d <= bound.max(16)
-        };
+        // An interval agrees within a fifth of the period, and at least a
+        // tick either way (a period that is not a whole number of ticks
+        // fires the whole ticks on both sides of it).
+        let agrees = d.abs() <= (i32::from(per) / 5).max(16);
         if agrees {
             // Learnt fast at first, then slowly: a particle that lingers
             // on the pixel does not become its static light.
-            let shift = if count >= CONFIDENT { SETTLED_SHIFT } else { 1 };
-            let per = (i32::from(per) + (d >> shift)) as u16;
+            let shift = if count >= CONFIDENT {
+                settled_shift(per)
+            } else {
+                1
+            };
+            let per = (i32::from(per) + dithered_step(d, shift, t)) as u16;
             (per, (count + 1).min(MAX_CONFIDENCE), 0)
         } else if d < 0 && short.saturating_add(since) < RELEARN_TICKS {
             (per, count, short + since)
@@ -446,6 +522,64 @@ mod tests {
         let after: Vec<_> = ev.iter().filter(|e| e.0 > last_spike).collect();
         assert_eq!(after.len(), 1, "{ev:?}");
         assert_eq!(after[0].1, -1);
+    }
+
+    /// An integrate-and-fire pixel's train: `light(t)` thresholds per
+    /// tick, each tick's charge off by up to ±3 % (a fixed pseudo-random
+    /// sequence: the sensor's photon noise).
+    fn fire(ticks: usize, light: impl Fn(usize) -> f64) -> Vec<u8> {
+        let mut charge = 0.37;
+        let mut noise: u32 = 12345;
+        (0..ticks)
+            .map(|t| {
+                noise = noise.wrapping_mul(1_103_515_245).wrapping_add(12345);
+                let jitter = f64::from(noise >> 16) / 65536.0 * 0.06 - 0.03;
+                charge += light(t) * (1.0 + jitter);
+                let s = charge >= 1.0;
+                if s {
+                    charge -= 1.0;
+                }
+                u8::from(s)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn glare_of_a_fractional_period_is_quiet_and_added_light_is_not() {
+        // Periods of 2.3, 2.5 and 2.8 ticks: intervals of 2 and 3 ticks.
+        for light in [1.0 / 2.3, 0.4, 1.0 / 2.8] {
+            let train = fire(3000, |_| light);
+            let (ev, periodic, _) = events(&train);
+            assert!(periodic, "{light}");
+            let late = ev.iter().filter(|e| e.0 >= 200).count();
+            assert!(late <= 6, "{light}: {late} events of static light");
+        }
+        // A particle adds 30 % for 40 ticks: about 5 extra spikes, which
+        // show as events though every interval is still 2 or 3 ticks.
+        let base = 1.0 / 2.3;
+        let lit = |t: usize| {
+            if (2000..2040).contains(&t) {
+                1.3 * base
+            } else {
+                base
+            }
+        };
+        let train = fire(3000, lit);
+        let extra = train[2000..2040]
+            .iter()
+            .map(|&s| usize::from(s))
+            .sum::<usize>() as f64
+            - 40.0 * base;
+        let (ev, _, _) = events(&train);
+        let seen = ev
+            .iter()
+            .filter(|e| (2000..2060).contains(&e.0) && e.1 > 0)
+            .count() as f64;
+        assert!(extra > 4.0, "{extra}");
+        assert!(
+            seen >= 0.5 * extra && seen <= extra + 2.0,
+            "{seen} events for {extra} extra spikes"
+        );
     }
 
     #[test]

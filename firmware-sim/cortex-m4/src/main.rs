@@ -120,6 +120,7 @@ struct LightRam {
     period: [u16; LIGHT_PX],
     rate: [u32; LIGHT_PX],
     short: [u16; LIGHT_PX],
+    lead: [i8; LIGHT_PX],
     flags: [u8; LIGHT_PX],
     entries: [u32; LIGHT_EVENTS],
     starts: [u32; LIGHT_TICKS],
@@ -370,6 +371,7 @@ fn light() -> Result<(), Failure> {
         period: [0; LIGHT_PX],
         rate: [0; LIGHT_PX],
         short: [0; LIGHT_PX],
+        lead: [0; LIGHT_PX],
         flags: [0; LIGHT_PX],
         entries: [0; LIGHT_EVENTS],
         starts: [0; LIGHT_TICKS],
@@ -381,6 +383,7 @@ fn light() -> Result<(), Failure> {
         period: &mut ram.period,
         rate: &mut ram.rate,
         short: &mut ram.short,
+        lead: &mut ram.lead,
         flags: &mut ram.flags,
     };
     let mut model = Light::new(W, LIGHT_H, 0, state)?;

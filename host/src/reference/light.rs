@@ -15,8 +15,8 @@
 
 use super::SpikeVolume;
 use spiv_core::light::{
-    early_tolerance, tolerance, CONFIDENT, MAX_CONFIDENCE, MAX_PERIOD, RATE_TICKS, RELEARN_TICKS,
-    SETTLED_SHIFT,
+    early_tolerance, tolerance, CONFIDENT, LEAD, LEAD_LEAK, MAX_CONFIDENCE, MAX_PERIOD, RATE_TICKS,
+    RELEARN_TICKS, SETTLED_SHIFT,
 };
 
 /// One pixel's model, in the reference's terms.
@@ -29,6 +29,8 @@ struct Pixel {
     count: u8,
     /// Ticks of short intervals since the last agreeing one.
     short: u32,
+    /// Lead on the period chain, 1/16 tick.
+    lead: i32,
     /// Mean rate, spikes per tick.
     rate: f64,
 }
@@ -63,11 +65,28 @@ pub fn events(vol: &SpikeVolume) -> Events {
             let early = i64::from(early_tolerance(per as u16));
             let periodic = p.spiked && p.count >= CONFIDENT;
             if s {
-                if !(periodic && since + early >= per && since <= per + late) {
+                let extra = if periodic && since + early >= per && since <= per + late {
+                    // The lead on the period chain gains the deviation,
+                    // leaks an eighth (floored), and gives a period back
+                    // past a tick and a half (and the early tolerance)
+                    // ahead.
+                    let mut lead = p.lead + (since * 16) as i32 - p.period;
+                    lead -= (f64::from(lead) / f64::from(1u32 << LEAD_LEAK)).floor() as i32;
+                    let extra = lead < -(LEAD + 16 * early as i32);
+                    if extra {
+                        lead += p.period;
+                    }
+                    p.lead = lead.clamp(-128, 127);
+                    extra
+                } else {
+                    p.lead = 0;
+                    true
+                };
+                if extra {
                     out.push((i as u32, tick as u32, 1));
                 }
                 if p.spiked {
-                    learn(p, since);
+                    learn(p, since, tick as u16);
                 }
                 p.last = tick;
                 p.spiked = true;
@@ -88,7 +107,7 @@ pub fn events(vol: &SpikeVolume) -> Events {
     (out, rates, periodic)
 }
 
-fn learn(p: &mut Pixel, since: i64) {
+fn learn(p: &mut Pixel, since: i64, t: u16) {
     if since > i64::from(MAX_PERIOD) {
         (p.period, p.count, p.short) = (0, 0, 0);
         return;
@@ -101,17 +120,24 @@ fn learn(p: &mut Pixel, since: i64) {
     let d = iv - p.period;
     let bound = p.period / 5;
     let agrees = if d < 0 {
-        -d <= bound.max(8)
+        -d <= bound.max(16)
     } else {
         d <= bound.max(16)
     };
     if agrees {
         let shift = if p.count >= CONFIDENT {
-            SETTLED_SHIFT
+            // One more halving of the step per halving of the period below
+            // 16 ticks.
+            let whole = f64::from((p.period >> 4).max(1));
+            SETTLED_SHIFT + (4.0 - whole.log2().floor()).max(0.0) as u32
         } else {
             1
         };
-        p.period += d >> shift;
+        // The core's dither: the top `shift` bits of the tick's
+        // multiplicative hash (mod 2^32), added before flooring.
+        let hash = (u64::from(t) * 0x9E37_79B9) % (1 << 32);
+        let u = (hash >> (32 - shift)) as f64;
+        p.period += ((f64::from(d) + u) / f64::from(1u32 << shift)).floor() as i32;
         p.count = (p.count + 1).min(MAX_CONFIDENCE);
         p.short = 0;
     } else if d < 0 && p.short + (since as u32) < u32::from(RELEARN_TICKS) {
