@@ -1116,7 +1116,7 @@ fn ladder_loop(
         let planes: Vec<&[u8]> = pl.data.chunks_exact(pb).collect();
         maker.train(&planes, LIGHT_TRAIN)?;
     }
-    let mut link = AskLink::new(opts.delivery, cfg);
+    let mut link = AskLink::new(opts.delivery, cfg, (sw, h), rec.flip);
     let mut out = Chain::default();
     let mut read = first_read;
     for (i, &(mid, reported)) in all.iter().enumerate() {
@@ -1140,7 +1140,7 @@ fn ladder_loop(
         if let Some(mask) = &opts.mask {
             masked_out(&mut m.field, mask);
         }
-        link.send(i, Ask::after(&m, dt as f64, cfg));
+        link.send(i, Ask::after(&m, dt as f64, cfg))?;
         if !reported {
             continue;
         }

@@ -1,6 +1,8 @@
 //! The loop between the core and the estimator as a live downlink runs it:
 //! the estimator's asks arrive late by whole pairs, and some are lost
-//! (`FlowOptions::delivery`). On a steady flow the loop stays as accurate
+//! or corrupted (`FlowOptions::delivery`: each ask goes as its wire
+//! messages, which the core hears through its CRC and checks). On a steady
+//! flow the loop stays as accurate
 //! as `spiv flow` (asks at once) after its first pairs, and what each pair
 //! costs on the wire is counted.
 
@@ -28,10 +30,10 @@ fn after_third(out: &FlowOutcome, truth: &[spiv_formats::Vector]) -> (f64, f64) 
     (e / n.max(1) as f64, n as f64 / all.max(1) as f64)
 }
 
-/// Asks one and three pairs late, and one late with a tenth lost: after
-/// the third pair each measures the paper's linear profile within 1.2× of
-/// `spiv flow`'s EPE with as many vectors (measured on this recording:
-/// 0.078 at once; 0.064, 0.086 and 0.080 px per pair).
+/// Asks one and three pairs late, one late with a tenth lost, and one late
+/// with 5 % lost and 5 % corrupted: after the third pair each measures the
+/// paper's linear profile within 1.2× of `spiv flow`'s EPE with as many
+/// vectors.
 #[test]
 fn late_and_lost_asks_measure_as_well_as_immediate_ones() {
     let dir = tempfile::tempdir().unwrap();
@@ -63,11 +65,12 @@ fn late_and_lost_asks_measure_as_well_as_immediate_ones() {
         let b = pr.bytes.expect("counted");
         assert!(b.total() > 0 && b.total() < raw, "{b:?} against {raw}");
     }
-    for (late, loss) in [(1, 0.0), (3, 0.0), (1, 0.1)] {
+    for (late, loss, corrupt) in [(1, 0.0, 0.0), (3, 0.0, 0.0), (1, 0.1, 0.0), (1, 0.05, 0.05)] {
         let o = FlowOptions {
             delivery: Delivery {
                 late,
                 loss,
+                corrupt,
                 seed: 11,
             },
             ..base.clone()
@@ -75,8 +78,9 @@ fn late_and_lost_asks_measure_as_well_as_immediate_ones() {
         let out = run_flow(&rec, &o, |_, _| {}).expect("runs");
         let (e, m) = after_third(&out, &truth);
         eprintln!(
-            "{late} late, {:.0} % lost: EPE {e:.4}, {:.0} % measured",
+            "{late} late, {:.0} % lost, {:.0} % corrupted: EPE {e:.4}, {:.0} % measured",
             100.0 * loss,
+            100.0 * corrupt,
             100.0 * m
         );
         assert!(e <= 1.2 * e0, "{late} late, {loss} lost: {e} against {e0}");

@@ -12,8 +12,8 @@
 //! ([`Kind::FrameTile`]), the end of a frame with its pairing and checksum
 //! ([`Kind::FrameEnd`], payload [`FrameEnd`]), or the firmware's counters
 //! ([`Kind::Status`], payload [`Status`]) up the link, and what the host
-//! tells the sidecar ([`Kind::Control`], payload [`control::ControlView`])
-//! down it. Payloads are at most
+//! tells the sidecar ([`Kind::Control`], payload [`control::ControlView`];
+//! in the live loop [`Kind::Ask`], payload [`ask::AskView`]) down it. Payloads are at most
 //! [`MAX_PAYLOAD`] = 16 KiB, so a device needs one message buffer of
 //! [`MAX_MESSAGE`] bytes and one COBS buffer of [`MAX_ENCODED`] bytes.
 //!
@@ -30,9 +30,11 @@
 //! | [`crc`] | the link's CRC-32 ([`Crc32`], [`crc32`]) |
 //! | [`message`] | the frame-end and status payloads, the frame checksum |
 //! | [`control`] | the downlink's control payload: predicted motion, window caps |
+//! | [`ask`] | the live loop's downlink payload: rungs, events' reach, node flow |
 //! | [`codec`] | tile codecs: raw, lossless Rice, lossy sparse |
 //! | [`sender`] | the pair schedule and the messages that carry a frame |
 
+pub mod ask;
 pub mod codec;
 pub mod control;
 pub mod crc;
@@ -77,6 +79,9 @@ pub enum Kind {
     /// Host to sidecar: predicted motion and window caps; payload
     /// [`control::ControlView`].
     Control = 4,
+    /// Host to sidecar, the live loop: the rung frames and events of the
+    /// next pairs and the flow they follow; payload [`ask::AskView`].
+    Ask = 5,
 }
 
 impl Kind {
@@ -86,6 +91,7 @@ impl Kind {
             2 => Some(Kind::FrameEnd),
             3 => Some(Kind::Status),
             4 => Some(Kind::Control),
+            5 => Some(Kind::Ask),
             _ => None,
         }
     }

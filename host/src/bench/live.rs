@@ -73,7 +73,12 @@ impl LiveRow {
 /// The modes: `spiv flow`'s immediate asks, asks one and three pairs
 /// late, and one late with a tenth of them lost.
 pub fn modes(seed: u64) -> Vec<(&'static str, Delivery)> {
-    let d = |late, loss| Delivery { late, loss, seed };
+    let d = |late, loss| Delivery {
+        late,
+        loss,
+        corrupt: 0.0,
+        seed,
+    };
     vec![
         ("spiv flow", Delivery::default()),
         ("1 pair late", d(1, 0.0)),

@@ -129,6 +129,24 @@ impl WarpFlow {
         }
     }
 
+    /// The core's flow `f`, owned.
+    pub fn from_core(f: &CoreFlow<'_>) -> WarpFlow {
+        if f.is_still() {
+            return WarpFlow::still();
+        }
+        WarpFlow {
+            nx: f.nx,
+            ny: f.ny,
+            x0: f.x0,
+            y0: f.y0,
+            pitch: f.pitch,
+            vx: f.vx.to_vec(),
+            vy: f.vy.to_vec(),
+            ax: f.ax.to_vec(),
+            ay: f.ay.to_vec(),
+        }
+    }
+
     /// Whether this is [`WarpFlow::still`].
     pub fn is_still(&self) -> bool {
         self.nx == 0 || self.ny == 0

@@ -12,7 +12,14 @@ use std::collections::VecDeque;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use spiv_core::rungs::{Rungs, MAX_RUNGS};
+use spiv_core::wire::ask::{
+    ask_parts, encode_ask, AskAssembly, AskView, Part, MAX_ASK_PAYLOAD, MAX_FLOW_NODES,
+};
+use spiv_core::wire::{
+    encode_message, Decoder, DecoderState, Encoding, Header, Kind, WireError, MAX_ENCODED,
+};
 
+use super::compensate::WarpFlow;
 use super::ladder::{per_ticks, LadderSettings, Measurement};
 use crate::piv::Field;
 
@@ -74,18 +81,104 @@ impl Ask {
         self.flow.is_some() && !self.rungs.is_empty()
     }
 
+    /// The ask as the wire carries it to a `width × height` sensor (stored
+    /// rows bottom-up when `flip`), for the pairs from `from_pair` on: its
+    /// messages ([`spiv_core::wire::ask`]), the flow in the core's fixed
+    /// point on the field's grid (at most eight separations; none without
+    /// a flow). Refused when the grid is larger than an ask carries.
+    pub fn messages(
+        &self,
+        from_pair: u32,
+        (width, height): (u16, u16),
+        flip: bool,
+    ) -> Result<Vec<Vec<u8>>, WireError> {
+        let mut rungs = Rungs::events(u16::try_from(self.reach).unwrap_or(u16::MAX));
+        let flow = match &self.flow {
+            Some(f) if !self.rungs.is_empty() => WarpFlow::from_field(f, usize::from(height), flip),
+            _ => WarpFlow::still(),
+        };
+        if !flow.is_still() {
+            for s in self.rungs.iter().filter_map(|&s| u16::try_from(s).ok()) {
+                if usize::from(rungs.count) == MAX_RUNGS {
+                    break;
+                }
+                rungs.separations[usize::from(rungs.count)] = s;
+                rungs.count += 1;
+            }
+        }
+        let view = flow.view();
+        let mut payload = vec![0u8; MAX_ASK_PAYLOAD];
+        let mut wire = vec![0u8; MAX_ENCODED];
+        let mut out = Vec::new();
+        for (k, part) in ask_parts(&view).enumerate() {
+            let len = encode_ask(from_pair, &rungs, &view, part, &mut payload)?;
+            let header = Header {
+                kind: Kind::Ask,
+                seq: k as u32,
+                frame_id: from_pair,
+                tick: 0,
+                width,
+                height,
+                row0: 0,
+                rows: 0,
+                encoding: Encoding::None,
+                payload_len: 0,
+            };
+            let n = encode_message(&header, &payload[..len], &mut wire)?;
+            out.push(wire[..n].to_vec());
+        }
+        if out.is_empty() {
+            return Err(WireError::Payload);
+        }
+        Ok(out)
+    }
+}
+
+/// An ask as the core holds it once the wire delivered it: its rungs and
+/// reach, and the flow its rung frames follow in the core's fixed point
+/// (stored order) — with the field the estimator sent it from, which the
+/// host keeps (the ladder's start for the pairs made along it).
+#[derive(Debug, Clone)]
+pub struct Heard {
+    /// The first pair the ask applies to.
+    pub from_pair: u32,
+    /// Separations (none without a flow) and the events' reach.
+    pub rungs: Rungs,
+    /// The flow the rung frames follow, as the wire carried it.
+    pub flow: WarpFlow,
+    /// The field it was sent from, px per tick (`None` without a flow).
+    pub start: Option<Field>,
+}
+
+impl Heard {
+    /// What a core holds before any ask: events within the ladder's
+    /// bootstrap reach ([`Ask::cold`]).
+    pub fn cold(cfg: &LadderSettings) -> Heard {
+        Heard {
+            from_pair: 0,
+            rungs: Rungs::events(u16::try_from(cfg.bootstrap_reach).unwrap_or(u16::MAX)),
+            flow: WarpFlow::still(),
+            start: None,
+        }
+    }
+
+    /// `ask` through the wire at once (no loss): what a core hears of it,
+    /// for a `width × height` sensor (bottom-up when `flip`).
+    pub fn of(ask: &Ask, size: (u16, u16), flip: bool) -> Result<Heard, WireError> {
+        let mut link = AskLink::new(Delivery::default(), &LadderSettings::default(), size, flip);
+        link.send(0, ask.clone())?;
+        Ok(link.ask_for(1).clone())
+    }
+
     /// The core's rung request: the separations `fits` keeps (those the
     /// ticks around the pair hold), and the reach.
     pub fn core_rungs(&self, fits: impl Fn(u32) -> bool) -> Rungs {
-        let mut r = Rungs::events(u16::try_from(self.reach).unwrap_or(u16::MAX));
-        if self.flow.is_none() {
+        let mut r = Rungs::events(self.rungs.reach);
+        if self.flow.is_still() {
             return r;
         }
-        for &s in self.rungs.iter().filter(|&&s| fits(s)) {
-            if usize::from(r.count) == MAX_RUNGS {
-                break;
-            }
-            if let Ok(s) = u16::try_from(s) {
+        for &s in self.rungs.separations() {
+            if fits(u32::from(s)) {
                 r.separations[usize::from(r.count)] = s;
                 r.count += 1;
             }
@@ -103,66 +196,176 @@ pub struct Delivery {
     /// Pairs by which an ask arrives late: the ask measured after pair
     /// `i` makes pair `i + 1 + late` on (0: the next pair).
     pub late: usize,
-    /// Share of asks lost, 0–1.
+    /// Share of ask messages lost, 0–1.
     pub loss: f64,
-    /// Seed of the losses.
+    /// Share of ask messages with a byte corrupted on the way, 0–1 (the
+    /// core's CRC check refuses them).
+    pub corrupt: f64,
+    /// Seed of the losses and corruptions.
     pub seed: u64,
 }
 
-/// The asks on their way to the core ([`Delivery`]).
+/// The asks on their way to the core ([`Delivery`]): each sent as its
+/// wire messages ([`Ask::messages`]), which arrive late, are lost or
+/// corrupted as the delivery says, and are heard as a core hears them —
+/// the stream decoder (CRC), the payload's checks and the parts put
+/// together in order ([`AskAssembly`]). An ask whose parts did not all
+/// arrive intact is not heard; the core keeps the last one it heard.
 #[derive(Debug)]
 pub struct AskLink {
     delivery: Delivery,
     rng: ChaCha8Rng,
-    sent: VecDeque<(usize, Ask)>,
-    current: Ask,
+    size: (u16, u16),
+    flip: bool,
+    /// Messages in flight: the pair they arrive for, their bytes.
+    sent: VecDeque<(usize, Vec<u8>)>,
+    /// The fields the asks in flight were sent from, by `from_pair`.
+    starts: VecDeque<(u32, Option<Field>)>,
+    rx: Vec<u8>,
+    rx_state: Option<DecoderState>,
+    store: [Vec<i16>; 4],
+    current: Heard,
     lost: usize,
+    refused: usize,
 }
 
 impl AskLink {
-    /// Nothing sent yet: the core makes its pairs [`Ask::cold`].
-    pub fn new(delivery: Delivery, cfg: &LadderSettings) -> AskLink {
+    /// Nothing sent yet: the core makes its pairs [`Heard::cold`]; asks go
+    /// to a `width × height` sensor (stored rows bottom-up when `flip`).
+    pub fn new(delivery: Delivery, cfg: &LadderSettings, size: (u16, u16), flip: bool) -> AskLink {
         AskLink {
             delivery,
             rng: ChaCha8Rng::seed_from_u64(delivery.seed),
+            size,
+            flip,
             sent: VecDeque::new(),
-            current: Ask::cold(cfg),
+            starts: VecDeque::new(),
+            rx: vec![0; MAX_ENCODED],
+            rx_state: None,
+            store: std::array::from_fn(|_| Vec::new()),
+            current: Heard::cold(cfg),
             lost: 0,
+            refused: 0,
         }
     }
 
-    /// What the core makes pair `i` (counted from the loop's first) with.
-    pub fn ask_for(&mut self, i: usize) -> &Ask {
-        while let Some((at, _)) = self.sent.front() {
-            if *at > i {
-                break;
+    /// What the core makes pair `i` (counted from the loop's first) with:
+    /// the newest ask heard by then.
+    pub fn ask_for(&mut self, i: usize) -> &Heard {
+        let mut due = Vec::new();
+        while self.sent.front().is_some_and(|(at, _)| *at <= i) {
+            if let Some((_, m)) = self.sent.pop_front() {
+                due.push(m);
             }
-            if let Some((_, a)) = self.sent.pop_front() {
-                self.current = a;
-            }
+        }
+        if !due.is_empty() {
+            self.hear(&due);
         }
         &self.current
     }
 
-    /// Sends `ask`, measured after pair `i`.
-    pub fn send(&mut self, i: usize, ask: Ask) {
-        let loss = self.delivery.loss.clamp(0.0, 1.0);
-        if loss > 0.0 && self.rng.gen::<f64>() < loss {
-            self.lost += 1;
+    /// Hears `messages` as a core does.
+    fn hear(&mut self, messages: &[Vec<u8>]) {
+        let mut dec = match self.rx_state {
+            Some(st) => Decoder::resume(&mut self.rx, st),
+            None => Decoder::new(&mut self.rx),
+        };
+        let [vx, vy, ax, ay] = &mut self.store;
+        for v in [&mut *vx, &mut *vy, &mut *ax, &mut *ay] {
+            if v.is_empty() {
+                v.resize(MAX_FLOW_NODES, 0);
+            }
+        }
+        let mut asm = AskAssembly::new(vx, vy, ax, ay);
+        let mut heard: Option<(spiv_core::wire::ask::AskHead, WarpFlow)> = None;
+        for m in messages {
+            let mut input = m.as_slice();
+            while let Some(r) = dec.feed(&mut input) {
+                let view = match r {
+                    Ok(msg)
+                        if msg.header.kind == Kind::Ask
+                            && (msg.header.width, msg.header.height) == self.size =>
+                    {
+                        AskView::parse(msg.payload)
+                    }
+                    _ => Err(WireError::Payload),
+                };
+                match view.map(|v| asm.take(&v)) {
+                    Ok(Part::Whole) => {
+                        if let Some(h) = asm.head() {
+                            heard = Some((h, WarpFlow::from_core(&asm.flow())));
+                        }
+                    }
+                    Ok(Part::Taken) => {}
+                    Ok(Part::Refused) | Err(_) => self.refused += 1,
+                }
+            }
+        }
+        self.rx_state = Some(dec.state());
+        let Some((h, flow)) = heard else { return };
+        if h.from_pair < self.current.from_pair {
+            self.refused += 1;
             return;
         }
-        self.sent.push_back((i + 1 + self.delivery.late, ask));
+        while self.starts.front().is_some_and(|(p, _)| *p < h.from_pair) {
+            self.starts.pop_front();
+        }
+        let start = match self.starts.front() {
+            Some((p, f)) if *p == h.from_pair => f.clone(),
+            _ => None,
+        };
+        self.current = Heard {
+            from_pair: h.from_pair,
+            rungs: h.rungs,
+            flow,
+            start,
+        };
     }
 
-    /// Asks lost so far.
+    /// Sends `ask`, measured after pair `i`: it applies from pair `i + 1`
+    /// and arrives for pair `i + 1 + late`. Refused when the wire cannot
+    /// carry it ([`Ask::messages`]).
+    pub fn send(&mut self, i: usize, ask: Ask) -> Result<(), WireError> {
+        let from = u32::try_from(i + 1).map_err(|_| WireError::Field)?;
+        let messages = ask.messages(from, self.size, self.flip)?;
+        let start = ask.flow.filter(|_| !ask.rungs.is_empty());
+        self.starts.push_back((from, start));
+        let (loss, corrupt) = (
+            self.delivery.loss.clamp(0.0, 1.0),
+            self.delivery.corrupt.clamp(0.0, 1.0),
+        );
+        for mut m in messages {
+            if loss > 0.0 && self.rng.gen::<f64>() < loss {
+                self.lost += 1;
+                continue;
+            }
+            if corrupt > 0.0 && self.rng.gen::<f64>() < corrupt && m.len() > 1 {
+                let k = self.rng.gen_range(0..m.len() - 1);
+                m[k] ^= 1 << self.rng.gen_range(0..8);
+            }
+            self.sent.push_back((i + 1 + self.delivery.late, m));
+        }
+        Ok(())
+    }
+
+    /// Ask messages lost so far.
     pub fn lost(&self) -> usize {
         self.lost
+    }
+
+    /// Ask messages the core refused so far (corrupted, or parts of an ask
+    /// that could not be put together).
+    pub fn refused(&self) -> usize {
+        self.refused
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::piv::{Grid, State};
+
+    const SIZE: (u16, u16) = (64, 48);
 
     fn marked(reach: u32) -> Ask {
         Ask {
@@ -172,12 +375,16 @@ mod tests {
         }
     }
 
+    fn link(delivery: Delivery, cfg: &LadderSettings) -> AskLink {
+        AskLink::new(delivery, cfg, SIZE, false)
+    }
+
     /// An ask sent after pair `i` makes pair `i + 1 + late` on; until
     /// then the core keeps the last one it has (cold at first).
     #[test]
     fn asks_arrive_late_by_whole_pairs() {
         let cfg = LadderSettings::default();
-        let mut d = AskLink::new(
+        let mut d = link(
             Delivery {
                 late: 2,
                 ..Delivery::default()
@@ -186,43 +393,89 @@ mod tests {
         );
         let mut seen = Vec::new();
         for i in 0..6 {
-            seen.push(d.ask_for(i).reach);
-            d.send(i, marked(100 + i as u32));
+            seen.push(u32::from(d.ask_for(i).rungs.reach));
+            d.send(i, marked(100 + i as u32)).unwrap();
         }
         let cold = cfg.bootstrap_reach;
         assert_eq!(seen, vec![cold, cold, cold, 100, 101, 102]);
-        assert_eq!(d.lost(), 0);
+        assert_eq!((d.lost(), d.refused()), (0, 0));
     }
 
-    /// Lost asks leave the core on the last one that arrived; the share
-    /// lost follows `loss`, and the same seed loses the same asks.
+    /// Lost or corrupted asks leave the core on the last one it heard; the
+    /// shares follow the delivery's, and the same seed loses the same.
     #[test]
-    fn lost_asks_keep_the_last_one() {
+    fn lost_and_corrupted_asks_keep_the_last_one() {
         let cfg = LadderSettings::default();
-        let run = |seed| {
-            let mut d = AskLink::new(
+        let run = |seed, loss, corrupt| {
+            let mut d = link(
                 Delivery {
                     late: 0,
-                    loss: 0.25,
+                    loss,
+                    corrupt,
                     seed,
                 },
                 &cfg,
             );
             let mut seen = Vec::new();
             for i in 0..400 {
-                seen.push(d.ask_for(i).reach);
-                d.send(i, marked(1000 + i as u32));
+                seen.push(d.ask_for(i).rungs.reach);
+                d.send(i, marked(1000 + i as u32)).unwrap();
             }
-            (seen, d.lost())
+            (seen, d.lost(), d.refused())
         };
-        let (seen, lost) = run(7);
+        let (seen, lost, refused) = run(7, 0.25, 0.0);
         assert!((70..130).contains(&lost), "{lost} of 400 lost at 25 %");
-        // Each pair uses the newest ask that arrived, a stale one exactly
-        // where the one before it was lost (the last ask sent is never
-        // used).
+        assert_eq!(refused, 0);
+        // Each pair uses the newest ask heard, a stale one exactly where
+        // the one before it was lost (the last ask sent is never used).
         let stale = seen.windows(2).filter(|w| w[1] == w[0]).count();
         assert!(stale == lost || stale + 1 == lost, "{stale} {lost}");
         assert!(seen.windows(2).all(|w| w[1] >= w[0]));
-        assert_eq!(run(7), (seen, lost));
+        assert_eq!(run(7, 0.25, 0.0), (seen, lost, refused));
+        // Corrupted messages never apply: the CRC refuses them.
+        let (seen, lost, refused) = run(8, 0.0, 0.2);
+        assert_eq!(lost, 0);
+        assert!(
+            (50..110).contains(&refused),
+            "{refused} of 400 refused at 20 %"
+        );
+        let stale = seen.windows(2).filter(|w| w[1] == w[0]).count();
+        assert!(
+            stale <= refused && stale + 1 >= refused.min(stale + 1),
+            "{stale} {refused}"
+        );
+        assert!(seen.windows(2).all(|w| w[1] >= w[0]));
+    }
+
+    /// A field goes down the wire as the core's fixed-point flow on its
+    /// grid, with the rungs; the host keeps the field as the start.
+    #[test]
+    fn a_field_is_heard_as_the_cores_flow() {
+        let grid = Grid::new(usize::from(SIZE.0), usize::from(SIZE.1), 16, 8).unwrap();
+        let mut f = Field::unmeasured(grid);
+        for ((r, c), u) in f.u.indexed_iter_mut() {
+            *u = 0.01 * (r as f64) + 0.002 * c as f64;
+        }
+        f.v.fill(-0.05);
+        f.state.fill(State::Valid);
+        let ask = Ask {
+            flow: Some(f.clone()),
+            rungs: vec![16, 32, 64],
+            reach: 0,
+        };
+        for flip in [false, true] {
+            let heard = Heard::of(&ask, SIZE, flip).unwrap();
+            let want = WarpFlow::from_field(&f, usize::from(SIZE.1), flip);
+            assert_eq!(heard.flow.view().vx, want.view().vx);
+            assert_eq!(heard.flow.view().ay, want.view().ay);
+            assert_eq!(heard.flow.nodes(), want.nodes());
+            assert_eq!(heard.rungs.separations(), &[16, 32, 64]);
+            assert_eq!(heard.start.as_ref().map(|s| s.u.clone()), Some(f.u.clone()));
+            assert_eq!(heard.core_rungs(|s| s < 64).separations(), &[16, 32]);
+        }
+        // No flow: events only, whatever rungs were named.
+        let cold = Heard::of(&Ask { flow: None, ..ask }, SIZE, false).unwrap();
+        assert!(cold.flow.is_still() && cold.start.is_none());
+        assert_eq!(cold.core_rungs(|_| true).count, 0);
     }
 }

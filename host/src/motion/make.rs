@@ -1,8 +1,8 @@
 //! What the core makes of a stream of spike planes, in process: the
 //! sidecar's static-light model ([`spiv_core::light`]) and event ring
 //! ([`spiv_core::rungs`]) over owned buffers, and from them each pair's
-//! [`PairInput`] as the estimator asked for it ([`Ask`]) — the same
-//! frames a sidecar sends.
+//! [`PairInput`] as the estimator asked for it ([`Heard`]: its ask as the
+//! wire delivered it) — the same frames a sidecar sends.
 
 use spiv_core::buffers::LightBuf;
 use spiv_core::light::{Light, LightClock, MAX_TOLERANCE};
@@ -10,8 +10,7 @@ use spiv_core::plane::PlaneView;
 use spiv_core::rungs::{rung_frames, EventRing, RingCursor};
 use spiv_core::Error;
 
-use super::compensate::WarpFlow;
-use super::control::Ask;
+use super::control::{Ask, Heard};
 use super::events::{upright, Events};
 use super::ladder::PairInput;
 use crate::reconstruct::Planes;
@@ -138,8 +137,9 @@ impl PairMaker {
     /// its rung frames warped along the ask's flow (the separations the
     /// ticks held reach: `s` before `mid` and `s` plus the events'
     /// settling after it), and its events within the ask's reach — or
-    /// within `reach` when no rung frame is made.
-    pub fn input(&mut self, mid: u32, ask: &Ask, reach: u32) -> Result<PairInput, Error> {
+    /// within `reach` when no rung frame is made. The pair's start is the
+    /// field the ask was sent from.
+    pub fn input(&mut self, mid: u32, ask: &Heard, reach: u32) -> Result<PairInput, Error> {
         let (w, h) = (usize::from(self.width), usize::from(self.height));
         let px = w * h;
         let held = self.ticks();
@@ -151,10 +151,16 @@ impl PairMaker {
         let light = Light::resume(self.width, self.height, self.clock, self.light.state())?;
         let ring = EventRing::resume(&mut self.entries, &mut self.starts, self.cursor)?;
         let mut input = PairInput::default();
-        if let (Some(field), true) = (&ask.flow, rungs.count > 0) {
-            let flow = WarpFlow::from_field(field, h, self.flip);
+        if let (Some(field), true) = (&ask.start, rungs.count > 0) {
             self.frames.resize(2 * usize::from(rungs.count) * px, 0);
-            rung_frames(&ring, &light, &flow.view(), mid, &rungs, &mut self.frames)?;
+            rung_frames(
+                &ring,
+                &light,
+                &ask.flow.view(),
+                mid,
+                &rungs,
+                &mut self.frames,
+            )?;
             let frame = |k: usize| {
                 upright(
                     &self.frames[k * px..(k + 1) * px],
@@ -192,9 +198,12 @@ impl PairMaker {
 }
 
 /// The input of the one pair at `mid` of `planes` (a whole stretch held in
-/// memory) as the core makes it when asked `ask`: the model trained on the
-/// stretch's planes played backwards, then every plane taken in order.
+/// memory) as the core makes it when asked `ask` (through the wire at
+/// once, [`Heard::of`]): the model trained on the stretch's planes played
+/// backwards, then every plane taken in order.
 pub fn input_of(planes: &Planes, mid: u64, ask: &Ask, reach: u32) -> Result<PairInput, Error> {
+    let heard = Heard::of(ask, (planes.width, planes.height), planes.flip)
+        .map_err(|_| Error::BadParam(spiv_core::error::ParamError::Motion))?;
     let (w, h) = (planes.width, planes.height);
     let pb = (usize::from(w) * usize::from(h) / 8).max(1);
     let n = planes.data.len() / pb;
@@ -212,5 +221,5 @@ pub fn input_of(planes: &Planes, mid: u64, ask: &Ask, reach: u32) -> Result<Pair
         m.push(p)?;
     }
     let mid = u32::try_from(mid).map_err(|_| Error::TickOverflow)?;
-    m.input(mid, ask, reach)
+    m.input(mid, &heard, reach)
 }

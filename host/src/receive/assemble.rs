@@ -227,7 +227,7 @@ impl Assembler {
                 Ok(e) => p.end = Some(e),
                 Err(_) => return self.reject(id),
             },
-            Kind::Status | Kind::Control => return None,
+            Kind::Status | Kind::Control | Kind::Ask => return None,
         }
         self.try_complete(id)
     }
