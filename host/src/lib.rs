@@ -8,7 +8,7 @@
 //! | [`reconstruct`] | frames from spike files (`.dat`, `.npz`) through the core: TFP, TFI, adaptive |
 //! | [`reference`](mod@reference) | the `f64` reference of the core's algorithm, and its tolerance |
 //! | [`baseline`] | the wide baseline: a second compensated pair several pair separations apart, centred on the pair, kept per vector where the flow allows |
-//! | [`piv`] | the PIV engine, stage by stage: `filter`, `resample`, `deform`, `correlate`, `peak`, `validate` |
+//! | [`piv`] | the PIV engine (the `spiv-piv` crate, usable alone), stage by stage: `filter`, `resample`, `deform`, `correlate`, `peak`, `validate` |
 //! | [`dwell`] | the dwell cap: window limits per band from a predicted field, and the banded adaptive frame |
 //! | [`flow`] | the main job on any spike recording (`spiv flow`): each pair measured by the time ladder ([`motion`]) or, by `--method`, from plain frames through the core; the mean field, glare, outputs' orientation |
 //! | [`motion`] | the time ladder and the dense ensemble: a pair's 2-D flow from the spikes around it, with its uncertainty |
@@ -34,7 +34,7 @@ pub mod live;
 pub mod metrics;
 pub mod motion;
 pub mod pipeline;
-pub mod piv;
+pub use spiv_piv as piv;
 pub mod predict;
 pub mod receive;
 pub mod reconstruct;

@@ -917,6 +917,7 @@ fn bench_live_reports_every_mode() {
         "1 pair late",
         "3 pairs late",
         "1 late, 10 % lost",
+        "1 late, 5 % lost, 5 % corrupted",
     ] {
         assert!(
             out.lines()
@@ -926,7 +927,7 @@ fn bench_live_reports_every_mode() {
     }
     let rows: Vec<serde_json::Value> =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
-    assert_eq!(rows.len(), 4);
+    assert_eq!(rows.len(), 5);
     for r in &rows {
         let (b, raw) = (
             r["bytes_per_pair"].as_f64().unwrap(),

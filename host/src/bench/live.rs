@@ -29,7 +29,8 @@ pub struct LiveRow {
     pub family: String,
     /// Seed of particles, noise, flow and losses.
     pub seed: u64,
-    /// "spiv flow", "1 pair late", "3 pairs late" or "1 late, 10 % lost".
+    /// "spiv flow", "1 pair late", "3 pairs late", "1 late, 10 % lost" or
+    /// "1 late, 5 % lost, 5 % corrupted".
     pub mode: String,
     /// Pairs by which each ask arrived late.
     pub late: usize,
@@ -71,19 +72,21 @@ impl LiveRow {
 }
 
 /// The modes: `spiv flow`'s immediate asks, asks one and three pairs
-/// late, and one late with a tenth of them lost.
+/// late, one late with a tenth of the ask messages lost, and one late with
+/// 5 % lost and 5 % corrupted.
 pub fn modes(seed: u64) -> Vec<(&'static str, Delivery)> {
-    let d = |late, loss| Delivery {
+    let d = |late, loss, corrupt| Delivery {
         late,
         loss,
-        corrupt: 0.0,
+        corrupt,
         seed,
     };
     vec![
         ("spiv flow", Delivery::default()),
-        ("1 pair late", d(1, 0.0)),
-        ("3 pairs late", d(3, 0.0)),
-        ("1 late, 10 % lost", d(1, 0.1)),
+        ("1 pair late", d(1, 0.0, 0.0)),
+        ("3 pairs late", d(3, 0.0, 0.0)),
+        ("1 late, 10 % lost", d(1, 0.1, 0.0)),
+        ("1 late, 5 % lost, 5 % corrupted", d(1, 0.05, 0.05)),
     ]
 }
 

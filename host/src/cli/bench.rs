@@ -85,7 +85,8 @@ enum Which {
         dense: bool,
     },
     /// Every scene family through the live loop (asks 1 and 3 pairs
-    /// late, or 1 late with 10 % lost) beside `spiv flow` on the same
+    /// late, 1 late with 10 % lost, or 1 late with 5 % lost and 5 %
+    /// corrupted) beside `spiv flow` on the same
     /// recording: EPE in glare and other rows after the third pair,
     /// flagged share, bytes per pair on the wire against the raw spikes.
     Live {
@@ -215,7 +216,7 @@ fn live(
         seeds
     );
     println!(
-        "{:<17} {:<18} {:>9} {:>9} {:>8} {:>12} {:>9}",
+        "{:<17} {:<31} {:>9} {:>9} {:>8} {:>12} {:>9}",
         "family", "mode", "glare", "other", "flagged", "bytes/pair", "raw/wire"
     );
     for f in &fams {
@@ -227,7 +228,7 @@ fn live(
             let bytes = mean(rs.iter().map(|r| Some(r.bytes_per_pair)).collect()).unwrap_or(0.0);
             let raw = mean(rs.iter().map(|r| Some(r.raw_per_pair)).collect()).unwrap_or(0.0);
             println!(
-                "{:<17} {:<18} {:>9} {:>9} {:>7.1}% {:>12.0} {:>8.1}x",
+                "{:<17} {:<31} {:>9} {:>9} {:>7.1}% {:>12.0} {:>8.1}x",
                 f.name,
                 mode,
                 f3(mean(rs.iter().map(|r| r.glare).collect())),
@@ -254,7 +255,7 @@ fn live(
                         }
                     })
                     .collect();
-                println!("{:<17} {:<18} {:>9}", f.name, mode, f3(mean(ratios)));
+                println!("{:<17} {:<31} {:>9}", f.name, mode, f3(mean(ratios)));
             }
         }
     }

@@ -30,7 +30,7 @@ impl Default for Validation {
 }
 
 /// The median of `v` (sorted in place), 0 when empty.
-pub(crate) fn median(v: &mut [f64]) -> f64 {
+pub fn median(v: &mut [f64]) -> f64 {
     v.sort_unstable_by(f64::total_cmp);
     let n = v.len();
     if n == 0 {

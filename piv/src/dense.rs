@@ -113,7 +113,7 @@ fn down(a: &Array2<f32>) -> Array2<f32> {
 
 /// Bilinear sample of `a` at (row `y`, column `x`), edges clamped.
 #[inline]
-pub(crate) fn sample(a: &Array2<f32>, y: f32, x: f32) -> f32 {
+pub fn sample(a: &Array2<f32>, y: f32, x: f32) -> f32 {
     let (h, w) = a.dim();
     let y = y.clamp(0.0, (h - 1) as f32);
     let x = x.clamp(0.0, (w - 1) as f32);

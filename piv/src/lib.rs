@@ -101,7 +101,7 @@ pub struct Settings {
     pub rescue: bool,
     /// The predictor filter's stencil at the grid's edges
     /// ([`smooth::Edge`]): the line in the defaults; the quadratic for the
-    /// wide baseline's measurement ([`crate::baseline::measure`]).
+    /// wide baseline's measurement (`spiv_host::baseline::measure`).
     #[serde(default)]
     pub edge: smooth::Edge,
 }

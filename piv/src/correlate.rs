@@ -403,7 +403,7 @@ fn cross(z: Complex32, w: Complex32) -> Complex32 {
 
 /// The largest of `v` and `init` (NaNs ignored), in 8 independent lanes so
 /// that it vectorises.
-pub(crate) fn max_of(v: &[f32], init: f32) -> f32 {
+pub fn max_of(v: &[f32], init: f32) -> f32 {
     let mut acc = [init; 8];
     let mut chunks = v.chunks_exact(8);
     for ch in &mut chunks {

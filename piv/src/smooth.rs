@@ -34,7 +34,7 @@ use super::{Field, State};
 /// where the spike frames show no particle within about 18 px of the wall,
 /// that edge window sees only its upper half and keeps the bias
 /// (`host/examples/wall_probe.rs`). The quadratic does not: measured as the
-/// wide baseline's edge ([`crate::baseline::measure`]; `spiv bench paper
+/// wide baseline's edge (`spiv_host::baseline::measure`; `spiv bench paper
 /// --seeds 30`, glare rows linear / quadratic / log), 0.006 / 0.026 /
 /// 0.027 with the line, 0.007 / 0.020 / 0.026 with the quadratic.
 /// It damps an edge alternation less (to 0.6, the line to 1/3). That is

@@ -94,7 +94,7 @@ fn box_columns(block: &[f32], out: &mut [f32], w: usize, r: usize) {
 /// recursion along one row is a chain of dependent operations; 32 rows
 /// side by side run as vectors (32 rather than 8 lanes: the per-step loop
 /// overhead is shared by four times the pixels).
-pub(crate) fn for_row_blocks(img: &mut Array2<f32>, f: impl Fn(&mut [f32], usize) + Sync) {
+pub fn for_row_blocks(img: &mut Array2<f32>, f: impl Fn(&mut [f32], usize) + Sync) {
     const ROWS: usize = 32;
     img.axis_chunks_iter_mut(Axis(0), ROWS)
         .into_par_iter()
@@ -119,7 +119,7 @@ pub(crate) fn for_row_blocks(img: &mut Array2<f32>, f: impl Fn(&mut [f32], usize
 /// buffer (`block`, `width`), handed to `f` and copied back; blocks in
 /// parallel. The column filters run down whole block rows at once, which
 /// vectorises, instead of transposing the image twice.
-pub(crate) fn for_column_blocks(img: &mut Array2<f32>, f: impl Fn(&mut [f32], usize) + Sync) {
+pub fn for_column_blocks(img: &mut Array2<f32>, f: impl Fn(&mut [f32], usize) + Sync) {
     const BLOCK: usize = 128;
     img.axis_chunks_iter_mut(Axis(1), BLOCK)
         .into_par_iter()
