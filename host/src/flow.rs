@@ -37,10 +37,11 @@ use spiv_formats::{FormatError, State, Vector};
 use crate::dwell::{adaptive_banded, caps_for};
 use crate::motion::control::{Ask, AskLink, Delivery};
 use crate::motion::ladder::{self, LadderSettings, Rung};
-use crate::motion::make::{PairMaker, LIGHT_TRAIN};
-use crate::motion::uplink::{pair_bytes, PairBytes};
+use crate::motion::make::{CorePair, PairMaker, LIGHT_TRAIN};
+use crate::motion::uplink::{PairBytes, PairReader, Uplink};
 use crate::piv::validate::median;
 use crate::piv::{piv, to_f32, Field, PivError, Settings, NO_SIGMA};
+use crate::receive::assemble::FrameLimit;
 use crate::reconstruct::{frame_from_planes, FileOptions, Planes, ReconstructError};
 use crate::units::Calibration;
 
@@ -306,9 +307,11 @@ pub struct FlowOptions {
     /// the next pairs: at once (the default, as `spiv flow` runs), or late
     /// and with losses, as a live downlink delivers it.
     pub delivery: Delivery,
-    /// Count what each motion-compensated pair's frames and events cost
-    /// on the wire ([`PairResult::bytes`]; off by default: the coding
-    /// costs time and `spiv flow` sends nothing).
+    /// Send each motion-compensated pair through the live loop's uplink
+    /// and measure what is read back from its messages (bit-exact: the
+    /// same vectors), counting what its frames and events cost
+    /// ([`PairResult::bytes`]; off by default: the coding costs time and
+    /// `spiv flow` sends nothing).
     pub wire_bytes: bool,
 }
 
@@ -521,6 +524,23 @@ impl FlowRequest {
         o.segment = self.segment;
         Ok(o)
     }
+}
+
+/// The pair that `messages` (one pair's, in order) carry, as `reader`
+/// reads them from the stream.
+fn read_back(reader: &mut PairReader, messages: &[Vec<u8>]) -> Result<CorePair, FlowError> {
+    let mut rx = vec![0u8; spiv_core::wire::MAX_ENCODED];
+    let mut dec = spiv_core::wire::Decoder::new(&mut rx);
+    let mut got = None;
+    for m in messages {
+        let mut input = m.as_slice();
+        while let Some(r) = dec.feed(&mut input) {
+            if let Some((_, p)) = reader.push(&r?) {
+                got = Some(p);
+            }
+        }
+    }
+    got.ok_or(FlowError::Wire(spiv_core::wire::WireError::Payload))
 }
 
 /// Makes every node of `f` whose centre pixel `mask` covers invalid
@@ -1117,6 +1137,14 @@ fn ladder_loop(
         maker.train(&planes, LIGHT_TRAIN)?;
     }
     let mut link = AskLink::new(opts.delivery, cfg, (sw, h), rec.flip);
+    let mut wire = if opts.wire_bytes {
+        Some((
+            Uplink::new((sw, h))?,
+            PairReader::new(FrameLimit::default()),
+        ))
+    } else {
+        None
+    };
     let mut out = Chain::default();
     let mut read = first_read;
     for (i, &(mid, reported)) in all.iter().enumerate() {
@@ -1132,10 +1160,15 @@ fn ladder_loop(
             }
             read += n;
         }
-        let input = maker.input(mid as u32, link.ask_for(i), cfg.bootstrap_reach)?;
-        let bytes = (opts.wire_bytes && reported)
-            .then(|| pair_bytes(&input))
-            .transpose()?;
+        let heard = link.ask_for(i).clone();
+        let mut core = maker.make(mid as u32, &heard, cfg.bootstrap_reach)?;
+        let mut bytes = None;
+        if let Some((up, down)) = &mut wire {
+            let (messages, b) = up.send(i as u32, &core)?;
+            core = read_back(down, &messages)?;
+            bytes = reported.then_some(b);
+        }
+        let input = core.input(w, rec.flip, heard.start.as_ref());
         let mut m = ladder::measure(&input, mid, dt as f64, cfg, (w, hu), reported)?;
         if let Some(mask) = &opts.mask {
             masked_out(&mut m.field, mask);

@@ -55,6 +55,20 @@ fn late_and_lost_asks_measure_as_well_as_immediate_ones() {
     };
     let now = run_flow(&rec, &base, |_, _| {}).expect("runs");
     assert!(now.pairs.len() >= 6, "{} pairs", now.pairs.len());
+    // One algorithm, two transports: every pair sent up the wire and read
+    // back from its messages measures exactly what the pair made in
+    // process does.
+    let plain = FlowOptions {
+        wire_bytes: false,
+        ..base.clone()
+    };
+    let in_process = run_flow(&rec, &plain, |_, _| {}).expect("runs");
+    assert_eq!(in_process.pairs.len(), now.pairs.len());
+    for (a, b) in in_process.pairs.iter().zip(&now.pairs) {
+        assert!(a.bytes.is_none() && b.bytes.is_some());
+        assert_eq!(a.vectors, b.vectors);
+        assert_eq!(a.sigma, b.sigma);
+    }
     let (e0, m0) = after_third(&now, &truth);
     eprintln!("asks at once: EPE {e0:.4}, {:.0} % measured", 100.0 * m0);
     assert!(e0 < 0.1, "{e0}");

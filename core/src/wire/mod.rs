@@ -31,6 +31,7 @@
 //! | [`message`] | the frame-end and status payloads, the frame checksum |
 //! | [`control`] | the downlink's control payload: predicted motion, window caps |
 //! | [`ask`] | the live loop's downlink payload: rungs, events' reach, node flow |
+//! | [`pair`] | the live loop's uplink head: what a pair's parts carry |
 //! | [`codec`] | tile codecs: raw, lossless Rice, lossy sparse |
 //! | [`sender`] | the pair schedule and the messages that carry a frame |
 
@@ -40,6 +41,7 @@ pub mod control;
 pub mod crc;
 pub mod header;
 pub mod message;
+pub mod pair;
 pub mod sender;
 pub mod stream;
 
@@ -82,6 +84,9 @@ pub enum Kind {
     /// Host to sidecar, the live loop: the rung frames and events of the
     /// next pairs and the flow they follow; payload [`ask::AskView`].
     Ask = 5,
+    /// Sidecar to host, the live loop: what the pair's parts that follow
+    /// carry; payload [`pair::PairHead`].
+    PairHead = 6,
 }
 
 impl Kind {
@@ -92,6 +97,7 @@ impl Kind {
             3 => Some(Kind::Status),
             4 => Some(Kind::Control),
             5 => Some(Kind::Ask),
+            6 => Some(Kind::PairHead),
             _ => None,
         }
     }

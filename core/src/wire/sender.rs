@@ -277,6 +277,28 @@ impl Sender {
         Ok(())
     }
 
+    /// Sends the head of a live-loop pair ([`super::pair::PairHead`]),
+    /// before its parts: its frame id is the next frame's, its tick the
+    /// pair's midpoint.
+    pub fn send_pair_head<L: Link>(
+        &mut self,
+        buf: &mut SendBuffers<'_>,
+        head: &super::pair::PairHead,
+        link: &mut L,
+    ) -> Result<(), SendError<L::Error>> {
+        head.check()?;
+        let h = self.header(
+            Kind::PairHead,
+            self.sent.frames,
+            head.mid,
+            0,
+            0,
+            Encoding::None,
+        );
+        let m = encode_message(&h, &head.to_bytes(), buf.wire)?;
+        self.emit(buf, m, link)
+    }
+
     /// Sends a status message with the counts so far.
     pub fn send_status<L: Link>(
         &mut self,

@@ -18,7 +18,7 @@ use spiv_core::warp::{scatter, subtract_rates, Window, SCALE};
 use super::compensate::WarpFlow;
 
 /// A stretch of events: ticks `first..first + ticks`.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Events {
     /// Stored width of the planes, px (events index `row·stored_width +
     /// col`).
@@ -64,23 +64,41 @@ impl Events {
                 v.push((e.index, e.sign));
             }
         });
+        let rates = (0..sw * h).map(|i| light.rate(i)).collect();
+        Events::from_ticks((sw, h), crop_width, flip, u64::from(a), per, rates)
+    }
+
+    /// The events of ticks `first..first + per_tick.len()` (each tick's
+    /// pixel and sign, stored order; kept in pixel order, as the wire's
+    /// event planes give them back) with the static rates of the
+    /// `stored_width × height` pixels, for frames `crop_width` px wide.
+    pub fn from_ticks(
+        (stored_width, height): (usize, usize),
+        crop_width: usize,
+        flip: bool,
+        first: u64,
+        per_tick: Vec<Vec<(u32, i8)>>,
+        rates: Vec<u16>,
+    ) -> Events {
+        let n = per_tick.len();
         let mut starts = Vec::with_capacity(n + 1);
-        let mut events = Vec::with_capacity(per.iter().map(Vec::len).sum());
-        for v in per {
+        let mut events = Vec::with_capacity(per_tick.iter().map(Vec::len).sum());
+        for mut v in per_tick {
+            v.sort_unstable();
             starts.push(events.len());
             events.extend(v);
         }
         starts.push(events.len());
         Events {
-            stored_width: sw,
-            width: crop_width.min(sw),
-            height: h,
+            stored_width,
+            width: crop_width.min(stored_width),
+            height,
             flip,
-            first: u64::from(a),
+            first,
             ticks: n,
             starts,
             events,
-            rates: (0..sw * h).map(|i| light.rate(i)).collect(),
+            rates,
         }
     }
 

@@ -13,7 +13,10 @@ use spiv_core::Error;
 use super::control::{Ask, Heard};
 use super::events::{upright, Events};
 use super::ladder::PairInput;
+use crate::piv::Field;
 use crate::reconstruct::Planes;
+use spiv_core::light::Event;
+use spiv_core::wire::pair::NO_ASK;
 
 /// Pixel-ticks of the ring's depth per event it holds: a quarter of an
 /// event per pixel and tick on average (the scenes of `spiv bench flows`
@@ -133,15 +136,14 @@ impl PairMaker {
         (self.cursor.lost, self.cursor.evicted)
     }
 
-    /// What the pair whose midpoint is tick `mid` carries, as `ask` asks:
-    /// its rung frames warped along the ask's flow (the separations the
-    /// ticks held reach: `s` before `mid` and `s` plus the events'
-    /// settling after it), and its events within the ask's reach — or
-    /// within `reach` when no rung frame is made. The pair's start is the
-    /// field the ask was sent from.
-    pub fn input(&mut self, mid: u32, ask: &Heard, reach: u32) -> Result<PairInput, Error> {
-        let (w, h) = (usize::from(self.width), usize::from(self.height));
-        let px = w * h;
+    /// What the pair whose midpoint is tick `mid` carries, as `ask` asks,
+    /// in the core's terms ([`CorePair`]): its rung frames warped along
+    /// the ask's flow (the separations the ticks held reach: `s` before
+    /// `mid` and `s` plus the events' settling after it), and its events
+    /// within the ask's reach — or within `reach` when no rung frame is
+    /// made.
+    pub fn make(&mut self, mid: u32, ask: &Heard, reach: u32) -> Result<CorePair, Error> {
+        let px = usize::from(self.width) * usize::from(self.height);
         let held = self.ticks();
         let fits = |s: u32| {
             mid >= held.start.saturating_add(s)
@@ -150,8 +152,14 @@ impl PairMaker {
         let rungs = ask.core_rungs(fits);
         let light = Light::resume(self.width, self.height, self.clock, self.light.state())?;
         let ring = EventRing::resume(&mut self.entries, &mut self.starts, self.cursor)?;
-        let mut input = PairInput::default();
-        if let (Some(field), true) = (&ask.start, rungs.count > 0) {
+        let mut pair = CorePair {
+            size: (self.width, self.height),
+            mid,
+            from_pair: NO_ASK,
+            rungs: Vec::new(),
+            events: None,
+        };
+        if rungs.count > 0 {
             self.frames.resize(2 * usize::from(rungs.count) * px, 0);
             rung_frames(
                 &ring,
@@ -161,39 +169,112 @@ impl PairMaker {
                 &rungs,
                 &mut self.frames,
             )?;
-            let frame = |k: usize| {
-                upright(
-                    &self.frames[k * px..(k + 1) * px],
-                    w,
-                    h,
-                    self.crop,
-                    self.flip,
-                )
-            };
-            input.rungs = rungs
+            let frame = |k: usize| self.frames[k * px..(k + 1) * px].to_vec();
+            pair.rungs = rungs
                 .separations()
                 .iter()
                 .enumerate()
-                .map(|(i, &s)| (u32::from(s), [frame(2 * i), frame(2 * i + 1)]))
+                .map(|(i, &s)| (s, [frame(2 * i), frame(2 * i + 1)]))
                 .collect();
-            input.start = Some(field.clone());
+            pair.from_pair = ask.from_pair;
         }
-        let r = if input.rungs.is_empty() {
+        let r = if pair.rungs.is_empty() {
             reach.max(1)
         } else {
             u32::from(rungs.reach)
         };
         if r > 0 {
             let (a, b) = (mid.saturating_sub(r), mid.saturating_add(r).min(held.end));
-            input.events = Some(Events::from_ring(
-                &ring,
-                &light,
-                (a, b),
-                self.crop,
-                self.flip,
+            let a = a.max(ring.ticks().start);
+            let b = b.max(a);
+            let mut ticks: Vec<Vec<(u32, i8)>> = vec![Vec::new(); (b - a) as usize];
+            ring.each(a, b, |e: Event| {
+                if let Some(v) = ticks.get_mut((e.tick - a) as usize) {
+                    v.push((e.index, e.sign));
+                }
+            });
+            for v in &mut ticks {
+                v.sort_unstable();
+            }
+            pair.events = Some(CoreEvents {
+                first: a,
+                ticks,
+                rates: (0..px).map(|i| light.rate(i)).collect(),
+            });
+        }
+        Ok(pair)
+    }
+
+    /// [`PairMaker::make`] as the estimator reads it ([`CorePair::input`]),
+    /// its start the field the ask was sent from.
+    pub fn input(&mut self, mid: u32, ask: &Heard, reach: u32) -> Result<PairInput, Error> {
+        let (crop, flip) = (self.crop, self.flip);
+        Ok(self
+            .make(mid, ask, reach)?
+            .input(crop, flip, ask.start.as_ref()))
+    }
+}
+
+/// A pair as the core makes it, in its own terms (stored rows, fixed
+/// point): what a sidecar sends up the wire ([`super::uplink`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CorePair {
+    /// Stored width and height of the sensor, px.
+    pub size: (u16, u16),
+    /// Midpoint, ticks.
+    pub mid: u32,
+    /// `from_pair` of the ask its rung frames followed ([`NO_ASK`]
+    /// without rung frames).
+    pub from_pair: u32,
+    /// Each rung: its separation (ticks) and frames A and B (1/64 spike,
+    /// stored rows).
+    pub rungs: Vec<(u16, [Vec<i16>; 2])>,
+    /// Its events, if it carries them.
+    pub events: Option<CoreEvents>,
+}
+
+/// A pair's events in the core's terms.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CoreEvents {
+    /// First tick.
+    pub first: u32,
+    /// Each tick's events: stored pixel and sign, in pixel order.
+    pub ticks: Vec<Vec<(u32, i8)>>,
+    /// The static rate of every stored pixel, 1/65536 spike per tick.
+    pub rates: Vec<u16>,
+}
+
+impl CorePair {
+    /// What the estimator reads of the pair: its rung frames upright,
+    /// cropped to `crop` columns, in spikes; its events ([`Events`]); and
+    /// `start`, the field its rung frames followed, when it has rung
+    /// frames (rows stored bottom-up when `flip`).
+    pub fn input(&self, crop: usize, flip: bool, start: Option<&Field>) -> PairInput {
+        let (w, h) = (usize::from(self.size.0), usize::from(self.size.1));
+        let crop = crop.min(w);
+        let mut input = PairInput::default();
+        if let (Some(field), false) = (start, self.rungs.is_empty()) {
+            input.rungs = self
+                .rungs
+                .iter()
+                .map(|(s, [a, b])| {
+                    let f = |x: &Vec<i16>| upright(x, w, h, crop, flip);
+                    (u32::from(*s), [f(a), f(b)])
+                })
+                .collect();
+            input.start = Some(field.clone());
+        }
+        if let Some(ev) = &self.events {
+            input.events = Some(Events::from_ticks(
+                (w, h),
+                crop,
+                flip,
+                u64::from(ev.first),
+                ev.ticks.clone(),
+                ev.rates.clone(),
             ));
         }
-        Ok(input)
+        input
     }
 }
 

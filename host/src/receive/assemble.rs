@@ -157,9 +157,14 @@ impl Assembler {
             self.last_status = Status::parse(m.payload).ok();
             return None;
         }
-        if h.kind == Kind::Control {
+        if matches!(h.kind, Kind::Control | Kind::Ask) {
             // A downlink message has no business on the uplink.
             self.stats.rejected += 1;
+            return None;
+        }
+        if h.kind == Kind::PairHead {
+            // A live-loop pair's head: its parts are frames, and the
+            // pair's reader (`motion::uplink::PairReader`) reads the head.
             return None;
         }
         let id = h.frame_id;
@@ -227,7 +232,7 @@ impl Assembler {
                 Ok(e) => p.end = Some(e),
                 Err(_) => return self.reject(id),
             },
-            Kind::Status | Kind::Control | Kind::Ask => return None,
+            Kind::Status | Kind::Control | Kind::Ask | Kind::PairHead => return None,
         }
         self.try_complete(id)
     }
