@@ -35,7 +35,7 @@ case "${1:-}" in
   --runs) budget=(-runs="$2" -max_total_time=3600); shift 2 ;;
 esac
 targets=("$@")
-[ "${#targets[@]}" -gt 0 ] || targets=(wire_stream tile_decode downlink dat_reader npz_reader image_loader dense_reader)
+[ "${#targets[@]}" -gt 0 ] || targets=(wire_stream tile_decode downlink live_wire dat_reader npz_reader image_loader dense_reader)
 
 cargo fuzz build -s none "${profile[@]}"
 for t in "${targets[@]}"; do

@@ -8,13 +8,21 @@
 //! [`crate::warp`]). The sidecar's loop and the host's offline run call
 //! the same functions, so the host measures the same frames either way.
 //!
+//! [`send_pair`] sends a pair so made up the wire, as the live loop's pair
+//! head and its parts ([`crate::wire::pair`]).
+//!
 //! Memory: the ring's two caller-supplied buffers and the frames'; no
 //! allocation. Events the ring cannot hold are counted
 //! ([`EventRing::lost`]), never silently dropped.
 
 use crate::error::Error;
 use crate::light::{Event, Light, MAX_TOLERANCE};
+use crate::method::Method;
 use crate::warp::{scatter, subtract_rates, Flow, Window};
+use crate::wire::codec::Lossy;
+use crate::wire::pair::{PairHead, MAX_EVENT_TICKS};
+use crate::wire::sender::{FrameInfo, Link, SendBuffers, SendError, Sender, Slot};
+use crate::wire::{Encoding, WireError};
 
 /// Most rungs a pair asks for.
 pub const MAX_RUNGS: usize = 8;
@@ -331,6 +339,175 @@ fn windows_of(mid: u32, seps: &[u16]) -> [Window; 2 * MAX_RUNGS] {
         out[2 * i + 1] = Window::new(mid, s);
     }
     out
+}
+
+/// A live-loop pair to send ([`send_pair`]): which pair, its midpoint,
+/// the ask its rung frames follow, and what it carries.
+#[derive(Debug, Clone, Copy)]
+pub struct PairPlan<'f> {
+    /// Pair counter.
+    pub pair: u32,
+    /// Midpoint, ticks.
+    pub mid: u32,
+    /// `from_pair` of the ask followed ([`crate::wire::pair::NO_ASK`]
+    /// without rung frames).
+    pub from_pair: u32,
+    /// The rung frames' separations (their `reach` is not read).
+    pub rungs: Rungs,
+    /// The flow they are warped along.
+    pub flow: Flow<'f>,
+    /// Ticks `a..b` of events to send (`None`: none), at most
+    /// [`MAX_EVENT_TICKS`].
+    pub events: Option<(u32, u32)>,
+}
+
+/// The caller's buffers for [`send_pair`], each for a sensor of `px`
+/// pixels.
+#[derive(Debug)]
+pub struct PairScratch<'a> {
+    /// The rung frames: 2 × separations × `px` samples.
+    pub frames: &'a mut [i16],
+    /// One frame of 16-bit levels: `px`.
+    pub levels: &'a mut [u16],
+    /// One plane of event levels: `px`.
+    pub plane: &'a mut [u8],
+}
+
+/// Bytes a pair took on the wire, by what they carry (headers, CRCs and
+/// COBS framing included).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PairCost {
+    /// The head.
+    pub head: u64,
+    /// The rung frames.
+    pub rung_frames: u64,
+    /// The events, tick by tick.
+    pub events: u64,
+    /// The static rates sent with the events.
+    pub rates: u64,
+}
+
+/// Sends the pair `plan` describes through `sender` into `link`: its head
+/// ([`PairHead`]), then its parts as lossless `Context` frames — the rung
+/// frames made from `ring` and `light` ([`rung_frames`]) as levels above
+/// each frame's smallest sample, one plane per tick of events (0 none,
+/// 1 a `−1`, 2 a `+1`) and, with events, the static rate of every pixel
+/// ([`Light::rate`]). Each part's frame end names the pair and the part
+/// (`member`), and carries the rung's separation as `dt`.
+pub fn send_pair<L: Link>(
+    sender: &mut Sender,
+    buf: &mut SendBuffers<'_>,
+    link: &mut L,
+    (ring, light): (&EventRing<'_>, &Light<'_>),
+    plan: &PairPlan<'_>,
+    scratch: PairScratch<'_>,
+) -> Result<PairCost, SendError<L::Error>> {
+    let px = usize::from(light.width()) * usize::from(light.height());
+    let seps = plan.rungs.separations();
+    let n = 2 * seps.len();
+    if scratch.frames.len() < n * px || scratch.levels.len() < px || scratch.plane.len() < px {
+        return Err(SendError::Wire(WireError::TooLarge));
+    }
+    let (a, b) = plan.events.unwrap_or((0, 0));
+    let ev_ticks = u16::try_from(b.saturating_sub(a))
+        .ok()
+        .filter(|&t| t <= MAX_EVENT_TICKS)
+        .ok_or(SendError::Wire(WireError::Payload))?;
+    if plan.events.is_some() && (a < ring.ticks().start || b > ring.ticks().end) {
+        return Err(SendError::Wire(WireError::Payload));
+    }
+    if n > 0 {
+        rung_frames(
+            ring,
+            light,
+            &plan.flow,
+            plan.mid,
+            &plan.rungs,
+            scratch.frames,
+        )
+        .map_err(|_| SendError::Wire(WireError::Payload))?;
+    }
+    let mut head = PairHead {
+        pair: plan.pair,
+        mid: plan.mid,
+        from_pair: plan.from_pair,
+        count: plan.rungs.count,
+        ev_first: a,
+        ev_ticks,
+        ..PairHead::default()
+    };
+    head.separations[..seps.len()].copy_from_slice(seps);
+    for (k, f) in scratch.frames[..n * px].chunks_exact(px).enumerate() {
+        head.offsets[k] = f.iter().copied().min().unwrap_or(0);
+    }
+    let mut cost = PairCost::default();
+    let spent = |sender: &Sender, before: u64| sender.sent.bytes - before;
+    let before = sender.sent.bytes;
+    sender.send_pair_head(buf, &head, link)?;
+    cost.head = spent(sender, before);
+    let mut member = 0u8;
+    let mut info = |dt: u32| {
+        let i = FrameInfo {
+            slot: Slot {
+                tick: plan.mid,
+                pair: plan.pair,
+                member,
+            },
+            method: Method::Mc,
+            full_scale: u16::MAX,
+            dt,
+        };
+        member = member.wrapping_add(1);
+        i
+    };
+    for (k, f) in scratch.frames[..n * px].chunks_exact(px).enumerate() {
+        let low = i32::from(head.offsets[k]);
+        for (l, &v) in scratch.levels[..px].iter_mut().zip(f) {
+            *l = (i32::from(v) - low) as u16;
+        }
+        let before = sender.sent.bytes;
+        let i = info(u32::from(seps[k / 2]));
+        sender.send_frame(
+            buf,
+            &mut scratch.levels[..px],
+            &i,
+            Encoding::Context,
+            &Lossy::DEFAULT,
+            link,
+        )?;
+        cost.rung_frames += spent(sender, before);
+    }
+    if plan.events.is_some() {
+        for t in a..b {
+            let plane = &mut scratch.plane[..px];
+            plane.fill(0);
+            ring.each(t, t + 1, |e: Event| {
+                if let Some(x) = plane.get_mut(e.index as usize) {
+                    *x = if e.sign > 0 { 2 } else { 1 };
+                }
+            });
+            let before = sender.sent.bytes;
+            let i = info(0);
+            sender.send_frame(buf, plane, &i, Encoding::Context, &Lossy::DEFAULT, link)?;
+            cost.events += spent(sender, before);
+        }
+        for (i, l) in scratch.levels[..px].iter_mut().enumerate() {
+            *l = light.rate(i);
+        }
+        let before = sender.sent.bytes;
+        let i = info(0);
+        sender.send_frame(
+            buf,
+            &mut scratch.levels[..px],
+            &i,
+            Encoding::Context,
+            &Lossy::DEFAULT,
+            link,
+        )?;
+        cost.rates += spent(sender, before);
+    }
+    Ok(cost)
 }
 
 #[cfg(test)]

@@ -38,7 +38,7 @@ use crate::dwell::{adaptive_banded, caps_for};
 use crate::motion::control::{Ask, AskLink, Delivery};
 use crate::motion::ladder::{self, LadderSettings, Rung};
 use crate::motion::make::{CorePair, PairMaker, LIGHT_TRAIN};
-use crate::motion::uplink::{PairBytes, PairReader, Uplink};
+use crate::motion::uplink::{PairBytes, PairReader, Uplink, UplinkError};
 use crate::piv::validate::median;
 use crate::piv::{piv, to_f32, Field, PivError, Settings, NO_SIGMA};
 use crate::receive::assemble::FrameLimit;
@@ -72,6 +72,15 @@ pub enum FlowError {
     /// Coding a pair's frames for the wire ([`FlowOptions::wire_bytes`]).
     #[error("wire: {0}")]
     Wire(#[from] spiv_core::wire::WireError),
+}
+
+impl From<UplinkError> for FlowError {
+    fn from(e: UplinkError) -> Self {
+        match e {
+            UplinkError::Core(c) => FlowError::Core(c),
+            UplinkError::Wire(w) => FlowError::Wire(w),
+        }
+    }
 }
 
 /// A spike recording, opened: its size and where its planes come from.
@@ -1161,13 +1170,16 @@ fn ladder_loop(
             read += n;
         }
         let heard = link.ask_for(i).clone();
-        let mut core = maker.make(mid as u32, &heard, cfg.bootstrap_reach)?;
         let mut bytes = None;
-        if let Some((up, down)) = &mut wire {
-            let (messages, b) = up.send(i as u32, &core)?;
-            core = read_back(down, &messages)?;
-            bytes = reported.then_some(b);
-        }
+        let core = match &mut wire {
+            Some((up, down)) => {
+                let (messages, b) =
+                    maker.send(i as u32, mid as u32, &heard, cfg.bootstrap_reach, up)?;
+                bytes = reported.then_some(b);
+                read_back(down, &messages)?
+            }
+            None => maker.make(mid as u32, &heard, cfg.bootstrap_reach)?,
+        };
         let input = core.input(w, rec.flip, heard.start.as_ref());
         let mut m = ladder::measure(&input, mid, dt as f64, cfg, (w, hu), reported)?;
         if let Some(mask) = &opts.mask {

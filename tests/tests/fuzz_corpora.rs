@@ -14,6 +14,8 @@ mod dense_reader;
 mod downlink;
 #[path = "../../fuzz/harness/image_loader.rs"]
 mod image_loader;
+#[path = "../../fuzz/harness/live_wire.rs"]
+mod live_wire;
 #[path = "../../fuzz/harness/npz_reader.rs"]
 mod npz_reader;
 #[path = "../../fuzz/harness/tile_decode.rs"]
@@ -46,10 +48,11 @@ fn replay(target: &str, run: fn(&[u8])) -> usize {
 
 #[test]
 fn every_corpus_input_passes_its_harness() {
-    let targets: [Target; 7] = [
+    let targets: [Target; 8] = [
         ("wire_stream", wire_stream::run),
         ("tile_decode", tile_decode::run),
         ("downlink", downlink::run),
+        ("live_wire", live_wire::run),
         ("dat_reader", dat_reader::run),
         ("npz_reader", npz_reader::run),
         ("image_loader", image_loader::run),

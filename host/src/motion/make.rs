@@ -7,12 +7,13 @@
 use spiv_core::buffers::LightBuf;
 use spiv_core::light::{Light, LightClock, MAX_TOLERANCE};
 use spiv_core::plane::PlaneView;
-use spiv_core::rungs::{rung_frames, EventRing, RingCursor};
+use spiv_core::rungs::{rung_frames, EventRing, PairPlan, RingCursor, Rungs};
 use spiv_core::Error;
 
 use super::control::{Ask, Heard};
 use super::events::{upright, Events};
 use super::ladder::PairInput;
+use super::uplink::{PairBytes, Uplink, UplinkError};
 use crate::piv::Field;
 use crate::reconstruct::Planes;
 use spiv_core::light::Event;
@@ -144,12 +145,7 @@ impl PairMaker {
     /// made.
     pub fn make(&mut self, mid: u32, ask: &Heard, reach: u32) -> Result<CorePair, Error> {
         let px = usize::from(self.width) * usize::from(self.height);
-        let held = self.ticks();
-        let fits = |s: u32| {
-            mid >= held.start.saturating_add(s)
-                && u64::from(mid) + u64::from(s) + u64::from(MAX_TOLERANCE) <= u64::from(held.end)
-        };
-        let rungs = ask.core_rungs(fits);
+        let (rungs, events) = self.plan(mid, ask, reach);
         let light = Light::resume(self.width, self.height, self.clock, self.light.state())?;
         let ring = EventRing::resume(&mut self.entries, &mut self.starts, self.cursor)?;
         let mut pair = CorePair {
@@ -178,15 +174,7 @@ impl PairMaker {
                 .collect();
             pair.from_pair = ask.from_pair;
         }
-        let r = if pair.rungs.is_empty() {
-            reach.max(1)
-        } else {
-            u32::from(rungs.reach)
-        };
-        if r > 0 {
-            let (a, b) = (mid.saturating_sub(r), mid.saturating_add(r).min(held.end));
-            let a = a.max(ring.ticks().start);
-            let b = b.max(a);
+        if let Some((a, b)) = events {
             let mut ticks: Vec<Vec<(u32, i8)>> = vec![Vec::new(); (b - a) as usize];
             ring.each(a, b, |e: Event| {
                 if let Some(v) = ticks.get_mut((e.tick - a) as usize) {
@@ -203,6 +191,60 @@ impl PairMaker {
             });
         }
         Ok(pair)
+    }
+
+    /// The rungs the pair at `mid` carries (those of `ask` that the ticks
+    /// held reach) and its ticks of events (within the ask's reach, or
+    /// within `reach` when it has no rung frames; `None`: none).
+    fn plan(&self, mid: u32, ask: &Heard, reach: u32) -> (Rungs, Option<(u32, u32)>) {
+        let held = self.ticks();
+        let fits = |s: u32| {
+            mid >= held.start.saturating_add(s)
+                && u64::from(mid) + u64::from(s) + u64::from(MAX_TOLERANCE) <= u64::from(held.end)
+        };
+        let rungs = ask.core_rungs(fits);
+        let r = if rungs.count == 0 {
+            reach.max(1)
+        } else {
+            u32::from(rungs.reach)
+        };
+        let events = (r > 0).then(|| {
+            let a = mid.saturating_sub(r).max(held.start);
+            let b = mid.saturating_add(r).min(held.end).max(a);
+            (a, b)
+        });
+        (rungs, events)
+    }
+
+    /// Sends the pair [`PairMaker::make`] makes as pair number `pair` up
+    /// `uplink`'s stream ([`spiv_core::rungs::send_pair`]): its messages,
+    /// in order, and what they cost.
+    pub fn send(
+        &mut self,
+        pair: u32,
+        mid: u32,
+        ask: &Heard,
+        reach: u32,
+        uplink: &mut Uplink,
+    ) -> Result<(Vec<Vec<u8>>, PairBytes), UplinkError> {
+        let px = usize::from(self.width) * usize::from(self.height);
+        let (rungs, events) = self.plan(mid, ask, reach);
+        let light = Light::resume(self.width, self.height, self.clock, self.light.state())?;
+        let ring = EventRing::resume(&mut self.entries, &mut self.starts, self.cursor)?;
+        let plan = PairPlan {
+            pair,
+            mid,
+            from_pair: if rungs.count > 0 {
+                ask.from_pair
+            } else {
+                NO_ASK
+            },
+            rungs,
+            flow: ask.flow.view(),
+            events,
+        };
+        self.frames.resize(2 * usize::from(rungs.count) * px, 0);
+        uplink.send(&ring, &light, &plan, &mut self.frames)
     }
 
     /// [`PairMaker::make`] as the estimator reads it ([`CorePair::input`]),

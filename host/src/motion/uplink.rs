@@ -1,10 +1,10 @@
-//! A pair of the live loop on the wire, both ways: the core's pair
-//! ([`CorePair`]) sent as its head ([`spiv_core::wire::pair::PairHead`])
-//! and its parts — lossless `Context` tiles through the wire's
-//! [`Sender`] — and read back bit-exact from the messages
-//! ([`PairReader`]: the frame assembler's CRC-checked frames, put
-//! together by the head). What each part costs is counted as it leaves
-//! (headers, CRCs and COBS framing included):
+//! A pair of the live loop on the wire, both ways: sent as the core sends
+//! it ([`send_pair`]: its head, [`spiv_core::wire::pair::PairHead`], and
+//! its parts as lossless `Context` tiles through one stream's [`Sender`],
+//! [`Uplink`]), and read back bit-exact from the messages as the core's
+//! pair ([`PairReader`] → [`CorePair`]: the frame assembler's CRC-checked
+//! frames, put together by the head). What each part costs is counted as
+//! it leaves (headers, CRCs and COBS framing included):
 //!
 //! - each rung frame as 16-bit levels above its smallest sample, whose
 //!   value the head carries;
@@ -12,12 +12,12 @@
 //!   1 (−1) and 2 (+1);
 //! - with the events, the static rate of every stored pixel (16-bit).
 
-use spiv_core::method::Method;
-use spiv_core::rungs::MAX_RUNGS;
+use spiv_core::light::Light;
+use spiv_core::rungs::{send_pair, EventRing, PairPlan, PairScratch};
 use spiv_core::wire::codec::Lossy;
-use spiv_core::wire::pair::{PairHead, MAX_EVENT_TICKS};
-use spiv_core::wire::sender::{tile_rows, FrameInfo, Link, SendBuffers, SendError, Sender, Slot};
-use spiv_core::wire::{Encoding, Kind, Message, WireError, MAX_ENCODED, MAX_PAYLOAD};
+use spiv_core::wire::pair::PairHead;
+use spiv_core::wire::sender::{tile_rows, Link, SendBuffers, SendError, Sender};
+use spiv_core::wire::{Kind, Message, WireError, MAX_ENCODED, MAX_PAYLOAD};
 
 use super::make::{CoreEvents, CorePair};
 use crate::receive::assemble::{Assembler, FrameLimit, ReceivedFrame};
@@ -65,73 +65,52 @@ fn wire(e: SendError<std::convert::Infallible>) -> WireError {
     }
 }
 
+/// Why a pair could not be sent.
+#[derive(Debug, thiserror::Error)]
+pub enum UplinkError {
+    /// The core refused (its state could not be resumed).
+    #[error("core: {0}")]
+    Core(#[from] spiv_core::Error),
+    /// The wire refused (a pair the head cannot carry, buffers too small).
+    #[error("wire: {0}")]
+    Wire(#[from] WireError),
+}
+
 /// One stream of live-loop pairs out of a `width × height` sensor: one
-/// sender (its message and frame counters run on), its buffers.
+/// sender (its message and frame counters run on) and its buffers.
 #[derive(Debug)]
 pub struct Uplink {
     sender: Sender,
     payload: Vec<u8>,
     wire: Vec<u8>,
+    levels: Vec<u16>,
+    plane: Vec<u8>,
 }
 
 impl Uplink {
     /// A stream for a sensor of `width × height` stored pixels.
     pub fn new((width, height): (u16, u16)) -> Result<Uplink, WireError> {
         let rows = tile_rows(width, height, true, Lossy::DEFAULT.block);
+        let px = usize::from(width) * usize::from(height);
         Ok(Uplink {
             sender: Sender::new(width, height, rows)?,
             payload: vec![0u8; MAX_PAYLOAD],
             wire: vec![0u8; MAX_ENCODED],
+            levels: vec![0; px],
+            plane: vec![0; px],
         })
     }
 
-    /// Sends `p` as pair number `pair`: its messages, in order, and what
-    /// they cost. Refused when `p` is not this stream's size, has more
-    /// rungs or ticks of events than a head carries, or a rung frame is
-    /// not one frame of samples.
+    /// Sends the pair `plan` describes, made from `ring` and `light`
+    /// ([`send_pair`]; `frames` holds its rung frames): its messages, in
+    /// order, and what they cost.
     pub fn send(
         &mut self,
-        pair: u32,
-        p: &CorePair,
-    ) -> Result<(Vec<Vec<u8>>, PairBytes), WireError> {
-        let px = usize::from(p.size.0) * usize::from(p.size.1);
-        let mut head = PairHead {
-            pair,
-            mid: p.mid,
-            from_pair: p.from_pair,
-            ..PairHead::default()
-        };
-        if p.rungs.len() > MAX_RUNGS {
-            return Err(WireError::Payload);
-        }
-        let mut rung_levels = Vec::with_capacity(2 * p.rungs.len());
-        for (k, (s, frames)) in p.rungs.iter().enumerate() {
-            head.separations[k] = *s;
-            for (j, f) in frames.iter().enumerate() {
-                if f.len() != px {
-                    return Err(WireError::Payload);
-                }
-                let low = f.iter().copied().min().unwrap_or(0);
-                head.offsets[2 * k + j] = low;
-                rung_levels.push(
-                    f.iter()
-                        .map(|&v| (i32::from(v) - i32::from(low)) as u16)
-                        .collect::<Vec<u16>>(),
-                );
-            }
-        }
-        head.count = p.rungs.len() as u8;
-        if let Some(ev) = &p.events {
-            head.ev_first = ev.first;
-            head.ev_ticks = u16::try_from(ev.ticks.len())
-                .ok()
-                .filter(|&n| n <= MAX_EVENT_TICKS)
-                .ok_or(WireError::Payload)?;
-            if ev.rates.len() != px {
-                return Err(WireError::Payload);
-            }
-        }
-        let mut out = PairBytes::default();
+        ring: &EventRing<'_>,
+        light: &Light<'_>,
+        plan: &PairPlan<'_>,
+        frames: &mut [i16],
+    ) -> Result<(Vec<Vec<u8>>, PairBytes), UplinkError> {
         let mut link = Keep::default();
         let mut buf = SendBuffers {
             payload: &mut self.payload,
@@ -139,68 +118,28 @@ impl Uplink {
             // `Context` tiles need no scratch.
             scratch: &mut [],
         };
-        self.sender
-            .send_pair_head(&mut buf, &head, &mut link)
-            .map_err(wire)?;
-        out.head = link.bytes;
-        let mut member = 0u8;
-        let mut info = |dt: u32| {
-            let i = FrameInfo {
-                slot: Slot {
-                    tick: p.mid,
-                    pair,
-                    member,
-                },
-                method: Method::Mc,
-                full_scale: u16::MAX,
-                dt,
-            };
-            member = member.wrapping_add(1);
-            i
+        let scratch = PairScratch {
+            frames,
+            levels: &mut self.levels,
+            plane: &mut self.plane,
         };
-        let s = &mut self.sender;
-        for (k, levels) in rung_levels.iter_mut().enumerate() {
-            let i = info(u32::from(head.separations[k / 2]));
-            out.rung_frames += send_part(s, &mut buf, &mut link, levels, &i)?;
-        }
-        if let Some(ev) = &p.events {
-            let mut plane = vec![0u8; px];
-            for tick in &ev.ticks {
-                plane.fill(0);
-                for &(i, sign) in tick {
-                    if let Some(x) = plane.get_mut(i as usize) {
-                        *x = if sign > 0 { 2 } else { 1 };
-                    }
-                }
-                let i = info(0);
-                out.events += send_part(s, &mut buf, &mut link, &mut plane, &i)?;
-            }
-            let mut rates = ev.rates.clone();
-            let i = info(0);
-            out.rates += send_part(s, &mut buf, &mut link, &mut rates, &i)?;
-        }
-        Ok((link.messages, out))
-    }
-}
-
-/// Sends one part as a lossless `Context` frame; returns its bytes.
-fn send_part<G: spiv_core::gray::Gray>(
-    sender: &mut Sender,
-    buf: &mut SendBuffers<'_>,
-    link: &mut Keep,
-    frame: &mut [G],
-    info: &FrameInfo,
-) -> Result<u64, WireError> {
-    let before = link.bytes;
-    sender
-        .send_frame(buf, frame, info, Encoding::Context, &Lossy::DEFAULT, link)
+        let cost = send_pair(
+            &mut self.sender,
+            &mut buf,
+            &mut link,
+            (ring, light),
+            plan,
+            scratch,
+        )
         .map_err(wire)?;
-    Ok(link.bytes - before)
-}
-
-/// What `p` costs on the wire, sent as the first pair of a stream.
-pub fn pair_bytes(p: &CorePair) -> Result<PairBytes, WireError> {
-    Ok(Uplink::new(p.size)?.send(0, p)?.1)
+        let bytes = PairBytes {
+            head: cost.head,
+            rung_frames: cost.rung_frames,
+            events: cost.events,
+            rates: cost.rates,
+        };
+        Ok((link.messages, bytes))
+    }
 }
 
 /// Live-loop pairs back from the messages of one stream: each pair once
@@ -316,35 +255,47 @@ impl PairReader {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::motion::control::{Ask, Heard};
+    use crate::motion::make::PairMaker;
+    use crate::piv::{Field, Grid, State};
     use spiv_core::wire::Decoder;
+    use spiv_firmware_sim::scene::{SceneKind, SceneParams};
+    use spiv_firmware_sim::simulation::{simulate_planes, Request};
 
-    /// A pair of a 40 × 24 sensor: two rungs of frames with negative and
-    /// positive samples, events on 5 ticks, rates.
-    fn pair(seed: i32) -> CorePair {
-        let px: usize = 40 * 24;
-        let frame = |k: i32| -> Vec<i16> {
-            (0..px as i32)
-                .map(|i| ((i * 37 + k * 11 + seed) % 301 - 120) as i16 * 16)
-                .collect()
+    const W: u16 = 64;
+    const H: u16 = 48;
+
+    /// A maker that took 300 planes of a uniform flow with glare.
+    fn maker() -> PairMaker {
+        let p = SceneParams {
+            width: W,
+            height: H,
+            glare_sigma: 10.0,
+            ..SceneParams::new(SceneKind::Uniform)
         };
-        CorePair {
-            size: (40, 24),
-            mid: 500 + seed as u32,
-            from_pair: 3,
-            rungs: vec![(16, [frame(0), frame(1)]), (32, [frame(2), frame(3)])],
-            events: Some(CoreEvents {
-                first: 480,
-                ticks: (0..5)
-                    .map(|t| {
-                        (0..px as u32)
-                            .filter(|i| (i * 7 + t * 13) % 29 == 0)
-                            .map(|i| (i, if i % 3 == 0 { -1 } else { 1 }))
-                            .collect()
-                    })
-                    .collect(),
-                rates: (0..px).map(|i| (i * 13 % 4000) as u16).collect(),
-            }),
+        let mut req = Request::new(p, 4);
+        req.ticks = Some(300);
+        let (data, _) = simulate_planes(&req).expect("simulates");
+        let mut m = PairMaker::new((W, H), usize::from(W), false, 0, 301).unwrap();
+        for plane in data.chunks_exact(usize::from(W) * usize::from(H) / 8) {
+            m.push(plane).unwrap();
         }
+        m
+    }
+
+    /// An ask with rung frames along a uniform flow, as the core hears it.
+    fn warm() -> Heard {
+        let grid = Grid::new(usize::from(W), usize::from(H), 16, 8).unwrap();
+        let mut f = Field::unmeasured(grid);
+        f.u.fill(0.3);
+        f.v.fill(-0.1);
+        f.state.fill(State::Valid);
+        let ask = Ask {
+            flow: Some(f),
+            rungs: vec![16, 32, 64],
+            reach: 20,
+        };
+        Heard::of(&ask, (W, H), false).unwrap()
     }
 
     /// Every pair `reader` reads from `messages`.
@@ -363,53 +314,46 @@ mod tests {
         out
     }
 
-    /// Pairs come back bit-exact, in a stream; the bytes counted are the
-    /// bytes sent, and less than the frames raw.
+    /// What the core sends up the wire is read back as exactly the pair
+    /// the host makes in process, pair after pair of one stream; the
+    /// bytes counted are the bytes sent.
     #[test]
-    fn pairs_come_back_bit_exact() {
-        let mut up = Uplink::new((40, 24)).unwrap();
+    fn the_wire_gives_back_the_pair_made_in_process() {
+        let mut m = maker();
+        let mut up = Uplink::new((W, H)).unwrap();
         let mut reader = PairReader::new(FrameLimit::default());
-        for k in 0..3 {
-            let p = pair(k);
-            let (messages, bytes) = up.send(k as u32 + 7, &p).unwrap();
-            let sent: u64 = messages.iter().map(|m| m.len() as u64).sum();
+        let cold = Heard::cold(&crate::motion::ladder::LadderSettings::default());
+        for (k, (mid, ask)) in [(150, warm()), (160, cold), (200, warm())]
+            .into_iter()
+            .enumerate()
+        {
+            let want = m.make(mid, &ask, 24).unwrap();
+            let (messages, bytes) = m.send(k as u32, mid, &ask, 24, &mut up).unwrap();
+            let sent: u64 = messages.iter().map(|b| b.len() as u64).sum();
             assert_eq!(bytes.total(), sent);
-            assert!(bytes.head > 0 && bytes.rung_frames > 0 && bytes.events > 0 && bytes.rates > 0);
-            assert!(bytes.rung_frames < 4 * 40 * 24 * 2, "{bytes:?}");
-            assert_eq!(read(&mut reader, &messages), vec![(k as u32 + 7, p)]);
+            assert!(bytes.head > 0);
+            assert_eq!(bytes.rung_frames > 0, !want.rungs.is_empty());
+            assert_eq!(bytes.events > 0, want.events.is_some());
+            assert_eq!(read(&mut reader, &messages), vec![(k as u32, want)]);
         }
-        // A pair of events alone.
-        let p = CorePair {
-            rungs: Vec::new(),
-            from_pair: spiv_core::wire::pair::NO_ASK,
-            ..pair(9)
-        };
-        let (messages, bytes) = up.send(20, &p).unwrap();
-        assert_eq!(bytes.rung_frames, 0);
-        assert_eq!(read(&mut reader, &messages), vec![(20, p)]);
+        assert_eq!((reader.pairs, reader.incomplete), (3, 0));
     }
 
     /// A damaged part loses its pair, never the next one, and the loss is
-    /// counted; a pair the head cannot carry is refused before sending.
+    /// counted.
     #[test]
     fn a_damaged_part_loses_its_pair_only() {
-        let mut up = Uplink::new((40, 24)).unwrap();
+        let mut m = maker();
+        let mut up = Uplink::new((W, H)).unwrap();
         let mut reader = PairReader::new(FrameLimit::default());
-        let (mut first, _) = up.send(0, &pair(1)).unwrap();
+        let (mut first, _) = m.send(0, 150, &warm(), 24, &mut up).unwrap();
         let k = first.len() / 2;
         let n = first[k].len();
         first[k][n / 2] ^= 0x10;
         assert!(read(&mut reader, &first).is_empty());
-        let (second, _) = up.send(1, &pair(2)).unwrap();
-        assert_eq!(read(&mut reader, &second), vec![(1, pair(2))]);
+        let (second, _) = m.send(1, 200, &warm(), 24, &mut up).unwrap();
+        let want = m.make(200, &warm(), 24).unwrap();
+        assert_eq!(read(&mut reader, &second), vec![(1, want)]);
         assert_eq!(reader.incomplete, 1);
-        let mut long = pair(3);
-        if let Some(ev) = &mut long.events {
-            ev.ticks = vec![Vec::new(); usize::from(MAX_EVENT_TICKS) + 1];
-        }
-        assert!(up.send(2, &long).is_err());
-        let mut odd = pair(3);
-        odd.rungs[0].1[0].pop();
-        assert!(up.send(2, &odd).is_err());
     }
 }
