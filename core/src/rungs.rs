@@ -404,16 +404,11 @@ pub fn send_pair<L: Link>(
     scratch: PairScratch<'_>,
 ) -> Result<PairCost, SendError<L::Error>> {
     let px = usize::from(light.width()) * usize::from(light.height());
-    let seps = plan.rungs.separations();
-    let n = 2 * seps.len();
+    let n = 2 * plan.rungs.separations().len();
     if scratch.frames.len() < n * px || scratch.levels.len() < px || scratch.plane.len() < px {
         return Err(SendError::Wire(WireError::TooLarge));
     }
     let (a, b) = plan.events.unwrap_or((0, 0));
-    let ev_ticks = u16::try_from(b.saturating_sub(a))
-        .ok()
-        .filter(|&t| t <= MAX_EVENT_TICKS)
-        .ok_or(SendError::Wire(WireError::Payload))?;
     if plan.events.is_some() && (a < ring.ticks().start || b > ring.ticks().end) {
         return Err(SendError::Wire(WireError::Payload));
     }
@@ -428,27 +423,15 @@ pub fn send_pair<L: Link>(
         )
         .map_err(|_| SendError::Wire(WireError::Payload))?;
     }
-    let mut head = PairHead {
-        pair: plan.pair,
-        mid: plan.mid,
-        from_pair: plan.from_pair,
-        count: plan.rungs.count,
-        ev_first: a,
-        ev_ticks,
-        ..PairHead::default()
-    };
-    head.separations[..seps.len()].copy_from_slice(seps);
-    for (k, f) in scratch.frames[..n * px].chunks_exact(px).enumerate() {
-        head.offsets[k] = f.iter().copied().min().unwrap_or(0);
-    }
+    let frames = &scratch.frames[..n * px];
+    let head = pair_head(plan, frames, px)?;
     let mut cost = PairCost::default();
-    let spent = |sender: &Sender, before: u64| sender.sent.bytes - before;
     let before = sender.sent.bytes;
     sender.send_pair_head(buf, &head, link)?;
-    cost.head = spent(sender, before);
+    cost.head = sender.sent.bytes - before;
     let mut member = 0u8;
-    let mut info = |dt: u32| {
-        let i = FrameInfo {
+    let mut part = |sender: &Sender, dt: u32| {
+        let info = FrameInfo {
             slot: Slot {
                 tick: plan.mid,
                 pair: plan.pair,
@@ -459,55 +442,65 @@ pub fn send_pair<L: Link>(
             dt,
         };
         member = member.wrapping_add(1);
-        i
+        (info, sender.sent.bytes)
     };
-    for (k, f) in scratch.frames[..n * px].chunks_exact(px).enumerate() {
+    let levels = &mut scratch.levels[..px];
+    for (k, f) in frames.chunks_exact(px).enumerate() {
         let low = i32::from(head.offsets[k]);
-        for (l, &v) in scratch.levels[..px].iter_mut().zip(f) {
+        for (l, &v) in levels.iter_mut().zip(f) {
             *l = (i32::from(v) - low) as u16;
         }
-        let before = sender.sent.bytes;
-        let i = info(u32::from(seps[k / 2]));
-        sender.send_frame(
-            buf,
-            &mut scratch.levels[..px],
-            &i,
-            Encoding::Context,
-            &Lossy::DEFAULT,
-            link,
-        )?;
-        cost.rung_frames += spent(sender, before);
+        let (info, before) = part(sender, u32::from(head.separations[k / 2]));
+        sender.send_frame(buf, levels, &info, Encoding::Context, &Lossy::DEFAULT, link)?;
+        cost.rung_frames += sender.sent.bytes - before;
     }
-    if plan.events.is_some() {
-        for t in a..b {
-            let plane = &mut scratch.plane[..px];
-            plane.fill(0);
-            ring.each(t, t + 1, |e: Event| {
-                if let Some(x) = plane.get_mut(e.index as usize) {
-                    *x = if e.sign > 0 { 2 } else { 1 };
-                }
-            });
-            let before = sender.sent.bytes;
-            let i = info(0);
-            sender.send_frame(buf, plane, &i, Encoding::Context, &Lossy::DEFAULT, link)?;
-            cost.events += spent(sender, before);
-        }
-        for (i, l) in scratch.levels[..px].iter_mut().enumerate() {
-            *l = light.rate(i);
-        }
-        let before = sender.sent.bytes;
-        let i = info(0);
-        sender.send_frame(
-            buf,
-            &mut scratch.levels[..px],
-            &i,
-            Encoding::Context,
-            &Lossy::DEFAULT,
-            link,
-        )?;
-        cost.rates += spent(sender, before);
+    if plan.events.is_none() {
+        return Ok(cost);
     }
+    let plane = &mut scratch.plane[..px];
+    for t in a..b {
+        plane.fill(0);
+        ring.each(t, t + 1, |e: Event| {
+            if let Some(x) = plane.get_mut(e.index as usize) {
+                *x = if e.sign > 0 { 2 } else { 1 };
+            }
+        });
+        let (info, before) = part(sender, 0);
+        sender.send_frame(buf, plane, &info, Encoding::Context, &Lossy::DEFAULT, link)?;
+        cost.events += sender.sent.bytes - before;
+    }
+    for (i, l) in levels.iter_mut().enumerate() {
+        *l = light.rate(i);
+    }
+    let (info, before) = part(sender, 0);
+    sender.send_frame(buf, levels, &info, Encoding::Context, &Lossy::DEFAULT, link)?;
+    cost.rates += sender.sent.bytes - before;
     Ok(cost)
+}
+
+/// The head of the pair `plan` describes, its rung frames `frames` (`px`
+/// samples each): each frame's offset its smallest sample.
+fn pair_head<E>(plan: &PairPlan<'_>, frames: &[i16], px: usize) -> Result<PairHead, SendError<E>> {
+    let (a, b) = plan.events.unwrap_or((0, 0));
+    let ev_ticks = u16::try_from(b.saturating_sub(a))
+        .ok()
+        .filter(|&t| t <= MAX_EVENT_TICKS)
+        .ok_or(SendError::Wire(WireError::Payload))?;
+    let seps = plan.rungs.separations();
+    let mut head = PairHead {
+        pair: plan.pair,
+        mid: plan.mid,
+        from_pair: plan.from_pair,
+        count: plan.rungs.count,
+        ev_first: a,
+        ev_ticks,
+        ..PairHead::default()
+    };
+    head.separations[..seps.len()].copy_from_slice(seps);
+    for (k, f) in frames.chunks_exact(px.max(1)).enumerate() {
+        head.offsets[k] = f.iter().copied().min().unwrap_or(0);
+    }
+    Ok(head)
 }
 
 #[cfg(test)]

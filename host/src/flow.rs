@@ -35,7 +35,7 @@ use spiv_formats::npz::read_npz_spikes;
 use spiv_formats::{FormatError, State, Vector};
 
 use crate::dwell::{adaptive_banded, caps_for};
-use crate::motion::control::{Ask, AskLink, Delivery};
+use crate::motion::control::{Ask, AskLink, Delivery, Heard};
 use crate::motion::ladder::{self, LadderSettings, Rung};
 use crate::motion::make::{CorePair, PairMaker, LIGHT_TRAIN};
 use crate::motion::uplink::{PairBytes, PairReader, Uplink, UplinkError};
@@ -533,6 +533,58 @@ impl FlowRequest {
         o.segment = self.segment;
         Ok(o)
     }
+}
+
+/// A reported pair of the ladder's loop as the outputs take it: its kept
+/// rung's frames (zeros of `h × w` without one, `dt` ticks), its field,
+/// rungs and dense field, and what it cost on the wire.
+fn measured_pair(
+    m: ladder::Measurement,
+    (h, w): (usize, usize),
+    dt: f64,
+    bytes: Option<PairBytes>,
+) -> Measured {
+    let (frames, frame_ticks) = match m.frames {
+        Some(f) => (f.frames, f64::from(f.separation)),
+        None => {
+            let zero = Array2::zeros((h, w));
+            ([zero.clone(), zero], dt)
+        }
+    };
+    Measured {
+        method: Method::Mc,
+        separation: m.separation.iter().copied().collect(),
+        field: m.field,
+        frames,
+        caps: Vec::new(),
+        bootstrapped: false,
+        rungs: m.rungs,
+        frame_ticks,
+        // The ladder's frames carry no label table.
+        lost: LabelLoss::default(),
+        dense: m.dense,
+        bytes,
+    }
+}
+
+/// The core's pair `i` at `mid` as `heard` asks: made in process, or,
+/// with `wire`, sent up the uplink and read back from its messages (with
+/// what it cost).
+fn make_pair(
+    maker: &mut PairMaker,
+    wire: Option<&mut (Uplink, PairReader)>,
+    (i, mid): (usize, u64),
+    heard: &Heard,
+    cfg: &LadderSettings,
+) -> Result<(CorePair, Option<PairBytes>), FlowError> {
+    let reach = cfg.bootstrap_reach;
+    Ok(match wire {
+        Some((up, down)) => {
+            let (messages, b) = maker.send(i as u32, mid as u32, heard, reach, up)?;
+            (read_back(down, &messages)?, Some(b))
+        }
+        None => (maker.make(mid as u32, heard, reach)?, None),
+    })
 }
 
 /// The pair that `messages` (one pair's, in order) carry, as `reader`
@@ -1128,6 +1180,15 @@ fn ladder_loop(
         .map(|m| (m, false))
         .chain(seg.iter().map(|&ka| (ka + half, true)))
         .collect();
+    let mut wire = opts
+        .wire_bytes
+        .then(|| {
+            Ok::<_, FlowError>((
+                Uplink::new((rec.width, rec.height))?,
+                PairReader::new(FrameLimit::default()),
+            ))
+        })
+        .transpose()?;
     if end > u64::from(u32::MAX) {
         return Err(FlowError::Schedule(format!(
             "{end} planes: the core counts ticks in 32 bits"
@@ -1146,14 +1207,6 @@ fn ladder_loop(
         maker.train(&planes, LIGHT_TRAIN)?;
     }
     let mut link = AskLink::new(opts.delivery, cfg, (sw, h), rec.flip);
-    let mut wire = if opts.wire_bytes {
-        Some((
-            Uplink::new((sw, h))?,
-            PairReader::new(FrameLimit::default()),
-        ))
-    } else {
-        None
-    };
     let mut out = Chain::default();
     let mut read = first_read;
     for (i, &(mid, reported)) in all.iter().enumerate() {
@@ -1170,16 +1223,8 @@ fn ladder_loop(
             read += n;
         }
         let heard = link.ask_for(i).clone();
-        let mut bytes = None;
-        let core = match &mut wire {
-            Some((up, down)) => {
-                let (messages, b) =
-                    maker.send(i as u32, mid as u32, &heard, cfg.bootstrap_reach, up)?;
-                bytes = reported.then_some(b);
-                read_back(down, &messages)?
-            }
-            None => maker.make(mid as u32, &heard, cfg.bootstrap_reach)?,
-        };
+        let (core, bytes) = make_pair(&mut maker, wire.as_mut(), (i, mid), &heard, cfg)?;
+        let bytes = bytes.filter(|_| reported);
         let input = core.input(w, rec.flip, heard.start.as_ref());
         let mut m = ladder::measure(&input, mid, dt as f64, cfg, (w, hu), reported)?;
         if let Some(mask) = &opts.mask {
@@ -1189,28 +1234,8 @@ fn ladder_loop(
         if !reported {
             continue;
         }
-        let (frames, frame_ticks) = match m.frames {
-            Some(f) => (f.frames, f64::from(f.separation)),
-            None => {
-                let zero = Array2::zeros((hu, w));
-                ([zero.clone(), zero], dt as f64)
-            }
-        };
         let ka = mid - half;
-        let measured = Measured {
-            method: Method::Mc,
-            separation: m.separation.iter().copied().collect(),
-            field: m.field,
-            frames,
-            caps: Vec::new(),
-            bootstrapped: false,
-            rungs: m.rungs,
-            frame_ticks,
-            // The ladder's frames carry no label table.
-            lost: LabelLoss::default(),
-            dense: m.dense,
-            bytes,
-        };
+        let measured = measured_pair(m, (hu, w), dt as f64, bytes);
         out.take(measured, [ka, ka + dt], opts, opts.core.full_scale);
         tell();
     }
