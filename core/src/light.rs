@@ -20,7 +20,8 @@
 //!
 //! - a spike of a periodic pixel `P − early ..= P + late` ticks after its
 //!   last spike was predicted — unless the train has run ahead of its
-//!   period chain: each such spike adds its interval's deviation from the
+//!   period chain: at periods below [`LEAD_PERIOD`] each such spike adds
+//!   its interval's deviation from the
 //!   Q4 period to the pixel's *lead* (leaking an eighth per spike), and
 //!   once the lead is more than [`LEAD`] (a tick and a half) and `early`
 //!   ahead, the spike is an extra one (event `+1`) and the lead gives a
@@ -75,6 +76,13 @@ pub const MAX_PERIOD: u16 = 4095;
 /// interval is a whole number of ticks around a fractional period, so a
 /// particle's light shows only in the sum.
 pub const LEAD: i32 = 24;
+
+/// Periods, whole ticks, below which a pixel keeps a lead: at longer ones
+/// a particle's light brings a spike a tick or more early, which the
+/// window itself sees, and a lead would carry the phase a particle left
+/// behind for many ticks after it passed (an extra event on the pixel
+/// long after, where the flow no longer is).
+pub const LEAD_PERIOD: u16 = 8;
 
 /// The lead keeps 1 − 1/2^`LEAD_LEAK` of itself per spike (the sensor's
 /// phase noise does not add up).
@@ -326,10 +334,10 @@ impl<'a> Light<'a> {
                     let in_window = periodic
                         && since.saturating_add(early) >= p
                         && since <= p.saturating_add(late);
-                    let (extra, lead) = if in_window {
-                        ahead(st.lead[i], since, st.period[i], early)
-                    } else {
-                        (true, 0)
+                    let (extra, lead) = match (in_window, p < LEAD_PERIOD) {
+                        (true, true) => ahead(st.lead[i], since, st.period[i], early),
+                        (true, false) => (false, 0),
+                        (false, _) => (true, 0),
                     };
                     st.lead[i] = lead;
                     if extra {

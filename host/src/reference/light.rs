@@ -15,8 +15,8 @@
 
 use super::SpikeVolume;
 use spiv_core::light::{
-    early_tolerance, tolerance, CONFIDENT, LEAD, LEAD_LEAK, MAX_CONFIDENCE, MAX_PERIOD, RATE_TICKS,
-    RELEARN_TICKS, SETTLED_SHIFT,
+    early_tolerance, tolerance, CONFIDENT, LEAD, LEAD_LEAK, LEAD_PERIOD, MAX_CONFIDENCE,
+    MAX_PERIOD, RATE_TICKS, RELEARN_TICKS, SETTLED_SHIFT,
 };
 
 /// One pixel's model, in the reference's terms.
@@ -65,7 +65,11 @@ pub fn events(vol: &SpikeVolume) -> Events {
             let early = i64::from(early_tolerance(per as u16));
             let periodic = p.spiked && p.count >= CONFIDENT;
             if s {
-                let extra = if periodic && since + early >= per && since <= per + late {
+                let in_window = periodic && since + early >= per && since <= per + late;
+                let extra = if in_window && per >= i64::from(LEAD_PERIOD) {
+                    p.lead = 0;
+                    false
+                } else if in_window {
                     // The lead on the period chain gains the deviation,
                     // leaks an eighth (floored), and gives a period back
                     // past a tick and a half (and the early tolerance)
