@@ -113,6 +113,13 @@ pub const SETTLED_SHIFT: u32 = 4;
 /// period of 1 tick), so that it learns over about 256 ticks at any
 /// period. Per spike, a glare pixel's period would otherwise learn a
 /// slow particle that lingers a hundred ticks as its own light.
+///
+/// ```
+/// use spiv_core::light::settled_shift;
+/// assert_eq!(settled_shift(16), 8); // a period of 1 tick
+/// assert_eq!(settled_shift(40), 7); // 2.5 ticks
+/// assert_eq!(settled_shift(16 * 20), 4); // 20 ticks
+/// ```
 #[inline]
 pub fn settled_shift(per: u16) -> u32 {
     let whole = (per >> 4).max(1);
@@ -164,6 +171,39 @@ pub struct LightState<'a> {
 }
 
 /// The static-light model of a `width × height` sensor.
+///
+/// A pixel that fires every 5 ticks goes quiet once it has shown its
+/// period; an early spike (a particle) is an event:
+///
+/// ```
+/// use spiv_core::light::{Light, LightState};
+/// use spiv_core::plane::PlaneView;
+///
+/// let (mut last, mut period, mut rate) = ([0u16; 8], [0u16; 8], [0u32; 8]);
+/// let (mut short, mut lead, mut flags) = ([0u16; 8], [0i8; 8], [0u8; 8]);
+/// let state = LightState {
+///     last: &mut last,
+///     period: &mut period,
+///     rate: &mut rate,
+///     short: &mut short,
+///     lead: &mut lead,
+///     flags: &mut flags,
+/// };
+/// let mut light = Light::new(8, 1, 0, state).unwrap();
+/// let mut events = Vec::new();
+/// for t in 0..70u32 {
+///     // Pixel 3 fires every 5 ticks; light added at tick 52 fires it
+///     // early, and its beat goes on from there (57, 62, …).
+///     let spike = if t < 52 { t % 5 == 0 } else { (t - 52) % 5 == 0 };
+///     let byte = [u8::from(spike) << 3];
+///     light
+///         .push(&PlaneView::new(&byte, 8, 1).unwrap(), |e| events.push((e.tick, e.sign)))
+///         .unwrap();
+/// }
+/// assert!(light.periodic(3));
+/// let late: Vec<_> = events.into_iter().filter(|e| e.0 > 20).collect();
+/// assert_eq!(late, vec![(52, 1)]);
+/// ```
 #[derive(Debug)]
 pub struct Light<'a> {
     width: u16,
@@ -189,6 +229,13 @@ pub struct LightClock {
 /// and still be the predicted one: [`TOLERANCE`] (a tick of phase) and
 /// `p/16` (the photon noise of a spike's charge, about 3 % of the period
 /// at 1000 electrons per spike, twice over), at most [`MAX_TOLERANCE`].
+///
+/// ```
+/// use spiv_core::light::tolerance;
+/// assert_eq!(tolerance(2), 1);
+/// assert_eq!(tolerance(40), 3);
+/// assert_eq!(tolerance(4000), 16);
+/// ```
 #[inline]
 pub fn tolerance(p: u16) -> u16 {
     TOLERANCE.saturating_add(p / 16).min(MAX_TOLERANCE)
@@ -412,6 +459,14 @@ fn ahead(lead: i8, since: u16, per: u16, early: u16) -> (bool, i8) {
 /// 2^shift` on average. (A plain shift floors: it pulled every period down
 /// by up to a tick, and a glare pixel of period 2.1 ticks came to expect
 /// 1, so each of its 3-tick intervals was an event of static light.)
+///
+/// ```
+/// use spiv_core::light::dithered_step;
+/// // A step of 3/16 is 0 or 1 tick by tick, 3/16 on average.
+/// let sum: i32 = (0..4096u16).map(|t| dithered_step(3, 4, t)).sum();
+/// assert!((sum - 768).abs() < 40, "{sum}");
+/// assert_eq!(dithered_step(-16, 4, 7), -1);
+/// ```
 #[inline]
 pub fn dithered_step(d: i32, shift: u32, t: u16) -> i32 {
     let u = (u32::from(t).wrapping_mul(0x9E37_79B9) >> (32 - shift)) as i32;

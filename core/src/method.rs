@@ -55,6 +55,12 @@ impl Method {
     }
 
     /// The method named `name` (see [`Method::name`]).
+    ///
+    /// ```
+    /// use spiv_core::Method;
+    /// assert_eq!(Method::from_name("tfp"), Some(Method::Tfp));
+    /// assert_eq!(Method::from_name("TFP"), None);
+    /// ```
     pub fn from_name(name: &str) -> Option<Method> {
         Method::ALL.into_iter().find(|m| m.name() == name)
     }

@@ -47,6 +47,14 @@ pub(crate) fn le_words(bytes: &[u8], out: &mut [u64]) {
 
 impl<'a> PlaneView<'a> {
     /// Views `bytes` as one plane of `width × height` pixels.
+    ///
+    /// ```
+    /// use spiv_core::plane::PlaneView;
+    /// // 16 × 1 pixels, bit `c % 8` of byte `c / 8`: columns 0 and 9 fire.
+    /// let p = PlaneView::new(&[0b0000_0001, 0b0000_0010], 16, 1).unwrap();
+    /// assert!(p.get(0, 0) && p.get(0, 9) && !p.get(0, 1));
+    /// assert!(PlaneView::new(&[0], 16, 1).is_err());
+    /// ```
     pub fn new(bytes: &'a [u8], width: u16, height: u16) -> Result<Self, Error> {
         let expected = plane_bytes(width, height).ok_or(Error::BadDimensions)?;
         if bytes.len() != expected {

@@ -236,6 +236,13 @@ pub struct Rungs {
 
 impl Rungs {
     /// No rung frames, the events within `reach` ticks of the midpoint.
+    ///
+    /// ```
+    /// use spiv_core::rungs::Rungs;
+    /// let r = Rungs::events(24);
+    /// assert!(r.separations().is_empty());
+    /// assert_eq!(r.ahead(), 24 + u32::from(spiv_core::light::MAX_TOLERANCE));
+    /// ```
     pub const fn events(reach: u16) -> Rungs {
         Rungs {
             separations: [0; MAX_RUNGS],

@@ -66,6 +66,11 @@ pub struct Flow<'a> {
 
 impl Flow<'static> {
     /// No motion: every event stays on its pixel.
+    ///
+    /// ```
+    /// let f = spiv_core::warp::Flow::still();
+    /// assert!(f.is_still() && f.check().is_ok());
+    /// ```
     pub const fn still() -> Flow<'static> {
         Flow {
             nx: 0,

@@ -19,6 +19,14 @@ pub struct Grid {
 
 impl Grid {
     /// The grid over a `w × h` image, or `None` when no window fits.
+    ///
+    /// ```
+    /// use spiv_formats::grid::Grid;
+    /// let g = Grid::new(64, 48, 16, 8).unwrap();
+    /// assert_eq!((g.nx, g.ny), (7, 5));
+    /// assert_eq!(g.centre(0, 0), (7.5, 7.5));
+    /// assert!(Grid::new(8, 8, 16, 8).is_none());
+    /// ```
     pub fn new(w: usize, h: usize, size: usize, step: usize) -> Option<Grid> {
         let step = step.max(1);
         if size == 0 || w < size || h < size {

@@ -272,6 +272,13 @@ pub struct Field {
 impl Field {
     /// A field on `grid` that measured nothing: every vector invalid at
     /// zero, with no peak and no uncertainty.
+    ///
+    /// ```
+    /// use spiv_piv::{Field, Grid};
+    /// let f = Field::unmeasured(Grid::new(64, 64, 32, 16).unwrap());
+    /// assert_eq!(f.counts(), (0, 0, 9));
+    /// assert!(!f.usable());
+    /// ```
     pub fn unmeasured(grid: Grid) -> Field {
         let shape = (grid.ny, grid.nx);
         Field {
@@ -409,6 +416,33 @@ fn check(s: &Settings, (h, w): (usize, usize)) -> Result<(), PivError> {
 }
 
 /// Runs PIV on a pair; the field lives on the last pass's grid.
+///
+/// A random dot pattern moved 3 px right and 1 px down:
+///
+/// ```
+/// use ndarray::Array2;
+/// use spiv_piv::{piv, Settings, State};
+///
+/// let dots = |dx: f32, dy: f32| {
+///     let mut seed = 7u32;
+///     let mut img = Array2::<f32>::zeros((96, 96));
+///     for _ in 0..300 {
+///         seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+///         let x = (seed >> 8) as f32 / 16_777_216.0 * 96.0 + dx;
+///         seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+///         let y = (seed >> 8) as f32 / 16_777_216.0 * 96.0 + dy;
+///         for ((r, c), v) in img.indexed_iter_mut() {
+///             let d2 = (c as f32 - x).powi(2) + (r as f32 - y).powi(2);
+///             *v += 200.0 * (-d2 / 2.0).exp();
+///         }
+///     }
+///     img
+/// };
+/// let field = piv(&dots(0.0, 0.0), &dots(3.0, 1.0), None, &Settings::default()).unwrap();
+/// let mid = (field.u.nrows() / 2, field.u.ncols() / 2);
+/// assert_eq!(field.state[mid], State::Valid);
+/// assert!((field.u[mid] - 3.0).abs() < 0.1 && (field.v[mid] - 1.0).abs() < 0.1);
+/// ```
 pub fn piv(
     a: &Array2<f32>,
     b: &Array2<f32>,

@@ -30,6 +30,13 @@ impl Default for Validation {
 }
 
 /// The median of `v` (sorted in place), 0 when empty.
+///
+/// ```
+/// use spiv_piv::validate::median;
+/// assert_eq!(median(&mut [3.0, 1.0, 2.0]), 2.0);
+/// assert_eq!(median(&mut [4.0, 1.0, 2.0, 3.0]), 2.5);
+/// assert_eq!(median(&mut []), 0.0);
+/// ```
 pub fn median(v: &mut [f64]) -> f64 {
     v.sort_unstable_by(f64::total_cmp);
     let n = v.len();

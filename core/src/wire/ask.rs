@@ -173,6 +173,25 @@ impl<'a> AskView<'a> {
     }
 }
 
+/// ```
+/// use spiv_core::rungs::Rungs;
+/// use spiv_core::warp::Flow;
+/// use spiv_core::wire::ask::{ask_parts, encode_ask, AskView, MAX_ASK_PAYLOAD};
+///
+/// let v = [410i16; 6]; // 0.1 px per tick
+/// let flow = Flow { nx: 3, ny: 2, x0: 128, y0: 128, pitch: 256, vx: &v, vy: &v, ax: &v, ay: &v };
+/// let mut rungs = Rungs::events(0);
+/// rungs.separations[..2].copy_from_slice(&[16, 32]);
+/// rungs.count = 2;
+/// let parts: Vec<_> = ask_parts(&flow).collect();
+/// assert_eq!(parts, vec![(0, 2)]);
+/// let mut buf = vec![0u8; MAX_ASK_PAYLOAD];
+/// let n = encode_ask(5, &rungs, &flow, parts[0], &mut buf).unwrap();
+/// let ask = AskView::parse(&buf[..n]).unwrap();
+/// assert_eq!((ask.head.from_pair, ask.nodes()), (5, 6));
+/// assert_eq!(ask.node(4), (410, 410, 410, 410));
+/// ```
+///
 /// Writes the ask message payload that carries node rows `row0..row0 +
 /// rows` of `flow` (all of them: [`ask_parts`]) into `out`, with
 /// `from_pair` and `rungs`; returns its length. A still flow has no rows

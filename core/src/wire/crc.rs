@@ -57,6 +57,10 @@ impl Default for Crc32 {
 }
 
 /// The CRC-32/ISO-HDLC of `bytes`.
+///
+/// ```
+/// assert_eq!(spiv_core::wire::crc32(b"123456789"), 0xCBF4_3926);
+/// ```
 pub fn crc32(bytes: &[u8]) -> u32 {
     let mut d = Crc32::new();
     d.update(bytes);

@@ -49,6 +49,26 @@ impl Header {
     }
 
     /// Parses and checks magic, version, kind and encoding.
+    ///
+    /// ```
+    /// use spiv_core::wire::{Encoding, Header, Kind};
+    /// let h = Header {
+    ///     kind: Kind::FrameTile,
+    ///     seq: 7,
+    ///     frame_id: 2,
+    ///     tick: 640,
+    ///     width: 400,
+    ///     height: 250,
+    ///     row0: 40,
+    ///     rows: 40,
+    ///     encoding: Encoding::Rice,
+    ///     payload_len: 1234,
+    /// };
+    /// assert_eq!(Header::parse(&h.to_bytes()), Ok(h));
+    /// let mut bad = h.to_bytes();
+    /// bad[0] ^= 1; // the magic
+    /// assert!(Header::parse(&bad).is_err());
+    /// ```
     pub fn parse(b: &[u8]) -> Result<Header, WireError> {
         let b: &[u8; HEADER_LEN] = b
             .get(..HEADER_LEN)

@@ -24,6 +24,13 @@ pub const MAX_EVENT_TICKS: u16 = 224;
 pub const NO_ASK: u32 = u32::MAX;
 
 /// Payload of [`super::Kind::PairHead`].
+///
+/// ```
+/// use spiv_core::wire::pair::{PairHead, NO_ASK};
+/// let h = PairHead { pair: 3, mid: 120, from_pair: NO_ASK, ev_first: 88, ev_ticks: 64, ..PairHead::default() };
+/// assert_eq!(h.parts(), 65); // 64 event planes and the rates
+/// assert_eq!(PairHead::parse(&h.to_bytes()), Ok(h));
+/// ```
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct PairHead {

@@ -7,6 +7,32 @@ use super::{crc32, Crc32, Header, WireError, CRC_LEN, HEADER_LEN, MAX_PAYLOAD};
 /// Frames one message into `out`: COBS of header, payload and CRC, then the
 /// `0x00` delimiter. Returns the bytes written (at most [`MAX_ENCODED`]).
 /// `header.payload_len` is set from `payload`.
+///
+/// A message framed and read back by the stream decoder:
+///
+/// ```
+/// use spiv_core::wire::{encode_message, Decoder, Encoding, Header, Kind, MAX_ENCODED, MAX_MESSAGE};
+///
+/// let header = Header {
+///     kind: Kind::Status,
+///     seq: 0,
+///     frame_id: 0,
+///     tick: 0,
+///     width: 64,
+///     height: 32,
+///     row0: 0,
+///     rows: 0,
+///     encoding: Encoding::None,
+///     payload_len: 0,
+/// };
+/// let mut wire = vec![0u8; MAX_ENCODED];
+/// let n = encode_message(&header, &[1, 2, 3], &mut wire).unwrap();
+/// let mut rx = vec![0u8; MAX_MESSAGE + 8];
+/// let mut dec = Decoder::new(&mut rx);
+/// let mut input = &wire[..n];
+/// let m = dec.feed(&mut input).unwrap().unwrap();
+/// assert_eq!((m.header.kind, m.payload), (Kind::Status, &[1u8, 2, 3][..]));
+/// ```
 pub fn encode_message(header: &Header, payload: &[u8], out: &mut [u8]) -> Result<usize, WireError> {
     if payload.len() > MAX_PAYLOAD {
         return Err(WireError::TooLarge);

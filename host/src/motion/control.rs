@@ -39,6 +39,17 @@ pub struct Ask {
 impl Ask {
     /// A pair with no flow to follow: its events within the ladder's
     /// bootstrap reach.
+    ///
+    /// ```
+    /// use spiv_host::motion::control::Ask;
+    /// use spiv_host::motion::ladder::LadderSettings;
+    /// let cfg = LadderSettings::default();
+    /// let a = Ask::cold(&cfg);
+    /// assert!(!a.warm() && a.reach == cfg.bootstrap_reach);
+    /// // On the wire: one message of the ask's head, no nodes.
+    /// let m = a.messages(1, (64, 48), false).unwrap();
+    /// assert_eq!(m.len(), 1);
+    /// ```
     pub fn cold(cfg: &LadderSettings) -> Ask {
         Ask {
             flow: None,
@@ -153,6 +164,16 @@ pub struct Heard {
 impl Heard {
     /// What a core holds before any ask: events within the ladder's
     /// bootstrap reach ([`Ask::cold`]).
+    ///
+    /// ```
+    /// use spiv_host::motion::control::Heard;
+    /// use spiv_host::motion::ladder::LadderSettings;
+    /// let cfg = LadderSettings::default();
+    /// let h = Heard::cold(&cfg);
+    /// assert!(h.flow.is_still() && h.start.is_none());
+    /// assert_eq!(u32::from(h.rungs.reach), cfg.bootstrap_reach);
+    /// assert_eq!(h.core_rungs(|_| true).count, 0);
+    /// ```
     pub fn cold(cfg: &LadderSettings) -> Heard {
         Heard {
             from_pair: 0,

@@ -37,6 +37,12 @@ pub struct PairBytes {
 
 impl PairBytes {
     /// Every byte of the pair.
+    ///
+    /// ```
+    /// use spiv_host::motion::uplink::PairBytes;
+    /// let b = PairBytes { head: 120, rung_frames: 9000, events: 0, rates: 0 };
+    /// assert_eq!(b.total(), 9120);
+    /// ```
     pub fn total(&self) -> u64 {
         self.head + self.rung_frames + self.events + self.rates
     }
