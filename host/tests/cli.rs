@@ -141,6 +141,15 @@ fn bad_inputs_fail_with_one_line() {
         "-o",
         p(&out),
     ]);
+}
+
+/// A recording that is empty, ragged, of an odd size or too short, and
+/// bad option values: one line each, nothing written.
+#[test]
+fn bad_recordings_fail_with_one_line() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    let out = d.join("o.png");
 
     // Empty file.
     let empty = d.join("empty.dat");
@@ -655,6 +664,16 @@ fn flow_writes_vectors_per_pair_the_mean_field_and_plots() {
     assert_eq!(frames.len(), pairs);
     // The pairs differ, so the frames do (their captions at least).
     assert!(frames.windows(2).all(|w| w[0] != w[1]));
+}
+
+/// `spiv flow`'s inputs checked against what they claim, and its bad
+/// values: each named on one line.
+#[test]
+fn flow_refuses_bad_inputs_with_one_line() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let sim = simulate_small(tmp.path());
+    let out = tmp.path().join("flow");
+    let dat = sim.join("spikes.dat");
     // Without scene.json the pair separation must be given; bad values fail.
     let lone = tmp.path().join("lone.dat");
     std::fs::copy(&dat, &lone).unwrap();
