@@ -200,6 +200,15 @@ fn bad_recordings_fail_with_one_line() {
         "-o",
         p(&out),
     ]);
+}
+
+/// A tick outside the recording, no size, bad option values: one line
+/// each, nothing written.
+#[test]
+fn bad_ticks_and_options_fail_with_one_line() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    let out = d.join("o.png");
 
     // A tick outside the file.
     let whole = d.join("whole.dat");
