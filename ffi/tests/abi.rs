@@ -407,7 +407,16 @@ fn bad_input_comes_back_as_status_codes() {
             SpivStatus::SpivErrHandle
         );
         assert_eq!(spiv_done(ptr::null_mut()), 0);
+    }
+}
 
+/// A handle's calls with a bad plane, null pointers, the wrong mode or a
+/// link that refuses: each a status code; every code has a message.
+#[test]
+fn bad_calls_on_a_handle_come_back_as_status_codes() {
+    let cfg = one_pair();
+    // SAFETY (each call below): pointers are valid or deliberately null.
+    unsafe {
         let h = Handle::new(&cfg).unwrap();
         let mut tap = Tap::default();
         let l = link(&mut tap);
