@@ -1407,6 +1407,55 @@ mod tests {
         assert_eq!(region_gray(4, &flat, &p, 255), 26);
     }
 
+    /// Up to 40 cells `spread` words apart at most over `words` words,
+    /// each with a ring and a region mask: narrow masks (a byte's span
+    /// anywhere, across the halves' boundary too) as often as wide ones.
+    fn random_cells(
+        rnd: &mut impl FnMut(u64) -> u64,
+        words: usize,
+        spread: u64,
+    ) -> std::vec::Vec<Cell> {
+        let n = 1 + rnd(40) as usize;
+        let mask = |rnd: &mut dyn FnMut(u64) -> u64, sh: u32| match rnd(6) {
+            0 => 0,
+            1 => rnd(u64::MAX) & 0xffff_ffff,
+            2 => rnd(u64::MAX) << 32,
+            3 => rnd(u64::MAX) ^ rnd(u64::MAX) << 21,
+            _ => rnd(256) << sh,
+        };
+        let mut at = rnd(words as u64 - spread.min(40)) as usize;
+        (0..n)
+            .map(|_| {
+                at = (at + rnd(spread / 4 + 1) as usize) % words;
+                let sh = rnd(57) as u32;
+                let ring = mask(rnd, sh);
+                Cell {
+                    at,
+                    ring,
+                    reg: mask(rnd, sh) & !ring,
+                    ..Cell::default()
+                }
+            })
+            .collect()
+    }
+
+    /// The region and ring sums of `cells` per plane (plane `i` at
+    /// `i + 1`), pixel by pixel.
+    fn pixel_sums(planes: &[std::vec::Vec<u64>], cells: &[Cell]) -> ([u32; 256], [u32; 256]) {
+        let (mut es, mut eb) = ([0u32; 256], [0u32; 256]);
+        for (i, plane) in planes.iter().enumerate() {
+            for c in cells {
+                for bit in 0..64 {
+                    if (plane[c.at] >> bit) & 1 == 1 {
+                        es[i + 1] += u32::from((c.reg >> bit) & 1 == 1);
+                        eb[i + 1] += u32::from((c.ring >> bit) & 1 == 1);
+                    }
+                }
+            }
+        }
+        (es, eb)
+    }
+
     /// The per-tick sums over whole words and over their `u32` halves
     /// (the 32-bit targets' cells, [`parts`], narrow ones included) both
     /// equal a pixel-by-pixel count: random planes (sparse and dense),
@@ -1451,42 +1500,9 @@ mod tests {
                 nominal: depth,
             };
             assert_eq!(Span::new(&hist, held).planes(), &refs[..]);
-            let n = 1 + rnd(40) as usize;
             let spread = if case % 2 == 0 { 40 } else { words as u64 };
-            // Narrow masks (a byte's span anywhere, across the halves'
-            // boundary too) as often as wide ones.
-            let mask = |rnd: &mut dyn FnMut(u64) -> u64, sh: u32| match rnd(6) {
-                0 => 0,
-                1 => rnd(u64::MAX) & 0xffff_ffff,
-                2 => rnd(u64::MAX) << 32,
-                3 => rnd(u64::MAX) ^ rnd(u64::MAX) << 21,
-                _ => rnd(256) << sh,
-            };
-            let mut at = rnd(words as u64 - spread.min(40)) as usize;
-            let cells: std::vec::Vec<Cell> = (0..n)
-                .map(|_| {
-                    at = (at + rnd(spread / 4 + 1) as usize) % words;
-                    let sh = rnd(57) as u32;
-                    let ring = mask(&mut rnd, sh);
-                    Cell {
-                        at,
-                        ring,
-                        reg: mask(&mut rnd, sh) & !ring,
-                        ..Cell::default()
-                    }
-                })
-                .collect();
-            let (mut es, mut eb) = ([0u32; 256], [0u32; 256]);
-            for (i, plane) in planes.iter().enumerate() {
-                for c in &cells {
-                    for bit in 0..64 {
-                        if (plane[c.at] >> bit) & 1 == 1 {
-                            es[i + 1] += u32::from((c.reg >> bit) & 1 == 1);
-                            eb[i + 1] += u32::from((c.ring >> bit) & 1 == 1);
-                        }
-                    }
-                }
-            }
+            let cells = random_cells(&mut rnd, words, spread);
+            let (es, eb) = pixel_sums(&planes, &cells);
             let word = |plane: &[u64], _t: u32, c: &Cell| plane.get(c.at).copied().unwrap_or(0);
             for half in [false, true] {
                 let parts: std::vec::Vec<Cell> = cells
