@@ -179,6 +179,7 @@ pub struct LightState<'a> {
 /// use spiv_core::light::{Light, LightState};
 /// use spiv_core::plane::PlaneView;
 ///
+/// # fn main() -> Result<(), spiv_core::Error> {
 /// let (mut last, mut period, mut rate) = ([0u16; 8], [0u16; 8], [0u32; 8]);
 /// let (mut short, mut lead, mut flags) = ([0u16; 8], [0i8; 8], [0u8; 8]);
 /// let state = LightState {
@@ -189,20 +190,20 @@ pub struct LightState<'a> {
 ///     lead: &mut lead,
 ///     flags: &mut flags,
 /// };
-/// let mut light = Light::new(8, 1, 0, state).unwrap();
+/// let mut light = Light::new(8, 1, 0, state)?;
 /// let mut events = Vec::new();
 /// for t in 0..70u32 {
 ///     // Pixel 3 fires every 5 ticks; light added at tick 52 fires it
 ///     // early, and its beat goes on from there (57, 62, …).
 ///     let spike = if t < 52 { t % 5 == 0 } else { (t - 52) % 5 == 0 };
 ///     let byte = [u8::from(spike) << 3];
-///     light
-///         .push(&PlaneView::new(&byte, 8, 1).unwrap(), |e| events.push((e.tick, e.sign)))
-///         .unwrap();
+///     light.push(&PlaneView::new(&byte, 8, 1)?, |e| events.push((e.tick, e.sign)))?;
 /// }
 /// assert!(light.periodic(3));
 /// let late: Vec<_> = events.into_iter().filter(|e| e.0 > 20).collect();
 /// assert_eq!(late, vec![(52, 1)]);
+/// # Ok(())
+/// # }
 /// ```
 #[derive(Debug)]
 pub struct Light<'a> {

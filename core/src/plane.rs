@@ -51,9 +51,12 @@ impl<'a> PlaneView<'a> {
     /// ```
     /// use spiv_core::plane::PlaneView;
     /// // 16 × 1 pixels, bit `c % 8` of byte `c / 8`: columns 0 and 9 fire.
-    /// let p = PlaneView::new(&[0b0000_0001, 0b0000_0010], 16, 1).unwrap();
+    /// # fn main() -> Result<(), spiv_core::Error> {
+    /// let p = PlaneView::new(&[0b0000_0001, 0b0000_0010], 16, 1)?;
     /// assert!(p.get(0, 0) && p.get(0, 9) && !p.get(0, 1));
     /// assert!(PlaneView::new(&[0], 16, 1).is_err());
+    /// # Ok(())
+    /// # }
     /// ```
     pub fn new(bytes: &'a [u8], width: u16, height: u16) -> Result<Self, Error> {
         let expected = plane_bytes(width, height).ok_or(Error::BadDimensions)?;

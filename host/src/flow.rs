@@ -1222,8 +1222,8 @@ fn ladder_loop(
             }
             read += n;
         }
-        let heard = link.ask_for(i).clone();
-        let (core, bytes) = make_pair(&mut maker, wire.as_mut(), (i, mid), &heard, cfg)?;
+        let heard = link.ask_for(i);
+        let (core, bytes) = make_pair(&mut maker, wire.as_mut(), (i, mid), heard, cfg)?;
         let bytes = bytes.filter(|_| reported);
         let input = core.input(w, rec.flip, heard.start.as_ref());
         let mut m = ladder::measure(&input, mid, dt as f64, cfg, (w, hu), reported)?;

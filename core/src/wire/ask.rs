@@ -178,6 +178,7 @@ impl<'a> AskView<'a> {
 /// use spiv_core::warp::Flow;
 /// use spiv_core::wire::ask::{ask_parts, encode_ask, AskView, MAX_ASK_PAYLOAD};
 ///
+/// # fn main() -> Result<(), spiv_core::wire::WireError> {
 /// let v = [410i16; 6]; // 0.1 px per tick
 /// let flow = Flow { nx: 3, ny: 2, x0: 128, y0: 128, pitch: 256, vx: &v, vy: &v, ax: &v, ay: &v };
 /// let mut rungs = Rungs::events(0);
@@ -186,10 +187,12 @@ impl<'a> AskView<'a> {
 /// let parts: Vec<_> = ask_parts(&flow).collect();
 /// assert_eq!(parts, vec![(0, 2)]);
 /// let mut buf = vec![0u8; MAX_ASK_PAYLOAD];
-/// let n = encode_ask(5, &rungs, &flow, parts[0], &mut buf).unwrap();
-/// let ask = AskView::parse(&buf[..n]).unwrap();
+/// let n = encode_ask(5, &rungs, &flow, parts[0], &mut buf)?;
+/// let ask = AskView::parse(&buf[..n])?;
 /// assert_eq!((ask.head.from_pair, ask.nodes()), (5, 6));
 /// assert_eq!(ask.node(4), (410, 410, 410, 410));
+/// # Ok(())
+/// # }
 /// ```
 ///
 /// Writes the ask message payload that carries node rows `row0..row0 +

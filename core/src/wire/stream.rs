@@ -11,8 +11,10 @@ use super::{crc32, Crc32, Header, WireError, CRC_LEN, HEADER_LEN, MAX_PAYLOAD};
 /// A message framed and read back by the stream decoder:
 ///
 /// ```
-/// use spiv_core::wire::{encode_message, Decoder, Encoding, Header, Kind, MAX_ENCODED, MAX_MESSAGE};
+/// use spiv_core::wire::{encode_message, Decoder, Encoding, Header, Kind, WireError};
+/// use spiv_core::wire::{MAX_ENCODED, MAX_MESSAGE};
 ///
+/// # fn main() -> Result<(), WireError> {
 /// let header = Header {
 ///     kind: Kind::Status,
 ///     seq: 0,
@@ -26,12 +28,14 @@ use super::{crc32, Crc32, Header, WireError, CRC_LEN, HEADER_LEN, MAX_PAYLOAD};
 ///     payload_len: 0,
 /// };
 /// let mut wire = vec![0u8; MAX_ENCODED];
-/// let n = encode_message(&header, &[1, 2, 3], &mut wire).unwrap();
+/// let n = encode_message(&header, &[1, 2, 3], &mut wire)?;
 /// let mut rx = vec![0u8; MAX_MESSAGE + 8];
 /// let mut dec = Decoder::new(&mut rx);
 /// let mut input = &wire[..n];
-/// let m = dec.feed(&mut input).unwrap().unwrap();
+/// let m = dec.feed(&mut input).ok_or(WireError::Payload)??;
 /// assert_eq!((m.header.kind, m.payload), (Kind::Status, &[1u8, 2, 3][..]));
+/// # Ok(())
+/// # }
 /// ```
 pub fn encode_message(header: &Header, payload: &[u8], out: &mut [u8]) -> Result<usize, WireError> {
     if payload.len() > MAX_PAYLOAD {

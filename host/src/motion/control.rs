@@ -15,8 +15,9 @@ use spiv_core::rungs::{Rungs, MAX_RUNGS};
 use spiv_core::wire::ask::{
     ask_parts, encode_ask, AskAssembly, AskView, Part, MAX_ASK_PAYLOAD, MAX_FLOW_NODES,
 };
+use spiv_core::wire::control::control_header;
 use spiv_core::wire::{
-    encode_message, Decoder, DecoderState, Encoding, Header, Kind, WireError, MAX_ENCODED,
+    encode_message, Decoder, DecoderState, Header, Kind, WireError, MAX_ENCODED,
 };
 
 use super::compensate::WarpFlow;
@@ -125,15 +126,8 @@ impl Ask {
             let len = encode_ask(from_pair, &rungs, &view, part, &mut payload)?;
             let header = Header {
                 kind: Kind::Ask,
-                seq: k as u32,
                 frame_id: from_pair,
-                tick: 0,
-                width,
-                height,
-                row0: 0,
-                rows: 0,
-                encoding: Encoding::None,
-                payload_len: 0,
+                ..control_header(k as u32, width, height)
             };
             let n = encode_message(&header, &payload[..len], &mut wire)?;
             out.push(wire[..n].to_vec());

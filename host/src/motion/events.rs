@@ -11,8 +11,7 @@
 //! `spiv bench flows`) and one `u16` per pixel.
 
 use ndarray::Array2;
-use spiv_core::light::{Event, Light};
-use spiv_core::rungs::EventRing;
+use spiv_core::light::Event;
 use spiv_core::warp::{scatter, subtract_rates, Window, SCALE};
 
 use super::compensate::WarpFlow;
@@ -44,33 +43,9 @@ pub struct Events {
 }
 
 impl Events {
-    /// The events of ticks `a..b` that `ring` holds, with the rates of
-    /// `light` (its state as of now), for frames `crop_width` px wide
-    /// (rows stored bottom-up when `flip`).
-    pub fn from_ring(
-        ring: &EventRing<'_>,
-        light: &Light<'_>,
-        (a, b): (u32, u32),
-        crop_width: usize,
-        flip: bool,
-    ) -> Events {
-        let (sw, h) = (usize::from(light.width()), usize::from(light.height()));
-        let a = a.max(ring.ticks().start);
-        let b = b.max(a);
-        let n = (b - a) as usize;
-        let mut per: Vec<Vec<(u32, i8)>> = vec![Vec::new(); n];
-        ring.each(a, b, |e: Event| {
-            if let Some(v) = per.get_mut((e.tick - a) as usize) {
-                v.push((e.index, e.sign));
-            }
-        });
-        let rates = (0..sw * h).map(|i| light.rate(i)).collect();
-        Events::from_ticks((sw, h), crop_width, flip, u64::from(a), per, rates)
-    }
-
     /// The events of ticks `first..first + per_tick.len()` (each tick's
-    /// pixel and sign, stored order; kept in pixel order, as the wire's
-    /// event planes give them back) with the static rates of the
+    /// pixel and sign, stored order, in pixel order as the core's pair
+    /// holds them: [`super::make::CoreEvents`]) with the static rates of the
     /// `stored_width × height` pixels, for frames `crop_width` px wide.
     pub fn from_ticks(
         (stored_width, height): (usize, usize),
@@ -83,8 +58,7 @@ impl Events {
         let n = per_tick.len();
         let mut starts = Vec::with_capacity(n + 1);
         let mut events = Vec::with_capacity(per_tick.iter().map(Vec::len).sum());
-        for mut v in per_tick {
-            v.sort_unstable();
+        for v in per_tick {
             starts.push(events.len());
             events.extend(v);
         }

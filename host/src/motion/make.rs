@@ -174,22 +174,7 @@ impl PairMaker {
                 .collect();
             pair.from_pair = ask.from_pair;
         }
-        if let Some((a, b)) = events {
-            let mut ticks: Vec<Vec<(u32, i8)>> = vec![Vec::new(); (b - a) as usize];
-            ring.each(a, b, |e: Event| {
-                if let Some(v) = ticks.get_mut((e.tick - a) as usize) {
-                    v.push((e.index, e.sign));
-                }
-            });
-            for v in &mut ticks {
-                v.sort_unstable();
-            }
-            pair.events = Some(CoreEvents {
-                first: a,
-                ticks,
-                rates: (0..px).map(|i| light.rate(i)).collect(),
-            });
-        }
+        pair.events = events.map(|span| CoreEvents::from_ring(&ring, &light, span));
         Ok(pair)
     }
 
@@ -284,6 +269,28 @@ pub struct CoreEvents {
     pub ticks: Vec<Vec<(u32, i8)>>,
     /// The static rate of every stored pixel, 1/65536 spike per tick.
     pub rates: Vec<u16>,
+}
+
+impl CoreEvents {
+    /// The events of ticks `a..b` that `ring` holds, each tick's in pixel
+    /// order, with the static rates of `light` as of now.
+    pub fn from_ring(ring: &EventRing<'_>, light: &Light<'_>, (a, b): (u32, u32)) -> CoreEvents {
+        let px = usize::from(light.width()) * usize::from(light.height());
+        let mut ticks: Vec<Vec<(u32, i8)>> = vec![Vec::new(); b.saturating_sub(a) as usize];
+        ring.each(a, b, |e: Event| {
+            if let Some(v) = ticks.get_mut((e.tick - a) as usize) {
+                v.push((e.index, e.sign));
+            }
+        });
+        for v in &mut ticks {
+            v.sort_unstable();
+        }
+        CoreEvents {
+            first: a,
+            ticks,
+            rates: (0..px).map(|i| light.rate(i)).collect(),
+        }
+    }
 }
 
 impl CorePair {
