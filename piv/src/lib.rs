@@ -361,6 +361,18 @@ pub fn usable(vectors: &[Vector]) -> bool {
     is_usable(valid, measured, vectors.len())
 }
 
+/// [`usable`] on a field's counts of (valid, replaced, invalid) vectors
+/// ([`Field::counts`]).
+///
+/// ```
+/// use spiv_piv::usable_counts;
+/// assert!(usable_counts((30, 30, 40)));
+/// assert!(!usable_counts((20, 40, 40)));
+/// ```
+pub fn usable_counts((valid, replaced, invalid): (usize, usize, usize)) -> bool {
+    is_usable(valid, valid + replaced, valid + replaced + invalid)
+}
+
 fn is_usable(valid: usize, measured: usize, all: usize) -> bool {
     let all = all.max(1) as f64;
     valid as f64 >= MIN_SUPPORT * all && 2 * measured >= all as usize

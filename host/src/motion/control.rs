@@ -37,6 +37,19 @@ pub struct Ask {
     pub reach: u32,
 }
 
+/// The longest separation the pair after `m` asks for: the shortest rung
+/// longer than `cfg`'s bootstrap rungs that `m` climbed to and found
+/// unusable (tried again: the flow may have eased), or every rung when
+/// none failed. A climb thus reaches one rung further per pair at most.
+pub fn highest_rung(m: &Measurement, cfg: &LadderSettings) -> u32 {
+    m.rungs
+        .iter()
+        .filter(|r| r.separation > cfg.bootstrap_longest && !r.usable())
+        .map(|r| r.separation)
+        .min()
+        .unwrap_or(u32::MAX)
+}
+
 impl Ask {
     /// A pair with no flow to follow: its events within the ladder's
     /// bootstrap reach.
@@ -60,21 +73,25 @@ impl Ask {
     }
 
     /// What the pair after `m` (measured over `dt` ticks) is made with: its
-    /// rung frames along `m`'s field when that field is usable (every
-    /// separation of `cfg` longer than its bootstrap rungs), with its events
-    /// too when `m` was measured from its events alone or by the dense
-    /// ensemble; else its events alone.
+    /// rung frames along `m`'s field when that field is usable, with its
+    /// events too when `m` was measured from its events alone or by the
+    /// dense ensemble; else its events alone. The rung frames are those of
+    /// every separation of `cfg` longer than its bootstrap rungs up to the
+    /// shortest at which `m`'s climb stopped ([`highest_rung`]): the ladder
+    /// climbs no further than the first rung that fails, so a longer one
+    /// would cross the wire unread.
     pub fn after(m: &Measurement, dt: f64, cfg: &LadderSettings) -> Ask {
         if !m.field.usable() {
             return Ask::cold(cfg);
         }
+        let top = highest_rung(m, cfg);
         Ask {
             flow: Some(per_ticks(&m.field, 1.0 / dt.max(1e-9))),
             rungs: cfg
                 .separations
                 .iter()
                 .copied()
-                .filter(|&s| s > cfg.bootstrap_longest)
+                .filter(|&s| s > cfg.bootstrap_longest && s <= top)
                 .take(MAX_RUNGS)
                 .collect(),
             // Events again after a pair measured from its events alone (its
@@ -392,6 +409,60 @@ mod tests {
 
     fn link(delivery: Delivery, cfg: &LadderSettings) -> AskLink {
         AskLink::new(delivery, cfg, SIZE, false)
+    }
+
+    /// A measurement with a usable field whose climb went over `rungs`
+    /// (separation, and whether the rung's field was usable).
+    fn climbed(rungs: &[(u32, bool)]) -> Measurement {
+        let grid = Grid::new(64, 48, 16, 8).unwrap();
+        let mut field = Field::unmeasured(grid);
+        field.state.fill(State::Valid);
+        let n = grid.len();
+        Measurement {
+            field,
+            separation: ndarray::Array2::zeros((grid.ny, grid.nx)),
+            rungs: rungs
+                .iter()
+                .map(|&(separation, ok)| super::super::ladder::Rung {
+                    separation,
+                    counts: if ok { (n, 0, 0) } else { (0, 0, n) },
+                    kept: 0,
+                    ms: 0.0,
+                })
+                .collect(),
+            frames: None,
+            dense: None,
+            confirmed: Some(true),
+            ensemble: false,
+        }
+    }
+
+    /// The next pair carries the rungs up to the first that failed, tried
+    /// again, and every rung when none failed; the bootstrap rungs' own
+    /// failures do not count.
+    #[test]
+    fn asks_stop_at_the_rung_that_failed() {
+        let cfg = LadderSettings::default();
+        let ask = |r: &[(u32, bool)]| Ask::after(&climbed(r), 10.0, &cfg).rungs;
+        let all: Vec<u32> = cfg
+            .separations
+            .iter()
+            .copied()
+            .filter(|&s| s > cfg.bootstrap_longest)
+            .collect();
+        assert_eq!(ask(&[(16, true), (32, true), (64, true), (128, true)]), all);
+        assert_eq!(ask(&[(16, true), (32, false)]), vec![16, 32]);
+        assert_eq!(ask(&[(16, false)]), vec![16]);
+        // The events' climb: 8 failing is a bootstrap rung; 32 stops it.
+        assert_eq!(ask(&[(4, true), (8, false), (16, true)]), all);
+        assert_eq!(
+            ask(&[(4, true), (8, true), (16, true), (32, false), (16, true)]),
+            vec![16, 32]
+        );
+        // No usable field: events alone.
+        let mut m = climbed(&[(16, true)]);
+        m.field.state.fill(State::Invalid);
+        assert!(!Ask::after(&m, 10.0, &cfg).warm());
     }
 
     /// An ask sent after pair `i` makes pair `i + 1 + late` on; until

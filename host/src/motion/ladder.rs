@@ -117,6 +117,14 @@ pub struct Rung {
     pub ms: f64,
 }
 
+impl Rung {
+    /// Whether its field was usable ([`crate::piv::usable_counts`]): the
+    /// ladder climbs past a rung only when it is.
+    pub fn usable(&self) -> bool {
+        crate::piv::usable_counts(self.counts)
+    }
+}
+
 /// A pair measured by the ladder.
 #[derive(Debug, Clone)]
 pub struct Measurement {
