@@ -8,7 +8,7 @@
 use proptest::prelude::*;
 use spiv_core::buffers::LightBuf;
 use spiv_core::light::{Light, MAX_TOLERANCE};
-use spiv_core::rungs::{rung_frames, EventRing, Rungs, MAX_RUNGS};
+use spiv_core::rungs::{rung_floor, rung_frames, EventRing, Rungs, MAX_RUNGS};
 use spiv_core::warp::{scatter, Flow, Window, SCALE};
 use spiv_core::PlaneView;
 
@@ -110,7 +110,13 @@ proptest! {
         let mut frames = vec![0i16; 2 * MAX_RUNGS * px];
         // A refusal is fine (ticks not held, a pitch out of range); a
         // panic is not.
-        let _ = rung_frames(&ring, &light, &flow, mid, &rungs, &mut frames);
+        if rung_frames(&ring, &light, &flow, mid, &rungs, &mut frames).is_ok() {
+            // Whole spikes, 0 or at least the rung's floor.
+            for (k, f) in frames.chunks_exact(px).take(2 * seps.len()).enumerate() {
+                let least = rung_floor(seps[k / 2]) * SCALE;
+                prop_assert!(f.iter().all(|&v| v % SCALE == 0 && (v == 0 || v >= least)));
+            }
+        }
         for d2 in [-1024, -7, 0, 9, 1024] {
             let _ = flow.displacement(w - 1, h - 1, d2);
         }

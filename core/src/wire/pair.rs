@@ -2,7 +2,8 @@
 //! of the time ladder carries, sent before its parts. The parts follow as
 //! frames (tiles and a frame end each, [`super::sender::Sender::send_frame`])
 //! whose frame end names the pair and the part (`member`): first the rung
-//! frames, A then B of each separation (levels above the head's offset),
+//! frames, A then B of each separation (whole spikes: levels of one spike
+//! above the head's offset, which is in 1/64 spike),
 //! then one plane per tick of events (0 none, 1 a `−1`, 2 a `+1`, stored
 //! order), then, after any events, the static rates of every stored pixel
 //! (1/65536 spike per tick).

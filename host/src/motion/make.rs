@@ -253,8 +253,8 @@ pub struct CorePair {
     /// `from_pair` of the ask its rung frames followed ([`NO_ASK`]
     /// without rung frames).
     pub from_pair: u32,
-    /// Each rung: its separation (ticks) and frames A and B (1/64 spike,
-    /// stored rows).
+    /// Each rung: its separation (ticks) and frames A and B (whole spikes,
+    /// in 1/64 spike: [`spiv_core::rungs::rung_frames`]; stored rows).
     pub rungs: Vec<(u16, [Vec<i16>; 2])>,
     /// Its events, if it carries them.
     pub events: Option<CoreEvents>,

@@ -14,6 +14,7 @@
 
 use spiv_core::light::Light;
 use spiv_core::rungs::{send_pair, EventRing, PairPlan, PairScratch};
+use spiv_core::warp::SCALE;
 use spiv_core::wire::codec::Lossy;
 use spiv_core::wire::pair::PairHead;
 use spiv_core::wire::sender::{tile_rows, Link, SendBuffers, SendError, Sender};
@@ -220,7 +221,11 @@ impl PairReader {
                     parts[2 * k + j]
                         .data
                         .iter()
-                        .map(|&l| (i32::from(l) + off) as i16)
+                        .map(|&l| {
+                            (i32::from(l) * i32::from(SCALE) + off)
+                                .clamp(i32::from(i16::MIN), i32::from(i16::MAX))
+                                as i16
+                        })
                         .collect()
                 };
                 (h.separations[k], [frame(0), frame(1)])

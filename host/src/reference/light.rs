@@ -220,6 +220,29 @@ impl NodeFlow {
     }
 }
 
+/// The floor of a rung of `s` ticks, spikes: `√(s/16)` rounded, at least 1
+/// (the core's [`spiv_core::rungs::rung_floor`]).
+pub fn floor_of(s: u32) -> f64 {
+    (f64::from(s) / 16.0).sqrt().round().max(1.0)
+}
+
+/// `frame` (spikes) as the core sends a rung of `s` ticks: each sample
+/// rounded to whole spikes (half up), 0 below [`floor_of`]`(s)`.
+pub fn floored(frame: &[f64], s: u32) -> Vec<f64> {
+    let least = floor_of(s);
+    frame
+        .iter()
+        .map(|&v| {
+            let n = (v + 0.5).floor();
+            if n >= least {
+                n
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
 /// The frame of `events` (index, tick, sign) of ticks `start..start + len`
 /// warped to the centre `centre` (ticks; an event of tick `t` taken at
 /// `t + ½`) along `flow`, less `rate(i)` (spikes per tick) over each block
