@@ -282,12 +282,10 @@ impl Rungs {
 
 /// The floor of a rung's frames, whole spikes: `round(√(s/16))` for a
 /// separation of `s` ticks, at least 1 (1 up to 35 ticks, 2 for 36–99,
-/// 3 for 100–195, 4 above). A frame sample below it is sent as 0
-/// ([`rung_frames`]): it is the shot noise of the particle-free
-/// background, whose spread grows as √s, and about half of a lossless
-/// rung frame's bytes. `spiv bench flows` measured no change beyond its
-/// seed-to-seed spread with it, and `spiv bench live` 4.6–5.0× fewer
-/// bytes per pair than 1/64-spike frames.
+/// 3 for 100–195, 4 for 196–323). A frame sample below it is sent as 0
+/// ([`rung_frames`]): the shot noise of the particle-free background,
+/// whose spread grows as √s, and most of a rung frame's bytes on the wire
+/// (what it costs and saves: docs/results.md, `spiv bench live`).
 ///
 /// ```
 /// use spiv_core::rungs::rung_floor;
