@@ -443,33 +443,54 @@ pub fn refine(
                 _ => (px, py),
             };
         }
-        // Band centres at rows b·band + (band − 1)/2 (in half rows: c2(b));
-        // linear between them, constant beyond.
-        let band2 = 2 * i64::from(cfg.band);
-        let c2 = |b: u16| i64::from(b) * band2 + i64::from(cfg.band) - 1;
-        let last = bands.saturating_sub(1);
-        for r in 0..rows {
-            let y2 = 2 * i64::from(r);
-            let b = ((y2 - c2(0)).max(0) / band2).min(i64::from(last)) as u16;
-            let b1 = (b + 1).min(last);
-            let (a, z) = (win[usize::from(b)], win[usize::from(b1)]);
-            let (c0, c1) = (c2(b), c2(b1));
-            let lerp = |a: i16, z: i16| -> i16 {
-                if b1 == b || y2 <= c0 {
-                    a
-                } else if y2 >= c1 {
-                    z
-                } else {
-                    let d = (i64::from(z) - i64::from(a)) * (y2 - c0);
-                    (i64::from(a) + d.div_euclid(c1 - c0)) as i16
-                }
-            };
-            let i = usize::from(r) * cols + usize::from(c);
-            out_vx[i] = lerp(a.0, z.0);
-            out_vy[i] = lerp(a.1, z.1);
-        }
+        let column = (usize::from(c), cols);
+        spread_bands(
+            &win[..usize::from(bands)],
+            (cfg.band, rows),
+            column,
+            out_vx,
+            out_vy,
+        );
     }
     Ok(())
+}
+
+/// Writes column `c` (of `cols`) of `out_vx`, `out_vy` for `rows` rows
+/// from the velocities `win` of bands of `band` rows: band centres at
+/// rows b·band + (band − 1)/2, piecewise linear between them (rounded
+/// down), constant beyond the outer ones.
+#[inline(always)]
+fn spread_bands(
+    win: &[(i16, i16)],
+    (band, rows): (u16, u16),
+    (c, cols): (usize, usize),
+    out_vx: &mut [i16],
+    out_vy: &mut [i16],
+) {
+    // Centres in half rows: c2(b).
+    let band2 = 2 * i64::from(band);
+    let c2 = |b: u16| i64::from(b) * band2 + i64::from(band) - 1;
+    let last = (win.len() as u16).saturating_sub(1);
+    for r in 0..rows {
+        let y2 = 2 * i64::from(r);
+        let b = ((y2 - c2(0)).max(0) / band2).min(i64::from(last)) as u16;
+        let b1 = (b + 1).min(last);
+        let (a, z) = (win[usize::from(b)], win[usize::from(b1)]);
+        let (c0, c1) = (c2(b), c2(b1));
+        let lerp = |a: i16, z: i16| -> i16 {
+            if b1 == b || y2 <= c0 {
+                a
+            } else if y2 >= c1 {
+                z
+            } else {
+                let d = (i64::from(z) - i64::from(a)) * (y2 - c0);
+                (i64::from(a) + d.div_euclid(c1 - c0)) as i16
+            }
+        };
+        let i = usize::from(r) * cols + c;
+        out_vx[i] = lerp(a.0, z.0);
+        out_vy[i] = lerp(a.1, z.1);
+    }
 }
 
 /// The pixels of one [`refine`] node: band rows `rows.0..rows.1` of a
@@ -661,62 +682,16 @@ fn sharpness(
                     let q = (j as isize).wrapping_add(s.q);
                     let at = |k: isize| (0..wpr as isize).contains(&k).then_some(k as usize);
                     let (wl, wh) = (at(q), at(q.wrapping_add(1)));
-                    let mut base = (first + lo as i32).max(0) as usize * wpr;
-                    let word = |base: usize, k: Option<usize>| {
-                        k.and_then(|k| plane.get(base + k)).copied().unwrap_or(0)
-                    };
-                    // (hi << 1) << (63 − b) is hi << (64 − b) for b > 0
-                    // and 0 for b = 0.
-                    let one = |base: usize| {
-                        ((word(base, wl) >> s.b) | ((word(base, wh) << 1) << (63 - s.b))) & m
-                    };
-                    // Two rows per SSE2 operation (rows 2p and 2p + 1 are
-                    // pair p's lanes); a first row that is odd, or a last
-                    // that is even, alone in its lane.
+                    let base = (first + lo as i32).max(0) as usize * wpr;
                     #[cfg(target_arch = "x86_64")]
-                    {
-                        let mut i = lo;
-                        if i % 2 == 1 && i < hi {
-                            slices::csa(&mut pairs[i / 2], wide::u64x2::new([0, one(base)]));
-                            base += wpr;
-                            i += 1;
-                        }
-                        let two = 2 * ((hi - i) / 2);
-                        if let Some(rows) = plane.get(base..base + two * wpr) {
-                            // Every row in the plane: one slice, no check
-                            // per word, and a source word outside the row
-                            // (`None`) is not read.
-                            let (b, m) = (s.b, wide::u64x2::splat(m));
-                            let pairs = &mut pairs[i / 2..];
-                            match (wl, wh) {
-                                (Some(l), Some(r)) => {
-                                    row_pairs::<true, true>(rows, wpr, (l, r), b, m, pairs)
-                                }
-                                (Some(l), None) => {
-                                    row_pairs::<true, false>(rows, wpr, (l, 0), b, m, pairs)
-                                }
-                                (None, Some(r)) => {
-                                    row_pairs::<false, true>(rows, wpr, (0, r), b, m, pairs)
-                                }
-                                (None, None) => {}
-                            }
-                            base += two * wpr;
-                            i += two;
-                        }
-                        while i + 1 < hi {
-                            let w = wide::u64x2::new([one(base), one(base + wpr)]);
-                            slices::csa(&mut pairs[i / 2], w);
-                            base += 2 * wpr;
-                            i += 2;
-                        }
-                        if i < hi {
-                            slices::csa(&mut pairs[i / 2], wide::u64x2::new([one(base), 0]));
-                        }
-                    }
+                    row_pairs_of(plane, (wpr, m), (wl, wh), s.b, (base, lo, hi), &mut pairs);
                     #[cfg(not(target_arch = "x86_64"))]
-                    for a in &mut acc[lo..hi] {
-                        slices::csa(a, one(base));
-                        base += wpr;
+                    {
+                        let mut base = base;
+                        for a in &mut acc[lo..hi] {
+                            slices::csa(a, shifted(plane, base, (wl, wh), s.b, m));
+                            base += wpr;
+                        }
                     }
                 }
                 #[cfg(not(target_arch = "x86_64"))]
@@ -736,6 +711,71 @@ fn sharpness(
         r0 += nr as u16;
     }
     e
+}
+
+/// The row word at `base` of `plane` whose source words are `wl` and `wh`
+/// (`None`: outside the row, read as 0), funnel-shifted right by `b` and
+/// masked by `m`.
+#[inline(always)]
+fn shifted(
+    plane: &[u64],
+    base: usize,
+    (wl, wh): (Option<usize>, Option<usize>),
+    b: u32,
+    m: u64,
+) -> u64 {
+    let word = |k: Option<usize>| k.and_then(|k| plane.get(base + k)).copied().unwrap_or(0);
+    // (hi << 1) << (63 − b) is hi << (64 − b) for b > 0 and 0 for b = 0.
+    ((word(wl) >> b) | ((word(wh) << 1) << (63 - b))) & m
+}
+
+/// [`sharpness`]'s block rows `lo..hi` of one plane on x86-64, from
+/// block row `lo`'s first word at `base`: two rows per SSE2 operation
+/// (rows 2p and 2p + 1 are pair p's lanes), a first row that is odd, or a
+/// last that is even, alone in its lane; source words `wl`, `wh` of a row
+/// (`None`: outside it) funnel-shifted by `b` and masked by `m`.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn row_pairs_of(
+    plane: &[u64],
+    (wpr, m): (usize, u64),
+    (wl, wh): (Option<usize>, Option<usize>),
+    b: u32,
+    (mut base, lo, hi): (usize, usize, usize),
+    pairs: &mut [[wide::u64x2; 4]; BLOCK_ROWS / 2],
+) {
+    let one = |base: usize| shifted(plane, base, (wl, wh), b, m);
+    let mut i = lo;
+    if i % 2 == 1 && i < hi {
+        slices::csa(&mut pairs[i / 2], wide::u64x2::new([0, one(base)]));
+        base += wpr;
+        i += 1;
+    }
+    let two = 2 * ((hi - i) / 2);
+    if let Some(rows) = plane.get(base..base + two * wpr) {
+        // Every row in the plane: one slice, no check
+        // per word, and a source word outside the row
+        // (`None`) is not read.
+        let m = wide::u64x2::splat(m);
+        let pairs = &mut pairs[i / 2..];
+        match (wl, wh) {
+            (Some(l), Some(r)) => row_pairs::<true, true>(rows, wpr, (l, r), b, m, pairs),
+            (Some(l), None) => row_pairs::<true, false>(rows, wpr, (l, 0), b, m, pairs),
+            (None, Some(r)) => row_pairs::<false, true>(rows, wpr, (0, r), b, m, pairs),
+            (None, None) => {}
+        }
+        base += two * wpr;
+        i += two;
+    }
+    while i + 1 < hi {
+        let w = wide::u64x2::new([one(base), one(base + wpr)]);
+        slices::csa(&mut pairs[i / 2], w);
+        base += 2 * wpr;
+        i += 2;
+    }
+    if i < hi {
+        slices::csa(&mut pairs[i / 2], wide::u64x2::new([one(base), 0]));
+    }
 }
 
 /// [`sharpness`]'s row pairs on x86: `rows` holds whole rows of `wpr`

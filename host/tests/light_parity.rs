@@ -77,8 +77,15 @@ fn events_rates_and_rung_frames_hold_to_the_reference() {
             "pixel {i}: {core} against {reference}"
         );
     }
-    // Rung frames along a rotation: each sample within 1/64 spike per rate
-    // block that reached it (the core rounds each block) of the reference.
+    rung_frames_hold_to_the_reference(&ring, &light);
+}
+
+/// The rung frames of 16, 32 and 64 ticks along a rotation, made from
+/// `ring` and `light`, against the reference's frames rounded and floored
+/// as the core sends them.
+fn rung_frames_hold_to_the_reference(ring: &EventRing<'_>, light: &Light<'_>) {
+    let (w, h) = (light.width(), light.height());
+    let px = usize::from(w) * usize::from(h);
     let (vx, vy, ax, ay) = rotation();
     let flow = Flow {
         nx: 5,
