@@ -103,7 +103,7 @@ fn rung_frames_hold_to_the_reference(ring: &EventRing<'_>, light: &Light<'_>) {
     rungs.count = 3;
     let mid = 300;
     let mut frames = vec![0i16; 6 * px];
-    rung_frames(&ring, &light, &flow, mid, &rungs, &mut frames).unwrap();
+    rung_frames(ring, light, &flow, mid, &rungs, &mut frames).unwrap();
     let nf = NodeFlow::of(&flow);
     let all: Vec<_> = {
         let mut v = Vec::new();
