@@ -436,9 +436,9 @@ pub struct PairCost {
 /// Sends the pair `plan` describes through `sender` into `link`: its head
 /// ([`PairHead`]), then its parts as lossless `Context` frames — the rung
 /// frames made from `ring` and `light` ([`rung_frames`]: whole spikes) as
-/// levels of one spike above each frame's smallest sample, one plane per tick of events (0 none,
-/// 1 a `−1`, 2 a `+1`) and, with events, the static rate of every pixel
-/// ([`Light::rate`]). Each part's frame end names the pair and the part
+/// levels of one spike above each frame's smallest sample, one plane per
+/// tick of events (0 none, 1 a `−1`, 2 a `+1`) and, with events, the
+/// static rate of every pixel ([`Light::rate`]). Each part's frame end names the pair and the part
 /// (`member`), and carries the rung's separation as `dt`.
 pub fn send_pair<L: Link>(
     sender: &mut Sender,
