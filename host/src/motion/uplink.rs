@@ -13,7 +13,7 @@
 //! - with the events, the static rate of every stored pixel (16-bit).
 
 use spiv_core::light::Light;
-use spiv_core::rungs::{send_pair, EventRing, PairPlan, PairScratch};
+use spiv_core::rungs::{send_pair, EventRing, PairCost, PairPlan, PairScratch};
 use spiv_core::warp::SCALE;
 use spiv_core::wire::codec::Lossy;
 use spiv_core::wire::pair::PairHead;
@@ -23,7 +23,8 @@ use spiv_core::wire::{Kind, Message, WireError, MAX_ENCODED, MAX_PAYLOAD};
 use super::make::{CoreEvents, CorePair};
 use crate::receive::assemble::{Assembler, FrameLimit, ReceivedFrame};
 
-/// Bytes of one pair on the wire, by what they carry.
+/// Bytes of one pair on the wire, by what they carry: the core's
+/// [`PairCost`], for the host's reports (serialisable).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
 pub struct PairBytes {
     /// The head.
@@ -34,6 +35,17 @@ pub struct PairBytes {
     pub events: u64,
     /// The static rates sent with the events.
     pub rates: u64,
+}
+
+impl From<PairCost> for PairBytes {
+    fn from(c: PairCost) -> Self {
+        PairBytes {
+            head: c.head,
+            rung_frames: c.rung_frames,
+            events: c.events,
+            rates: c.rates,
+        }
+    }
 }
 
 impl PairBytes {
@@ -139,13 +151,7 @@ impl Uplink {
             scratch,
         )
         .map_err(wire)?;
-        let bytes = PairBytes {
-            head: cost.head,
-            rung_frames: cost.rung_frames,
-            events: cost.events,
-            rates: cost.rates,
-        };
-        Ok((link.messages, bytes))
+        Ok((link.messages, cost.into()))
     }
 }
 
