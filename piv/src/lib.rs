@@ -41,7 +41,7 @@ pub use resample::Interp;
 pub use spiv_formats::grid::Grid;
 pub use validate::{State, Validation};
 
-use correlate::{correlate, NoPeak, Plan, Scratch};
+use correlate::{NoPeak, Plan, Scratch};
 pub use peak::Subpixel;
 
 /// Fraction of windows with signal that must pass validation for a pass's
@@ -545,79 +545,109 @@ impl Passes<'_> {
     /// on undeformed images is rescued by coarser rungs, and a failed pass
     /// after a good one on the same grid leaves that one standing.
     fn measure(&self, initial: Option<&Field>) -> Result<Measured, PivError> {
-        let (s, (h, w)) = (self.s, self.size);
-        let run = |by: Option<&Field>, rung: Rung| self.run(by, rung);
-        let mut prev: Option<(Field, f64)> = None;
-        let mut predictor: Option<Field> = initial.cloned();
-        // The last field that passed (any grid): what a failed last pass
-        // degrades to.
-        let mut good: Option<Field> = None;
-        // Once a rescue needed the neighbours to judge weak peaks, so do the
-        // passes after it: the frames' peaks do not grow stronger.
-        let mut relaxed = false;
-        // Whether the reported pass judged its peaks by the neighbours (then
-        // none of its vectors is valid).
-        let mut weak = false;
-        let npass = s.windows.len();
-        for (pi, &size) in s.windows.iter().enumerate() {
-            let rung = Rung {
-                relaxed,
-                ..Rung::plain(size)
-            };
-            // Every pass but the last deforms by the filtered predictor
-            // (`smooth`); the last one measures the residual of the field as
-            // it stands, so that what it reports is not smoothed.
-            let filtered = match &predictor {
-                Some(f) if pi + 1 < npass => Some(smooth::filtered(f, s.edge)),
-                _ => None,
-            };
-            let (mut field, mut support) = run(filtered.as_ref().or(predictor.as_ref()), rung)?;
-            let good_same_grid = prev
-                .as_ref()
-                .is_some_and(|(f, sup)| *sup >= MIN_SUPPORT && f.grid == field.grid);
-            if s.rescue && support < MIN_SUPPORT && predictor.is_none() && !good_same_grid {
-                // A pass on the undeformed images failed: a signal, not a
-                // verdict. Larger displacements than the window's quarter rule
-                // or too few particles per window both fail so; the rescue
-                // rungs measure a coarser field, which then predicts (deforms)
-                // this pass again.
-                if let Some((coarse, how)) = rescue(&run, size, w, h)? {
-                    relaxed |= how.relaxed;
-                    let rung = Rung {
-                        relaxed,
-                        ..Rung::plain(size)
-                    };
-                    let (f2, s2) = run(Some(&coarse), rung)?;
-                    good = Some(coarse);
-                    if s2 >= MIN_SUPPORT {
-                        (field, support) = (f2, s2);
-                    }
-                }
-            }
-            // A pass where fewer than a quarter of the windows with signal
-            // passed validation has failed (e.g. displacements beyond the
-            // window): its replaced field would only spread noise. After a
-            // good pass on the same grid (a repeated final window), that pass
-            // stands: it stays the predictor and the result. Otherwise the
-            // next pass starts again from the undeformed images.
-            if support < MIN_SUPPORT && good_same_grid {
-                continue;
-            }
-            if support >= MIN_SUPPORT {
-                good = Some(field.clone());
-            }
-            predictor = (support >= MIN_SUPPORT).then(|| field.clone());
-            weak = relaxed;
-            prev = Some((field, support));
-        }
-        let (field, support) = prev.ok_or_else(|| PivError::Settings("no windows given".into()))?;
-        Ok(Measured {
-            field,
-            support,
-            weak,
-            good,
-        })
+        measured(&|by, rung| self.run(by, rung), self.s, self.size, initial)
     }
+}
+
+/// [`Passes::measure`] with the pass given as `run`.
+fn measured(
+    run: &PassFn<'_>,
+    s: &Settings,
+    (h, w): (usize, usize),
+    initial: Option<&Field>,
+) -> Result<Measured, PivError> {
+    let mut prev: Option<(Field, f64)> = None;
+    let mut predictor: Option<Field> = initial.cloned();
+    // The last field that passed (any grid): what a failed last pass
+    // degrades to.
+    let mut good: Option<Field> = None;
+    // Once a rescue needed the neighbours to judge weak peaks, so do the
+    // passes after it: the frames' peaks do not grow stronger.
+    let mut relaxed = false;
+    // Whether the reported pass judged its peaks by the neighbours (then
+    // none of its vectors is valid).
+    let mut weak = false;
+    let npass = s.windows.len();
+    // What the standing pass was run on, to run it again with its
+    // uncertainties should a failed last pass leave it standing.
+    let mut prev_input: Option<(Option<Field>, Rung)> = None;
+    for (pi, &size) in s.windows.iter().enumerate() {
+        let last = pi + 1 == npass;
+        let rung = Rung {
+            relaxed,
+            sigma: last,
+            ..Rung::plain(size)
+        };
+        // Every pass but the last deforms by the filtered predictor
+        // (`smooth`); the last one measures the residual of the field as
+        // it stands, so that what it reports is not smoothed.
+        let filtered = match &predictor {
+            Some(f) if pi + 1 < npass => Some(smooth::filtered(f, s.edge)),
+            _ => None,
+        };
+        let by = filtered.or_else(|| predictor.clone());
+        let (mut field, mut support) = run(by.as_ref(), rung)?;
+        let mut input = (by, rung);
+        let good_same_grid = prev
+            .as_ref()
+            .is_some_and(|(f, sup)| *sup >= MIN_SUPPORT && f.grid == field.grid);
+        if s.rescue && support < MIN_SUPPORT && predictor.is_none() && !good_same_grid {
+            // A pass on the undeformed images failed: a signal, not a
+            // verdict. Larger displacements than the window's quarter rule
+            // or too few particles per window both fail so; the rescue
+            // rungs measure a coarser field, which then predicts (deforms)
+            // this pass again.
+            if let Some((coarse, how)) = rescue(run, size, w, h)? {
+                relaxed |= how.relaxed;
+                let rung = Rung {
+                    relaxed,
+                    sigma: last,
+                    ..Rung::plain(size)
+                };
+                let (f2, s2) = run(Some(&coarse), rung)?;
+                if s2 >= MIN_SUPPORT {
+                    (field, support) = (f2, s2);
+                    input = (Some(coarse.clone()), rung);
+                }
+                good = Some(coarse);
+            }
+        }
+        // A pass where fewer than a quarter of the windows with signal
+        // passed validation has failed (e.g. displacements beyond the
+        // window): its replaced field would only spread noise. After a
+        // good pass on the same grid (a repeated final window), that pass
+        // stands: it stays the predictor and the result. Otherwise the
+        // next pass starts again from the undeformed images.
+        if support < MIN_SUPPORT && good_same_grid {
+            continue;
+        }
+        if support >= MIN_SUPPORT {
+            good = Some(field.clone());
+        }
+        predictor = (support >= MIN_SUPPORT).then(|| field.clone());
+        weak = relaxed;
+        prev = Some((field, support));
+        prev_input = Some(input);
+    }
+    let (mut field, support) = prev.ok_or_else(|| PivError::Settings("no windows given".into()))?;
+    if let Some((by, rung)) = prev_input.filter(|(_, r)| !r.sigma) {
+        // The last pass failed and an earlier one on its grid stands:
+        // the same pass again (the same vectors), with uncertainties.
+        field = run(
+            by.as_ref(),
+            Rung {
+                sigma: true,
+                ..rung
+            },
+        )?
+        .0;
+    }
+    Ok(Measured {
+        field,
+        support,
+        weak,
+        good,
+    })
 }
 
 /// The images' size after checking that every image, and the mask, has
@@ -822,6 +852,10 @@ struct Rung {
     /// 40 px from its twin made a whole patch of the log profile's seed 9
     /// agree on the wrong 56 px).
     recheck: bool,
+    /// The peaks' uncertainties are computed: on the last pass, whose
+    /// field is reported (a coarser field that stands in for a failed one
+    /// is reported without them); the passes before it skip them.
+    sigma: bool,
 }
 
 impl Rung {
@@ -831,6 +865,7 @@ impl Rung {
             search: size,
             relaxed: false,
             recheck: false,
+            sigma: false,
         }
     }
 }
@@ -1002,7 +1037,7 @@ impl PassWindows<'_> {
             origin: (x0, y0),
             n,
         };
-        let mut peak = region.correlate(self.plan, sc, self.s.subpixel);
+        let mut peak = region.correlate(self.plan, sc, self.s.subpixel, self.rung.sigma);
         // Undeformed, a peak beyond the quarter rule may be an alias (a
         // displacement beyond half the window wraps around) or a match by
         // chance: the window is measured again over an area twice its
@@ -1012,7 +1047,7 @@ impl PassWindows<'_> {
         if let (Ok(p), Some(plan2)) = (&peak, self.wide) {
             if p.dx.hypot(p.dy) > n as f64 / 4.0 {
                 let sc2 = wide_sc.get_or_insert_with(|| Ensemble::new(plan2));
-                if let Ok(q) = region.correlate(plan2, sc2, self.s.subpixel) {
+                if let Ok(q) = region.correlate(plan2, sc2, self.s.subpixel, self.rung.sigma) {
                     let differs = (q.dx - p.dx).hypot(q.dy - p.dy) > 1.0;
                     if differs && q.ratio > p.ratio && q.width <= MAX_PEAK_WIDTH {
                         peak = Ok(q);
@@ -1185,16 +1220,26 @@ impl Region<'_> {
     /// areas must fit the image): the displacement of B relative to A,
     /// px. One pair is [`correlate`]; several sum their normalised planes
     /// (pairs whose windows have no signal add nothing), and the peak's
-    /// uncertainty adds the pairs' variances.
+    /// uncertainty adds the pairs' variances. Without `sigma` the
+    /// uncertainty is not computed and left at [`NO_SIGMA`].
     fn correlate(
         &self,
         plan: &Plan,
         en: &mut Ensemble,
         method: Subpixel,
+        sigma: bool,
     ) -> Result<correlate::Peak, NoPeak> {
         if let [(a, b)] = self.pairs {
             self.fill(a, b, plan, &mut en.sc);
-            return correlate(plan, &mut en.sc, method);
+            let p = correlate::plane(plan, &mut en.sc)?;
+            let (peak, at) = correlate::locate(plan.size(), en.sc.plane(), p.norm, method)?;
+            if !sigma {
+                return Ok(correlate::Peak {
+                    sigma: NO_SIGMA,
+                    ..peak
+                });
+            }
+            return Ok(correlate::with_uncertainty(plan, &mut en.sc, peak, at, p));
         }
         let n = plan.size();
         en.sum.fill(0.0);
@@ -1218,13 +1263,17 @@ impl Region<'_> {
         }
         let norm = 1.0 / used as f64;
         let (mut peak, at) = correlate::locate(n, &en.sum, norm, method)?;
+        if !sigma {
+            peak.sigma = NO_SIGMA;
+            return Ok(peak);
+        }
         // The asymmetry's variance over the pairs, each normalised as its
         // plane entered the sum.
         let (mut vu, mut vv) = (0.0, 0.0);
         for (a, b) in self.pairs {
             self.fill(a, b, plan, &mut en.sc);
             if let Ok(p) = correlate::plane(plan, &mut en.sc) {
-                let (su, sv) = correlate::spread(&en.sc, n, at, p.means);
+                let (su, sv) = correlate::spread(&mut en.sc, n, at, p.means);
                 vu += (su * p.direct).powi(2);
                 vv += (sv * p.direct).powi(2);
             }
@@ -1257,7 +1306,7 @@ impl Region<'_> {
             // window's row slices (vectorised) says so.
             let rows = || (by..by + search).map(|i| m.row(i));
             let any = rows().any(|r| match r.as_slice() {
-                Some(r) => r[bx..bx + search].contains(&true),
+                Some(r) => any_true(&r[bx..bx + search]),
                 None => (bx..bx + search).any(|j| r[j]),
             });
             if any {
@@ -1293,6 +1342,14 @@ impl Region<'_> {
 /// Sets the pixels of the `k × k` buffer `a` outside the `n × n` window
 /// at `(ox, oy)` to the window's mean over its unmasked pixels, so that
 /// they add nothing to the correlation once the mean is removed.
+/// Whether any of `v` is true: an OR over blocks of 32 (vectorises, where
+/// `contains` on bools tests one at a time).
+fn any_true(v: &[bool]) -> bool {
+    let mut blocks = v.chunks_exact(32);
+    let hit = blocks.any(|b| b.iter().fold(0u8, |acc, &x| acc | u8::from(x)) != 0);
+    hit || blocks.remainder().contains(&true)
+}
+
 fn pad_outside(a: &mut [f32], masked: &[bool], k: usize, (ox, oy): (usize, usize), n: usize) {
     let inside = |i: usize, j: usize| (oy..oy + n).contains(&i) && (ox..ox + n).contains(&j);
     let (mut sum, mut cnt) = (0.0f64, 0usize);
@@ -1315,4 +1372,53 @@ fn pad_outside(a: &mut [f32], masked: &[bool], k: usize, (ox, oy): (usize, usize
 /// An upright `w × h` gray image as PIV input.
 pub fn to_f32(data: &[u16], w: usize, h: usize) -> Array2<f32> {
     Array2::from_shape_fn((h, w), |(i, j)| f32::from(data[i * w + j]))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::cell::RefCell;
+
+    /// A stand-in for a pass on a 128² image: the support `supports[k]`
+    /// for the k-th call, uncertainties only where the rung asks for them.
+    /// Returns the rungs it was called with.
+    fn passes(windows: &[usize], supports: &[f64]) -> (Measured, Vec<Rung>) {
+        let s = Settings {
+            windows: windows.to_vec(),
+            rescue: false,
+            ..Settings::default()
+        };
+        let calls = RefCell::new(Vec::new());
+        let run = |_: Option<&Field>, rung: Rung| {
+            let k = calls.borrow().len();
+            calls.borrow_mut().push(rung);
+            let grid = Grid::new(128, 128, rung.size, s.step(rung.size)).expect("grid");
+            let mut f = Field::unmeasured(grid);
+            if rung.sigma {
+                f.sigma.fill((0.05, 0.05));
+            }
+            Ok((f, supports[k]))
+        };
+        let m = measured(&run, &s, (128, 128), None).expect("measured");
+        (m, calls.into_inner())
+    }
+
+    #[test]
+    fn only_the_last_pass_computes_uncertainties() {
+        let (m, calls) = passes(&[64, 32, 32], &[1.0, 1.0, 1.0]);
+        let asked: Vec<bool> = calls.iter().map(|r| r.sigma).collect();
+        assert_eq!(asked, [false, false, true]);
+        assert!(m.field.sigma.iter().all(|&(a, b)| a == 0.05 && b == 0.05));
+    }
+
+    #[test]
+    fn a_pass_left_standing_is_run_again_with_uncertainties() {
+        // The last 32-px pass fails: the one before it stands, and is run
+        // once more (same rung, same input) to give its uncertainties.
+        let (m, calls) = passes(&[64, 32, 32], &[1.0, 1.0, 0.0, 1.0]);
+        let asked: Vec<(usize, bool)> = calls.iter().map(|r| (r.size, r.sigma)).collect();
+        assert_eq!(asked, [(64, false), (32, false), (32, true), (32, true)]);
+        assert_eq!(m.field.grid.size, 32);
+        assert!(m.field.sigma.iter().all(|&(a, _)| a == 0.05));
+    }
 }
