@@ -8,6 +8,7 @@
 
 use std::sync::{Arc, Mutex, OnceLock};
 
+use realfft::{ComplexToReal, RealFftPlanner};
 use rustfft::num_complex::Complex32;
 use rustfft::{Fft, FftPlanner};
 
@@ -18,6 +19,8 @@ pub struct Plan {
     n: usize,
     fwd: Arc<dyn Fft<f32>>,
     inv: Arc<dyn Fft<f32>>,
+    /// The last inverse step, to a real correlation row.
+    real: Arc<dyn ComplexToReal<f32>>,
 }
 
 impl std::fmt::Debug for Plan {
@@ -32,14 +35,18 @@ impl Plan {
     /// every size it has made: later passes and pairs reuse them.
     pub fn new(n: usize) -> Plan {
         static PLANNER: OnceLock<Mutex<FftPlanner<f32>>> = OnceLock::new();
+        static REAL: OnceLock<Mutex<RealFftPlanner<f32>>> = OnceLock::new();
         let planner = PLANNER.get_or_init(|| Mutex::new(FftPlanner::new()));
+        let real = REAL.get_or_init(|| Mutex::new(RealFftPlanner::new()));
         // A poisoned lock only means another thread panicked while
         // planning; the planner's cache is still valid.
         let mut planner = planner.lock().unwrap_or_else(|e| e.into_inner());
+        let mut real = real.lock().unwrap_or_else(|e| e.into_inner());
         Plan {
             n,
             fwd: planner.plan_fft_forward(n),
             inv: planner.plan_fft_inverse(n),
+            real: real.plan_fft_inverse(n),
         }
     }
 
@@ -85,7 +92,8 @@ impl Scratch {
         let len = plan
             .fwd
             .get_inplace_scratch_len()
-            .max(plan.inv.get_inplace_scratch_len());
+            .max(plan.inv.get_inplace_scratch_len())
+            .max(plan.real.get_scratch_len());
         Scratch {
             z: vec![Complex32::default(); n2],
             t: vec![Complex32::default(); n2],
@@ -204,7 +212,9 @@ pub fn plane(plan: &Plan, s: &mut Scratch) -> Result<PlaneScale, NoPeak> {
     // With Z = FFT(a + i·b) and W = Z(−k), the cross spectrum is
     // conj(A)·B = ½·Im(Z·W) − ¼·i·(|Z|² − |W|²): no separation of A and B
     // needed (the layout is symmetric under −k, so transposed is fine).
-    for p in 0..n {
+    // Only kx up to n/2 is transformed back (below).
+    let h = n / 2 + 1;
+    for p in 0..h {
         let pm = if p == 0 { 0 } else { n - p };
         let row = &s.t[p * n..(p + 1) * n];
         let row_m = &s.t[pm * n..(pm + 1) * n];
@@ -218,11 +228,25 @@ pub fn plane(plan: &Plan, s: &mut Scratch) -> Result<PlaneScale, NoPeak> {
             *o = cross(zk, w);
         }
     }
-    // Inverse: columns (rows of the transposed layout), transpose, rows.
-    plan.inv.process_with_scratch(&mut s.z, &mut s.fft);
-    transpose(&s.z, &mut s.t, n);
-    plan.inv.process_with_scratch(&mut s.t, &mut s.fft);
-    real_parts(&s.t, &mut s.c);
+    // Inverse. The correlation is real, so its spectrum is Hermitian: the
+    // columns (rows of the transposed layout) are transformed for kx up to
+    // n/2 only, and each row of the plane is a complex-to-real transform
+    // of those half spectra (half the work of two complex passes).
+    plan.inv.process_with_scratch(&mut s.z[..h * n], &mut s.fft);
+    transpose::transpose(&s.z[..h * n], &mut s.t[..n * h], n, h);
+    for (half, row) in s.t[..n * h]
+        .chunks_exact_mut(h)
+        .zip(s.c.chunks_exact_mut(n))
+    {
+        // kx = 0 (and n/2 for even n) are real up to rounding.
+        half[0].im = 0.0;
+        if n.is_multiple_of(2) {
+            half[h - 1].im = 0.0;
+        }
+        // The lengths match the plan and the imaginary parts that must be
+        // zero are: the transform cannot fail.
+        let _ = plan.real.process_with_scratch(half, row, &mut s.fft);
+    }
     let norm = 1.0 / (n2 * (ea * eb).sqrt());
     Ok(PlaneScale {
         norm,
@@ -572,13 +596,6 @@ fn fill_z(z: &mut [Complex32], a: &[f32], b: &[f32], ma: f32, mb: f32) -> (f64, 
     }
     let sum = |e: [f32; 8]| e.iter().map(|&v| f64::from(v)).sum::<f64>();
     (sum(ea) + ta, sum(eb) + tb)
-}
-
-/// Copies the real parts of `t` into `c`.
-fn real_parts(t: &[Complex32], c: &mut [f32]) {
-    for (cv, tv) in c.iter_mut().zip(t) {
-        *cv = tv.re;
-    }
 }
 
 fn transpose(src: &[Complex32], dst: &mut [Complex32], n: usize) {
