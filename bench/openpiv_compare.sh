@@ -2,14 +2,14 @@
 # spiv against OpenPIV (multi-pass windef) on the same simulated pairs:
 # errors against the truth and times, in one table.
 #
-#   bash bench/openpiv_compare.sh --install   # first time: OpenPIV into bench/.venv
+#   bash bench/openpiv_compare.sh --install   # first time: OpenPIV (Rust backend) into bench/.venv
 #   bash bench/openpiv_compare.sh             # the table
 set -euo pipefail
 cd "$(dirname "$0")/.."
 VENV=bench/.venv
 if [[ "${1:-}" == "--install" ]]; then
   python3 -m venv "$VENV"
-  "$VENV/bin/pip" install --quiet openpiv imageio
+  "$VENV/bin/pip" install --quiet "openpiv[rust]==0.26.1" imageio
   shift
 fi
 [[ -x "$VENV/bin/python" ]] || { echo "no $VENV: run $0 --install" >&2; exit 1; }
@@ -37,4 +37,9 @@ spike_case() {
   $SPIV reconstruct "$from/spikes.dat" --method tfp --at "$kb" -o "$to/frame_b.png" >/dev/null
 }
 spike_case turbulence
-"$VENV/bin/python" bench/openpiv_compare.py "$CASES"/* --spiv "$SPIV" --json target/openpiv-compare.json "$@"
+# One thread, then two, each for both engines (and numpy under OpenPIV).
+for t in 1 2; do
+  RAYON_NUM_THREADS=$t OMP_NUM_THREADS=$t OPENBLAS_NUM_THREADS=$t \
+    "$VENV/bin/python" bench/openpiv_compare.py "$CASES"/* --spiv "$SPIV" \
+    --json "target/openpiv-compare-$t.json" "$@"
+done
