@@ -121,9 +121,9 @@ fn late_and_lost_asks_measure_as_well_as_immediate_ones() {
 /// A vortex array at 1 px per tick (10 px per pair), measured from the
 /// loop's very first pair: the loop starts cold (no warm-up pair fits
 /// before tick 40), and a pair with no field before it carries its
-/// events, whose short rungs nothing blurs. The first pair has most of
-/// its vectors valid and errs about as the later pairs do (tuning seeds
-/// 1–5: 79–98 % valid, 0.92–1.29× the later pairs' EPE).
+/// events, whose short rungs nothing blurs, and climbs them again along
+/// what they measured. The first pair has at least 80 % of its vectors
+/// valid and errs about as the later pairs do.
 #[test]
 fn a_fast_flow_is_measured_from_the_first_pair() {
     let p = SceneParams {
@@ -153,7 +153,7 @@ fn a_fast_flow_is_measured_from_the_first_pair() {
         "first pair: {:.0} % valid, EPE {first:.3} px; later pairs {later:.3} px",
         100.0 * valid
     );
-    assert!(valid >= 0.75, "{valid}");
+    assert!(valid >= 0.8, "{valid}");
     assert!(first <= 1.5 * later, "{first} against {later}");
     assert!(later < 1.0, "{later}");
 }

@@ -263,7 +263,8 @@ impl Climb {
 /// first rung's own field. Without rung frames, the pair climbs from its
 /// events: the uncompensated rungs up to
 /// [`LadderSettings::bootstrap_longest`], then rungs compensated along
-/// the estimate so far, as far as the events reach. Every kept vector's
+/// the estimate so far, as far as the events reach; then once more, every
+/// rung compensated along the estimate that climb reached. Every kept vector's
 /// uncertainty includes its change from the estimate that predicted its
 /// rung.
 ///
@@ -293,7 +294,7 @@ pub fn measure(
             c
         }
         _ => match &input.events {
-            Some(ev) => cold(ev, mid, dt, cfg)?,
+            Some(ev) => again(ev, mid, dt, cfg, cold(ev, mid, dt, cfg)?)?,
             None => Climb::new(None, dt),
         },
     };
@@ -399,8 +400,37 @@ fn warm(
 
 /// The climb of a pair from its events alone.
 fn cold(ev: &Events, mid: u64, dt: f64, cfg: &LadderSettings) -> Result<Climb, PivError> {
+    climb_events(ev, mid, dt, cfg, None)
+}
+
+/// A pair with no flow to follow climbs its events a second time along
+/// the estimate its first climb reached: every rung, the shortest too, is
+/// then compensated, where the first climb's bootstrap rungs were blurred
+/// by the motion (a third climb gains nothing: docs/results.md).
+fn again(
+    ev: &Events,
+    mid: u64,
+    dt: f64,
+    cfg: &LadderSettings,
+    first: Climb,
+) -> Result<Climb, PivError> {
+    match first.estimate.clone() {
+        Some(e) => climb_events(ev, mid, dt, cfg, Some(e)),
+        None => Ok(first),
+    }
+}
+
+/// The climb over `ev`'s rungs, compensated along `estimate` (and along
+/// what each rung adds) or, without one, from the bootstrap rungs.
+fn climb_events(
+    ev: &Events,
+    mid: u64,
+    dt: f64,
+    cfg: &LadderSettings,
+    estimate: Option<Field>,
+) -> Result<Climb, PivError> {
     let span = ev.range();
-    let mut climb = Climb::new(None, dt);
+    let mut climb = Climb::new(estimate, dt);
     for &s in &cfg.separations {
         let s64 = u64::from(s.max(2));
         if mid < span.start + s64 || mid + s64 > span.end {
