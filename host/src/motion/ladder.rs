@@ -406,7 +406,9 @@ fn cold(ev: &Events, mid: u64, dt: f64, cfg: &LadderSettings) -> Result<Climb, P
 /// A pair with no flow to follow climbs its events a second time along
 /// the estimate its first climb reached: every rung, the shortest too, is
 /// then compensated, where the first climb's bootstrap rungs were blurred
-/// by the motion (a third climb gains nothing: docs/results.md).
+/// by the motion (a third climb gains nothing: docs/results.md). The
+/// second climb stands when it keeps at least as many valid vectors as
+/// the first (at a recording's clipped ends it can keep fewer).
 fn again(
     ev: &Events,
     mid: u64,
@@ -414,10 +416,21 @@ fn again(
     cfg: &LadderSettings,
     first: Climb,
 ) -> Result<Climb, PivError> {
-    match first.estimate.clone() {
-        Some(e) => climb_events(ev, mid, dt, cfg, Some(e)),
-        None => Ok(first),
+    let Some(e) = first.estimate.clone() else {
+        return Ok(first);
+    };
+    let mut second = climb_events(ev, mid, dt, cfg, Some(e))?;
+    let valid = |c: &Climb| c.best.as_ref().map_or(0, |b| b.counts().0);
+    if valid(&second) < valid(&first) {
+        return Ok(first);
     }
+    // The second climb follows the first's estimate from the same events:
+    // how little it changes that estimate is no sign of how right it is.
+    // The uncertainty keeps the first climb's changes (none where its
+    // node came from a rung no estimate predicted: the correlation's
+    // statistics stand whole there).
+    second.change = first.change;
+    Ok(second)
 }
 
 /// The climb over `ev`'s rungs, compensated along `estimate` (and along
