@@ -13,13 +13,6 @@
 
 use std::path::{Path, PathBuf};
 
-/// mimalloc instead of the system allocator, as in the `spiv` binary: PIV
-/// allocates image-sized buffers per call, and glibc hands those back to
-/// the kernel on free, so every call paid fresh page faults (a fifth of a
-/// 1024² `piv` on one thread); mimalloc keeps and reuses its pages.
-#[global_allocator]
-static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
-
 use numpy::ndarray::{Array2, Array3};
 use numpy::{
     IntoPyArray, PyArray2, PyArray3, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods,
@@ -43,6 +36,13 @@ use spiv_host::receive::{FrameLimit, Spec};
 use spiv_host::reconstruct::{frame_from_planes, FileOptions, Planes, ReconstructError};
 use spiv_host::simulate::SimulateRequest;
 use spiv_host::units::Calibration;
+
+/// mimalloc instead of the system allocator, as in the `spiv` binary: PIV
+/// allocates image-sized buffers per call, and glibc hands those back to
+/// the kernel on free, so every call paid fresh page faults (a fifth of a
+/// 1024² `piv` on one thread); mimalloc keeps and reuses its pages.
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 pyo3::create_exception!(
     spiv,
