@@ -633,6 +633,17 @@ mod tests {
         }
     }
 
+    /// Uniform numbers in [0, 1) from a 64-bit LCG seeded with `seed`.
+    fn uniform(seed: u64) -> impl FnMut() -> f32 {
+        let mut rng = seed;
+        move || {
+            rng = rng
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (rng >> 40) as f32 / (1u64 << 24) as f32
+        }
+    }
+
     /// The FFT path against the cyclic cross-correlation summed directly:
     /// same integer peak, same normalised height and peak ratio.
     #[test]
@@ -640,13 +651,7 @@ mod tests {
         let n = 16;
         let plan = Plan::new(n);
         let mut s = Scratch::new(&plan);
-        let mut rng = 12345u64;
-        let mut next = || {
-            rng = rng
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (rng >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut next = uniform(12345);
         let a: Vec<f32> = (0..n * n).map(|_| 100.0 * next()).collect();
         // B: A moved by (dx 3, dy −2) cyclically, plus noise.
         let b: Vec<f32> = (0..n * n)
@@ -747,13 +752,7 @@ mod tests {
     /// the wrap, on odd and even sizes, with and without a mask.
     #[test]
     fn spread_matches_the_direct_sum() {
-        let mut rng = 99u64;
-        let mut next = || {
-            rng = rng
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (rng >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut next = uniform(99);
         for n in [8usize, 13, 32] {
             let plan = Plan::new(n);
             let mut s = Scratch::new(&plan);

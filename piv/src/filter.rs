@@ -47,16 +47,21 @@ fn box_line(row: &mut [f32], r: usize, pad: &mut Vec<f32>) {
         return;
     }
     let norm = 1.0 / (2 * r + 1) as f32;
-    // The line padded by r clamped values on each side.
     pad.clear();
-    pad.extend(std::iter::repeat_n(row[0], r));
-    pad.extend_from_slice(row);
-    pad.extend(std::iter::repeat_n(row[w - 1], r + 1));
+    clamped(pad, row, r);
     let mut sum: f32 = pad[..2 * r + 1].iter().sum();
     for j in 0..w {
         row[j] = sum * norm;
         sum += pad[j + 2 * r + 1] - pad[j];
     }
+}
+
+/// Appends `row` (not empty) padded by `r` clamped values on the left and
+/// `r + 1` on the right (the last running-sum step reads one more).
+fn clamped(pad: &mut Vec<f32>, row: &[f32], r: usize) {
+    pad.extend(std::iter::repeat_n(row[0], r));
+    pad.extend_from_slice(row);
+    pad.extend(std::iter::repeat_n(row[row.len() - 1], r + 1));
 }
 
 /// Rows [`box_lines`] blurs together.
@@ -70,17 +75,13 @@ fn box_lines(rows: &mut [f32], w: usize, r: usize, pad: &mut Vec<f32>) {
     if w == 0 {
         return;
     }
+    let norm = 1.0 / (2 * r + 1) as f32;
+    let pw = w + 2 * r + 1;
     let mut blocks = rows.chunks_exact_mut(LOCKSTEP * w);
     for block in &mut blocks {
-        let norm = 1.0 / (2 * r + 1) as f32;
-        // Each row padded by r clamped values on each side (and one more
-        // on the right, read by the last step).
-        let pw = w + 2 * r + 1;
         pad.clear();
         for row in block.chunks_exact(w) {
-            pad.extend(std::iter::repeat_n(row[0], r));
-            pad.extend_from_slice(row);
-            pad.extend(std::iter::repeat_n(row[w - 1], r + 1));
+            clamped(pad, row, r);
         }
         let p: [&[f32]; LOCKSTEP] = std::array::from_fn(|l| &pad[l * pw..(l + 1) * pw]);
         let mut sum: [f32; LOCKSTEP] = std::array::from_fn(|l| p[l][..2 * r + 1].iter().sum());

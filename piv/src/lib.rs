@@ -1339,9 +1339,6 @@ impl Region<'_> {
     }
 }
 
-/// Sets the pixels of the `k × k` buffer `a` outside the `n × n` window
-/// at `(ox, oy)` to the window's mean over its unmasked pixels, so that
-/// they add nothing to the correlation once the mean is removed.
 /// Whether any of `v` is true: an OR over blocks of 32 (vectorises, where
 /// `contains` on bools tests one at a time).
 fn any_true(v: &[bool]) -> bool {
@@ -1350,6 +1347,9 @@ fn any_true(v: &[bool]) -> bool {
     hit || blocks.remainder().contains(&true)
 }
 
+/// Sets the pixels of the `k × k` buffer `a` outside the `n × n` window
+/// at `(ox, oy)` to the window's mean over its unmasked pixels, so that
+/// they add nothing to the correlation once the mean is removed.
 fn pad_outside(a: &mut [f32], masked: &[bool], k: usize, (ox, oy): (usize, usize), n: usize) {
     let inside = |i: usize, j: usize| (oy..oy + n).contains(&i) && (ox..ox + n).contains(&j);
     let (mut sum, mut cnt) = (0.0f64, 0usize);
