@@ -252,3 +252,82 @@ impl LightBuf {
         }
     }
 }
+
+/// A [`crate::warp::Flow`] owned: what a sidecar keeps of the last ask it
+/// heard while the next one is put together in the assembly's slices.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FlowBuf {
+    /// Nodes across (0: no motion).
+    pub nx: u16,
+    /// Nodes down (0: no motion).
+    pub ny: u16,
+    /// x of column 0, 1/16 px.
+    pub x0: i32,
+    /// y of row 0, 1/16 px.
+    pub y0: i32,
+    /// Node spacing, 1/16 px.
+    pub pitch: u16,
+    /// x velocity per node, Q12 px/tick, `ny × nx` row-major.
+    pub vx: Vec<i16>,
+    /// y velocity, as `vx`.
+    pub vy: Vec<i16>,
+    /// x acceleration along the path, Q16 px/tick², as `vx`.
+    pub ax: Vec<i16>,
+    /// y acceleration, as `vx`.
+    pub ay: Vec<i16>,
+}
+
+impl FlowBuf {
+    /// No motion ([`crate::warp::Flow::still`]).
+    pub fn still() -> FlowBuf {
+        FlowBuf::of(&crate::warp::Flow::still())
+    }
+
+    /// `f`, owned.
+    pub fn of(f: &crate::warp::Flow<'_>) -> FlowBuf {
+        if f.is_still() {
+            return FlowBuf {
+                nx: 0,
+                ny: 0,
+                x0: 0,
+                y0: 0,
+                pitch: 16,
+                vx: Vec::new(),
+                vy: Vec::new(),
+                ax: Vec::new(),
+                ay: Vec::new(),
+            };
+        }
+        FlowBuf {
+            nx: f.nx,
+            ny: f.ny,
+            x0: f.x0,
+            y0: f.y0,
+            pitch: f.pitch,
+            vx: f.vx.to_vec(),
+            vy: f.vy.to_vec(),
+            ax: f.ax.to_vec(),
+            ay: f.ay.to_vec(),
+        }
+    }
+
+    /// Whether this is no motion.
+    pub fn is_still(&self) -> bool {
+        self.nx == 0 || self.ny == 0
+    }
+
+    /// The core's view.
+    pub fn view(&self) -> crate::warp::Flow<'_> {
+        crate::warp::Flow {
+            nx: self.nx,
+            ny: self.ny,
+            x0: self.x0,
+            y0: self.y0,
+            pitch: self.pitch,
+            vx: &self.vx,
+            vy: &self.vy,
+            ax: &self.ax,
+            ay: &self.ay,
+        }
+    }
+}

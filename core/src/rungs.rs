@@ -27,6 +27,87 @@ use crate::wire::{Encoding, WireError};
 /// Most rungs a pair asks for.
 pub const MAX_RUNGS: usize = 8;
 
+/// The longest rung the live loop makes by default, ticks (the host's
+/// ladder climbs 4, 8, 16, 32, 64 and 128 ticks).
+pub const LONGEST_RUNG: u16 = 128;
+
+/// Ticks on each side of the midpoint whose events a pair with no flow to
+/// follow carries by default (the host's unestimated rungs sum them).
+pub const BOOTSTRAP_REACH: u16 = 32;
+
+/// Ticks after a pair's midpoint that a loop whose rungs reach up to
+/// `longest` ticks and whose events reach `reach` ticks holds before it
+/// makes the pair: the longest of them, then the events' tolerance.
+///
+/// ```
+/// use spiv_core::rungs::{lead, LONGEST_RUNG, BOOTSTRAP_REACH};
+/// assert_eq!(lead(LONGEST_RUNG, BOOTSTRAP_REACH), 128 + u32::from(spiv_core::light::MAX_TOLERANCE));
+/// ```
+pub const fn lead(longest: u16, reach: u16) -> u32 {
+    let s = if longest > reach { longest } else { reach };
+    s as u32 + MAX_TOLERANCE as u32
+}
+
+/// Ticks of events the ring of such a loop holds ([`EventRing`]'s
+/// `depth`): the `longest` (or `reach`) ticks before a midpoint, [`lead`]
+/// after it, and two more.
+pub const fn ring_depth(longest: u16, reach: u16) -> u32 {
+    let s = if longest > reach { longest } else { reach };
+    s as u32 + lead(longest, reach) + 2
+}
+
+/// What the pair at midpoint `mid` carries when the ring holds the ticks
+/// `held` and the last ask heard says `asked` (`still`: it gave no flow):
+/// the asked separations `s` whose frames the held ticks reach (`s`
+/// before `mid`, `s` and the events' tolerance after it) — none without a
+/// flow — and the ticks of events within the ask's reach, or within
+/// `cold_reach` when no rung frame is made (`None`: no events).
+///
+/// ```
+/// use spiv_core::rungs::{pair_plan, Rungs};
+/// let mut asked = Rungs::events(0);
+/// asked.separations[..2].copy_from_slice(&[16, 128]);
+/// asked.count = 2;
+/// // 128 ticks do not fit before tick 100: the 16-tick rung alone, no events.
+/// let (r, ev) = pair_plan(0..400, 100, &asked, false, 32);
+/// assert_eq!((r.separations(), ev), (&[16u16][..], None));
+/// // No flow: the events within the cold reach.
+/// let (r, ev) = pair_plan(0..400, 100, &asked, true, 32);
+/// assert_eq!((r.count, ev), (0, Some((68, 132))));
+/// ```
+pub fn pair_plan(
+    held: core::ops::Range<u32>,
+    mid: u32,
+    asked: &Rungs,
+    still: bool,
+    cold_reach: u16,
+) -> (Rungs, Option<(u32, u32)>) {
+    let fits = |s: u32| {
+        mid >= held.start.saturating_add(s)
+            && u64::from(mid) + u64::from(s) + u64::from(MAX_TOLERANCE) <= u64::from(held.end)
+    };
+    let mut rungs = Rungs::events(asked.reach);
+    if !still {
+        for &s in asked.separations() {
+            if fits(u32::from(s)) && usize::from(rungs.count) < MAX_RUNGS {
+                rungs.separations[usize::from(rungs.count)] = s;
+                rungs.count += 1;
+            }
+        }
+    }
+    let r = if rungs.count == 0 {
+        u32::from(cold_reach.max(1))
+    } else {
+        u32::from(rungs.reach)
+    };
+    let events = (r > 0).then(|| {
+        let a = mid.saturating_sub(r).max(held.start);
+        let b = mid.saturating_add(r).min(held.end).max(a);
+        (a, b)
+    });
+    (rungs, events)
+}
+
 /// Bits of a ring entry below the pixel: the ticks between the event and
 /// the tick it was stored under (a prediction settled late), and the sign.
 const LOW_BITS: u32 = 6;
@@ -404,6 +485,9 @@ pub struct PairPlan<'f> {
     /// Ticks `a..b` of events to send (`None`: none), at most
     /// [`MAX_EVENT_TICKS`].
     pub events: Option<(u32, u32)>,
+    /// Ticks between the frames of the pair the host reports (the head's
+    /// `dt`; 0: not given).
+    pub dt: u16,
 }
 
 /// The caller's buffers for [`send_pair`], each for a sensor of `px`
@@ -539,6 +623,7 @@ fn pair_head<E>(plan: &PairPlan<'_>, frames: &[i16], px: usize) -> Result<PairHe
         count: plan.rungs.count,
         ev_first: a,
         ev_ticks,
+        dt: plan.dt,
         ..PairHead::default()
     };
     head.separations[..seps.len()].copy_from_slice(seps);

@@ -15,6 +15,7 @@ use std::sync::mpsc::{channel, Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
 
 use crate::firmware::{FaultCounts, Faults, Faulty, Firmware, FirmwareError, Link};
+use crate::ladder::LadderFirmware;
 
 /// Control bytes arriving from the host.
 #[derive(Debug)]
@@ -155,21 +156,29 @@ impl ControlStream {
     /// Call before each plane: the firmware hears whatever arrived, and,
     /// pacing, waits for the host when the plane begins a pair.
     pub fn before_plane<L: Link>(&mut self, fw: &mut Firmware<L>) -> Result<(), FirmwareError> {
+        let pair = fw.pair_due();
+        self.pace(fw, pair)
+    }
+
+    /// Call before the live loop sends pair `pair`
+    /// ([`crate::ladder::LadderFirmware::pair_due`]): it hears whatever
+    /// arrived and, pacing, waits for the host's answer to the pair before.
+    pub fn before_pair<F: Hears>(&mut self, fw: &mut F, pair: u32) -> Result<(), FirmwareError> {
+        self.pace(fw, Some(pair))
+    }
+
+    fn pace<F: Hears>(&mut self, fw: &mut F, pair: Option<u32>) -> Result<(), FirmwareError> {
         while let Ok(b) = self.rx.try_recv() {
             fw.hear(&b);
         }
-        let (Some(limit), Some(pair)) = (self.wait, fw.pair_due()) else {
+        let (Some(limit), Some(pair)) = (self.wait, pair) else {
             return Ok(());
         };
-        let chunks = |fw: &Firmware<L>| {
-            let d = fw.downlink();
-            u64::from(d.heard) + u64::from(d.refused)
-        };
-        if pair > 0 && !self.closed && chunks(fw) == self.mark {
+        if pair > 0 && !self.closed && fw.answers() == self.mark {
             // The host can only answer what it received.
             fw.flush()?;
             let deadline = Instant::now() + limit;
-            while chunks(fw) == self.mark {
+            while fw.answers() == self.mark {
                 let left = deadline.saturating_duration_since(Instant::now());
                 match self.rx.recv_timeout(left) {
                     Ok(b) => fw.hear(&b),
@@ -184,7 +193,44 @@ impl ControlStream {
                 }
             }
         }
-        self.mark = chunks(fw);
+        self.mark = fw.answers();
         Ok(())
+    }
+}
+
+/// A firmware that hears the downlink between planes.
+pub trait Hears {
+    /// Takes downlink bytes (any chunking).
+    fn hear(&mut self, bytes: &[u8]);
+    /// The host's messages heard or refused so far: a change is an answer.
+    fn answers(&self) -> u64;
+    /// Pushes out what the uplink holds (the host can only answer what it
+    /// received).
+    fn flush(&mut self) -> Result<(), FirmwareError>;
+}
+
+impl<L: Link> Hears for Firmware<L> {
+    fn hear(&mut self, bytes: &[u8]) {
+        Firmware::hear(self, bytes);
+    }
+    fn answers(&self) -> u64 {
+        let d = self.downlink();
+        u64::from(d.heard) + u64::from(d.refused)
+    }
+    fn flush(&mut self) -> Result<(), FirmwareError> {
+        Firmware::flush(self)
+    }
+}
+
+impl<L: Link> Hears for LadderFirmware<L> {
+    fn hear(&mut self, bytes: &[u8]) {
+        LadderFirmware::hear(self, bytes);
+    }
+    fn answers(&self) -> u64 {
+        let (heard, refused) = self.heard();
+        heard + refused
+    }
+    fn flush(&mut self) -> Result<(), FirmwareError> {
+        LadderFirmware::flush(self)
     }
 }

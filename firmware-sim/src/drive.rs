@@ -4,6 +4,7 @@
 
 use crate::downlink::ControlStream;
 use crate::firmware::{Config, Firmware, FirmwareError, Link};
+use crate::ladder::{LadderConfig, LadderFirmware};
 
 /// Why a driven run stopped.
 #[derive(Debug, thiserror::Error)]
@@ -83,6 +84,86 @@ pub fn run_on_dat<L: Link>(
         }
         fw.push_plane(&plane)?;
     }
+    fw.finish()?;
+    Ok(fw)
+}
+
+/// Every step the live loop can take now ([`LadderFirmware::step`]),
+/// hearing the host (and, pacing, waiting for it) before each pair.
+fn drain<L: Link>(
+    fw: &mut LadderFirmware<L>,
+    mut downlink: Option<&mut ControlStream>,
+) -> Result<(), FirmwareError> {
+    loop {
+        if let (Some(i), Some(d)) = (fw.pair_due(), downlink.as_deref_mut()) {
+            d.before_pair(fw, i)?;
+        }
+        if fw.done() || !fw.step()? {
+            return Ok(());
+        }
+    }
+}
+
+/// Runs the live loop ([`crate::ladder`]) on a `.dat` file, plane by
+/// plane, hearing the host before each pair when given a `downlink`.
+pub fn run_ladder_on_dat<L: Link>(
+    path: &std::path::Path,
+    (width, height): (u16, u16),
+    opts: spiv_formats::dat::DatOptions,
+    cfg: LadderConfig,
+    link: L,
+    mut downlink: Option<&mut ControlStream>,
+) -> Result<LadderFirmware<L>, DriveError> {
+    let mut r = spiv_formats::dat::DatReader::open(path, width, height, opts)?;
+    let mut fw = LadderFirmware::new((r.width(), r.height()), cfg, link)?;
+    let mut plane = vec![0u8; r.out_plane_bytes()];
+    while !fw.done() && r.read_plane(&mut plane)? {
+        fw.take(&plane)?;
+        drain(&mut fw, downlink.as_deref_mut())?;
+    }
+    fw.end()?;
+    drain(&mut fw, downlink)?;
+    fw.finish()?;
+    Ok(fw)
+}
+
+/// Runs the live loop on a simulated scene, the planes streamed from the
+/// sensor; with `cfg.pairs`, the scene lasts as long as the last pair
+/// needs.
+pub fn run_ladder_on_scene<L: Link>(
+    req: &crate::simulation::Request,
+    cfg: LadderConfig,
+    link: L,
+    mut downlink: Option<&mut ControlStream>,
+) -> Result<LadderFirmware<L>, DriveError> {
+    let mut req = req.clone();
+    if let Some(mid) = cfg.pairs.and_then(|p| cfg.mid(p.max(1) - 1)) {
+        let lead = spiv_core::rungs::lead(cfg.longest, cfg.cold_reach);
+        req.ticks = Some(mid.saturating_add(lead).saturating_add(1));
+    }
+    let mut fw = LadderFirmware::new((req.scene.width, req.scene.height), cfg, link)?;
+    let mut failed: Option<FirmwareError> = None;
+    crate::simulation::simulate(
+        &req,
+        |_, _| {},
+        |plane| {
+            if failed.is_some() || fw.done() {
+                return Ok(());
+            }
+            if let Err(e) = fw
+                .take(plane)
+                .and_then(|()| drain(&mut fw, downlink.as_deref_mut()))
+            {
+                failed = Some(e);
+            }
+            Ok(())
+        },
+    )?;
+    if let Some(e) = failed {
+        return Err(e.into());
+    }
+    fw.end()?;
+    drain(&mut fw, downlink)?;
     fw.finish()?;
     Ok(fw)
 }

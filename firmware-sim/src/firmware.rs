@@ -32,6 +32,9 @@ pub enum FirmwareError {
     /// A configuration the firmware cannot run.
     #[error("configuration: {0}")]
     Config(spiv_core::sidecar::ConfigError),
+    /// A live-loop schedule the firmware cannot run.
+    #[error("schedule: {0}")]
+    Schedule(&'static str),
 }
 
 impl From<SidecarError<std::io::Error>> for FirmwareError {

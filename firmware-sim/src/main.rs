@@ -14,10 +14,13 @@ use spiv_core::downlink::DownlinkStats;
 use spiv_core::wire::{crc32, frame_crc, Encoding};
 use spiv_core::Method;
 use spiv_firmware_sim::downlink::ControlStream;
-use spiv_firmware_sim::drive::{run_on_dat, run_on_scene, DriveError};
+use spiv_firmware_sim::drive::{
+    run_ladder_on_dat, run_ladder_on_scene, run_on_dat, run_on_scene, DriveError,
+};
 use spiv_firmware_sim::firmware::{
     Config, Counters, FaultCounts, Faults, Faulty, Firmware, Plain, SentFrame,
 };
+use spiv_firmware_sim::ladder::LadderConfig;
 use spiv_firmware_sim::scene::{SceneKind, SceneParams, TICK_HZ};
 use spiv_firmware_sim::simulation::Request;
 use spiv_formats::capture::Capture;
@@ -86,9 +89,12 @@ struct Args {
     /// particles are at full scale, so more noise may go).
     #[arg(long, default_value_t = 2)]
     contrast_mc: u16,
-    /// Frame method: adaptive, tfp, tfi or mc (motion-compensated: needs
+    /// Frame method: adaptive, tfp, tfi, mc (motion-compensated: needs
     /// the host's predicted motion over the downlink — `--tcp` or
-    /// `--control` — and sends the paper's adaptive frames until it has one).
+    /// `--control` — and sends the paper's adaptive frames until it has one)
+    /// or ladder (the live loop of `spiv flow`'s time ladder: each pair's
+    /// events, or its rung frames along the flow the host asked for over
+    /// the downlink; `spiv receive --piv --control` measures them).
     #[arg(long, default_value = "adaptive")]
     method: String,
     /// mc: how frames are made until the host's first motion arrives: tfp
@@ -328,6 +334,9 @@ fn run(a: &Args) -> Result<(), Error> {
             "spiv-firmware-sim: --method mc without a downlink (--tcp or --control): the paper's adaptive frames"
         );
     }
+    if a.method == "ladder" {
+        return run_ladder(a, &shared, faults, t0);
+    }
     let run = match &a.scene {
         Some(name) => from_scene(a, name, &shared, faults)?,
         None => from_input(a, &shared, faults)?,
@@ -353,6 +362,155 @@ fn run(a: &Args) -> Result<(), Error> {
         }
     }
     Ok(())
+}
+
+/// The live loop's schedule from the command line, pairs `dt` apart.
+fn ladder_config(a: &Args, dt: u32) -> Result<LadderConfig, Error> {
+    if !(1..=u32::from(u16::MAX)).contains(&dt) {
+        return Err(Error::Usage(format!(
+            "dt {dt}: expected 1..=65535 ticks between the frames of a pair"
+        )));
+    }
+    let mut cfg = LadderConfig::new(dt);
+    if let Some(e) = a.every {
+        if e < dt {
+            return Err(Error::Usage(format!(
+                "--every {e} must be at least dt = {dt}"
+            )));
+        }
+        cfg.every = e;
+    }
+    if let Some(f) = a.first {
+        cfg.first = f;
+    }
+    cfg.pairs = a.pairs;
+    Ok(cfg)
+}
+
+/// The live loop of the time ladder on `--scene` or `--input`.
+fn run_ladder(a: &Args, shared: &Shared, faults: Faults, t0: Instant) -> Result<(), Error> {
+    if a.checksum {
+        return Err(Error::Usage(
+            "--checksum: the Cortex-M4 firmware does not run --method ladder".into(),
+        ));
+    }
+    if a.tcp.is_none() && a.control.is_none() && !a.quiet {
+        eprintln!(
+            "spiv-firmware-sim: --method ladder without a downlink (--tcp or --control): every pair carries its events"
+        );
+    }
+    let (out, mut control) = open_link(a, shared)?;
+    let link = Faulty::new(Plain(out), faults, a.seed);
+    let (fw, (w, h), tick_hz) = match &a.scene {
+        Some(name) => {
+            let kind = SceneKind::parse(name).map_err(|e| Error::Usage(e.to_string()))?;
+            let mut p = SceneParams::new(kind);
+            if let Some(dt) = a.dt {
+                p.pair_dt = dt;
+            }
+            let (w, h) = (a.width.unwrap_or(p.width), a.height.unwrap_or(p.height));
+            check_size(w, h)?;
+            (p.width, p.height) = (w, h);
+            let mut cfg = ladder_config(a, p.pair_dt)?;
+            cfg.pairs = Some(a.pairs.unwrap_or(4).max(1));
+            let req = Request::new(p, a.seed);
+            let fw = run_ladder_on_scene(&req, cfg, link, control.as_mut())?;
+            (fw, (w, h), None)
+        }
+        None => {
+            let (path, (w, h), dt, tick_hz) = input_layout(a)?;
+            let cfg = ladder_config(a, dt)?;
+            let opts = DatOptions::default();
+            let fw = run_ladder_on_dat(&path, (w, h), opts, cfg, link, control.as_mut())?;
+            (fw, (w, h), Some(tick_hz))
+        }
+    };
+    if !a.quiet {
+        let c = fw.counts();
+        let secs = t0.elapsed().as_secs_f64().max(1e-9);
+        let raw = f64::from(c.planes) * f64::from(w) * f64::from(h) / 8.0;
+        let bytes = c.cost.head + c.cost.rung_frames + c.cost.events + c.cost.rates;
+        eprintln!(
+            "spiv-firmware-sim: {} planes, {} pairs ({} with rung frames), {} messages, {} bytes ({:.1}x less than the {:.0} raw spike bytes) in {:.2} s, {:.3}x real time at {:.0} kHz",
+            c.planes,
+            c.pairs,
+            c.warm,
+            c.messages,
+            bytes,
+            raw / bytes.max(1) as f64,
+            raw,
+            secs,
+            f64::from(c.planes) / tick_hz.unwrap_or(TICK_HZ) / secs,
+            tick_hz.unwrap_or(TICK_HZ) / 1e3,
+        );
+        if c.lost != (0, 0) {
+            eprintln!(
+                "spiv-firmware-sim: the event ring lost {} events and dropped {} ticks for room",
+                c.lost.0, c.lost.1
+            );
+        }
+        let f = fw.into_link().counts;
+        if faults != Faults::default() {
+            eprintln!(
+                "spiv-firmware-sim: faults: {} dropped, {} corrupted, {} truncated, {} stalled, {} reordered, {} duplicated",
+                f.dropped, f.corrupted, f.truncated, f.stalled, f.reordered, f.duplicated
+            );
+        }
+        if let Some(c) = &control {
+            report_asks(c);
+        }
+    }
+    Ok(())
+}
+
+/// One line on what the downlink of the live loop heard.
+fn report_asks(c: &ControlStream) {
+    let f = c.fault_counts();
+    eprintln!(
+        "spiv-firmware-sim: downlink: {} pairs began without an answer; faults: {} dropped, {} corrupted, {} truncated, {} reordered, {} duplicated",
+        c.timeouts, f.dropped, f.corrupted, f.truncated, f.reordered, f.duplicated
+    );
+}
+
+/// A simulated sensor's size, checked.
+fn check_size(w: u16, h: u16) -> Result<(), Error> {
+    if w < 8
+        || h < 8
+        || (usize::from(w) * usize::from(h)) % 8 != 0
+        || u64::from(w) * u64::from(h) > MAX_FRAME_PIXELS
+    {
+        return Err(Error::Usage(format!(
+            "--width {w} --height {h}: both at least 8, width*height a multiple of 8 and at most {MAX_FRAME_PIXELS}"
+        )));
+    }
+    Ok(())
+}
+
+/// `--input`'s path, size, pair separation and tick rate (from the
+/// scene.json beside it, or the command line).
+fn input_layout(a: &Args) -> Result<(PathBuf, (u16, u16), u32, f64), Error> {
+    let path = a
+        .input
+        .as_ref()
+        .ok_or_else(|| Error::Usage("--scene or --input".into()))?;
+    let meta = Capture::beside(path)?;
+    let (w, h) = match (a.width, a.height, &meta) {
+        (Some(w), Some(h), _) => (w, h),
+        (None, None, Some(m)) => (m.width, m.height),
+        _ => {
+            return Err(Error::Usage(format!(
+                "{}: give --width and --height (no scene.json beside it)",
+                path.display()
+            )))
+        }
+    };
+    // scene.json is input too: a pair listed backwards is refused by the
+    // schedule's range check, not wrapped.
+    let dt =
+        a.dt.or_else(|| meta.as_ref().map(|m| m.pair[1].saturating_sub(m.pair[0])))
+            .unwrap_or(13);
+    let tick_hz = meta.map_or(TICK_HZ, |m| m.tick_hz);
+    Ok((path.clone(), (w, h), dt, tick_hz))
 }
 
 /// What one run of the firmware loop leaves for the report.
@@ -399,15 +557,7 @@ fn from_scene(a: &Args, name: &str, shared: &Shared, faults: Faults) -> Result<R
         p.pair_dt = dt;
     }
     let (w, h) = (a.width.unwrap_or(p.width), a.height.unwrap_or(p.height));
-    if w < 8
-        || h < 8
-        || (usize::from(w) * usize::from(h)) % 8 != 0
-        || u64::from(w) * u64::from(h) > MAX_FRAME_PIXELS
-    {
-        return Err(Error::Usage(format!(
-            "--width {w} --height {h}: both at least 8, width*height a multiple of 8 and at most {MAX_FRAME_PIXELS}"
-        )));
-    }
+    check_size(w, h)?;
     p.width = w;
     p.height = h;
     let mut cfg = config(a, p.pair_dt)?;
@@ -422,33 +572,13 @@ fn from_scene(a: &Args, name: &str, shared: &Shared, faults: Faults) -> Result<R
 /// The firmware loop on the recording `--input` (its size and pair from
 /// the scene.json beside it, or the command line).
 fn from_input(a: &Args, shared: &Shared, faults: Faults) -> Result<Run, Error> {
-    let path = a
-        .input
-        .as_ref()
-        .ok_or_else(|| Error::Usage("--scene or --input".into()))?;
-    let meta = Capture::beside(path)?;
-    let (w, h) = match (a.width, a.height, &meta) {
-        (Some(w), Some(h), _) => (w, h),
-        (None, None, Some(m)) => (m.width, m.height),
-        _ => {
-            return Err(Error::Usage(format!(
-                "{}: give --width and --height (no scene.json beside it)",
-                path.display()
-            )))
-        }
-    };
-    // scene.json is input too: a pair listed backwards is refused by
-    // `config`'s range check, not wrapped.
-    let dt =
-        a.dt.or_else(|| meta.as_ref().map(|m| m.pair[1].saturating_sub(m.pair[0])))
-            .unwrap_or(13);
+    let (path, (w, h), dt, tick_hz) = input_layout(a)?;
     let cfg = config(a, dt)?;
     let (out, mut control) = open_link(a, shared)?;
     let link = Faulty::new(Plain(out), faults, a.seed);
     let opts = DatOptions::default();
-    let fw = run_on_dat(path, w, h, opts, cfg, link, a.checksum, control.as_mut())?;
-    let tick_hz = Some(meta.map_or(TICK_HZ, |m| m.tick_hz));
-    Ok(Run::of(fw, control, (w, h), tick_hz))
+    let fw = run_on_dat(&path, w, h, opts, cfg, link, a.checksum, control.as_mut())?;
+    Ok(Run::of(fw, control, (w, h), Some(tick_hz)))
 }
 
 /// One line on what the downlink heard, and its injected faults.

@@ -123,4 +123,23 @@ impl Downlink {
         }
         Ok(())
     }
+
+    /// Sends an ask of the live loop of the time ladder (its messages,
+    /// [`crate::motion::control::Ask::messages`]); `with_motion` when it
+    /// carries a flow. A link that refuses is counted, not fatal.
+    pub fn send_ask(&mut self, messages: &[Vec<u8>], with_motion: bool) {
+        let mut write = || -> std::io::Result<()> {
+            for m in messages {
+                self.out.write_all(m)?;
+            }
+            self.out.flush()
+        };
+        match write() {
+            Ok(()) => {
+                self.report.sent += 1;
+                self.report.with_motion += u64::from(with_motion);
+            }
+            Err(_) => self.report.failed += 1,
+        }
+    }
 }

@@ -37,13 +37,14 @@ use spiv_formats::{FormatError, State, Vector};
 use crate::dwell::{adaptive_banded, caps_for};
 use crate::motion::control::{Ask, AskLink, Delivery, Heard};
 use crate::motion::ladder::{self, LadderSettings, Rung};
-use crate::motion::make::{CorePair, PairMaker, LIGHT_TRAIN};
+use crate::motion::make::pair_input;
 use crate::motion::uplink::{PairBytes, PairReader, Uplink, UplinkError};
 use crate::piv::validate::median;
 use crate::piv::{piv, to_f32, Field, PivError, Settings, NO_SIGMA};
 use crate::receive::assemble::FrameLimit;
 use crate::reconstruct::{frame_from_planes, FileOptions, Planes, ReconstructError};
 use crate::units::Calibration;
+use spiv_firmware_sim::pairs::{CorePair, PairMaker, LIGHT_TRAIN};
 
 /// The TFP window of the dwell cap's bootstrap pair, ticks.
 pub const BOOTSTRAP_WINDOW: u16 = 8;
@@ -573,17 +574,19 @@ fn measured_pair(
 fn make_pair(
     maker: &mut PairMaker,
     wire: Option<&mut (Uplink, PairReader)>,
-    (i, mid): (usize, u64),
+    (i, mid, dt): (usize, u64, u32),
     heard: &Heard,
     cfg: &LadderSettings,
 ) -> Result<(CorePair, Option<PairBytes>), FlowError> {
-    let reach = cfg.bootstrap_reach;
+    let reach = u16::try_from(cfg.bootstrap_reach).unwrap_or(u16::MAX);
+    let ask = heard.asked();
     Ok(match wire {
         Some((up, down)) => {
-            let (messages, b) = maker.send(i as u32, mid as u32, heard, reach, up)?;
+            let dt = u16::try_from(dt).unwrap_or(u16::MAX);
+            let (messages, b) = up.send(maker, (i as u32, mid as u32, dt), &ask, reach)?;
             (read_back(down, &messages)?, Some(b))
         }
-        None => (maker.make(mid as u32, heard, reach)?, None),
+        None => (maker.make(mid as u32, &ask, reach)?, None),
     })
 }
 
@@ -1164,9 +1167,14 @@ fn ladder_loop(
     let dt = u64::from(opts.dt);
     let every = u64::from(opts.every.max(1));
     let half = dt.div_ceil(2);
-    let longest = u64::from(cfg.separations.iter().copied().max().unwrap_or(0));
-    let reach = u64::from(cfg.bootstrap_reach);
-    let ahead = longest.max(reach) + u64::from(spiv_core::light::MAX_TOLERANCE);
+    let (longest16, reach16) = (
+        u16::try_from(cfg.separations.iter().copied().max().unwrap_or(0)).unwrap_or(u16::MAX),
+        u16::try_from(cfg.bootstrap_reach).unwrap_or(u16::MAX),
+    );
+    let (longest, reach) = (u64::from(longest16), u64::from(reach16));
+    // The sidecar's loop makes a pair when its ring holds these ticks
+    // after the midpoint, in a ring this deep (`spiv_firmware_sim::ladder`).
+    let ahead = u64::from(spiv_core::rungs::lead(longest16, reach16));
     let end = opts.end.min(rec.planes);
     let Some(&m0) = seg.first().map(|ka| ka + half).as_ref() else {
         return Ok(Chain::default());
@@ -1198,8 +1206,8 @@ fn ladder_loop(
     let (w, hu) = (usize::from(rec.crop_width), usize::from(h));
     let pb = (usize::from(sw) * usize::from(h) / 8).max(1);
     let first_read = all[0].0.saturating_sub(longest.max(reach) + LIGHT_WARMUP);
-    let depth = (longest.max(reach) + ahead + 2) as usize;
-    let mut maker = PairMaker::new((sw, h), w, rec.flip, first_read as u32, depth)?;
+    let depth = spiv_core::rungs::ring_depth(longest16, reach16) as usize;
+    let mut maker = PairMaker::new((sw, h), first_read as u32, depth)?;
     if first_read == 0 {
         let n = (LIGHT_TRAIN as u64).min(end.saturating_sub(1));
         let pl = rec.stretch(1, n)?;
@@ -1223,9 +1231,9 @@ fn ladder_loop(
             read += n;
         }
         let heard = link.ask_for(i);
-        let (core, bytes) = make_pair(&mut maker, wire.as_mut(), (i, mid), heard, cfg)?;
+        let (core, bytes) = make_pair(&mut maker, wire.as_mut(), (i, mid, opts.dt), heard, cfg)?;
         let bytes = bytes.filter(|_| reported);
-        let input = core.input(w, rec.flip, heard.start.as_ref());
+        let input = pair_input(&core, w, rec.flip, heard.start.as_ref());
         let mut m = ladder::measure(&input, mid, dt as f64, cfg, (w, hu), reported)?;
         if let Some(mask) = &opts.mask {
             masked_out(&mut m.field, mask);

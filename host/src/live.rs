@@ -5,12 +5,19 @@
 
 use std::path::{Path, PathBuf};
 
+use std::collections::VecDeque;
+
+use spiv_core::wire::pair::PairHead;
+use spiv_firmware_sim::pairs::CorePair;
 use spiv_formats::image::write_levels;
-use spiv_formats::vectors::write_vectors;
+use spiv_formats::vectors::{write_vectors, write_vectors_uncertain};
 
 use crate::downlink::{control_for, Downlink, DownlinkError, DownlinkReport};
 use crate::link::{receiver_settings, upright_f32};
-use crate::piv::{piv, PivError, Settings};
+use crate::motion::control::Ask;
+use crate::motion::ladder::{self, LadderSettings, Measurement};
+use crate::motion::make::pair_input;
+use crate::piv::{piv, Field, PivError, Settings};
 use crate::receive::source::{Source, SourceError};
 use crate::receive::{receive, Event, FrameLimit, ReceivedFrame, Report};
 
@@ -35,6 +42,9 @@ pub enum LiveError {
     /// Bytes arrived but none of them made a message.
     #[error("no valid message in the stream (not spiv wire format?)")]
     NotWire,
+    /// An ask the wire cannot carry.
+    #[error("ask: {0}")]
+    Ask(#[from] spiv_core::wire::WireError),
 }
 
 /// What the loop does with what it receives.
@@ -53,6 +63,9 @@ pub struct LiveOptions {
     /// The motion model of the controls sent
     /// ([`crate::predict::motion_grid`]).
     pub motion_model: crate::predict::MotionModel,
+    /// The time ladder that measures the pairs of a live loop of the
+    /// ladder (a sidecar run with `--method ladder`), when PIV runs.
+    pub ladder: LadderSettings,
 }
 
 /// What the loop received, measured and sent.
@@ -114,6 +127,7 @@ pub fn run_live(
         None => (None, None),
     };
     let mut vectors = 0usize;
+    let mut ladder = LadderHost::new(opts.ladder.clone());
     let received = receive::<LiveError>(
         source,
         opts.max_frame,
@@ -122,6 +136,26 @@ pub fn run_live(
                 Event::Frame(f) => {
                     if let Some(d) = &opts.out {
                         save_frame(d, &f)?;
+                    }
+                }
+                Event::Ladder(p) => {
+                    let (head, pair) = &*p;
+                    if opts.piv_windows.is_none() {
+                        return Ok(());
+                    }
+                    let (m, ask) = ladder.measure(head, pair)?;
+                    let v = m.field.vectors();
+                    vectors += v.len();
+                    if let Some(d) = downlink.as_mut() {
+                        let next = head.pair.wrapping_add(1);
+                        let messages = ask.messages(next, pair.size, true)?;
+                        ladder.sent(next, &ask);
+                        d.send_ask(&messages, ask.warm());
+                    }
+                    if let Some(d) = &opts.out {
+                        let sigma: Vec<(f64, f64)> = m.field.sigma.iter().copied().collect();
+                        let path = d.join(format!("vectors_{:05}.csv", head.pair));
+                        write_vectors_uncertain(&path, &v, &sigma)?;
                     }
                 }
                 Event::Pair(pair) => {
@@ -156,6 +190,68 @@ pub fn run_live(
         vectors,
         downlink: downlink.map(|d| d.report),
     })
+}
+
+/// Asks in flight whose fields the host keeps, at most: a sidecar that
+/// hears none of them follows the oldest, which is then forgotten.
+const ASKS_KEPT: usize = 64;
+
+/// The host end of the live loop of the time ladder: each pair measured by
+/// `spiv flow`'s ladder ([`ladder::measure`]; the stream's first
+/// [`crate::flow::WARMUP`] pairs as `spiv flow` measures its warm-up
+/// pairs, without the dense rescue), and the ask for the pairs after it
+/// ([`Ask::after`]), with the field each ask was sent from kept until the
+/// sidecar's pairs follow a newer one.
+#[derive(Debug)]
+struct LadderHost {
+    cfg: LadderSettings,
+    starts: VecDeque<(u32, Option<Field>)>,
+}
+
+impl LadderHost {
+    fn new(cfg: LadderSettings) -> LadderHost {
+        LadderHost {
+            cfg,
+            starts: VecDeque::new(),
+        }
+    }
+
+    /// Measures `pair` (upright, stored bottom-up as the wire carries
+    /// frames): its field in px per the head's `dt` ticks, and the ask for
+    /// the pairs after it.
+    fn measure(
+        &mut self,
+        head: &PairHead,
+        pair: &CorePair,
+    ) -> Result<(Measurement, Ask), PivError> {
+        while self
+            .starts
+            .front()
+            .is_some_and(|(p, _)| *p < pair.from_pair)
+        {
+            self.starts.pop_front();
+        }
+        let start = match self.starts.front() {
+            Some((p, f)) if *p == pair.from_pair => f.clone(),
+            _ => None,
+        };
+        let (w, h) = (usize::from(pair.size.0), usize::from(pair.size.1));
+        let input = pair_input(pair, w, true, start.as_ref());
+        let dt = f64::from(head.dt.max(1));
+        let rescue = head.pair >= crate::flow::WARMUP as u32;
+        let m = ladder::measure(&input, u64::from(head.mid), dt, &self.cfg, (w, h), rescue)?;
+        let ask = Ask::after(&m, dt, &self.cfg);
+        Ok((m, ask))
+    }
+
+    /// `ask` was sent for the pairs from `from_pair` on.
+    fn sent(&mut self, from_pair: u32, ask: &Ask) {
+        let start = ask.flow.clone().filter(|_| !ask.rungs.is_empty());
+        self.starts.push_back((from_pair, start));
+        while self.starts.len() > ASKS_KEPT {
+            self.starts.pop_front();
+        }
+    }
 }
 
 /// Writes a received frame as `frame_NNNNN_{a,b}.png`, upright.

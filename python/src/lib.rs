@@ -1135,6 +1135,7 @@ fn receive<'py>(
         piv_windows: windows,
         out,
         motion_model: Default::default(),
+        ladder: Default::default(),
     };
     let report = py
         .detach(|| {

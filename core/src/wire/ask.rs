@@ -290,6 +290,16 @@ pub struct AskAssembly<'a> {
     rows: usize,
 }
 
+/// Where an [`AskAssembly`] stands besides its slices: an assembly taken
+/// apart ([`AskAssembly::progress`]) and made again over the same slices
+/// ([`AskAssembly::resume`]) goes on with the ask it was putting together.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct AskProgress {
+    head: Option<AskHead>,
+    rows: usize,
+}
+
 /// What a part did to an [`AskAssembly`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -314,6 +324,30 @@ impl<'a> AskAssembly<'a> {
             ay,
             head: None,
             rows: 0,
+        }
+    }
+
+    /// An assembly into the slices an assembly at `progress` used, going
+    /// on where it stood.
+    pub fn resume(
+        vx: &'a mut [i16],
+        vy: &'a mut [i16],
+        ax: &'a mut [i16],
+        ay: &'a mut [i16],
+        progress: AskProgress,
+    ) -> Self {
+        AskAssembly {
+            head: progress.head,
+            rows: progress.rows,
+            ..AskAssembly::new(vx, vy, ax, ay)
+        }
+    }
+
+    /// Where it stands ([`AskAssembly::resume`]).
+    pub fn progress(&self) -> AskProgress {
+        AskProgress {
+            head: self.head,
+            rows: self.rows,
         }
     }
 
@@ -446,6 +480,31 @@ mod tests {
         let mut asm = AskAssembly::new(&mut [], &mut [], &mut [], &mut []);
         assert_eq!(asm.take(&view), Part::Whole);
         assert!(asm.flow().is_still());
+    }
+
+    /// An assembly taken apart between parts and resumed over the same
+    /// slices puts the ask together as one that never stopped.
+    #[test]
+    fn an_assembly_resumed_between_parts_goes_on() {
+        let n = 100 * 50;
+        let v: std::vec::Vec<i16> = (0..n).map(|i| i as i16).collect();
+        let f = flow(&v, 100, 50);
+        let msgs = messages(&f, &Rungs::events(8));
+        assert!(msgs.len() >= 3);
+        let (mut a, mut b, mut c, mut d) = (vec![0; n], vec![0; n], vec![0; n], vec![0; n]);
+        let mut progress = AskProgress::default();
+        let mut last = Part::Refused;
+        for m in &msgs {
+            let mut asm = AskAssembly::resume(&mut a, &mut b, &mut c, &mut d, progress);
+            last = asm.take(&AskView::parse(m).unwrap());
+            progress = asm.progress();
+        }
+        assert_eq!(last, Part::Whole);
+        let asm = AskAssembly::resume(&mut a, &mut b, &mut c, &mut d, progress);
+        assert_eq!(asm.flow().vx, &v[..]);
+        // Started afresh each time instead, the second part is refused.
+        let mut asm = AskAssembly::new(&mut a, &mut b, &mut c, &mut d);
+        assert_eq!(asm.take(&AskView::parse(&msgs[1]).unwrap()), Part::Refused);
     }
 
     #[test]

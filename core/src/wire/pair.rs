@@ -11,7 +11,7 @@
 //! ```text
 //! payload = pair u32 | mid u32 | from_pair u32 | count u8 | reserved u8 |
 //!           ev_ticks u16 | ev_first u32 | separations 8 × u16 |
-//!           offsets 16 × i16 | parts u16 | reserved u16        (72 bytes)
+//!           offsets 16 × i16 | parts u16 | dt u16              (72 bytes)
 //! ```
 
 use super::WireError;
@@ -52,6 +52,9 @@ pub struct PairHead {
     /// Each rung frame's offset: sample = level + offset (A and B of rung
     /// 0, then of rung 1, …).
     pub offsets: [i16; 2 * MAX_RUNGS],
+    /// Ticks between the two frames of the pair the host reports (the
+    /// unit of its field, px per `dt` ticks; 0: not given).
+    pub dt: u16,
 }
 
 impl PairHead {
@@ -98,6 +101,7 @@ impl PairHead {
             b[36 + 2 * k..38 + 2 * k].copy_from_slice(&o.to_le_bytes());
         }
         b[68..70].copy_from_slice(&self.parts().to_le_bytes());
+        b[70..72].copy_from_slice(&self.dt.to_le_bytes());
         b
     }
 
@@ -114,6 +118,7 @@ impl PairHead {
             count: b[12],
             ev_ticks: u16_at(14),
             ev_first: u32_at(16),
+            dt: u16_at(70),
             ..PairHead::default()
         };
         for k in 0..MAX_RUNGS {
@@ -143,6 +148,7 @@ mod tests {
             count: 2,
             ev_first: 1200,
             ev_ticks: 40,
+            dt: 10,
             ..PairHead::default()
         };
         h.separations[..2].copy_from_slice(&[16, 32]);

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use spiv_host::live::{open_downlink, run_live, LiveOptions};
+use spiv_host::motion::ladder::LadderSettings;
 use spiv_host::predict::MotionModel;
 use spiv_host::receive::source::{open, parse_vid_pid};
 use spiv_host::receive::{FrameLimit, Spec};
@@ -34,9 +35,11 @@ pub struct ReceiveArgs {
     #[arg(long)]
     piv: bool,
     /// After each pair, send the sidecar the motion its PIV measured, for
-    /// motion-compensated frames from the next pair on: back on the TCP
-    /// connection or the USB OUT endpoint, or into PATH (a file or FIFO
-    /// that `spiv-firmware-sim --control` reads) for --pipe and --file.
+    /// motion-compensated frames from the next pair on (a sidecar run with
+    /// `--method ladder`: the ask of `spiv flow`'s time ladder, its rung
+    /// frames along the field measured): back on the TCP connection or
+    /// the USB OUT endpoint, or into PATH (a file or FIFO that
+    /// `spiv-firmware-sim --control` reads) for --pipe and --file.
     #[arg(long, num_args = 0..=1, value_name = "PATH", requires = "piv")]
     control: Option<Option<PathBuf>>,
     /// The motion model of the controls: auto (per row, or per row and
@@ -44,7 +47,8 @@ pub struct ReceiveArgs {
     #[arg(long, value_enum, default_value_t = MotionModel::Auto, requires = "control")]
     motion_model: MotionModel,
     /// PIV window side of each pass, px (default: 64,32,32, and
-    /// 64,32,32,32,32 for motion-compensated pairs).
+    /// 64,32,32,32,32 for motion-compensated pairs; the time ladder's own
+    /// for the pairs of a sidecar run with `--method ladder`).
     #[arg(long, value_delimiter = ',')]
     windows: Option<Vec<usize>>,
     /// Largest frame accepted, WxH px: a message claiming a larger (or an
@@ -80,6 +84,13 @@ pub fn run(a: &ReceiveArgs) -> Result<(), CliError> {
             .then(|| a.windows.clone().unwrap_or_else(|| vec![64, 32, 32])),
         out: a.out.clone(),
         motion_model: a.motion_model,
+        ladder: {
+            let mut l = LadderSettings::default();
+            if let Some(w) = &a.windows {
+                l.piv.windows = w.clone();
+            }
+            l
+        },
     };
     let bar = ProgressBar::new_spinner();
     bar.set_style(

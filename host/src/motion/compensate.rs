@@ -6,6 +6,7 @@
 //! from a field of node velocities or from a [`Velocity`].
 
 use ndarray::Array2;
+use spiv_core::buffers::FlowBuf;
 use spiv_core::warp::Flow as CoreFlow;
 
 use crate::piv::{validate, Field};
@@ -101,87 +102,45 @@ impl Velocity {
 /// `(v·∇)v` Q16 px/tick², all in the stored row order (y down the stored
 /// rows).
 #[derive(Debug, Clone, PartialEq)]
-pub struct WarpFlow {
-    nx: u16,
-    ny: u16,
-    x0: i32,
-    y0: i32,
-    pitch: u16,
-    vx: Vec<i16>,
-    vy: Vec<i16>,
-    ax: Vec<i16>,
-    ay: Vec<i16>,
-}
+pub struct WarpFlow(FlowBuf);
 
 impl WarpFlow {
     /// No motion.
     pub fn still() -> WarpFlow {
-        WarpFlow {
-            nx: 0,
-            ny: 0,
-            x0: 0,
-            y0: 0,
-            pitch: 16,
-            vx: Vec::new(),
-            vy: Vec::new(),
-            ax: Vec::new(),
-            ay: Vec::new(),
-        }
+        WarpFlow(FlowBuf::still())
     }
 
     /// The core's flow `f`, owned.
     pub fn from_core(f: &CoreFlow<'_>) -> WarpFlow {
-        if f.is_still() {
-            return WarpFlow::still();
-        }
-        WarpFlow {
-            nx: f.nx,
-            ny: f.ny,
-            x0: f.x0,
-            y0: f.y0,
-            pitch: f.pitch,
-            vx: f.vx.to_vec(),
-            vy: f.vy.to_vec(),
-            ax: f.ax.to_vec(),
-            ay: f.ay.to_vec(),
-        }
+        WarpFlow(FlowBuf::of(f))
     }
 
     /// Whether this is [`WarpFlow::still`].
     pub fn is_still(&self) -> bool {
-        self.nx == 0 || self.ny == 0
+        self.0.is_still()
     }
 
     /// The core's view.
     pub fn view(&self) -> CoreFlow<'_> {
-        CoreFlow {
-            nx: self.nx,
-            ny: self.ny,
-            x0: self.x0,
-            y0: self.y0,
-            pitch: self.pitch,
-            vx: &self.vx,
-            vy: &self.vy,
-            ax: &self.ax,
-            ay: &self.ay,
-        }
+        self.0.view()
     }
 
     /// Node rows and columns, `(ny, nx)`.
     pub fn nodes(&self) -> (usize, usize) {
-        (usize::from(self.ny), usize::from(self.nx))
+        (usize::from(self.0.ny), usize::from(self.0.nx))
     }
 
     /// Node `(r, c)` (stored order) as `((vx, vy), (ax, ay))` in the core's
     /// units.
     pub fn node(&self, r: usize, c: usize) -> ((i16, i16), (i16, i16)) {
-        let k = r * usize::from(self.nx) + c;
-        ((self.vx[k], self.vy[k]), (self.ax[k], self.ay[k]))
+        let f = &self.0;
+        let k = r * usize::from(f.nx) + c;
+        ((f.vx[k], f.vy[k]), (f.ax[k], f.ay[k]))
     }
 
     /// The layout `(x0, y0, pitch)`, 1/16 px.
     pub fn layout(&self) -> (i32, i32, u16) {
-        (self.x0, self.y0, self.pitch)
+        (self.0.x0, self.0.y0, self.0.pitch)
     }
 
     /// The flow whose nodes hold the upright velocities `u`, `v` (px per
@@ -244,7 +203,7 @@ impl WarpFlow {
         } else {
             first.1
         };
-        WarpFlow {
+        WarpFlow(FlowBuf {
             nx: nx as u16,
             ny: ny as u16,
             x0: q4(first.0),
@@ -254,7 +213,7 @@ impl WarpFlow {
             vy,
             ax,
             ay,
-        }
+        })
     }
 
     /// The flow of a field of node velocities (px per tick): its holes

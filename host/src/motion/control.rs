@@ -12,13 +12,10 @@ use std::collections::VecDeque;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use spiv_core::rungs::{Rungs, MAX_RUNGS};
-use spiv_core::wire::ask::{
-    ask_parts, encode_ask, AskAssembly, AskView, Part, MAX_ASK_PAYLOAD, MAX_FLOW_NODES,
-};
+use spiv_core::wire::ask::{ask_parts, encode_ask, MAX_ASK_PAYLOAD};
 use spiv_core::wire::control::control_header;
-use spiv_core::wire::{
-    encode_message, Decoder, DecoderState, Header, Kind, WireError, MAX_ENCODED,
-};
+use spiv_core::wire::{encode_message, Header, Kind, WireError, MAX_ENCODED};
+use spiv_firmware_sim::pairs::AskEar;
 
 use super::compensate::WarpFlow;
 use super::ladder::{per_ticks, LadderSettings, Measurement};
@@ -253,18 +250,17 @@ pub struct AskLink {
     sent: VecDeque<(usize, Vec<u8>)>,
     /// The fields the asks in flight were sent from, by `from_pair`.
     starts: VecDeque<(u32, Option<Field>)>,
-    rx: Vec<u8>,
-    rx_state: Option<DecoderState>,
-    store: [Vec<i16>; 4],
+    /// The sidecar's ear.
+    ear: AskEar,
     current: Heard,
     lost: usize,
-    refused: usize,
 }
 
 impl AskLink {
     /// Nothing sent yet: the core makes its pairs [`Heard::cold`]; asks go
     /// to a `width × height` sensor (stored rows bottom-up when `flip`).
     pub fn new(delivery: Delivery, cfg: &LadderSettings, size: (u16, u16), flip: bool) -> AskLink {
+        let reach = u16::try_from(cfg.bootstrap_reach).unwrap_or(u16::MAX);
         AskLink {
             delivery,
             rng: ChaCha8Rng::seed_from_u64(delivery.seed),
@@ -272,84 +268,42 @@ impl AskLink {
             flip,
             sent: VecDeque::new(),
             starts: VecDeque::new(),
-            rx: vec![0; MAX_ENCODED],
-            rx_state: None,
-            store: std::array::from_fn(|_| Vec::new()),
+            ear: AskEar::new(size, reach),
             current: Heard::cold(cfg),
             lost: 0,
-            refused: 0,
         }
     }
 
     /// What the core makes pair `i` (counted from the loop's first) with:
     /// the newest ask heard by then.
     pub fn ask_for(&mut self, i: usize) -> &Heard {
-        let mut due = Vec::new();
+        let mut newest = None;
         while self.sent.front().is_some_and(|(at, _)| *at <= i) {
             if let Some((_, m)) = self.sent.pop_front() {
-                due.push(m);
+                newest = self.ear.hear(&m).or(newest);
             }
         }
-        if !due.is_empty() {
-            self.hear(&due);
+        if let Some(from_pair) = newest {
+            self.heard(from_pair);
         }
         &self.current
     }
 
-    /// Hears `messages` as a core does.
-    fn hear(&mut self, messages: &[Vec<u8>]) {
-        let mut dec = match self.rx_state {
-            Some(st) => Decoder::resume(&mut self.rx, st),
-            None => Decoder::new(&mut self.rx),
-        };
-        let [vx, vy, ax, ay] = &mut self.store;
-        for v in [&mut *vx, &mut *vy, &mut *ax, &mut *ay] {
-            if v.is_empty() {
-                v.resize(MAX_FLOW_NODES, 0);
-            }
-        }
-        let mut asm = AskAssembly::new(vx, vy, ax, ay);
-        let mut heard: Option<(spiv_core::wire::ask::AskHead, WarpFlow)> = None;
-        for m in messages {
-            let mut input = m.as_slice();
-            while let Some(r) = dec.feed(&mut input) {
-                let view = match r {
-                    Ok(msg)
-                        if msg.header.kind == Kind::Ask
-                            && (msg.header.width, msg.header.height) == self.size =>
-                    {
-                        AskView::parse(msg.payload)
-                    }
-                    _ => Err(WireError::Payload),
-                };
-                match view.map(|v| asm.take(&v)) {
-                    Ok(Part::Whole) => {
-                        if let Some(h) = asm.head() {
-                            heard = Some((h, WarpFlow::from_core(&asm.flow())));
-                        }
-                    }
-                    Ok(Part::Taken) => {}
-                    Ok(Part::Refused) | Err(_) => self.refused += 1,
-                }
-            }
-        }
-        self.rx_state = Some(dec.state());
-        let Some((h, flow)) = heard else { return };
-        if h.from_pair < self.current.from_pair {
-            self.refused += 1;
-            return;
-        }
-        while self.starts.front().is_some_and(|(p, _)| *p < h.from_pair) {
+    /// The ear heard a new ask for the pairs from `from_pair` on: it is
+    /// what the core makes them with, with the field it was sent from.
+    fn heard(&mut self, from_pair: u32) {
+        while self.starts.front().is_some_and(|(p, _)| *p < from_pair) {
             self.starts.pop_front();
         }
         let start = match self.starts.front() {
-            Some((p, f)) if *p == h.from_pair => f.clone(),
+            Some((p, f)) if *p == from_pair => f.clone(),
             _ => None,
         };
+        let asked = self.ear.asked();
         self.current = Heard {
-            from_pair: h.from_pair,
-            rungs: h.rungs,
-            flow,
+            from_pair,
+            rungs: asked.rungs,
+            flow: WarpFlow::from_core(&asked.flow),
             start,
         };
     }
@@ -388,7 +342,7 @@ impl AskLink {
     /// Ask messages the core refused so far (corrupted, or parts of an ask
     /// that could not be put together).
     pub fn refused(&self) -> usize {
-        self.refused
+        self.ear.refused as usize
     }
 }
 

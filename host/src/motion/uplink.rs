@@ -1,6 +1,7 @@
-//! A pair of the live loop on the wire, both ways: sent as the core sends
-//! it ([`send_pair`]: its head, [`spiv_core::wire::pair::PairHead`], and
-//! its parts as lossless `Context` tiles through one stream's [`Sender`],
+//! A pair of the live loop on the wire, both ways: sent as the sidecar
+//! sends it ([`spiv_core::rungs::send_pair`]: its head,
+//! [`spiv_core::wire::pair::PairHead`], and its parts as lossless
+//! `Context` tiles through one stream's [`PairSender`], kept in memory by
 //! [`Uplink`]), and read back bit-exact from the messages as the core's
 //! pair ([`PairReader`] → [`CorePair`]: the frame assembler's CRC-checked
 //! frames, put together by the head). What each part costs is counted as
@@ -12,15 +13,13 @@
 //!   1 (−1) and 2 (+1);
 //! - with the events, the static rate of every stored pixel (16-bit).
 
-use spiv_core::light::Light;
-use spiv_core::rungs::{send_pair, EventRing, PairCost, PairPlan, PairScratch};
+use spiv_core::rungs::PairCost;
 use spiv_core::warp::SCALE;
-use spiv_core::wire::codec::Lossy;
 use spiv_core::wire::pair::PairHead;
-use spiv_core::wire::sender::{tile_rows, Link, SendBuffers, SendError, Sender};
-use spiv_core::wire::{Kind, Message, WireError, MAX_ENCODED, MAX_PAYLOAD};
+use spiv_core::wire::sender::{Link, SendError};
+use spiv_core::wire::{Kind, Message, WireError};
+use spiv_firmware_sim::pairs::{Asked, CoreEvents, CorePair, PairMaker, PairSender};
 
-use super::make::{CoreEvents, CorePair};
 use crate::receive::assemble::{Assembler, FrameLimit, ReceivedFrame};
 
 /// Bytes of one pair on the wire, by what they carry: the core's
@@ -61,17 +60,15 @@ impl PairBytes {
     }
 }
 
-/// A link that keeps every message and counts its bytes.
+/// A link that keeps every message.
 #[derive(Debug, Default)]
 struct Keep {
     messages: Vec<Vec<u8>>,
-    bytes: u64,
 }
 
 impl Link for Keep {
     type Error = std::convert::Infallible;
     fn send(&mut self, message: &[u8]) -> Result<(), Self::Error> {
-        self.bytes += message.len() as u64;
         self.messages.push(message.to_vec());
         Ok(())
     }
@@ -95,62 +92,35 @@ pub enum UplinkError {
     Wire(#[from] WireError),
 }
 
-/// One stream of live-loop pairs out of a `width × height` sensor: one
-/// sender (its message and frame counters run on) and its buffers.
+/// One stream of live-loop pairs out of a `width × height` sensor, kept
+/// in memory: the sidecar's sender ([`PairSender`]).
 #[derive(Debug)]
 pub struct Uplink {
-    sender: Sender,
-    payload: Vec<u8>,
-    wire: Vec<u8>,
-    levels: Vec<u16>,
-    plane: Vec<u8>,
+    out: PairSender,
 }
 
 impl Uplink {
     /// A stream for a sensor of `width × height` stored pixels.
-    pub fn new((width, height): (u16, u16)) -> Result<Uplink, WireError> {
-        let rows = tile_rows(width, height, true, Lossy::DEFAULT.block);
-        let px = usize::from(width) * usize::from(height);
+    pub fn new(size: (u16, u16)) -> Result<Uplink, WireError> {
         Ok(Uplink {
-            sender: Sender::new(width, height, rows)?,
-            payload: vec![0u8; MAX_PAYLOAD],
-            wire: vec![0u8; MAX_ENCODED],
-            levels: vec![0; px],
-            plane: vec![0; px],
+            out: PairSender::new(size)?,
         })
     }
 
-    /// Sends the pair `plan` describes, made from `ring` and `light`
-    /// ([`send_pair`]; `frames` holds its rung frames): its messages, in
-    /// order, and what they cost.
+    /// Sends the pair `maker` makes at `mid` as `ask` asks (numbered
+    /// `pair`, reported over `dt` ticks; [`PairMaker::send`]): its
+    /// messages, in order, and what they cost.
     pub fn send(
         &mut self,
-        ring: &EventRing<'_>,
-        light: &Light<'_>,
-        plan: &PairPlan<'_>,
-        frames: &mut [i16],
+        maker: &mut PairMaker,
+        (pair, mid, dt): (u32, u32, u16),
+        ask: &Asked<'_>,
+        cold_reach: u16,
     ) -> Result<(Vec<Vec<u8>>, PairBytes), UplinkError> {
         let mut link = Keep::default();
-        let mut buf = SendBuffers {
-            payload: &mut self.payload,
-            wire: &mut self.wire,
-            // `Context` tiles need no scratch.
-            scratch: &mut [],
-        };
-        let scratch = PairScratch {
-            frames,
-            levels: &mut self.levels,
-            plane: &mut self.plane,
-        };
-        let cost = send_pair(
-            &mut self.sender,
-            &mut buf,
-            &mut link,
-            (ring, light),
-            plan,
-            scratch,
-        )
-        .map_err(wire)?;
+        let cost = maker
+            .send((pair, mid, dt), ask, cold_reach, &mut self.out, &mut link)
+            .map_err(wire)?;
         Ok((link.messages, cost.into()))
     }
 }
@@ -182,9 +152,23 @@ impl PairReader {
         }
     }
 
-    /// Takes one message; returns a pair (its number and the core's pair)
+    /// What its frame assembler counted.
+    pub fn stats(&self) -> crate::receive::AssemblyStats {
+        self.frames.stats()
+    }
+
+    /// The stream ended: a pair still waiting for parts is incomplete, and
+    /// frames still partial are lost.
+    pub fn finish(&mut self) {
+        if self.head.take().is_some() {
+            self.incomplete += 1;
+        }
+        self.frames.finish();
+    }
+
+    /// Takes one message; returns a pair (its head and the core's pair)
     /// when the message completes one.
-    pub fn push(&mut self, m: &Message<'_>) -> Option<(u32, CorePair)> {
+    pub fn push(&mut self, m: &Message<'_>) -> Option<(PairHead, CorePair)> {
         if m.header.kind == Kind::PairHead {
             let h = PairHead::parse(m.payload).ok()?;
             if self.head.is_some() {
@@ -205,7 +189,7 @@ impl PairReader {
     }
 
     /// The pending pair, if every part is in.
-    fn complete(&mut self) -> Option<(u32, CorePair)> {
+    fn complete(&mut self) -> Option<(PairHead, CorePair)> {
         if self.parts.iter().any(Option::is_none) {
             return None;
         }
@@ -257,7 +241,7 @@ impl PairReader {
         });
         self.pairs += 1;
         Some((
-            h.pair,
+            h,
             CorePair {
                 size: (w, hh),
                 mid: h.mid,
@@ -273,9 +257,8 @@ impl PairReader {
 mod tests {
     use super::*;
     use crate::motion::control::{Ask, Heard};
-    use crate::motion::make::PairMaker;
     use crate::piv::{Field, Grid, State};
-    use spiv_core::wire::Decoder;
+    use spiv_core::wire::{Decoder, MAX_ENCODED};
     use spiv_firmware_sim::scene::{SceneKind, SceneParams};
     use spiv_firmware_sim::simulation::{simulate_planes, Request};
 
@@ -293,7 +276,7 @@ mod tests {
         let mut req = Request::new(p, 4);
         req.ticks = Some(300);
         let (data, _) = simulate_planes(&req).expect("simulates");
-        let mut m = PairMaker::new((W, H), usize::from(W), false, 0, 301).unwrap();
+        let mut m = PairMaker::new((W, H), 0, 301).unwrap();
         for plane in data.chunks_exact(usize::from(W) * usize::from(H) / 8) {
             m.push(plane).unwrap();
         }
@@ -324,7 +307,7 @@ mod tests {
             let mut input = m.as_slice();
             while let Some(r) = dec.feed(&mut input) {
                 if let Ok(msg) = r {
-                    out.extend(reader.push(&msg));
+                    out.extend(reader.push(&msg).map(|(h, p)| (h.pair, p)));
                 }
             }
         }
@@ -344,8 +327,10 @@ mod tests {
             .into_iter()
             .enumerate()
         {
-            let want = m.make(mid, &ask, 24).unwrap();
-            let (messages, bytes) = m.send(k as u32, mid, &ask, 24, &mut up).unwrap();
+            let want = m.make(mid, &ask.asked(), 24).unwrap();
+            let (messages, bytes) = up
+                .send(&mut m, (k as u32, mid, 10), &ask.asked(), 24)
+                .unwrap();
             let sent: u64 = messages.iter().map(|b| b.len() as u64).sum();
             assert_eq!(bytes.total(), sent);
             assert!(bytes.head > 0);
@@ -363,13 +348,14 @@ mod tests {
         let mut m = maker();
         let mut up = Uplink::new((W, H)).unwrap();
         let mut reader = PairReader::new(FrameLimit::default());
-        let (mut first, _) = m.send(0, 150, &warm(), 24, &mut up).unwrap();
+        let ask = warm();
+        let (mut first, _) = up.send(&mut m, (0, 150, 10), &ask.asked(), 24).unwrap();
         let k = first.len() / 2;
         let n = first[k].len();
         first[k][n / 2] ^= 0x10;
         assert!(read(&mut reader, &first).is_empty());
-        let (second, _) = m.send(1, 200, &warm(), 24, &mut up).unwrap();
-        let want = m.make(200, &warm(), 24).unwrap();
+        let (second, _) = up.send(&mut m, (1, 200, 10), &ask.asked(), 24).unwrap();
+        let want = m.make(200, &ask.asked(), 24).unwrap();
         assert_eq!(read(&mut reader, &second), vec![(1, want)]);
         assert_eq!(reader.incomplete, 1);
     }

@@ -6,7 +6,11 @@ pub mod assemble;
 pub mod source;
 
 use serde::Serialize;
-use spiv_core::wire::{Decoder, MAX_ENCODED};
+use spiv_core::wire::pair::PairHead;
+use spiv_core::wire::{Decoder, Kind, MAX_ENCODED};
+use spiv_firmware_sim::pairs::CorePair;
+
+use crate::motion::uplink::PairReader;
 
 pub use assemble::{Assembler, AssemblyStats, FrameLimit, Pairer, ReceivedFrame};
 pub use source::{Source, SourceError, Spec};
@@ -46,11 +50,16 @@ pub enum Event {
     Frame(ReceivedFrame),
     /// Both frames of a pair arrived.
     Pair(Box<[ReceivedFrame; 2]>),
+    /// A pair of the live loop of the time ladder arrived whole: its head
+    /// and what the sidecar made ([`crate::motion::uplink::PairReader`]).
+    Ladder(Box<(PairHead, CorePair)>),
 }
 
 /// Reads `source` to its end, accepting frames up to `limit`; calls `on`
 /// with every frame and pair, and `progress` with the running report after
-/// every read.
+/// every read. A stream whose messages include a pair head
+/// ([`spiv_core::wire::Kind::PairHead`]) is the live loop of the time
+/// ladder: from that head on, its messages make [`Event::Ladder`] pairs.
 pub fn receive<E>(
     source: &mut dyn Source,
     limit: FrameLimit,
@@ -64,6 +73,7 @@ where
     let mut dec = Decoder::new(&mut rx);
     let mut asm = Assembler::new(limit);
     let mut pairer = Pairer::default();
+    let mut ladder: Option<PairReader> = None;
     let mut buf = vec![0u8; 64 * 1024];
     let mut report = Report::default();
     loop {
@@ -74,6 +84,15 @@ where
         let mut input = &buf[..n];
         while let Some(m) = dec.feed(&mut input) {
             let Ok(m) = m else { continue };
+            if ladder.is_none() && m.header.kind == Kind::PairHead {
+                ladder = Some(PairReader::new(limit));
+            }
+            if let Some(r) = ladder.as_mut() {
+                if let Some(p) = r.push(&m) {
+                    on(Event::Ladder(Box::new(p)))?;
+                }
+                continue;
+            }
             if let Some(f) = asm.push(&m) {
                 if let Some(pair) = pairer.push(f.clone()) {
                     on(Event::Frame(f))?;
@@ -84,18 +103,35 @@ where
                 }
             }
         }
-        fill(&mut report, &dec, &asm, &pairer);
+        fill(&mut report, &dec, &asm, &pairer, ladder.as_ref());
         progress(&report);
     }
     report.truncated_tail = dec.pending() as u64;
     asm.finish();
-    fill(&mut report, &dec, &asm, &pairer);
+    if let Some(r) = ladder.as_mut() {
+        r.finish();
+    }
+    fill(&mut report, &dec, &asm, &pairer, ladder.as_ref());
     Ok(report)
 }
 
-fn fill(r: &mut Report, dec: &Decoder<'_>, asm: &Assembler, pairer: &Pairer) {
+fn fill(
+    r: &mut Report,
+    dec: &Decoder<'_>,
+    asm: &Assembler,
+    pairer: &Pairer,
+    ladder: Option<&PairReader>,
+) {
     let d = dec.stats();
-    let a = asm.stats();
+    let mut a = asm.stats();
+    if let Some(l) = ladder {
+        let b = l.stats();
+        a.frames += b.frames;
+        a.lost_frames += b.lost_frames;
+        a.rejected += b.rejected;
+        r.pairs = l.pairs;
+        r.broken_pairs = l.incomplete;
+    }
     r.bytes = d.bytes;
     r.messages = d.messages;
     r.corrupted = d.corrupt + d.overflow + a.rejected;
@@ -103,7 +139,9 @@ fn fill(r: &mut Report, dec: &Decoder<'_>, asm: &Assembler, pairer: &Pairer) {
     r.late_messages = d.late;
     r.frames = a.frames;
     r.lost_frames = a.lost_frames;
-    r.broken_pairs = pairer.broken;
+    if ladder.is_none() {
+        r.broken_pairs = pairer.broken;
+    }
 }
 
 #[cfg(test)]
