@@ -60,6 +60,9 @@ pub enum ParamError {
     /// A motion grid needs `cols` in `1..=`[`crate::motion::MAX_COLS`] and
     /// a tile that is a positive multiple of 64 px.
     Motion,
+    /// The method makes no frame at a tick (the time ladder's frames are
+    /// made by the live loop's pairs, [`crate::rungs`]).
+    Method,
 }
 
 impl core::fmt::Display for Error {

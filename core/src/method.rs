@@ -1,7 +1,9 @@
-//! How a frame is made from the spike history: the paper's adaptive
-//! integration, its two baselines (TFP, TFI), or adaptive integration on
-//! motion-compensated counts. The code is what a frame end carries on the
-//! wire ([`crate::wire::FrameEnd::method`]).
+//! How a frame is made: from the spike history at a tick, by the paper's
+//! adaptive integration, its two baselines (TFP, TFI) or adaptive
+//! integration on motion-compensated counts; or, in the live loop of the
+//! time ladder, as a rung frame of events warped along the host's flow.
+//! The code is what a frame end carries on the wire
+//! ([`crate::wire::FrameEnd::method`]).
 
 /// How a frame is made.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -21,13 +23,25 @@ pub enum Method {
     /// paper): each particle counted along its predicted path
     /// ([`crate::reconstruct_compensated`]); needs a predicted motion.
     Mc = 3,
+    /// The time ladder's frames: the events of a span of ticks less each
+    /// pixel's static light, warped along the host's node flow to the
+    /// frame's centre ([`crate::rungs::rung_frames`]), and the events
+    /// themselves. Made by the live loop's pairs ([`crate::rungs`]), not
+    /// one frame at a tick.
+    Ladder = 4,
 }
 
 impl Method {
-    /// All three, in wire-code order.
-    pub const ALL: [Method; 4] = [Method::Adaptive, Method::Tfp, Method::Tfi, Method::Mc];
+    /// All five, in wire-code order.
+    pub const ALL: [Method; 5] = [
+        Method::Adaptive,
+        Method::Tfp,
+        Method::Tfi,
+        Method::Mc,
+        Method::Ladder,
+    ];
 
-    /// The wire code (0, 1, 2).
+    /// The wire code (0–4).
     pub const fn code(self) -> u8 {
         self as u8
     }
@@ -39,11 +53,12 @@ impl Method {
             1 => Some(Method::Tfp),
             2 => Some(Method::Tfi),
             3 => Some(Method::Mc),
+            4 => Some(Method::Ladder),
             _ => None,
         }
     }
 
-    /// Its lower-case name (`adaptive`, `tfp`, `tfi`, `mc`), as the CLI and the
+    /// Its lower-case name (`adaptive`, `tfp`, `tfi`, `mc`, `ladder`), as the CLI and the
     /// reports spell it.
     pub const fn name(self) -> &'static str {
         match self {
@@ -51,6 +66,7 @@ impl Method {
             Method::Tfp => "tfp",
             Method::Tfi => "tfi",
             Method::Mc => "mc",
+            Method::Ladder => "ladder",
         }
     }
 
@@ -76,8 +92,8 @@ mod tests {
             assert_eq!(Method::from_code(m.code()), Some(m));
             assert_eq!(Method::from_name(m.name()), Some(m));
         }
-        assert_eq!(Method::from_code(4), None);
+        assert_eq!(Method::from_code(5), None);
         assert_eq!(Method::from_name("TFP"), None);
-        assert_eq!([0, 1, 2, 3], Method::ALL.map(Method::code));
+        assert_eq!([0, 1, 2, 3, 4], Method::ALL.map(Method::code));
     }
 }

@@ -566,7 +566,7 @@ pub fn send_pair<L: Link>(
                 pair: plan.pair,
                 member,
             },
-            method: Method::Mc,
+            method: Method::Ladder,
             full_scale: u16::MAX,
             dt,
         };

@@ -95,7 +95,7 @@ impl Config {
         match self.method {
             Method::Tfp => self.tfp_window,
             Method::Mc if self.bootstrap == Method::Tfp => self.params.n_max.max(self.tfp_window),
-            Method::Adaptive | Method::Tfi | Method::Mc => self.params.n_max,
+            Method::Adaptive | Method::Tfi | Method::Mc | Method::Ladder => self.params.n_max,
         }
     }
 
@@ -203,6 +203,9 @@ pub enum ConfigError {
     },
     /// One row of this many pixels does not fit one payload.
     RowTooWide(u16),
+    /// The frame loop does not make this method's frames (the time
+    /// ladder's are made by the live loop's pairs, [`crate::rungs`]).
+    Method(Method),
 }
 
 impl core::fmt::Display for ConfigError {
@@ -215,6 +218,11 @@ impl core::fmt::Display for ConfigError {
             ConfigError::RowTooWide(w) => write!(
                 f,
                 "a row of {w} px does not fit one {MAX_PAYLOAD}-byte payload"
+            ),
+            ConfigError::Method(m) => write!(
+                f,
+                "the frame loop does not make {} frames (the live loop of pairs does)",
+                m.name()
             ),
         }
     }
@@ -357,6 +365,11 @@ pub struct Sidecar {
 impl Sidecar {
     /// The loop for a `width × height` sensor; checks the configuration.
     pub fn new<E>(width: u16, height: u16, cfg: Config) -> Result<Sidecar, SidecarError<E>> {
+        for m in [cfg.method, cfg.bootstrap] {
+            if m == Method::Ladder {
+                return Err(SidecarError::Config(ConfigError::Method(m)));
+            }
+        }
         let window = cfg.window();
         // TFI needs two ticks to see an interval.
         let least = if cfg.method == Method::Tfi { 2 } else { 1 };
@@ -616,6 +629,7 @@ pub fn make_frame<G: Gray>(
         (m, _) => m,
     };
     match (method, guide.motion) {
+        (Method::Ladder, _) => Err(Error::BadParam(crate::error::ParamError::Method)),
         (Method::Tfp, _) => {
             tfp(hist, k, cfg.tfp_window, p.full_scale, mem.counts, mem.frame)?;
             Ok(Method::Tfp)

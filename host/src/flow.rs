@@ -2,7 +2,7 @@
 //! `.npz` capture): a field per pair at a fixed schedule, and their
 //! robust mean. No window needs hand-tuning.
 //!
-//! - `mc` (the default, beyond the paper): the time ladder
+//! - `ladder` (the default, beyond the paper): the time ladder
 //!   ([`crate::motion::ladder`]). Around each pair's midpoint the
 //!   recording's own planes measure the flow: disjoint frames of the
 //!   spikes' innovation, compensated along the motion known so far, at
@@ -327,14 +327,14 @@ pub struct FlowOptions {
 
 impl FlowOptions {
     /// The defaults for `rec` with pairs `dt` ticks apart: motion-compensated
-    /// (`mc`, the time ladder), one pair every `4·dt` ticks over the stretch
+    /// (`ladder`, the time ladder), one pair every `4·dt` ticks over the stretch
     /// where every pair's ladder reaches its longest rung (on a recording
     /// too short for that, one pair at its centre) — see
     /// [`FlowOptions::schedule`].
     pub fn new(rec: &Recording, dt: u32) -> FlowOptions {
         let core = Params::default();
         let mut o = FlowOptions {
-            method: Method::Mc,
+            method: Method::Ladder,
             window: core.n_max,
             dwell_cap: Some(DWELL_CAP),
             dt,
@@ -368,7 +368,7 @@ impl FlowOptions {
     pub fn schedule(&mut self, planes: u64) {
         let dt = u64::from(self.dt);
         let last = planes.saturating_sub(1 + dt);
-        if self.method != Method::Mc {
+        if self.method != Method::Ladder {
             self.start = u64::from(self.core.n_max / 2).min(last / 2);
             self.last_start = None;
             return;
@@ -401,7 +401,7 @@ impl FlowOptions {
     /// The PIV settings whose grid the pairs' fields live on.
     pub fn grid_settings(&self) -> &Settings {
         match self.method {
-            Method::Mc => &self.ladder.piv,
+            Method::Ladder => &self.ladder.piv,
             _ => &self.piv,
         }
     }
@@ -453,7 +453,7 @@ impl Default for FlowRequest {
             every: None,
             start: None,
             end: None,
-            method: Method::Mc,
+            method: Method::Ladder,
             window: None,
             dwell_cap: Some(DWELL_CAP),
             windows: None,
@@ -553,7 +553,7 @@ fn measured_pair(
         }
     };
     Measured {
-        method: Method::Mc,
+        method: Method::Ladder,
         separation: m.separation.iter().copied().collect(),
         field: m.field,
         frames,
@@ -938,8 +938,8 @@ pub fn run_flow_until(
         }
     };
     let chains: Vec<Result<Chain, FlowError>> = match (opts.method, opts.segment) {
-        (Method::Mc, None) => vec![ladder_loop(rec, opts, &ticks, &tell, stop)],
-        (Method::Mc, Some(n)) => ticks
+        (Method::Ladder, None) => vec![ladder_loop(rec, opts, &ticks, &tell, stop)],
+        (Method::Ladder, Some(n)) => ticks
             .par_chunks(n.max(1))
             .map(|seg| ladder_loop(rec, opts, seg, &tell, stop))
             .collect(),
@@ -1252,6 +1252,11 @@ fn ladder_loop(
 
 /// The pairs' first ticks, once the options are known to fit `rec`.
 fn check(rec: &Recording, opts: &FlowOptions) -> Result<Vec<u64>, FlowError> {
+    if opts.method == Method::Mc {
+        return Err(FlowError::Schedule(
+            "method mc is the sidecar's frames along the host's motion over a link (spiv-firmware-sim, spiv run); spiv flow's motion-compensated pairs are `ladder`, the default".into(),
+        ));
+    }
     if !(1..=255).contains(&opts.window) {
         return Err(FlowError::Schedule(format!(
             "window {}: expected 1..=255 ticks",

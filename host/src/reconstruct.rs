@@ -37,9 +37,12 @@ pub enum ReconstructError {
     /// Motion-compensated frames need a predicted motion, which one frame
     /// alone does not have.
     #[error(
-        "method mc needs a predicted motion: it runs in `spiv flow`, whose closed loop predicts it"
+        "method mc needs the host's predicted motion: it runs in the sidecar's loop (`spiv-firmware-sim --method mc`, `spiv run`)"
     )]
     NeedsMotion,
+    /// The time ladder's frames come in pairs along a measured flow.
+    #[error("method ladder makes pairs along a measured flow, not one frame: `spiv flow` runs it")]
+    Ladder,
 }
 
 /// A reconstructed frame, upright (row 0 at the top).
@@ -112,6 +115,7 @@ pub fn frame_from_planes(
     let fs = p.full_scale;
     let stats = match method {
         Method::Mc => return Err(ReconstructError::NeedsMotion),
+        Method::Ladder => return Err(ReconstructError::Ladder),
         Method::Tfp => {
             let mut counts = vec![0u8; px];
             tfp(&hist, k, window, fs, &mut counts, &mut out)?;

@@ -606,7 +606,10 @@ fn flow_writes_vectors_per_pair_the_mean_field_and_plots() {
     let out = tmp.path().join("flow");
     let dat = sim.join("spikes.dat");
     let msg = ok(&["flow", p(&dat), "--out", p(&out)]);
-    assert!(msg.contains("128x96 px") && msg.contains("(mc)"), "{msg}");
+    assert!(
+        msg.contains("128x96 px") && msg.contains("(ladder)"),
+        "{msg}"
+    );
     for f in [
         "vectors_00000.csv",
         "mean.csv",
@@ -623,7 +626,7 @@ fn flow_writes_vectors_per_pair_the_mean_field_and_plots() {
     }
     let s: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
-    assert_eq!(s["method"], "mc");
+    assert_eq!(s["method"], "ladder");
     // The time ladder: its rungs, the first two uncompensated.
     let rungs = s["pairs"][0]["rungs"].as_array().expect("rungs");
     assert_eq!(rungs[0]["separation"], 4);

@@ -150,7 +150,9 @@ fn image(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<ndarray::Array2<f32>> {
 
 fn method_named(name: &str) -> PyResult<Method> {
     Method::from_name(name).ok_or_else(|| {
-        SpivError::new_err(format!("method {name}: expected adaptive, tfp, tfi or mc"))
+        SpivError::new_err(format!(
+            "method {name}: expected ladder, adaptive, tfp, tfi or mc"
+        ))
     })
 }
 
@@ -615,8 +617,8 @@ fn array3<T>(shape: (usize, usize, usize), v: Vec<T>) -> PyResult<Array3<T>> {
 /// `path` is a Vidar `.dat` (size from `width`/`height` or the
 /// `scene.json` beside it) or a `.npz` capture; `dt` ticks between a
 /// pair's frames (default: scene.json's), `every` between pairs (default
-/// 4·dt), `start`/`end` ticks; `method` "mc" (default), "adaptive" or
-/// "tfp"; `window` ticks; `dwell_cap` px or None (off); `windows` the PIV
+/// 4·dt), `start`/`end` ticks; `method` "ladder" (default, the time
+/// ladder), "adaptive", "tfp" or "tfi"; `window` ticks; `dwell_cap` px or None (off); `windows` the PIV
 /// passes, px; `dense` also runs the dense stage on every pair;
 /// `pixel_size` (mm) and `tick_hz` calibrate it (default: the
 /// `scene.json` beside the file); `mask` (nonzero = left out, the frames'
@@ -652,7 +654,7 @@ fn array3<T>(shape: (usize, usize, usize), v: Vec<T>) -> PyResult<Array3<T>> {
 /// `y, x`, in m, s and m/s when calibrated (else px, ticks and px per
 /// pair), so `ds.piv.vorticity()` works.
 #[pyfunction]
-#[pyo3(signature = (path, dt=None, every=None, start=None, end=None, method="mc", window=None, dwell_cap=Some(spiv_host::dwell::DWELL_CAP), windows=None, width=None, height=None, flip=true, strip_head=0, dense=false, pixel_size=None, tick_hz=None, as_xarray=false, mask=None, pairs=None, progress=None, y_up=false, segment=None))]
+#[pyo3(signature = (path, dt=None, every=None, start=None, end=None, method="ladder", window=None, dwell_cap=Some(spiv_host::dwell::DWELL_CAP), windows=None, width=None, height=None, flip=true, strip_head=0, dense=false, pixel_size=None, tick_hz=None, as_xarray=false, mask=None, pairs=None, progress=None, y_up=false, segment=None))]
 #[allow(clippy::too_many_arguments)]
 fn flow<'py>(
     py: Python<'py>,
@@ -815,7 +817,7 @@ fn interruptible(
 /// `flow(..., segment=FLOW_SEGMENT)` gives, which is how `spiv.dask`
 /// spreads a recording over workers.
 #[pyfunction]
-#[pyo3(signature = (path, dt=None, every=None, start=None, end=None, method="mc", width=None, height=None, flip=true, strip_head=0))]
+#[pyo3(signature = (path, dt=None, every=None, start=None, end=None, method="ladder", width=None, height=None, flip=true, strip_head=0))]
 #[allow(clippy::too_many_arguments)]
 fn flow_pairs<'py>(
     py: Python<'py>,

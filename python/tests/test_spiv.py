@@ -156,7 +156,7 @@ def test_flow_gives_the_cli_mean_field(cli, tmp_path):
     got = spiv.flow(d / "spikes.dat")
     pairs = got["u"].shape[0]
     assert pairs >= 2 and got["ticks"].shape == (pairs, 2) and len(got["methods"]) == pairs
-    assert got["methods"][-1] == "mc"
+    assert got["methods"][-1] == "ladder"
     np.testing.assert_array_equal(got["x"].ravel(), want["x"])
     np.testing.assert_array_equal(got["mean_flags"].ravel(), want["flag"])
     # Where a node has no valid vector, the arrays hold NaN and the CSV
@@ -447,6 +447,8 @@ def test_bad_input_raises_the_cli_message(cli, recording, tmp_path):
         spiv.reconstruct(spikes, 64, method="nope")
     with pytest.raises(spiv.SpivError, match="predicted motion"):
         spiv.reconstruct(spikes, 64, method="mc")
+    with pytest.raises(spiv.SpivError, match="makes pairs"):
+        spiv.reconstruct(spikes, 64, method="ladder")
     with pytest.raises(spiv.SpivError, match="multiple of 8"):
         spiv.reconstruct(np.zeros((4, 3, 3), np.uint8), 1)
     with pytest.raises(OSError):

@@ -70,7 +70,7 @@ fn motion_compensation_measures_the_flow_best_and_one_n_max_does_not() {
     let rec = open(&dat);
     let dt = rec.meta_dt.expect("scene.json names the pair");
     let o = FlowOptions::new(&rec, dt);
-    assert_eq!(o.method, spiv_core::Method::Mc, "the default");
+    assert_eq!(o.method, spiv_core::Method::Ladder, "the default");
     // Every pair with the ladder's longest rung (128 ticks) on both sides.
     assert_eq!(
         o.pair_ticks(),
@@ -85,7 +85,10 @@ fn motion_compensation_measures_the_flow_best_and_one_n_max_does_not() {
     })
     .unwrap();
     assert_eq!((seen, out.pairs.len()), (7, 7));
-    assert!(out.pairs.iter().all(|p| p.method == spiv_core::Method::Mc));
+    assert!(out
+        .pairs
+        .iter()
+        .all(|p| p.method == spiv_core::Method::Ladder));
     let (mc, _) = rmae(dir.path(), &out.mean_field(), rec.height);
     assert!(mc < 0.008, "motion-compensated: other-row RMAE {mc:.4}");
     let (_, _, invalid) = out.pairs[3].counts();

@@ -191,7 +191,7 @@ fn a_wrong_prediction_is_not_confirmed() {
         let m = measure(&input, 80, f64::from(dt), &cfg, size, true).expect("measures");
         assert_eq!(m.confirmed, Some(false), "prediction × {k} confirmed");
         let pr = PairResult {
-            method: spiv_core::Method::Mc,
+            method: spiv_core::Method::Ladder,
             ticks: [75, 85],
             vectors: m.field.vectors(),
             sigma: m.field.sigma.iter().copied().collect(),

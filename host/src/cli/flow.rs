@@ -39,8 +39,9 @@ pub struct FlowArgs {
     /// No frame at or after this tick (default: the end of the recording).
     #[arg(long)]
     end: Option<u64>,
-    /// Frame method.
-    #[arg(long, default_value = "mc", value_parser = method_parser())]
+    /// Frame method (ladder: the time ladder; adaptive, tfp, tfi: plain
+    /// frame pairs).
+    #[arg(long, default_value = "ladder", value_parser = method_parser())]
     method: spiv_core::Method,
     /// TFP window, or the adaptive/TFI n_max, ticks (default 128, TFP 8).
     #[arg(long)]
@@ -212,7 +213,7 @@ fn run_line(
         o.method.name(),
         match (o.method, o.dwell_cap) {
             (spiv_core::Method::Adaptive, Some(c)) => format!(" {}, dwell cap {c} px", o.window),
-            (spiv_core::Method::Mc, _) => String::new(),
+            (spiv_core::Method::Ladder, _) => String::new(),
             _ => format!(" {}", o.window),
         },
         if empty > 0 {

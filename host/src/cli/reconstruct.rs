@@ -19,7 +19,10 @@ pub fn method_parser() -> impl clap::builder::TypedValueParser<Value = Method> {
         PossibleValue::new("tfp").help("Spike count over a window"),
         PossibleValue::new("tfi").help("Inverse inter-spike interval"),
         PossibleValue::new("mc").help(
-            "Motion-compensated frames (spiv flow: the time ladder, which measures the motion from the spikes)",
+            "The sidecar's motion-compensated frames along the host's per-row or per-tile motion",
+        ),
+        PossibleValue::new("ladder").help(
+            "The time ladder: pairs of rung frames along the flow measured from the spikes (spiv flow)",
         ),
     ])
     .try_map(|name| Method::from_name(&name).ok_or("unknown method"))

@@ -187,7 +187,7 @@ def flow(
     every: Optional[int] = None,
     start: Optional[int] = None,
     end: Optional[int] = None,
-    method: str = "mc",
+    method: str = "ladder",
     window: Optional[int] = None,
     dwell_cap: Optional[float] = 8.0,
     windows: Optional[Sequence[int]] = None,
@@ -208,8 +208,8 @@ def flow(
     """The flow job on a .dat or .npz recording, as `spiv flow` (without its files).
 
     dt: ticks between a pair's frames (default: scene.json's); every: between pairs
-    (default 4*dt); start, end: ticks. method: "mc" (motion-compensated, the default),
-    "adaptive" or "tfp". window: ticks. dwell_cap: px, or None for off.
+    (default 4*dt); start, end: ticks. method: "ladder" (the time ladder, the
+    default), "adaptive", "tfp" or "tfi". window: ticks. dwell_cap: px, or None for off.
     windows: PIV passes, px. dense: also the dense stage per pair, averaged.
     Returns per-pair u, v, flags and uncertainties sigma_u, sigma_v (px per pair,
     inf where invalid) (pairs, ny, nx), the grid x, y (ny, nx), each pair's ticks
@@ -246,7 +246,7 @@ def flow_pairs(
     every: Optional[int] = None,
     start: Optional[int] = None,
     end: Optional[int] = None,
-    method: str = "mc",
+    method: str = "ladder",
     width: Optional[int] = None,
     height: Optional[int] = None,
     flip: bool = True,
