@@ -1,0 +1,51 @@
+#!/usr/bin/env bash
+# The RTL against spiv-core, frame for frame: verilates fpga/rtl with the
+# C++ testbench fpga/tb/tb_tfp.cpp linked to spiv-core's C ABI (the
+# spiv-ffi static library) and runs it on the committed strip and on a
+# paper-linear and a vortex-array recording that `spiv simulate` makes,
+# at several windows and schedules. CI runs it (.ci/run); it needs
+# verilator (Debian: apt-get install verilator) and the `spiv` binary
+# (cargo build --bin spiv; SPIV_BIN names another).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+root="$PWD"
+target="${CARGO_TARGET_DIR:-$root/target}"
+spiv="${SPIV_BIN:-$target/debug/spiv}"
+cargo build --quiet -p spiv-ffi
+[ -x "$spiv" ] || cargo build --quiet -p spiv-host --bin spiv
+work="$(mktemp -d)"
+trap 'rm -rf "$work"' EXIT
+
+# The model: 128 x 64 px, 32 pixels per clock, windows up to 16 ticks.
+W=128 H=64 P=32 NMAX=16
+verilator --cc --exe --build -O2 -j 2 -Wall -Wno-DECLFILENAME -Wno-UNUSEDSIGNAL \
+  --Mdir "$work/obj" -GW=$W -GH=$H -GP=$P -GNMAX=$NMAX \
+  -CFLAGS "-DTB_W=$W -DTB_H=$H -DTB_P=$P -I$root/ffi/include" \
+  -LDFLAGS "$target/debug/libspiv_ffi.a -lpthread -ldl -lm" \
+  "$root/fpga/rtl/spiv_tfp.sv" "$root/fpga/tb/tb_tfp.cpp" >"$work/verilator.log" 2>&1 || {
+  tail -30 "$work/verilator.log"
+  exit 1
+}
+tb="$work/obj/Vspiv_tfp"
+
+for scene in paper-linear vortex-array; do
+  "$spiv" simulate --scene "$scene" --seed 7 --width $W --height $H --ticks 300 \
+    --out "$work/$scene" >/dev/null
+done
+
+# FILE WINDOW FIRST DT EVERY: the sidecar's default TFP schedule (window
+# 8, the first frame at 4, pairs 13 ticks apart every 52), the longest
+# window, odd windows, frames clipped at the start, overlapping windows.
+runs=(
+  "firmware-sim/cortex-m4/data/strip.dat 8 4 13 52"
+  "firmware-sim/cortex-m4/data/strip.dat 16 0 3 5"
+  "firmware-sim/cortex-m4/data/strip.dat 3 1 1 2"
+  "$work/paper-linear/spikes.dat 8 4 13 52"
+  "$work/paper-linear/spikes.dat 15 2 10 40"
+  "$work/vortex-array/spikes.dat 8 4 10 40"
+  "$work/vortex-array/spikes.dat 16 8 16 16"
+)
+for r in "${runs[@]}"; do
+  # shellcheck disable=SC2086
+  printf '%-40s %s\n' "$(basename "$(dirname ${r%% *})")/$(basename ${r%% *}) ${r#* }" "$($tb $r)"
+done
