@@ -33,6 +33,10 @@ for scene in paper-linear vortex-array; do
     --out "$work/$scene" >/dev/null
 done
 
+# The worst case: every pixel spiking on every tick (every count at the
+# window's length, every gray level at full scale).
+head -c $((W * H / 8 * 64)) /dev/zero | tr '\0' '\377' >"$work/all.dat"
+
 # FILE WINDOW FIRST DT EVERY: the sidecar's default TFP schedule (window
 # 8, the first frame at 4, pairs 13 ticks apart every 52), the longest
 # window, odd windows, frames clipped at the start, overlapping windows.
@@ -44,6 +48,7 @@ runs=(
   "$work/paper-linear/spikes.dat 15 2 10 40"
   "$work/vortex-array/spikes.dat 8 4 10 40"
   "$work/vortex-array/spikes.dat 16 8 16 16"
+  "$work/all.dat 16 0 5 9"
 )
 for r in "${runs[@]}"; do
   # shellcheck disable=SC2086

@@ -63,17 +63,16 @@ module spiv_tfp #(
 
     // ---- reciprocals: R(len) = ceil(2^SHIFT / len) --------------------
     logic [SHIFT:0] recip [0:255];
-    integer i;
     initial begin
         recip[0] = 0;
-        for (i = 1; i < 256; i = i + 1)
+        for (int i = 1; i < 256; i = i + 1)
             recip[i] = (SHIFT+1)'(((1 << SHIFT) + i - 1) / i);
     end
 
     // ---- per-pixel bit history ----------------------------------------
     logic [SLOTS*P-1:0] hist [0:BEATS-1];
     initial begin
-        for (i = 0; i < BEATS; i = i + 1) hist[i] = '0;
+        for (int i = 0; i < BEATS; i = i + 1) hist[i] = '0;
     end
 
     // ---- the plane and beat being taken -------------------------------
@@ -158,40 +157,39 @@ module spiv_tfp #(
         if (s1_valid) hist[s1_beat] <= {s1_hist[(SLOTS-1)*P-1:0], s1_bits};
     end
 
-    // Per lane: the current bit and the bits of the last window - 1 planes.
-    logic [8:0] s1_count [0:P-1];
-    integer l, j;
-    always_comb begin
-        for (l = 0; l < P; l = l + 1) begin
-            s1_count[l] = {8'd0, s1_bits[l]};
-            for (j = 0; j < SLOTS; j = j + 1)
-                if (j + 1 < window)
-                    s1_count[l] = s1_count[l] + {8'd0, s1_hist[j*P + l]};
-        end
-    end
-
-    // ---- stage 2: x = FS * c + len / 2 ---------------------------------
+    // ---- stages 2 and 3, per lane ----------------------------------------
     logic             s2_valid, s2_start;
     logic [31:0]      s2_k;
     logic [SHIFT:0]   s2_r;
-    logic [16:0]      s2_x [0:P-1];
     always_ff @(posedge clk) begin
         s2_valid <= s1_valid && s1_due;
         s2_start <= s1_start;
         s2_k <= s1_k;
         s2_r <= s1_r;
-        for (l = 0; l < P; l = l + 1)
-            s2_x[l] <= 17'(FS) * {8'd0, s1_count[l]} + {9'd0, s1_len[8:1]};
-    end
-
-    // ---- stage 3: gray = x * R >> SHIFT ---------------------------------
-    always_ff @(posedge clk) begin
         out_valid <= s2_valid;
         out_start <= s2_valid && s2_start;
         out_tick <= s2_k;
-        for (l = 0; l < P; l = l + 1)
-            out_gray[8*l +: 8] <= 8'((({27'd0, s2_x[l]} * {17'd0, s2_r}) >> SHIFT));
     end
+
+    genvar g;
+    generate
+        for (g = 0; g < P; g = g + 1) begin : lane
+            // The current bit and the bits of the last window - 1 planes.
+            logic [8:0] count;
+            always_comb begin
+                count = {8'd0, s1_bits[g]};
+                for (int j = 0; j < SLOTS; j = j + 1)
+                    if (j + 1 < int'(window))
+                        count = count + {8'd0, s1_hist[j*P + g]};
+            end
+            // Stage 2: x = FS * c + len / 2; stage 3: gray = x * R >> SHIFT.
+            logic [16:0] x;
+            always_ff @(posedge clk) begin
+                x <= 17'(FS) * {8'd0, count} + {9'd0, s1_len[8:1]};
+                out_gray[8*g +: 8] <= 8'((({27'd0, x} * {17'd0, s2_r}) >> SHIFT));
+            end
+        end
+    endgenerate
 
     assign planes = tick;
 endmodule

@@ -224,17 +224,7 @@ impl LadderHost {
         head: &PairHead,
         pair: &CorePair,
     ) -> Result<(Measurement, Ask), PivError> {
-        while self
-            .starts
-            .front()
-            .is_some_and(|(p, _)| *p < pair.from_pair)
-        {
-            self.starts.pop_front();
-        }
-        let start = match self.starts.front() {
-            Some((p, f)) if *p == pair.from_pair => f.clone(),
-            _ => None,
-        };
+        let start = self.start_for(pair);
         let (w, h) = (usize::from(pair.size.0), usize::from(pair.size.1));
         let input = pair_input(pair, w, true, start.as_ref());
         let dt = f64::from(head.dt.max(1));
@@ -242,6 +232,27 @@ impl LadderHost {
         let m = ladder::measure(&input, u64::from(head.mid), dt, &self.cfg, (w, h), rescue)?;
         let ask = Ask::after(&m, dt, &self.cfg);
         Ok((m, ask))
+    }
+
+    /// The field the ask `pair`'s rung frames followed was sent from; the
+    /// fields of older asks are forgotten. A pair without rung frames
+    /// followed no ask (`NO_ASK`): the asks in flight stay for the pairs
+    /// after it.
+    fn start_for(&mut self, pair: &CorePair) -> Option<Field> {
+        if pair.rungs.is_empty() {
+            return None;
+        }
+        while self
+            .starts
+            .front()
+            .is_some_and(|(p, _)| *p < pair.from_pair)
+        {
+            self.starts.pop_front();
+        }
+        match self.starts.front() {
+            Some((p, f)) if *p == pair.from_pair => f.clone(),
+            _ => None,
+        }
     }
 
     /// `ask` was sent for the pairs from `from_pair` on.
@@ -265,4 +276,51 @@ fn save_frame(dir: &Path, f: &ReceivedFrame) -> Result<(), LiveError> {
     let (w, h) = (u32::from(f.width), u32::from(f.height));
     write_levels(&path, w, h, &up, f.end.full_scale)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::piv::{Grid, State};
+    use spiv_core::wire::pair::NO_ASK;
+
+    fn pair(from_pair: u32, rungs: usize) -> CorePair {
+        CorePair {
+            size: (64, 48),
+            mid: 100,
+            from_pair,
+            rungs: (0..rungs)
+                .map(|_| (16, [vec![0; 64 * 48], vec![0; 64 * 48]]))
+                .collect(),
+            events: None,
+        }
+    }
+
+    fn ask(u: f64) -> Ask {
+        let mut f = Field::unmeasured(Grid::new(64, 48, 16, 8).unwrap());
+        f.u.fill(u);
+        f.state.fill(State::Valid);
+        Ask {
+            flow: Some(f),
+            rungs: vec![16, 32],
+            reach: 0,
+        }
+    }
+
+    /// Pairs made before an ask arrived (cold, late asks) leave it for the
+    /// pairs that follow it; a pair names the ask it followed and gets the
+    /// field that ask was sent from; older asks are then forgotten.
+    #[test]
+    fn each_pair_is_measured_from_the_field_its_ask_was_sent_from() {
+        let mut host = LadderHost::new(LadderSettings::default());
+        host.sent(1, &ask(0.1));
+        host.sent(2, &ask(0.2));
+        assert!(host.start_for(&pair(NO_ASK, 0)).is_none());
+        assert!(host.start_for(&pair(NO_ASK, 0)).is_none());
+        let u = |f: Option<Field>| f.map(|f| f.u[[0, 0]]);
+        assert_eq!(u(host.start_for(&pair(2, 2))), Some(0.2));
+        // The ask of pair 1 was overtaken: gone.
+        assert_eq!(u(host.start_for(&pair(1, 2))), None);
+        assert_eq!(u(host.start_for(&pair(2, 1))), Some(0.2));
+    }
 }

@@ -153,7 +153,7 @@ impl PairReader {
     }
 
     /// What its frame assembler counted.
-    pub fn stats(&self) -> crate::receive::AssemblyStats {
+    pub fn stats(&self) -> crate::receive::assemble::AssemblyStats {
         self.frames.stats()
     }
 
