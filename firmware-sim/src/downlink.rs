@@ -148,6 +148,20 @@ impl ControlStream {
         self
     }
 
+    /// Reads (and drops) what arrives until the host closes its end, or
+    /// for `limit` at most.
+    pub fn drain(&mut self, limit: Duration) {
+        let deadline = Instant::now() + limit;
+        while !self.closed {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match self.rx.recv_timeout(left) {
+                Ok(_) => {}
+                Err(RecvTimeoutError::Timeout) => break,
+                Err(RecvTimeoutError::Disconnected) => self.closed = true,
+            }
+        }
+    }
+
     /// What the fault injector did to the downlink.
     pub fn fault_counts(&self) -> FaultCounts {
         self.faults.lock().map(|c| *c).unwrap_or_default()

@@ -130,7 +130,30 @@ struct Args {
 
 /// The message stream, kept for `--checksum`.
 #[derive(Debug, Clone, Default)]
-struct Shared(std::rc::Rc<std::cell::RefCell<Vec<u8>>>);
+struct Shared(
+    std::rc::Rc<std::cell::RefCell<Vec<u8>>>,
+    std::rc::Rc<std::cell::RefCell<Option<std::net::TcpStream>>>,
+);
+
+/// Longest wait, after the last message, for the host to read what it was
+/// sent and close its end.
+const CLOSE_WAIT: std::time::Duration = std::time::Duration::from_secs(600);
+
+impl Shared {
+    /// Ends a TCP link gracefully: no more messages, then the host's
+    /// answers read (and dropped) until it closes its end. Closing with
+    /// its answers unread would reset the connection, and the host would
+    /// lose the messages still in flight.
+    fn close(&self, control: Option<&mut ControlStream>) {
+        let Some(s) = self.1.borrow_mut().take() else {
+            return;
+        };
+        let _ = s.shutdown(std::net::Shutdown::Write);
+        if let Some(c) = control {
+            c.drain(CLOSE_WAIT);
+        }
+    }
+}
 
 impl Write for Shared {
     fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
@@ -276,6 +299,7 @@ fn open_link(a: &Args, shared: &Shared) -> Result<(Box<dyn Write>, Option<Contro
                 eprintln!("spiv-firmware-sim: host {peer} connected");
             }
             let back = s.try_clone()?;
+            *shared.1.borrow_mut() = Some(s.try_clone()?);
             control = Some(paced(ControlStream::spawn(move || Ok(back), faults, seed)));
             Box::new(std::io::BufWriter::with_capacity(1 << 16, s))
         }
@@ -337,7 +361,7 @@ fn run(a: &Args) -> Result<(), Error> {
     if a.method == "ladder" {
         return run_ladder(a, &shared, faults, t0);
     }
-    let run = match &a.scene {
+    let mut run = match &a.scene {
         Some(name) => from_scene(a, name, &shared, faults)?,
         None => from_input(a, &shared, faults)?,
     };
@@ -361,6 +385,7 @@ fn run(a: &Args) -> Result<(), Error> {
             report_downlink(d, c);
         }
     }
+    shared.close(run.heard.1.as_mut());
     Ok(())
 }
 
@@ -460,6 +485,7 @@ fn run_ladder(a: &Args, shared: &Shared, faults: Faults, t0: Instant) -> Result<
             report_asks(c);
         }
     }
+    shared.close(control.as_mut());
     Ok(())
 }
 

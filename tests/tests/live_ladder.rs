@@ -131,3 +131,49 @@ fn the_sidecar_and_spiv_flow_measure_the_same_vectors() {
         valid(&first)
     );
 }
+
+/// Unpaced, the sidecar runs ahead of the host (its pairs go cold while
+/// the asks are late) and ends its link gracefully: every pair it sent
+/// reaches the host and is measured, none lost to a reset connection.
+#[test]
+fn an_unpaced_sidecar_loses_no_pair_at_the_end() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let sim = tmp.path().join("sim");
+    simulate(&sim);
+    let dat = sim.join("spikes.dat");
+    let args: Vec<String> = [
+        "--input",
+        dat.to_str().expect("utf-8"),
+        "--method",
+        "ladder",
+        "--tcp",
+        "127.0.0.1:0",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    let (mut sidecar, _err, addr) = listening_sidecar(&args);
+    let live = tmp.path().join("live");
+    let rx = command("spiv")
+        .args(["receive", "--tcp", &addr, "--piv", "--control", "--out"])
+        .arg(&live)
+        .stderr(Stdio::piped())
+        .output()
+        .expect("spiv receive");
+    assert!(
+        rx.status.success(),
+        "{}",
+        String::from_utf8_lossy(&rx.stderr)
+    );
+    assert!(sidecar.wait().expect("sidecar").success());
+    let said = String::from_utf8_lossy(&rx.stdout);
+    // Pairs every 40 ticks from midpoint 32 while frame A + 10 < 420.
+    assert!(said.contains("(10 pairs,"), "{said}");
+    assert!(
+        said.contains("0 broken pairs") && !said.contains("refused"),
+        "{said}"
+    );
+    for i in 0..10 {
+        assert!(!vectors(&live, i).is_empty(), "pair {i}");
+    }
+}
