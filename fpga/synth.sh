@@ -31,7 +31,7 @@ $yosys -q -l "$out/yosys.log" -p "
 # The ports are not pinned: a frame pipeline sits between the sensor's
 # interface and the uplink on the same chip.
 $nextpnr --85k --package CABGA381 --speed 8 --json "$out/spiv_tfp.json" \
-  --lpf-allow-unconstrained --out-of-context --freq 100 --seed 1 \
+  --lpf-allow-unconstrained --out-of-context --freq 100 --timing-allow-fail --seed 1 \
   --report "$out/report.json" --quiet -l "$out/nextpnr.log" || {
   tail -20 "$out/nextpnr.log"
   exit 1

@@ -19,7 +19,7 @@
 // One frame per plane: a frame due on a plane that already ended another
 // (every == dt) is skipped and counted (`missed`).
 //
-// Latency 3 clocks from in_bits to out_gray. in_valid may pause; planes
+// Latency 6 clocks from in_bits to out_gray. in_valid may pause; planes
 // are W * H / P beats back to back in stored pixel order (pixel y * W + x
 // in lane x % P of beat (y * W + x) / P).
 
@@ -57,8 +57,8 @@ module spiv_tfp #(
     localparam integer SHIFT = 26;
 
     initial begin
-        if (BEATS < 2 || W * H % P != 0 || NMAX < 3 || NMAX > 255 || FS < 1 || FS > 255)
-            $fatal(1, "spiv_tfp: W*H must be at least two beats of P pixels; NMAX 3..255; FS 1..255");
+        if (BEATS < 3 || W * H % P != 0 || NMAX < 3 || NMAX > 255 || FS < 1 || FS > 255)
+            $fatal(1, "spiv_tfp: W*H must be at least three beats of P pixels; NMAX 3..255; FS 1..255");
     end
 
     // ---- reciprocals: R(len) = ceil(2^SHIFT / len) --------------------
@@ -78,20 +78,27 @@ module spiv_tfp #(
     // ---- the plane and beat being taken -------------------------------
     logic [ABITS-1:0] beat;
     logic [31:0]      tick;
-    // The schedule: the next frame's centre tick, and which member.
+    // The schedule: the next frame's centre tick, its pair's first, and
+    // whether it is the pair's second.
     logic [31:0]      next_k, pair_k;
     logic             member_b;
-    logic             due;        // this plane ends the next frame's window
-    logic [8:0]       len;        // the window as clipped, ticks
-    logic [SHIFT:0]   r;          // R(len)
+    // Of the plane being taken: it ends the next frame's window (`due`),
+    // that window as clipped (`len`, ticks) and R(len).
+    logic             due;
+    logic [8:0]       len;
+    logic [SHIFT:0]   r;
+    // The same for the plane after it, worked out while this one streams
+    // (two beats before its end), so no plane starts on a long path.
+    logic             pre_due, pre_passed;
+    logic [8:0]       pre_len;
+    logic [SHIFT:0]   pre_r;
 
-    wire [7:0]  half_up = (window + 8'd1) >> 1;             // ceil(window / 2)
-    wire [31:0] due_tick = next_k + {24'd0, half_up} - 32'd1;
+    wire [31:0] half_up = {24'd0, (window + 8'd1) >> 1};      // ceil(window / 2)
+    wire [31:0] due_tick = next_k + half_up - 32'd1;
+    wire [31:0] first_due = first + half_up - 32'd1;
+    wire [31:0] next_tick = tick + 32'd1;
+    wire [31:0] next_held = tick + 32'd2;                      // ticks seen by then
     wire        plane_start = in_valid && beat == '0;
-    wire        now_due = (tick == due_tick);
-    wire        passed = (tick > due_tick);
-    wire [31:0] held = tick + 32'd1;
-    wire [8:0]  now_len = (held < {24'd0, window}) ? held[8:0] : {1'b0, window};
 
     always_ff @(posedge clk) begin
         if (rst) begin
@@ -102,15 +109,19 @@ module spiv_tfp #(
             member_b <= 1'b0;
             due <= 1'b0;
             len <= 9'd1;
-            r <= '0;
+            r <= recip[1];
+            pre_due <= first_due == 32'd0;
+            pre_passed <= 1'b0;
+            pre_len <= 9'd1;
+            pre_r <= recip[1];
             missed <= '0;
         end else if (in_valid) begin
             if (beat == '0) begin
-                due <= now_due;
-                len <= now_len;
-                r <= recip[now_len[7:0]];
-                if (passed) missed <= missed + 32'd1;
-                if (now_due || passed) begin
+                due <= pre_due;
+                len <= pre_len;
+                r <= pre_r;
+                if (pre_passed) missed <= missed + 32'd1;
+                if (pre_due || pre_passed) begin
                     // The frame after this one.
                     if (member_b) begin
                         pair_k <= pair_k + every;
@@ -121,16 +132,22 @@ module spiv_tfp #(
                     member_b <= ~member_b;
                 end
             end
+            if (beat == ABITS'(BEATS - 2)) begin
+                pre_due <= next_tick == due_tick;
+                pre_passed <= next_tick > due_tick;
+                pre_len <= (next_held < {24'd0, window}) ? next_held[8:0] : {1'b0, window};
+            end
             if (beat == ABITS'(BEATS - 1)) begin
+                pre_r <= recip[pre_len[7:0]];
                 beat <= '0;
-                tick <= tick + 32'd1;
+                tick <= next_tick;
             end else begin
                 beat <= beat + 1'b1;
             end
         end
     end
 
-    // ---- stage 1: read the history word, count -------------------------
+    // ---- stage 1: the history word read (block RAM) ---------------------
     logic             s1_valid, s1_start, s1_due;
     logic [ABITS-1:0] s1_beat;
     logic [P-1:0]     s1_bits;
@@ -141,52 +158,80 @@ module spiv_tfp #(
 
     always_ff @(posedge clk) begin
         s1_valid <= in_valid && !rst;
-        // The window of the beat's plane travels with the beat.
-        s1_len <= plane_start ? now_len : len;
-        s1_r <= plane_start ? recip[now_len[7:0]] : r;
         s1_beat <= beat;
         s1_bits <= in_bits;
         s1_hist <= hist[beat];
         s1_start <= plane_start;
-        s1_due <= plane_start ? now_due : due;
+        // The window of the beat's plane travels with the beat.
+        s1_due <= plane_start ? pre_due : due;
+        s1_len <= plane_start ? pre_len : len;
+        s1_r <= plane_start ? pre_r : r;
         if (plane_start) s1_k <= next_k;
     end
 
-    // Write back: the newest plane into slot 0, the others one slot older.
-    always_ff @(posedge clk) begin
-        if (s1_valid) hist[s1_beat] <= {s1_hist[(SLOTS-1)*P-1:0], s1_bits};
-    end
-
-    // ---- stages 2 and 3, per lane ----------------------------------------
-    logic             s2_valid, s2_start;
+    // ---- stage 2: the word registered; written back one plane older -----
+    logic             s2_valid, s2_start, s2_due;
+    logic [ABITS-1:0] s2_beat;
+    logic [P-1:0]     s2_bits;
+    logic [SLOTS*P-1:0] s2_hist;
     logic [31:0]      s2_k;
+    logic [8:0]       s2_len;
     logic [SHIFT:0]   s2_r;
     always_ff @(posedge clk) begin
-        s2_valid <= s1_valid && s1_due;
+        s2_valid <= s1_valid;
         s2_start <= s1_start;
+        s2_due <= s1_due;
+        s2_beat <= s1_beat;
+        s2_bits <= s1_bits;
+        s2_hist <= s1_hist;
         s2_k <= s1_k;
+        s2_len <= s1_len;
         s2_r <= s1_r;
-        out_valid <= s2_valid;
-        out_start <= s2_valid && s2_start;
-        out_tick <= s2_k;
+        // The newest plane into slot 0, the others one slot older.
+        if (s2_valid) hist[s2_beat] <= {s2_hist[(SLOTS-1)*P-1:0], s2_bits};
+    end
+
+    // ---- stages 3 to 6: count, FS * c + len / 2, times R, shifted --------
+    logic [6:3]       v, st;
+    logic [31:0]      k3, k4, k5;
+    logic [8:0]       len3;
+    logic [SHIFT:0]   r3, r4;
+    always_ff @(posedge clk) begin
+        v[3] <= s2_valid && s2_due;
+        st[3] <= s2_start;
+        k3 <= s2_k;
+        len3 <= s2_len;
+        r3 <= s2_r;
+        v[4] <= v[3];
+        st[4] <= st[3];
+        k4 <= k3;
+        r4 <= r3;
+        v[5] <= v[4];
+        st[5] <= st[4];
+        k5 <= k4;
+        out_valid <= v[5];
+        out_start <= v[5] && st[5];
+        out_tick <= k5;
     end
 
     genvar g;
     generate
         for (g = 0; g < P; g = g + 1) begin : lane
             // The current bit and the bits of the last window - 1 planes.
-            logic [8:0] count;
+            logic [8:0] sum, count;
             always_comb begin
-                count = {8'd0, s1_bits[g]};
+                sum = {8'd0, s2_bits[g]};
                 for (int j = 0; j < SLOTS; j = j + 1)
                     if (j + 1 < int'(window))
-                        count = count + {8'd0, s1_hist[j*P + g]};
+                        sum = sum + {8'd0, s2_hist[j*P + g]};
             end
-            // Stage 2: x = FS * c + len / 2; stage 3: gray = x * R >> SHIFT.
             logic [16:0] x;
+            logic [SHIFT+17:0] prod;
             always_ff @(posedge clk) begin
-                x <= 17'(FS) * {8'd0, count} + {9'd0, s1_len[8:1]};
-                out_gray[8*g +: 8] <= 8'((({27'd0, x} * {17'd0, s2_r}) >> SHIFT));
+                count <= sum;
+                x <= 17'(FS) * {8'd0, count} + {9'd0, len3[8:1]};
+                prod <= {{(SHIFT+1){1'b0}}, x} * {17'd0, r4};
+                out_gray[8*g +: 8] <= prod[SHIFT +: 8];
             end
         end
     endgenerate

@@ -126,7 +126,7 @@ int main(int argc, char** argv) {
             b.clock();
         }
         b.m.in_valid = 0;
-        for (int k = 0; k < 4; ++k) b.clock();
+        for (int k = 0; k < 8; ++k) b.clock();
         const uint64_t due_tick = (uint64_t)next_k + half_up - 1;
         if (due_tick < t) {
             // Due on a plane that ended another frame: the RTL skips it.
