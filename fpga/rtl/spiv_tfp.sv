@@ -19,7 +19,7 @@
 // One frame per plane: a frame due on a plane that already ended another
 // (every == dt) is skipped and counted (`missed`).
 //
-// Latency 6 clocks from in_bits to out_gray. in_valid may pause; planes
+// Latency 7 clocks from in_bits to out_gray. in_valid may pause; planes
 // are W * H / P beats back to back in stored pixel order (pixel y * W + x
 // in lane x % P of beat (y * W + x) / P).
 
@@ -191,11 +191,14 @@ module spiv_tfp #(
         if (s2_valid) hist[s2_beat] <= {s2_hist[(SLOTS-1)*P-1:0], s2_bits};
     end
 
-    // ---- stages 3 to 6: count, FS * c + len / 2, times R, shifted --------
-    logic [6:3]       v, st;
-    logic [31:0]      k3, k4, k5;
-    logic [8:0]       len3;
-    logic [SHIFT:0]   r3, r4;
+    // ---- stages 3 to 7: count in groups of four, their sum, FS * c +
+    // len / 2, times R, shifted --------------------------------------------
+    localparam integer BITS = SLOTS + 1;                 // a window's bits
+    localparam integer GROUPS = (BITS + 3) / 4;
+    logic [7:3]       v, st;
+    logic [31:0]      k3, k4, k5, k6;
+    logic [8:0]       len3, len4;
+    logic [SHIFT:0]   r3, r4, r5;
     always_ff @(posedge clk) begin
         v[3] <= s2_valid && s2_due;
         st[3] <= s2_start;
@@ -205,32 +208,51 @@ module spiv_tfp #(
         v[4] <= v[3];
         st[4] <= st[3];
         k4 <= k3;
+        len4 <= len3;
         r4 <= r3;
         v[5] <= v[4];
         st[5] <= st[4];
         k5 <= k4;
-        out_valid <= v[5];
-        out_start <= v[5] && st[5];
-        out_tick <= k5;
+        r5 <= r4;
+        v[6] <= v[5];
+        st[6] <= st[5];
+        k6 <= k5;
+        out_valid <= v[6];
+        out_start <= v[6] && st[6];
+        out_tick <= k6;
     end
 
     genvar g;
     generate
         for (g = 0; g < P; g = g + 1) begin : lane
-            // The current bit and the bits of the last window - 1 planes.
-            logic [8:0] sum, count;
+            // The window's bits of this pixel: the current plane's, then
+            // the last window - 1 planes' (bit j from j planes ago).
+            logic [4*GROUPS-1:0] bits;
             always_comb begin
-                sum = {8'd0, s2_bits[g]};
+                bits = '0;
+                bits[0] = s2_bits[g];
                 for (int j = 0; j < SLOTS; j = j + 1)
-                    if (j + 1 < int'(window))
-                        sum = sum + {8'd0, s2_hist[j*P + g]};
+                    bits[j + 1] = s2_hist[j*P + g] && (j + 1 < int'(window));
             end
+            // Stage 3: each group of four bits counted; stage 4: the sum.
+            logic [2:0] part [0:GROUPS-1];
+            logic [8:0] count;
+            always_ff @(posedge clk) begin
+                for (int q = 0; q < GROUPS; q = q + 1)
+                    part[q] <= 3'(bits[4*q]) + 3'(bits[4*q+1]) + 3'(bits[4*q+2]) + 3'(bits[4*q+3]);
+            end
+            always_ff @(posedge clk) begin
+                logic [8:0] acc;
+                acc = '0;
+                for (int q = 0; q < GROUPS; q = q + 1) acc = acc + 9'(part[q]);
+                count <= acc;
+            end
+            // Stage 5: x = FS * c + len / 2; 6: times R; 7: shifted.
             logic [16:0] x;
             logic [SHIFT+17:0] prod;
             always_ff @(posedge clk) begin
-                count <= sum;
-                x <= 17'(FS) * {8'd0, count} + {9'd0, len3[8:1]};
-                prod <= {{(SHIFT+1){1'b0}}, x} * {17'd0, r4};
+                x <= 17'(FS) * {8'd0, count} + {9'd0, len4[8:1]};
+                prod <= {{(SHIFT+1){1'b0}}, x} * {17'd0, r5};
                 out_gray[8*g +: 8] <= prod[SHIFT +: 8];
             end
         end
