@@ -70,7 +70,9 @@ struct Args {
     /// Ticks between pairs (default 4·dt).
     #[arg(long)]
     every: Option<u32>,
-    /// Tick of the first frame (default: n_max/2, the first with a whole window).
+    /// Tick of the first frame (default: n_max/2, the first with a whole
+    /// window; ladder: the first pair's first frame, default its midpoint
+    /// at tick 32).
     #[arg(long)]
     first: Option<u32>,
     /// Tile coding: rice (lossless, default), context (lossless,
@@ -128,7 +130,8 @@ struct Args {
     checksum: bool,
 }
 
-/// The message stream, kept for `--checksum`.
+/// The message stream, kept for `--checksum`, and the TCP connection,
+/// kept to end it gracefully ([`Shared::close`]).
 #[derive(Debug, Clone, Default)]
 struct Shared(
     std::rc::Rc<std::cell::RefCell<Vec<u8>>>,
@@ -418,6 +421,19 @@ fn run_ladder(a: &Args, shared: &Shared, faults: Faults, t0: Instant) -> Result<
         return Err(Error::Usage(
             "--checksum: the Cortex-M4 firmware does not run --method ladder".into(),
         ));
+    }
+    // The live loop's pairs have their own coding (lossless context
+    // tiles) and frames (rung frames along the host's asks).
+    for (given, what) in [
+        (a.window.is_some(), "--window"),
+        (a.encoding != "rice", "--encoding"),
+        (a.bootstrap != "tfp", "--bootstrap"),
+    ] {
+        if given {
+            return Err(Error::Usage(format!(
+                "{what} does not apply to --method ladder (its pairs are rung frames and events, coded losslessly)"
+            )));
+        }
     }
     if a.tcp.is_none() && a.control.is_none() && !a.quiet {
         eprintln!(

@@ -15,7 +15,7 @@ use spiv_core::rungs::{Rungs, MAX_RUNGS};
 use spiv_core::wire::ask::{ask_parts, encode_ask, MAX_ASK_PAYLOAD};
 use spiv_core::wire::control::control_header;
 use spiv_core::wire::{encode_message, Header, Kind, WireError, MAX_ENCODED};
-use spiv_firmware_sim::pairs::AskEar;
+use spiv_firmware_sim::pairs::{AskEar, Asked};
 
 use super::compensate::WarpFlow;
 use super::ladder::{per_ticks, LadderSettings, Measurement};
@@ -180,7 +180,7 @@ impl Heard {
     /// let h = Heard::cold(&cfg);
     /// assert!(h.flow.is_still() && h.start.is_none());
     /// assert_eq!(u32::from(h.rungs.reach), cfg.bootstrap_reach);
-    /// assert_eq!(h.core_rungs(|_| true).count, 0);
+    /// assert_eq!(h.rungs.count, 0);
     /// ```
     pub fn cold(cfg: &LadderSettings) -> Heard {
         Heard {
@@ -199,20 +199,13 @@ impl Heard {
         Ok(link.ask_for(1).clone())
     }
 
-    /// The core's rung request: the separations `fits` keeps (those the
-    /// ticks around the pair hold), and the reach.
-    pub fn core_rungs(&self, fits: impl Fn(u32) -> bool) -> Rungs {
-        let mut r = Rungs::events(self.rungs.reach);
-        if self.flow.is_still() {
-            return r;
+    /// The ask as the sidecar's state reads it.
+    pub fn asked(&self) -> Asked<'_> {
+        Asked {
+            from_pair: self.from_pair,
+            rungs: self.rungs,
+            flow: self.flow.view(),
         }
-        for &s in self.rungs.separations() {
-            if fits(u32::from(s)) {
-                r.separations[usize::from(r.count)] = s;
-                r.count += 1;
-            }
-        }
-        r
     }
 }
 
@@ -236,10 +229,10 @@ pub struct Delivery {
 
 /// The asks on their way to the core ([`Delivery`]): each sent as its
 /// wire messages ([`Ask::messages`]), which arrive late, are lost or
-/// corrupted as the delivery says, and are heard as a core hears them —
-/// the stream decoder (CRC), the payload's checks and the parts put
-/// together in order ([`AskAssembly`]). An ask whose parts did not all
-/// arrive intact is not heard; the core keeps the last one it heard.
+/// corrupted as the delivery says, and are heard by the sidecar's own
+/// ear ([`AskEar`]: the stream decoder (CRC), the payload's checks and the
+/// parts put together in order). An ask whose parts did not all arrive
+/// intact is not heard; the core keeps the last one it heard.
 #[derive(Debug)]
 pub struct AskLink {
     delivery: Delivery,
@@ -511,11 +504,15 @@ mod tests {
             assert_eq!(heard.flow.nodes(), want.nodes());
             assert_eq!(heard.rungs.separations(), &[16, 32, 64]);
             assert_eq!(heard.start.as_ref().map(|s| s.u.clone()), Some(f.u.clone()));
-            assert_eq!(heard.core_rungs(|s| s < 64).separations(), &[16, 32]);
+            // The pair at tick 100 holding ticks 40..200: its 64-tick rung does not fit.
+            let (r, _) = spiv_core::rungs::pair_plan(40..200, 100, &heard.rungs, false, 32);
+            assert_eq!(r.separations(), &[16, 32]);
         }
         // No flow: events only, whatever rungs were named.
         let cold = Heard::of(&Ask { flow: None, ..ask }, SIZE, false).unwrap();
         assert!(cold.flow.is_still() && cold.start.is_none());
-        assert_eq!(cold.core_rungs(|_| true).count, 0);
+        let (r, ev) =
+            spiv_core::rungs::pair_plan(0..400, 100, &cold.rungs, cold.flow.is_still(), 32);
+        assert_eq!((r.count, ev), (0, Some((68, 132))));
     }
 }

@@ -5,24 +5,13 @@
 //! stretch of planes held in memory ([`input_of`]).
 
 use spiv_core::Error;
-use spiv_firmware_sim::pairs::{Asked, CorePair, PairMaker, LIGHT_TRAIN};
+use spiv_firmware_sim::pairs::{CorePair, PairMaker, LIGHT_TRAIN};
 
 use super::control::{Ask, Heard};
 use super::events::{upright, Events};
 use super::ladder::PairInput;
 use crate::piv::Field;
 use crate::reconstruct::Planes;
-
-impl Heard {
-    /// The ask as the sidecar's state reads it.
-    pub fn asked(&self) -> Asked<'_> {
-        Asked {
-            from_pair: self.from_pair,
-            rungs: self.rungs,
-            flow: self.flow.view(),
-        }
-    }
-}
 
 /// What the estimator reads of `pair`: its rung frames upright, cropped
 /// to `crop` columns, in spikes; its events ([`Events`]); and `start`, the
