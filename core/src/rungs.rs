@@ -24,8 +24,7 @@ use crate::wire::pair::{PairHead, MAX_EVENT_TICKS};
 use crate::wire::sender::{FrameInfo, Link, SendBuffers, SendError, Sender, Slot};
 use crate::wire::{Encoding, WireError};
 
-/// Most rungs a pair asks for.
-pub const MAX_RUNGS: usize = 8;
+pub use crate::wire::pair::MAX_RUNGS;
 
 /// The longest rung the live loop makes by default, ticks (the host's
 /// ladder climbs 4, 8, 16, 32, 64 and 128 ticks).

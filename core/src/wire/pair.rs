@@ -15,7 +15,10 @@
 //! ```
 
 use super::WireError;
-use crate::rungs::MAX_RUNGS;
+
+/// Most rungs a pair carries (the head's slots; what an ask asks for at
+/// most, [`crate::rungs::Rungs`]).
+pub const MAX_RUNGS: usize = 8;
 
 /// Most ticks of events a pair carries, so that every part's number fits
 /// the frame end's `member` byte.
