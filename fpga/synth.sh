@@ -2,7 +2,9 @@
 # Synthesis, place and route of the RTL for a Lattice ECP5 (LFE5U-85F,
 # CABGA381, speed 8), and the table docs/embedded.md shows: LUTs, FFs,
 # block RAMs and multipliers, Fmax after routing, and the share of a
-# 400x250 x 20 kHz sensor (2e9 pixel-ticks/s) the design sustains.
+# 400x250 x 20 kHz sensor (2e9 pixel-ticks/s) the design sustains; then
+# yosys's estimate for a Xilinx 7-series part (synthesis only: no open
+# place and route, so no Fmax).
 #
 #   fpga/synth.sh [--out DIR]
 #
@@ -49,4 +51,21 @@ rate = fmax * 1e6 * p
 print("| part | LUT4 | FF | DP16KD (18 kbit) | MULT18X18D | Fmax | pixels per clock | pixel-ticks/s | of 400x250 x 20 kHz |")
 print("|---|---|---|---|---|---|---|---|---|")
 print(f"| LFE5U-85F-8 | {used('TRELLIS_COMB')} | {used('TRELLIS_FF')} | {used('DP16KD')} | {used('MULT18X18D')} | {fmax:.1f} MHz | {p} | {rate:.2e} | {rate / 2e9 * 100:.0f} % |")
+PY
+
+$yosys -q -l "$out/xilinx.log" -p "
+  read_verilog -sv rtl/spiv_tfp.sv
+  chparam -set W $W -set H $H -set P $P -set NMAX $NMAX spiv_tfp
+  synth_xilinx -top spiv_tfp -family xc7
+  tee -o $out/xilinx.txt stat
+"
+python3 - "$out/xilinx.txt" <<'PY'
+import re, sys
+cells = dict((m.group(2), int(m.group(1))) for m in re.finditer(r"^\s+(\d+)\s+(\w+)\s*$", open(sys.argv[1]).read(), re.M))
+luts = sum(v for k, v in cells.items() if re.fullmatch(r"LUT[1-6]", k))
+ffs = sum(v for k, v in cells.items() if k.startswith("FD"))
+print()
+print("| Xilinx 7-series (synth_xilinx, no place and route) | LUT | LUTRAM (SRL16E) | FF | RAMB18E1 | DSP48E1 |")
+print("|---|---|---|---|---|---|")
+print(f"| estimate | {luts} | {cells.get('SRL16E', 0)} | {ffs} | {cells.get('RAMB18E1', 0)} | {cells.get('DSP48E1', 0)} |")
 PY
