@@ -88,7 +88,7 @@ pub fn pair_plan(
     let mut rungs = Rungs::events(asked.reach);
     if !still {
         for &s in asked.separations() {
-            if fits(u32::from(s)) && usize::from(rungs.count) < MAX_RUNGS {
+            if fits(u32::from(s)) {
                 rungs.separations[usize::from(rungs.count)] = s;
                 rungs.count += 1;
             }

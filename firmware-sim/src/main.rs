@@ -378,11 +378,7 @@ fn run(a: &Args) -> Result<(), Error> {
         let secs = t0.elapsed().as_secs_f64();
         report(&run.counters, run.width, run.height, run.tick_hz, secs);
         if faults != Faults::default() {
-            let f = &run.faults;
-            eprintln!(
-                "spiv-firmware-sim: faults: {} dropped, {} corrupted, {} truncated, {} stalled, {} reordered, {} duplicated",
-                f.dropped, f.corrupted, f.truncated, f.stalled, f.reordered, f.duplicated
-            );
+            report_faults(&run.faults);
         }
         if let (d, Some(c)) = &run.heard {
             report_downlink(d, c);
@@ -394,24 +390,11 @@ fn run(a: &Args) -> Result<(), Error> {
 
 /// The live loop's schedule from the command line, pairs `dt` apart.
 fn ladder_config(a: &Args, dt: u32) -> Result<LadderConfig, Error> {
-    if !(1..=u32::from(u16::MAX)).contains(&dt) {
-        return Err(Error::Usage(format!(
-            "dt {dt}: expected 1..=65535 ticks between the frames of a pair"
-        )));
-    }
     let mut cfg = LadderConfig::new(dt);
-    if let Some(e) = a.every {
-        if e < dt {
-            return Err(Error::Usage(format!(
-                "--every {e} must be at least dt = {dt}"
-            )));
-        }
-        cfg.every = e;
-    }
-    if let Some(f) = a.first {
-        cfg.first = f;
-    }
+    cfg.every = a.every.unwrap_or(cfg.every);
+    cfg.first = a.first.unwrap_or(cfg.first);
     cfg.pairs = a.pairs;
+    cfg.check().map_err(|e| Error::Usage(e.to_string()))?;
     Ok(cfg)
 }
 
@@ -444,14 +427,8 @@ fn run_ladder(a: &Args, shared: &Shared, faults: Faults, t0: Instant) -> Result<
     let link = Faulty::new(Plain(out), faults, a.seed);
     let (fw, (w, h), tick_hz) = match &a.scene {
         Some(name) => {
-            let kind = SceneKind::parse(name).map_err(|e| Error::Usage(e.to_string()))?;
-            let mut p = SceneParams::new(kind);
-            if let Some(dt) = a.dt {
-                p.pair_dt = dt;
-            }
-            let (w, h) = (a.width.unwrap_or(p.width), a.height.unwrap_or(p.height));
-            check_size(w, h)?;
-            (p.width, p.height) = (w, h);
+            let p = scene_params(a, name)?;
+            let (w, h) = (p.width, p.height);
             let mut cfg = ladder_config(a, p.pair_dt)?;
             cfg.pairs = Some(a.pairs.unwrap_or(4).max(1));
             let req = Request::new(p, a.seed);
@@ -490,12 +467,8 @@ fn run_ladder(a: &Args, shared: &Shared, faults: Faults, t0: Instant) -> Result<
                 c.lost.0, c.lost.1
             );
         }
-        let f = fw.into_link().counts;
         if faults != Faults::default() {
-            eprintln!(
-                "spiv-firmware-sim: faults: {} dropped, {} corrupted, {} truncated, {} stalled, {} reordered, {} duplicated",
-                f.dropped, f.corrupted, f.truncated, f.stalled, f.reordered, f.duplicated
-            );
+            report_faults(&fw.into_link().counts);
         }
         if let Some(c) = &control {
             report_asks(c);
@@ -505,6 +478,14 @@ fn run_ladder(a: &Args, shared: &Shared, faults: Faults, t0: Instant) -> Result<
     Ok(())
 }
 
+/// One line on the faults injected on the uplink.
+fn report_faults(f: &FaultCounts) {
+    eprintln!(
+        "spiv-firmware-sim: faults: {} dropped, {} corrupted, {} truncated, {} stalled, {} reordered, {} duplicated",
+        f.dropped, f.corrupted, f.truncated, f.stalled, f.reordered, f.duplicated
+    );
+}
+
 /// One line on what the downlink of the live loop heard.
 fn report_asks(c: &ControlStream) {
     let f = c.fault_counts();
@@ -512,6 +493,19 @@ fn report_asks(c: &ControlStream) {
         "spiv-firmware-sim: downlink: {} pairs began without an answer; faults: {} dropped, {} corrupted, {} truncated, {} reordered, {} duplicated",
         c.timeouts, f.dropped, f.corrupted, f.truncated, f.reordered, f.duplicated
     );
+}
+
+/// The scene `name` with the command line's pair separation and size.
+fn scene_params(a: &Args, name: &str) -> Result<SceneParams, Error> {
+    let kind = SceneKind::parse(name).map_err(|e| Error::Usage(e.to_string()))?;
+    let mut p = SceneParams::new(kind);
+    if let Some(dt) = a.dt {
+        p.pair_dt = dt;
+    }
+    let (w, h) = (a.width.unwrap_or(p.width), a.height.unwrap_or(p.height));
+    check_size(w, h)?;
+    (p.width, p.height) = (w, h);
+    Ok(p)
 }
 
 /// A simulated sensor's size, checked.
@@ -593,15 +587,8 @@ impl Run {
 
 /// The firmware loop on the simulated scene `name`.
 fn from_scene(a: &Args, name: &str, shared: &Shared, faults: Faults) -> Result<Run, Error> {
-    let kind = SceneKind::parse(name).map_err(|e| Error::Usage(e.to_string()))?;
-    let mut p = SceneParams::new(kind);
-    if let Some(dt) = a.dt {
-        p.pair_dt = dt;
-    }
-    let (w, h) = (a.width.unwrap_or(p.width), a.height.unwrap_or(p.height));
-    check_size(w, h)?;
-    p.width = w;
-    p.height = h;
+    let p = scene_params(a, name)?;
+    let (w, h) = (p.width, p.height);
     let mut cfg = config(a, p.pair_dt)?;
     cfg.schedule.pairs = Some(a.pairs.unwrap_or(4).max(1));
     let req = Request::new(p, a.seed);

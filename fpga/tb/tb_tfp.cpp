@@ -110,6 +110,16 @@ int main(int argc, char** argv) {
     // The schedule, as the RTL's: centre ticks first + i*every (+ dt).
     uint32_t pair_k = first, next_k = first;
     bool member_b = false;
+    // The frame after the next one.
+    auto advance = [&]() {
+        if (member_b) {
+            pair_k += every;
+            next_k = pair_k;
+        } else {
+            next_k = pair_k + dt;
+        }
+        member_b = !member_b;
+    };
     const uint32_t half_up = (window + 1) / 2;
     size_t frames = 0, missed = 0;
     for (size_t t = 0; t < planes; ++t) {
@@ -131,13 +141,7 @@ int main(int argc, char** argv) {
         if (due_tick < t) {
             // Due on a plane that ended another frame: the RTL skips it.
             ++missed;
-            if (member_b) {
-                pair_k += every;
-                next_k = pair_k;
-            } else {
-                next_k = pair_k + dt;
-            }
-            member_b = !member_b;
+            advance();
         }
         const bool due = (uint64_t)next_k + half_up - 1 == t;
         if (due != b.done) {
@@ -166,13 +170,7 @@ int main(int argc, char** argv) {
             }
         }
         ++frames;
-        if (member_b) {
-            pair_k += every;
-            next_k = pair_k;
-        } else {
-            next_k = pair_k + dt;
-        }
-        member_b = !member_b;
+        advance();
     }
     if (b.m.missed != missed) {
         std::fprintf(stderr, "the RTL counted %u missed frames, the schedule %zu\n", b.m.missed, missed);

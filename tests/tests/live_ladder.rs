@@ -43,6 +43,32 @@ fn simulate(dir: &Path) {
     );
 }
 
+/// Runs `spiv-firmware-sim --input dat --method ladder --tcp` with `extra`
+/// into `spiv receive --piv --control --out live`; what the receiver
+/// printed.
+fn live_loop(dat: &Path, extra: &[&str], live: &Path) -> String {
+    let args: Vec<String> = ["--input", dat.to_str().expect("utf-8")]
+        .iter()
+        .chain(&["--method", "ladder", "--tcp", "127.0.0.1:0"])
+        .chain(extra)
+        .map(|s| s.to_string())
+        .collect();
+    let (mut sidecar, _err, addr) = listening_sidecar(&args);
+    let rx = command("spiv")
+        .args(["receive", "--tcp", &addr, "--piv", "--control", "--out"])
+        .arg(live)
+        .stderr(Stdio::piped())
+        .output()
+        .expect("spiv receive");
+    assert!(
+        rx.status.success(),
+        "{}",
+        String::from_utf8_lossy(&rx.stderr)
+    );
+    assert!(sidecar.wait().expect("sidecar").success());
+    String::from_utf8_lossy(&rx.stdout).into_owned()
+}
+
 fn vectors(dir: &Path, i: usize) -> Vec<Vector> {
     read_vectors(&dir.join(format!("vectors_{i:05}.csv"))).expect("vectors")
 }
@@ -74,36 +100,9 @@ fn the_sidecar_and_spiv_flow_measure_the_same_vectors() {
         String::from_utf8_lossy(&out.stderr)
     );
 
-    let args: Vec<String> = [
-        "--input",
-        dat.to_str().expect("utf-8"),
-        "--method",
-        "ladder",
-        "--first",
-        "43",
-        "--tcp",
-        "127.0.0.1:0",
-        "--control-wait",
-        "60000",
-    ]
-    .iter()
-    .map(|s| s.to_string())
-    .collect();
-    let (mut sidecar, _err, addr) = listening_sidecar(&args);
+    let extra = &["--first", "43", "--control-wait", "60000"];
     let live = tmp.path().join("live");
-    let rx = command("spiv")
-        .args(["receive", "--tcp", &addr, "--piv", "--control", "--out"])
-        .arg(&live)
-        .stderr(Stdio::piped())
-        .output()
-        .expect("spiv receive");
-    assert!(
-        rx.status.success(),
-        "{}",
-        String::from_utf8_lossy(&rx.stderr)
-    );
-    assert!(sidecar.wait().expect("sidecar").success());
-    let said = String::from_utf8_lossy(&rx.stdout);
+    let said = live_loop(&dat, extra, &live);
     assert!(said.contains("0 broken pairs"), "{said}");
 
     let mut compared = 0;
@@ -141,32 +140,9 @@ fn an_unpaced_sidecar_loses_no_pair_at_the_end() {
     let sim = tmp.path().join("sim");
     simulate(&sim);
     let dat = sim.join("spikes.dat");
-    let args: Vec<String> = [
-        "--input",
-        dat.to_str().expect("utf-8"),
-        "--method",
-        "ladder",
-        "--tcp",
-        "127.0.0.1:0",
-    ]
-    .iter()
-    .map(|s| s.to_string())
-    .collect();
-    let (mut sidecar, _err, addr) = listening_sidecar(&args);
+    let extra = &[];
     let live = tmp.path().join("live");
-    let rx = command("spiv")
-        .args(["receive", "--tcp", &addr, "--piv", "--control", "--out"])
-        .arg(&live)
-        .stderr(Stdio::piped())
-        .output()
-        .expect("spiv receive");
-    assert!(
-        rx.status.success(),
-        "{}",
-        String::from_utf8_lossy(&rx.stderr)
-    );
-    assert!(sidecar.wait().expect("sidecar").success());
-    let said = String::from_utf8_lossy(&rx.stdout);
+    let said = live_loop(&dat, extra, &live);
     // Pairs every 40 ticks from midpoint 32 while frame A + 10 < 420.
     assert!(said.contains("(10 pairs,"), "{said}");
     assert!(
