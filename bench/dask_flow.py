@@ -5,7 +5,7 @@ only parallelism), against spiv.flow on one process; speed against error:
 every run's Dataset must equal the one-process run's, and the mean field's
 error against the simulator's truth is printed beside the times.
 
-    python3 -m venv bench/.venv && bench/.venv/bin/pip install './python[dask]'
+    python3 -m venv bench/.venv && MATURIN_PEP517_ARGS="--features sim" bench/.venv/bin/pip install './python[dask]'
     bench/.venv/bin/python bench/dask_flow.py [--ticks 2000] [--seed 101]
 
 The recording is `spiv.simulate("paper-linear")` at sensor size (400x250),

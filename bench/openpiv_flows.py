@@ -4,7 +4,7 @@ camera pair and TFP 8 pair through OpenPIV 0.26's multi-pass window
 deformation (windows 64, 32, 32 at 50 % overlap: the grid of spiv piv's
 defaults and of the truth), scored as `spiv bench flows` scores its rows.
 
-    python3 -m venv bench/.venv && bench/.venv/bin/pip install ./python openpiv imageio
+    python3 -m venv bench/.venv && MATURIN_PEP517_ARGS="--features sim" bench/.venv/bin/pip install ./python openpiv imageio
     bench/.venv/bin/python bench/openpiv_flows.py [--seeds 101-110]
 
 Per family and seed: the recording is `spiv.simulate` of the family

@@ -4,7 +4,7 @@ arrays in the same process: median wall time and RMS error against the
 truth, speed against error, on one core and on two.
 
     python3 -m venv bench/.venv
-    bench/.venv/bin/pip install ./python "openpiv[rust]==0.26.1"
+    MATURIN_PEP517_ARGS="--features sim" bench/.venv/bin/pip install ./python "openpiv[rust]==0.26.1"
     bench/.venv/bin/python bench/python_piv.py [--size 1024] [--repeat 7] [--threads 1,2]
 
 The pair is the frame camera's of `spiv.simulate("uniform")` (2.6, 1.4 px

@@ -4,7 +4,8 @@ PIV, and plot the field (with matplotlib, if it is installed).
     python examples/quickstart.py            # simulates one first (paper-linear)
     python examples/quickstart.py SPIKES.dat --width 400 --height 250 --at 64 --dt 13
 
-Install the module first (README, "Python"): pip install ./python
+Install the module first (README, "Python"; simulating needs the simulator):
+    MATURIN_PEP517_ARGS="--features sim" pip install ./python
 """
 
 import argparse

@@ -27,6 +27,7 @@
 //! | [`downlink`] | the host's control messages heard, checked, held and applied per pair |
 //! | [`sidecar`] | the sidecar loop over borrowed memory: planes in, scheduled frames out through the sender; the dwell cap |
 //! | `buffers` | owned buffers of the history, the workspace and the loop (`std` feature) |
+//! | `pairs` | the live loop's sidecar state over owned buffers: light model, event ring, the asks heard, each pair made or sent (`std` feature; `spiv flow` and the simulated sidecar run it) |
 //! | [`state`] | the caller-owned per-pixel working memory |
 //! | [`q`] | the fixed-point formats, in one place |
 //! | [`wire`] | the sidecar link: message header, COBS framing, CRC, stream decoder, tile codecs (`wire::codec`), the sender (`wire::sender`) |
@@ -58,6 +59,8 @@ pub mod label;
 pub mod light;
 pub mod method;
 pub mod motion;
+#[cfg(feature = "std")]
+pub mod pairs;
 pub mod params;
 pub mod particle;
 pub mod plane;

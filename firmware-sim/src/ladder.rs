@@ -23,7 +23,7 @@ use spiv_core::rungs::{lead, ring_depth, PairCost, BOOTSTRAP_REACH, LONGEST_RUNG
 use spiv_core::wire::sender::SendError;
 
 use crate::firmware::{FirmwareError, Link};
-use crate::pairs::{AskEar, PairMaker, PairSender, LIGHT_TRAIN};
+use spiv_core::pairs::{AskEar, PairMaker, PairSender, LIGHT_TRAIN};
 
 /// What the live loop makes and when.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -8,7 +8,6 @@
 //! | [`meta`] | `scene.json` of a simulated recording: the layout (`spiv_formats::capture`) and the scene that made it |
 //! | [`downlink`] | the host's control bytes, read on a thread with faults injected, heard between planes; optional pacing |
 //! | [`firmware`] | the simulated sidecar: the core's loop (`spiv_core::sidecar`) over owned buffers, its links, fault injection and drivers |
-//! | [`pairs`] | the live loop's sidecar state: light model, event ring, the asks heard, each pair made or sent (`spiv flow` runs it in process) |
 //! | [`ladder`] | the simulated sidecar's live loop of the time ladder: pairs as the asks heard say, up the link |
 //! | [`cli`] | what the two binaries share on the command line |
 //!
@@ -21,7 +20,6 @@ pub mod drive;
 pub mod firmware;
 pub mod ladder;
 pub mod meta;
-pub mod pairs;
 pub mod scene;
 pub mod sensor;
 pub mod simulation;

@@ -44,7 +44,7 @@ use crate::piv::{piv, to_f32, Field, PivError, Settings, NO_SIGMA};
 use crate::receive::assemble::FrameLimit;
 use crate::reconstruct::{frame_from_planes, FileOptions, Planes, ReconstructError};
 use crate::units::Calibration;
-use spiv_firmware_sim::pairs::{CorePair, PairMaker, LIGHT_TRAIN};
+use spiv_core::pairs::{CorePair, PairMaker, LIGHT_TRAIN};
 
 /// The TFP window of the dwell cap's bootstrap pair, ticks.
 pub const BOOTSTRAP_WINDOW: u16 = 8;

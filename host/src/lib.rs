@@ -21,18 +21,28 @@
 //! | [`report`] | what a run tells its user: tables, `summary.json`, plots |
 //! | [`bench`] | the benchmarks' experiments: speed against error, the sidecar link |
 //!
+//! `link`, `simulate`, `pipeline` and `bench`, and the run report's
+//! `report::summary` and `report::table`, run the simulated camera: they
+//! and the `spiv` binary need the `sim` feature (on by default). `usb`
+//! (on by default) adds the USB receiver. Without them the library is the
+//! receivers, `spiv flow`'s estimator, PIV and the flow reports — what the
+//! Python package builds.
+//!
 //! The `spiv` binary's subcommands live in `cli`, one file each.
 #![warn(missing_docs)]
 
 pub mod baseline;
+#[cfg(feature = "sim")]
 pub mod bench;
 pub mod downlink;
 pub mod dwell;
 pub mod flow;
+#[cfg(feature = "sim")]
 pub mod link;
 pub mod live;
 pub mod metrics;
 pub mod motion;
+#[cfg(feature = "sim")]
 pub mod pipeline;
 pub use spiv_piv as piv;
 pub mod predict;
@@ -40,5 +50,6 @@ pub mod receive;
 pub mod reconstruct;
 pub mod reference;
 pub mod report;
+#[cfg(feature = "sim")]
 pub mod simulate;
 pub mod units;

@@ -3,14 +3,15 @@
 //! the pairs that arrive — so `spiv run` and the link benchmark exercise the
 //! same bytes a real sidecar would send.
 
-use ndarray::Array2;
 use spiv_core::wire::Encoding;
 use spiv_core::Method;
 use spiv_firmware_sim::firmware::{run_on_planes, Config, Control, FirmwareError, SentFrame};
 use spiv_formats::vectors::Vector;
 
 use crate::piv::{piv, PivError, Settings};
-use crate::receive::{receive, Event, FrameLimit, ReceivedFrame, Report, Source, SourceError};
+use crate::receive::{
+    receive, upright_f32, Event, FrameLimit, ReceivedFrame, Report, Source, SourceError,
+};
 
 /// Errors of an in-process link run.
 #[derive(Debug, thiserror::Error)]
@@ -113,20 +114,6 @@ pub fn transfer_with(
         bytes: counters.bytes,
         tiles: counters.tiles,
     })
-}
-
-/// The PIV settings `spiv receive --piv` uses on each received pair: the
-/// given window of each pass (px) and [`Settings::for_spike_frames`].
-pub fn receiver_settings(windows: Vec<usize>) -> Settings {
-    Settings {
-        windows,
-        ..Settings::for_spike_frames()
-    }
-}
-
-/// A received frame upright as PIV input.
-pub fn upright_f32(f: &ReceivedFrame) -> Array2<f32> {
-    crate::piv::to_f32(&f.upright(), usize::from(f.width), usize::from(f.height))
 }
 
 /// PIV on every pair.

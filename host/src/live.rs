@@ -7,19 +7,19 @@ use std::path::{Path, PathBuf};
 
 use std::collections::VecDeque;
 
+use spiv_core::pairs::CorePair;
 use spiv_core::wire::pair::PairHead;
-use spiv_firmware_sim::pairs::CorePair;
 use spiv_formats::image::write_levels;
 use spiv_formats::vectors::{write_vectors, write_vectors_uncertain};
 
 use crate::downlink::{control_for, Downlink, DownlinkError, DownlinkReport};
-use crate::link::{receiver_settings, upright_f32};
 use crate::motion::control::Ask;
 use crate::motion::ladder::{self, LadderSettings, Measurement};
 use crate::motion::make::pair_input;
 use crate::piv::{piv, Field, PivError, Settings};
 use crate::receive::source::{Source, SourceError};
 use crate::receive::{receive, Event, FrameLimit, ReceivedFrame, Report};
+use crate::receive::{receiver_settings, upright_f32};
 
 /// Why the live loop stopped.
 #[derive(Debug, thiserror::Error)]

@@ -17,8 +17,8 @@ use spiv_firmware_sim::scene::{SceneKind, SceneParams};
 use spiv_firmware_sim::simulation::Request;
 use spiv_formats::image::read_gray;
 use spiv_formats::vectors::write_vectors;
-use spiv_host::link::receiver_settings;
 use spiv_host::piv::piv;
+use spiv_host::receive::receiver_settings;
 use spiv_host::reconstruct::upright;
 use spiv_tests::{command, listening_sidecar, run};
 

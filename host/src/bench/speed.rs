@@ -1,6 +1,7 @@
 //! Speed against error (`spiv bench speed`): every way spiv makes and
 //! measures a frame pair, timed and held to the truth on one scene.
 
+use std::path::Path;
 use std::time::Instant;
 
 use ndarray::Array2;
@@ -10,12 +11,15 @@ use spiv_firmware_sim::simulation::simulate_planes;
 use spiv_formats::grid::Grid;
 use spiv_formats::vectors::Vector;
 
-use crate::link::{dwell_caps, transfer, upright_f32};
+use crate::link::{dwell_caps, transfer};
 use crate::metrics::{region_error, row_profile};
 use crate::pipeline::{Job, JobError};
 use crate::piv::{piv, to_f32, Interp, Settings};
+use crate::receive::upright_f32;
 use crate::reconstruct::{frame_from_planes, Method, Planes};
 use crate::reference::{adaptive_frame, SpikeVolume};
+use crate::report::plot::{self, PlotError};
+use plotters::prelude::*;
 
 /// One configuration: its name, wall time per frame pair and error.
 #[derive(Debug, Clone, PartialEq)]
@@ -356,4 +360,50 @@ fn piv_name(s: &Settings) -> String {
         Subpixel::Gaussian2d => ", 2-D Gaussian peak",
     };
     format!("PIV {} {interp}{peak}", w.join(","))
+}
+
+/// The speed-against-error chart of `spiv bench speed` (log time, error).
+pub fn pareto(path: &Path, rows: &[SpeedRow]) -> Result<(), PlotError> {
+    pareto_inner(path, rows).map_err(|m| PlotError::new(path, m))
+}
+
+fn pareto_inner(path: &Path, rows: &[SpeedRow]) -> Result<(), String> {
+    plot::ensure_font();
+    let root = BitMapBackend::new(path, (760, 520)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let tmax = rows.iter().map(|r| r.ms).fold(1.0, f64::max) * 1.3;
+    let emax = rows.iter().map(|r| r.rmse).fold(0.1, f64::max) * 1.2;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            "speed against error (paper-linear, 400x250)",
+            ("sans-serif", 18),
+        )
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(55)
+        .build_cartesian_2d((1.0..tmax).log_scale(), 0.0..emax)
+        .map_err(|e| e.to_string())?;
+    chart
+        .configure_mesh()
+        .x_desc("ms per frame pair (log)")
+        .y_desc("RMSE of u(y), px per pair")
+        .draw()
+        .map_err(|e| e.to_string())?;
+    for r in rows {
+        chart
+            .draw_series(std::iter::once(Circle::new(
+                (r.ms.max(1.0), r.rmse),
+                5,
+                RED.filled(),
+            )))
+            .map_err(|e| e.to_string())?;
+        chart
+            .draw_series(std::iter::once(Text::new(
+                r.name.split(',').next().unwrap_or("").to_string(),
+                (r.ms.max(1.0) * 1.05, r.rmse),
+                ("sans-serif", 11),
+            )))
+            .map_err(|e| e.to_string())?;
+    }
+    root.present().map_err(|e| e.to_string())
 }

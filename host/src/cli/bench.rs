@@ -443,7 +443,7 @@ fn speed(plot_path: &Path) -> Result<(), CliError> {
     for r in &rows {
         println!("{:<76} {:>8.1} {:>8.3}", r.name, r.ms, r.rmse);
     }
-    spiv_host::report::plot::pareto(plot_path, &rows)
+    spiv_host::bench::speed::pareto(plot_path, &rows)
         .map_err(|e| CliError::Usage(e.to_string()))?;
     println!("Pareto plot -> {}", plot_path.display());
     Ok(())

@@ -11,11 +11,11 @@ use std::collections::VecDeque;
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use spiv_core::pairs::{AskEar, Asked};
 use spiv_core::rungs::{Rungs, MAX_RUNGS};
 use spiv_core::wire::ask::{ask_parts, encode_ask, MAX_ASK_PAYLOAD};
 use spiv_core::wire::control::control_header;
 use spiv_core::wire::{encode_message, Header, Kind, WireError, MAX_ENCODED};
-use spiv_firmware_sim::pairs::{AskEar, Asked};
 
 use super::compensate::WarpFlow;
 use super::ladder::{per_ticks, LadderSettings, Measurement};

@@ -1,11 +1,11 @@
 //! What the host reads of the pairs the sidecar's state makes
-//! ([`spiv_firmware_sim::pairs`]: the core's static-light model and event
+//! ([`spiv_core::pairs`]: the core's static-light model and event
 //! ring over owned buffers, each pair as the last ask heard says): a
 //! [`CorePair`] as the estimator's [`PairInput`], and the one pair of a
 //! stretch of planes held in memory ([`input_of`]).
 
+use spiv_core::pairs::{CorePair, PairMaker, LIGHT_TRAIN};
 use spiv_core::Error;
-use spiv_firmware_sim::pairs::{CorePair, PairMaker, LIGHT_TRAIN};
 
 use super::control::{Ask, Heard};
 use super::events::{upright, Events};

@@ -13,12 +13,12 @@
 //!   1 (−1) and 2 (+1);
 //! - with the events, the static rate of every stored pixel (16-bit).
 
+use spiv_core::pairs::{Asked, CoreEvents, CorePair, PairMaker, PairSender};
 use spiv_core::rungs::PairCost;
 use spiv_core::warp::SCALE;
 use spiv_core::wire::pair::PairHead;
 use spiv_core::wire::sender::{Link, SendError};
 use spiv_core::wire::{Kind, Message, WireError};
-use spiv_firmware_sim::pairs::{Asked, CoreEvents, CorePair, PairMaker, PairSender};
 
 use crate::receive::assemble::{Assembler, FrameLimit, ReceivedFrame};
 

@@ -5,15 +5,31 @@
 pub mod assemble;
 pub mod source;
 
+use ndarray::Array2;
 use serde::Serialize;
+use spiv_core::pairs::CorePair;
 use spiv_core::wire::pair::PairHead;
 use spiv_core::wire::{Decoder, Kind, MAX_ENCODED};
-use spiv_firmware_sim::pairs::CorePair;
 
 use crate::motion::uplink::PairReader;
+use crate::piv::Settings;
 
 pub use assemble::{Assembler, AssemblyStats, FrameLimit, Pairer, ReceivedFrame};
 pub use source::{Source, SourceError, Spec};
+
+/// The PIV settings `spiv receive --piv` uses on each received pair: the
+/// given window of each pass (px) and [`Settings::for_spike_frames`].
+pub fn receiver_settings(windows: Vec<usize>) -> Settings {
+    Settings {
+        windows,
+        ..Settings::for_spike_frames()
+    }
+}
+
+/// A received frame upright as PIV input.
+pub fn upright_f32(f: &ReceivedFrame) -> Array2<f32> {
+    crate::piv::to_f32(&f.upright(), usize::from(f.width), usize::from(f.height))
+}
 
 /// Final counts of a reception.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]

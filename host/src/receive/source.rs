@@ -158,80 +158,8 @@ pub fn parse_vid_pid(s: &str) -> Result<(u16, u16), SourceError> {
     ))
 }
 
-/// A sidecar on USB: bulk IN reads into buffers of whole 512-byte packets.
-pub struct Usb {
-    handle: std::sync::Arc<rusb::DeviceHandle<rusb::Context>>,
-    name: String,
-}
-
-/// The bulk OUT endpoint as a writer (the downlink on USB).
-struct UsbOut(std::sync::Arc<rusb::DeviceHandle<rusb::Context>>);
-
-impl std::io::Write for UsbOut {
-    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
-        self.0
-            .write_bulk(USB_EP_OUT, buf, Duration::from_secs(1))
-            .map_err(|e| std::io::Error::other(format!("usb bulk OUT: {e}")))
-    }
-    fn flush(&mut self) -> std::io::Result<()> {
-        Ok(())
-    }
-}
-
-impl std::fmt::Debug for Usb {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.name)
-    }
-}
-
-impl Usb {
-    /// Opens the first device with `vid:pid` and claims its interface.
-    pub fn open(vid: u16, pid: u16) -> Result<Usb, SourceError> {
-        use rusb::UsbContext;
-        let usb = |e: rusb::Error| SourceError::Usb(e.to_string());
-        // Never the global context: it panics when libusb cannot start.
-        let ctx = rusb::Context::new().map_err(|e| {
-            SourceError::Usb(format!(
-                "cannot initialise libusb ({e}); is USB available here?"
-            ))
-        })?;
-        let handle = ctx.open_device_with_vid_pid(vid, pid).ok_or_else(|| {
-            SourceError::Usb(format!(
-                "no device {vid:04x}:{pid:04x} attached (or no permission to open it)"
-            ))
-        })?;
-        let _ = handle.set_auto_detach_kernel_driver(true);
-        handle.claim_interface(USB_INTERFACE).map_err(usb)?;
-        Ok(Usb {
-            handle: std::sync::Arc::new(handle),
-            name: format!("usb {vid:04x}:{pid:04x}"),
-        })
-    }
-}
-
-impl Source for Usb {
-    fn read(&mut self, buf: &mut [u8]) -> Result<usize, SourceError> {
-        // A multiple of the high-speed packet size, so libusb never overflows.
-        let n = (buf.len() / 512 * 512).max(512).min(buf.len());
-        loop {
-            match self
-                .handle
-                .read_bulk(USB_EP_IN, &mut buf[..n], Duration::from_secs(1))
-            {
-                Ok(k) => return Ok(k),
-                Err(rusb::Error::Timeout) => continue,
-                Err(rusb::Error::NoDevice) => return Ok(0),
-                Err(e) => return Err(SourceError::Usb(e.to_string())),
-            }
-        }
-    }
-    fn name(&self) -> String {
-        self.name.clone()
-    }
-    fn downlink(&self) -> Option<Result<Box<dyn std::io::Write + Send>, SourceError>> {
-        Some(Ok(Box::new(UsbOut(self.handle.clone()))))
-    }
-}
+#[cfg(feature = "usb")]
+pub use usb::Usb;
 
 /// Which source, as the CLI names it.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -249,9 +177,100 @@ pub enum Spec {
 /// Opens `spec`.
 pub fn open(spec: &Spec) -> Result<Box<dyn Source>, SourceError> {
     Ok(match spec {
+        #[cfg(feature = "usb")]
         Spec::Usb(v, p) => Box::new(Usb::open(*v, *p)?),
+        #[cfg(not(feature = "usb"))]
+        Spec::Usb(..) => {
+            return Err(SourceError::Usb(
+                "this build of spiv has no USB support (built without the `usb` feature)"
+                    .to_string(),
+            ))
+        }
         Spec::Tcp(a) => Box::new(tcp(a, Duration::from_secs(10))?),
         Spec::Pipe => Box::new(pipe()),
         Spec::File(p) => Box::new(file(p)?),
     })
+}
+
+/// The USB source (the `usb` feature: rusb against the system libusb).
+#[cfg(feature = "usb")]
+mod usb {
+    use std::time::Duration;
+
+    use super::{Source, SourceError, USB_EP_IN, USB_EP_OUT, USB_INTERFACE};
+
+    /// A sidecar on USB: bulk IN reads into buffers of whole 512-byte packets.
+    pub struct Usb {
+        handle: std::sync::Arc<rusb::DeviceHandle<rusb::Context>>,
+        name: String,
+    }
+
+    /// The bulk OUT endpoint as a writer (the downlink on USB).
+    struct UsbOut(std::sync::Arc<rusb::DeviceHandle<rusb::Context>>);
+
+    impl std::io::Write for UsbOut {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            self.0
+                .write_bulk(USB_EP_OUT, buf, Duration::from_secs(1))
+                .map_err(|e| std::io::Error::other(format!("usb bulk OUT: {e}")))
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    impl std::fmt::Debug for Usb {
+        fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+            f.write_str(&self.name)
+        }
+    }
+
+    impl Usb {
+        /// Opens the first device with `vid:pid` and claims its interface.
+        pub fn open(vid: u16, pid: u16) -> Result<Usb, SourceError> {
+            use rusb::UsbContext;
+            let usb = |e: rusb::Error| SourceError::Usb(e.to_string());
+            // Never the global context: it panics when libusb cannot start.
+            let ctx = rusb::Context::new().map_err(|e| {
+                SourceError::Usb(format!(
+                    "cannot initialise libusb ({e}); is USB available here?"
+                ))
+            })?;
+            let handle = ctx.open_device_with_vid_pid(vid, pid).ok_or_else(|| {
+                SourceError::Usb(format!(
+                    "no device {vid:04x}:{pid:04x} attached (or no permission to open it)"
+                ))
+            })?;
+            let _ = handle.set_auto_detach_kernel_driver(true);
+            handle.claim_interface(USB_INTERFACE).map_err(usb)?;
+            Ok(Usb {
+                handle: std::sync::Arc::new(handle),
+                name: format!("usb {vid:04x}:{pid:04x}"),
+            })
+        }
+    }
+
+    impl Source for Usb {
+        fn read(&mut self, buf: &mut [u8]) -> Result<usize, SourceError> {
+            // A multiple of the high-speed packet size, so libusb never overflows.
+            let n = (buf.len() / 512 * 512).max(512).min(buf.len());
+            loop {
+                match self
+                    .handle
+                    .read_bulk(USB_EP_IN, &mut buf[..n], Duration::from_secs(1))
+                {
+                    Ok(k) => return Ok(k),
+                    Err(rusb::Error::Timeout) => continue,
+                    Err(rusb::Error::NoDevice) => return Ok(0),
+                    Err(e) => return Err(SourceError::Usb(e.to_string())),
+                }
+            }
+        }
+        fn name(&self) -> String {
+            self.name.clone()
+        }
+        fn downlink(&self) -> Option<Result<Box<dyn std::io::Write + Send>, SourceError>> {
+            Some(Ok(Box::new(UsbOut(self.handle.clone()))))
+        }
+    }
 }

@@ -6,7 +6,9 @@ pub mod flow;
 pub mod movie;
 pub mod netcdf;
 pub mod plot;
+#[cfg(feature = "sim")]
 pub mod summary;
+#[cfg(feature = "sim")]
 pub mod table;
 
 use std::path::Path;

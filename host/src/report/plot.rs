@@ -8,7 +8,6 @@ use std::sync::Once;
 use plotters::prelude::*;
 use plotters::style::{register_font, FontStyle};
 
-use crate::bench::speed::SpeedRow;
 use crate::metrics::ProfileRow;
 use spiv_formats::{State, Vector};
 
@@ -262,52 +261,6 @@ pub fn vectors(
         )?;
     }
     root.present().map_err(|x| e(x.to_string()))
-}
-
-/// The speed-against-error chart of `spiv bench speed` (log time, error).
-pub fn pareto(path: &Path, rows: &[SpeedRow]) -> Result<(), PlotError> {
-    pareto_inner(path, rows).map_err(err(path))
-}
-
-fn pareto_inner(path: &Path, rows: &[SpeedRow]) -> Result<(), String> {
-    ensure_font();
-    let root = BitMapBackend::new(path, (760, 520)).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| e.to_string())?;
-    let tmax = rows.iter().map(|r| r.ms).fold(1.0, f64::max) * 1.3;
-    let emax = rows.iter().map(|r| r.rmse).fold(0.1, f64::max) * 1.2;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(
-            "speed against error (paper-linear, 400x250)",
-            ("sans-serif", 18),
-        )
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(55)
-        .build_cartesian_2d((1.0..tmax).log_scale(), 0.0..emax)
-        .map_err(|e| e.to_string())?;
-    chart
-        .configure_mesh()
-        .x_desc("ms per frame pair (log)")
-        .y_desc("RMSE of u(y), px per pair")
-        .draw()
-        .map_err(|e| e.to_string())?;
-    for r in rows {
-        chart
-            .draw_series(std::iter::once(Circle::new(
-                (r.ms.max(1.0), r.rmse),
-                5,
-                RED.filled(),
-            )))
-            .map_err(|e| e.to_string())?;
-        chart
-            .draw_series(std::iter::once(Text::new(
-                r.name.split(',').next().unwrap_or("").to_string(),
-                (r.ms.max(1.0) * 1.05, r.rmse),
-                ("sans-serif", 11),
-            )))
-            .map_err(|e| e.to_string())?;
-    }
-    root.present().map_err(|e| e.to_string())
 }
 
 plotters::style::colors::colormaps::def_linear_colormap! {

@@ -1,27 +1,30 @@
 //! The live loop's sidecar state over owned buffers: the static-light model
-//! ([`spiv_core::light`]) and event ring ([`spiv_core::rungs`]) a stream of
+//! ([`crate::light`]) and event ring ([`crate::rungs`]) a stream of
 //! planes goes through ([`PairMaker`]), the ask the host sent last as the
 //! sidecar heard it ([`AskEar`]), and each pair made as that ask says —
 //! in memory ([`CorePair`]) or sent up a wire ([`PairSender`]).
 //!
 //! `spiv flow` runs this in process (a sidecar without a wire) and the
-//! simulated sidecar ([`crate::ladder`]) runs it between planes, so the host
+//! simulated sidecar (`spiv_firmware_sim::ladder`) runs it between planes, so the host
 //! measures the same frames either way.
 
-use spiv_core::buffers::{FlowBuf, LightBuf};
-use spiv_core::light::{Event, Light, LightClock};
-use spiv_core::plane::PlaneView;
-use spiv_core::rungs::{
+use std::vec;
+use std::vec::Vec;
+
+use crate::buffers::{FlowBuf, LightBuf};
+use crate::light::{Event, Light, LightClock};
+use crate::plane::PlaneView;
+use crate::rungs::{
     pair_plan, rung_frames, send_pair, EventRing, PairCost, PairPlan, PairScratch, RingCursor,
     Rungs,
 };
-use spiv_core::warp::Flow;
-use spiv_core::wire::ask::{AskAssembly, AskProgress, AskView, Part, MAX_FLOW_NODES};
-use spiv_core::wire::codec::Lossy;
-use spiv_core::wire::pair::NO_ASK;
-use spiv_core::wire::sender::{tile_rows, Link, SendBuffers, SendError, Sender};
-use spiv_core::wire::{Decoder, DecoderState, Kind, WireError, MAX_ENCODED, MAX_PAYLOAD};
-use spiv_core::Error;
+use crate::warp::Flow;
+use crate::wire::ask::{AskAssembly, AskProgress, AskView, Part, MAX_FLOW_NODES};
+use crate::wire::codec::Lossy;
+use crate::wire::pair::NO_ASK;
+use crate::wire::sender::{tile_rows, Link, SendBuffers, SendError, Sender};
+use crate::wire::{Decoder, DecoderState, Kind, WireError, MAX_ENCODED, MAX_PAYLOAD};
+use crate::Error;
 
 /// Pixel-ticks of the ring's depth per event it holds: a quarter of an
 /// event per pixel and tick on average (the scenes of `spiv bench flows`
@@ -61,10 +64,10 @@ pub struct PairMaker {
 impl PairMaker {
     /// A maker for planes of `width × height` stored pixels, the first
     /// plane tick `first`, its ring `depth` ticks deep
-    /// ([`spiv_core::rungs::ring_depth`]).
+    /// ([`crate::rungs::ring_depth`]).
     pub fn new((width, height): (u16, u16), first: u32, depth: usize) -> Result<PairMaker, Error> {
         let px = usize::from(width) * usize::from(height);
-        if px as u64 >= u64::from(spiv_core::rungs::MAX_PIXELS) {
+        if px as u64 >= u64::from(crate::rungs::MAX_PIXELS) {
             return Err(Error::BadDimensions);
         }
         let mut light = LightBuf::new(px);
@@ -196,7 +199,7 @@ impl PairMaker {
 
     /// Sends the pair [`PairMaker::make`] makes, numbered `pair` and
     /// reported over `dt` ticks, through `out`'s stream into `link`
-    /// ([`spiv_core::rungs::send_pair`]): what it cost.
+    /// ([`crate::rungs::send_pair`]): what it cost.
     pub fn send<L: Link>(
         &mut self,
         (pair, mid, dt): (u32, u32, u16),
@@ -273,7 +276,7 @@ impl PairSender {
     }
 
     /// What the stream sent so far.
-    pub fn sent(&self) -> spiv_core::wire::sender::Sent {
+    pub fn sent(&self) -> crate::wire::sender::Sent {
         self.sender.sent
     }
 }
@@ -290,7 +293,7 @@ pub struct CorePair {
     /// without rung frames).
     pub from_pair: u32,
     /// Each rung: its separation (ticks) and frames A and B (whole spikes,
-    /// in 1/64 spike: [`spiv_core::rungs::rung_frames`]; stored rows).
+    /// in 1/64 spike: [`crate::rungs::rung_frames`]; stored rows).
     pub rungs: Vec<(u16, [Vec<i16>; 2])>,
     /// Its events, if it carries them.
     pub events: Option<CoreEvents>,
