@@ -6,7 +6,8 @@
 //! Run by the fuzz target of the same name (`fuzz/fuzz_targets`) and, over
 //! the committed corpus, by `tests/tests/fuzz_corpora.rs`.
 
-use spiv_host::receive::{receive, Event, FrameLimit, Source, SourceError};
+use spiv_host::receive::{receive, Event, FrameLimit, Source};
+use spiv_host::Error;
 
 /// Bytes handed out in chunks of 1..=64 sizes drawn from the input's head.
 struct Chunks<'a> {
@@ -16,7 +17,7 @@ struct Chunks<'a> {
 }
 
 impl Source for Chunks<'_> {
-    fn read(&mut self, buf: &mut [u8]) -> Result<usize, SourceError> {
+    fn read(&mut self, buf: &mut [u8]) -> Result<usize, Error> {
         let want = self
             .sizes
             .get(self.i % self.sizes.len().max(1))
@@ -44,7 +45,7 @@ pub fn run(input: &[u8]) {
         height: 128,
     };
     let mut frames = 0u64;
-    let report = receive::<SourceError>(
+    let report = receive::<Error>(
         &mut src,
         limit,
         |e| {

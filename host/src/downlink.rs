@@ -17,14 +17,7 @@ use spiv_formats::vectors::Vector;
 
 use crate::predict::{motion_grid, predicts, MotionModel, Prediction};
 use crate::receive::ReceivedFrame;
-
-/// Errors of the downlink.
-#[derive(Debug, thiserror::Error)]
-pub enum DownlinkError {
-    /// Framing (a control that does not fit a message).
-    #[error("control: {0}")]
-    Wire(#[from] spiv_core::wire::WireError),
-}
+use crate::Error;
 
 /// What the host sent.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
@@ -101,13 +94,11 @@ impl Downlink {
     /// Sends `control` for the pairs after `pair` (a frame of it gives the
     /// sensor size). A link that refuses is counted, not fatal: the
     /// sidecar runs on without the prediction.
-    pub fn send(
-        &mut self,
-        pair: &[ReceivedFrame; 2],
-        control: &Control,
-    ) -> Result<(), DownlinkError> {
+    pub fn send(&mut self, pair: &[ReceivedFrame; 2], control: &Control) -> Result<(), Error> {
         let a = &pair[0];
-        let m = control.message(a.end.pair.wrapping_add(1), self.seq, a.width, a.height)?;
+        let m = control
+            .message(a.end.pair.wrapping_add(1), self.seq, a.width, a.height)
+            .map_err(Error::control)?;
         self.seq = self.seq.wrapping_add(1);
         match self.out.write_all(&m).and_then(|()| self.out.flush()) {
             Ok(()) => {

@@ -7,7 +7,8 @@
 use spiv_core::Params;
 use spiv_formats::vectors::Vector;
 
-use crate::reconstruct::{Planes, ReconstructError};
+use crate::reconstruct::Planes;
+use crate::Error;
 
 /// The default blur budget, px: a particle's image may move this far
 /// within its window (`spiv bench speed`: 6 and 16 px measured worse on
@@ -29,7 +30,7 @@ pub fn adaptive_banded(
     k: u64,
     core: &Params,
     caps: &[u16],
-) -> Result<(Vec<u16>, spiv_core::label::LabelStats), ReconstructError> {
+) -> Result<(Vec<u16>, spiv_core::label::LabelStats), Error> {
     let (w, h) = (planes.width, planes.height);
     let mut ring = planes.ring(k, core.n_max)?;
     let tick = ring.tick;

@@ -38,51 +38,19 @@ use crate::dwell::{adaptive_banded, caps_for};
 use crate::motion::control::{Ask, AskLink, Delivery, Heard};
 use crate::motion::ladder::{self, LadderSettings, Rung};
 use crate::motion::make::pair_input;
-use crate::motion::uplink::{PairBytes, PairReader, Uplink, UplinkError};
+use crate::motion::uplink::{PairBytes, PairReader, Uplink};
 use crate::piv::validate::median;
 use crate::piv::{piv, to_f32, Field, PivError, Settings, NO_SIGMA};
 use crate::receive::assemble::FrameLimit;
-use crate::reconstruct::{frame_from_planes, FileOptions, Planes, ReconstructError};
+use crate::reconstruct::{frame_from_planes, FileOptions, Planes};
 use crate::units::Calibration;
+use crate::Error;
 use spiv_core::pairs::{CorePair, PairMaker, LIGHT_TRAIN};
 
 /// The TFP window of the dwell cap's bootstrap pair, ticks.
 pub const BOOTSTRAP_WINDOW: u16 = 8;
 
 pub use crate::dwell::DWELL_CAP;
-
-/// Everything `spiv flow` can refuse.
-#[derive(Debug, thiserror::Error)]
-pub enum FlowError {
-    /// Reading the recording.
-    #[error(transparent)]
-    Format(#[from] FormatError),
-    /// Making a frame.
-    #[error(transparent)]
-    Reconstruct(#[from] ReconstructError),
-    /// PIV.
-    #[error(transparent)]
-    Piv(#[from] PivError),
-    /// A schedule the recording cannot hold, or a bad option.
-    #[error("{0}")]
-    Schedule(String),
-    /// The core refused (a plane of the wrong size, a sensor too large
-    /// for its event ring).
-    #[error("core: {0}")]
-    Core(#[from] spiv_core::Error),
-    /// Coding a pair's frames for the wire ([`FlowOptions::wire_bytes`]).
-    #[error("wire: {0}")]
-    Wire(#[from] spiv_core::wire::WireError),
-}
-
-impl From<UplinkError> for FlowError {
-    fn from(e: UplinkError) -> Self {
-        match e {
-            UplinkError::Core(c) => FlowError::Core(c),
-            UplinkError::Wire(w) => FlowError::Wire(w),
-        }
-    }
-}
 
 /// A spike recording, opened: its size and where its planes come from.
 #[derive(Debug)]
@@ -118,7 +86,7 @@ impl Recording {
     /// the two must agree) or a `.npz` capture (by extension). A missing
     /// file, and a file named or starting like an image, text or another
     /// known format, is refused before any size is asked for.
-    pub fn open(path: &Path, opts: &FileOptions) -> Result<Recording, FlowError> {
+    pub fn open(path: &Path, opts: &FileOptions) -> Result<Recording, Error> {
         not_a_recording(path)?;
         let is_npz = path
             .extension()
@@ -183,12 +151,12 @@ impl Recording {
 
     /// The planes a window of `window` ticks centred on `k` needs (clipped
     /// at the recording's ends).
-    pub fn around(&self, k: u64, window: u16) -> Result<Planes, FlowError> {
+    pub fn around(&self, k: u64, window: u16) -> Result<Planes, Error> {
         self.stretch(k.saturating_sub(u64::from(window / 2)), u64::from(window))
     }
 
     /// The planes `first..first + n` (clipped at the recording's end).
-    pub fn stretch(&self, first: u64, n: u64) -> Result<Planes, FlowError> {
+    pub fn stretch(&self, first: u64, n: u64) -> Result<Planes, Error> {
         let n = n.min(self.planes.saturating_sub(first));
         let data = match &self.source {
             Source::Dat(r) => {
@@ -470,22 +438,22 @@ impl Default for FlowRequest {
 impl FlowRequest {
     /// The run's options over `rec` (read from `input`, named in the
     /// messages).
-    pub fn options(&self, rec: &Recording, input: &Path) -> Result<FlowOptions, FlowError> {
+    pub fn options(&self, rec: &Recording, input: &Path) -> Result<FlowOptions, Error> {
         let dt = self.dt.or(rec.meta_dt).ok_or_else(|| {
-            FlowError::Schedule(format!(
+            Error::Schedule(format!(
                 "{}: give --dt (ticks between the frames of a pair): no scene.json beside it names one",
                 input.display()
             ))
         })?;
         if dt == 0 || u64::from(dt) >= rec.planes {
-            return Err(FlowError::Schedule(format!(
+            return Err(Error::Schedule(format!(
                 "--dt {dt}: expected 1..{} (the recording has {} planes)",
                 rec.planes, rec.planes
             )));
         }
         if let Some(c) = self.dwell_cap {
             if !(c.is_finite() && c > 0.0 && c <= 1000.0) {
-                return Err(FlowError::Schedule(format!(
+                return Err(Error::Schedule(format!(
                     "--dwell-cap {c}: expected px in (0, 1000] or off"
                 )));
             }
@@ -510,11 +478,11 @@ impl FlowRequest {
         }
         o.dense = self.dense;
         o.calibration = Calibration::resolve(self.pixel_mm, self.tick_hz, rec.meta_calibration)
-            .map_err(|e| FlowError::Schedule(e.to_string()))?;
+            .map_err(|e| Error::Schedule(e.to_string()))?;
         if let Some(m) = &self.mask {
             let want = (usize::from(rec.height), usize::from(rec.crop_width));
             if m.dim() != want {
-                return Err(FlowError::Schedule(format!(
+                return Err(Error::Schedule(format!(
                     "mask is {}x{} px but the frames are {}x{} px",
                     m.ncols(),
                     m.nrows(),
@@ -527,7 +495,7 @@ impl FlowRequest {
         o.ladder.mask = self.mask.clone();
         o.pairs = self.pairs.clone();
         if self.segment == Some(0) {
-            return Err(FlowError::Schedule(
+            return Err(Error::Schedule(
                 "segment 0: expected at least 1 pair per loop".into(),
             ));
         }
@@ -577,7 +545,7 @@ fn make_pair(
     (i, mid, dt): (usize, u64, u32),
     heard: &Heard,
     cfg: &LadderSettings,
-) -> Result<(CorePair, Option<PairBytes>), FlowError> {
+) -> Result<(CorePair, Option<PairBytes>), Error> {
     let reach = u16::try_from(cfg.bootstrap_reach).unwrap_or(u16::MAX);
     let ask = heard.asked();
     Ok(match wire {
@@ -592,7 +560,7 @@ fn make_pair(
 
 /// The pair that `messages` (one pair's, in order) carry, as `reader`
 /// reads them from the stream.
-fn read_back(reader: &mut PairReader, messages: &[Vec<u8>]) -> Result<CorePair, FlowError> {
+fn read_back(reader: &mut PairReader, messages: &[Vec<u8>]) -> Result<CorePair, Error> {
     let mut rx = vec![0u8; spiv_core::wire::MAX_ENCODED];
     let mut dec = spiv_core::wire::Decoder::new(&mut rx);
     let mut got = None;
@@ -604,7 +572,7 @@ fn read_back(reader: &mut PairReader, messages: &[Vec<u8>]) -> Result<CorePair, 
             }
         }
     }
-    got.ok_or(FlowError::Wire(spiv_core::wire::WireError::Payload))
+    got.ok_or(Error::from(spiv_core::wire::WireError::Payload))
 }
 
 /// Makes every node of `f` whose centre pixel `mask` covers invalid
@@ -902,7 +870,7 @@ pub fn run_flow(
     rec: &Recording,
     opts: &FlowOptions,
     progress: impl FnMut(usize, usize) + Send,
-) -> Result<FlowOutcome, FlowError> {
+) -> Result<FlowOutcome, Error> {
     run_flow_until(rec, opts, progress, &AtomicBool::new(false))
 }
 
@@ -916,7 +884,7 @@ pub fn run_flow_until(
     opts: &FlowOptions,
     progress: impl FnMut(usize, usize) + Send,
     stop: &AtomicBool,
-) -> Result<FlowOutcome, FlowError> {
+) -> Result<FlowOutcome, Error> {
     use rayon::prelude::*;
     let ticks = check(rec, opts)?;
     let core = Params {
@@ -937,7 +905,7 @@ pub fn run_flow_until(
             p(n, total);
         }
     };
-    let chains: Vec<Result<Chain, FlowError>> = match (opts.method, opts.segment) {
+    let chains: Vec<Result<Chain, Error>> = match (opts.method, opts.segment) {
         (Method::Ladder, None) => vec![ladder_loop(rec, opts, &ticks, &tell, stop)],
         (Method::Ladder, Some(n)) => ticks
             .par_chunks(n.max(1))
@@ -990,7 +958,7 @@ pub const GLARE_RADIUS: usize = 4;
 /// each pixel's spikes per tick over [`GLARE_TICKS`] ticks, against
 /// [`GLARE_FACTOR`] × the median pixel's and [`GLARE_MIN_RATE`], where
 /// the bright pixels are extended ([`GLARE_RADIUS`]).
-pub fn glare(rec: &Recording, k: u64) -> Result<Vec<bool>, FlowError> {
+pub fn glare(rec: &Recording, k: u64) -> Result<Vec<bool>, Error> {
     let p = rec.around(k, GLARE_TICKS)?;
     let (w, h) = (usize::from(p.width), usize::from(p.height));
     let cw = usize::from(p.crop_width);
@@ -1103,7 +1071,7 @@ fn measure_chain(
     chain: &[u64],
     tell: &(impl Fn() + Sync),
     stop: &AtomicBool,
-) -> Result<Chain, FlowError> {
+) -> Result<Chain, Error> {
     let mut prediction: Option<Field> = None;
     let mut out = Chain {
         pairs: Vec::with_capacity(chain.len()),
@@ -1162,7 +1130,7 @@ fn ladder_loop(
     seg: &[u64],
     tell: &(impl Fn() + Sync),
     stop: &AtomicBool,
-) -> Result<Chain, FlowError> {
+) -> Result<Chain, Error> {
     let cfg = &opts.ladder;
     let dt = u64::from(opts.dt);
     let every = u64::from(opts.every.max(1));
@@ -1191,14 +1159,14 @@ fn ladder_loop(
     let mut wire = opts
         .wire_bytes
         .then(|| {
-            Ok::<_, FlowError>((
+            Ok::<_, Error>((
                 Uplink::new((rec.width, rec.height))?,
                 PairReader::new(FrameLimit::default()),
             ))
         })
         .transpose()?;
     if end > u64::from(u32::MAX) {
-        return Err(FlowError::Schedule(format!(
+        return Err(Error::Schedule(format!(
             "{end} planes: the core counts ticks in 32 bits"
         )));
     }
@@ -1251,27 +1219,27 @@ fn ladder_loop(
 }
 
 /// The pairs' first ticks, once the options are known to fit `rec`.
-fn check(rec: &Recording, opts: &FlowOptions) -> Result<Vec<u64>, FlowError> {
+fn check(rec: &Recording, opts: &FlowOptions) -> Result<Vec<u64>, Error> {
     if opts.method == Method::Mc {
-        return Err(FlowError::Schedule(
+        return Err(Error::Schedule(
             "method mc is the sidecar's frames along the host's motion over a link (spiv-firmware-sim, spiv run); spiv flow's motion-compensated pairs are `ladder`, the default".into(),
         ));
     }
     if !(1..=255).contains(&opts.window) {
-        return Err(FlowError::Schedule(format!(
+        return Err(Error::Schedule(format!(
             "window {}: expected 1..=255 ticks",
             opts.window
         )));
     }
     if opts.dt == 0 || opts.every < opts.dt {
-        return Err(FlowError::Schedule(format!(
+        return Err(Error::Schedule(format!(
             "pairs every {} ticks, {} apart: dt must be at least 1 and every at least dt",
             opts.every, opts.dt
         )));
     }
     let ticks = opts.pair_ticks();
     if ticks.is_empty() {
-        return Err(FlowError::Schedule(format!(
+        return Err(Error::Schedule(format!(
             "no pair fits: {} planes, first frame at {}, frames {} ticks apart (end {})",
             rec.planes, opts.start, opts.dt, opts.end
         )));
@@ -1279,13 +1247,13 @@ fn check(rec: &Recording, opts: &FlowOptions) -> Result<Vec<u64>, FlowError> {
     match &opts.pairs {
         None => Ok(ticks),
         Some(r) if r.start < r.end && r.end <= ticks.len() => Ok(ticks[r.clone()].to_vec()),
-        Some(r) if r.start >= r.end => Err(FlowError::Schedule(format!(
+        Some(r) if r.start >= r.end => Err(Error::Schedule(format!(
             "pairs {}..{}: an empty range (the first pair, then one past the last; the schedule has pairs 0..{})",
             r.start,
             r.end,
             ticks.len()
         ))),
-        Some(r) => Err(FlowError::Schedule(format!(
+        Some(r) => Err(Error::Schedule(format!(
             "pairs {}..{}: the schedule has pairs 0..{}",
             r.start,
             r.end,
@@ -1304,7 +1272,7 @@ fn capped_pair(
     core: &Params,
     budget: f64,
     prediction: Option<Field>,
-) -> Result<Measured, FlowError> {
+) -> Result<Measured, Error> {
     let (pred, bootstrapped) = match prediction {
         Some(p) => (p, false),
         None => {
@@ -1345,7 +1313,7 @@ fn plain_pair(
     opts: &FlowOptions,
     core: &Params,
     method: Method,
-) -> Result<Measured, FlowError> {
+) -> Result<Measured, Error> {
     let (frames, lost) = frames(rec, ticks, method, opts.window, core)?;
     let field = piv(&frames[0], &frames[1], opts.mask.as_ref(), &opts.piv)?;
     Ok(Measured {
@@ -1370,7 +1338,7 @@ fn frames(
     method: Method,
     n: u16,
     core: &Params,
-) -> Result<([Array2<f32>; 2], LabelLoss), FlowError> {
+) -> Result<([Array2<f32>; 2], LabelLoss), Error> {
     let (w, h) = (usize::from(rec.crop_width), usize::from(rec.height));
     let mut out = [Array2::zeros((0, 0)), Array2::zeros((0, 0))];
     let mut lost = LabelLoss::default();

@@ -14,12 +14,13 @@
 //! | [`motion`] | the time ladder and the dense ensemble: a pair's 2-D flow from the spikes around it, with its uncertainty |
 //! | [`live`] | the live closed loop: frames from a sidecar, PIV on each pair, the motion sent back |
 //! | [`simulate`] | a simulation as a user asks for it, its sizes bounded |
+//! | [`error`] | the crate's one error type, [`Error`] |
 //! | [`units`] | a recording's calibration: px per pair to m/s |
 //! | [`predict`] | the prediction of motion-compensated frames: a field as row velocities, refined in the core, and the compensated frame |
 //! | [`pipeline`] | the main job (`spiv run`): scene → both cameras → sidecar → PIV → metrics |
 //! | [`metrics`] | the paper's row-profile RMAE / RMSE and confidence intervals |
 //! | [`report`] | what a run tells its user: tables, `summary.json`, plots |
-//! | [`bench`] | the benchmarks' experiments: speed against error, the sidecar link |
+//! | [`bench`](mod@bench) | the benchmarks' experiments: speed against error, the sidecar link |
 //!
 //! `link`, `simulate`, `pipeline` and `bench`, and the run report's
 //! `report::summary` and `report::table`, run the simulated camera: they
@@ -36,6 +37,7 @@ pub mod baseline;
 pub mod bench;
 pub mod downlink;
 pub mod dwell;
+pub mod error;
 pub mod flow;
 #[cfg(feature = "sim")]
 pub mod link;
@@ -53,3 +55,5 @@ pub mod report;
 #[cfg(feature = "sim")]
 pub mod simulate;
 pub mod units;
+
+pub use error::Error;

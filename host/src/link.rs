@@ -5,27 +5,12 @@
 
 use spiv_core::wire::Encoding;
 use spiv_core::Method;
-use spiv_firmware_sim::firmware::{run_on_planes, Config, Control, FirmwareError, SentFrame};
+use spiv_firmware_sim::firmware::{run_on_planes, Config, Control, SentFrame};
 use spiv_formats::vectors::Vector;
 
-use crate::piv::{piv, PivError, Settings};
-use crate::receive::{
-    receive, upright_f32, Event, FrameLimit, ReceivedFrame, Report, Source, SourceError,
-};
-
-/// Errors of an in-process link run.
-#[derive(Debug, thiserror::Error)]
-pub enum LinkError {
-    /// The firmware.
-    #[error(transparent)]
-    Firmware(#[from] FirmwareError),
-    /// Reading (cannot happen from memory, but the trait says so).
-    #[error(transparent)]
-    Source(#[from] SourceError),
-    /// PIV.
-    #[error(transparent)]
-    Piv(#[from] PivError),
-}
+use crate::piv::{piv, Settings};
+use crate::receive::{receive, upright_f32, Event, FrameLimit, ReceivedFrame, Report, Source};
+use crate::Error;
 
 /// Bytes in memory as a [`Source`].
 #[derive(Debug)]
@@ -39,9 +24,9 @@ impl Memory {
 }
 
 impl Source for Memory {
-    fn read(&mut self, buf: &mut [u8]) -> Result<usize, SourceError> {
+    fn read(&mut self, buf: &mut [u8]) -> Result<usize, Error> {
         use std::io::Read;
-        self.0.read(buf).map_err(|source| SourceError::Io {
+        self.0.read(buf).map_err(|source| Error::Io {
             what: "memory".into(),
             source,
         })
@@ -74,7 +59,7 @@ pub fn transfer(
     height: u16,
     cfg: Config,
     caps: Vec<u16>,
-) -> Result<Transfer, LinkError> {
+) -> Result<Transfer, Error> {
     let control = Control {
         caps,
         ..Control::default()
@@ -90,13 +75,13 @@ pub fn transfer_with(
     height: u16,
     cfg: Config,
     control: Control,
-) -> Result<Transfer, LinkError> {
+) -> Result<Transfer, Error> {
     let mut fw = run_on_planes(planes, width, height, cfg, control, Vec::new(), true)?;
     let counters = fw.counters();
     let sent = fw.keep.take().unwrap_or_default();
     let bytes = fw.into_link();
     let mut pairs = Vec::new();
-    let report = receive::<LinkError>(
+    let report = receive::<Error>(
         &mut Memory::new(bytes),
         FrameLimit::default(),
         |e| {
@@ -117,10 +102,7 @@ pub fn transfer_with(
 }
 
 /// PIV on every pair.
-pub fn piv_pairs(
-    pairs: &[[ReceivedFrame; 2]],
-    s: &Settings,
-) -> Result<Vec<Vec<Vector>>, LinkError> {
+pub fn piv_pairs(pairs: &[[ReceivedFrame; 2]], s: &Settings) -> Result<Vec<Vec<Vector>>, Error> {
     use rayon::prelude::*;
     pairs
         .par_iter()
@@ -144,7 +126,7 @@ pub fn mc_transfer(
     field: &[Vector],
     dt: f64,
     mc_piv: &Settings,
-) -> Result<Option<(Control, Transfer)>, LinkError> {
+) -> Result<Option<(Control, Transfer)>, Error> {
     use crate::predict::{motion_grid, predicts, MotionModel, ROUNDS};
     if !predicts(field) {
         return Ok(None);
@@ -183,7 +165,7 @@ pub fn dwell_caps(
     tfp_window: u16,
     budget: f64,
     s: &Settings,
-) -> Result<(Vec<u16>, Transfer), LinkError> {
+) -> Result<(Vec<u16>, Transfer), Error> {
     let (field, t) = tfp_field(planes, width, height, base, tfp_window, s)?;
     if field.is_empty() {
         return Ok((Vec::new(), t));
@@ -208,7 +190,7 @@ pub fn tfp_field(
     base: &Config,
     tfp_window: u16,
     s: &Settings,
-) -> Result<(Vec<Vector>, Transfer), LinkError> {
+) -> Result<(Vec<Vector>, Transfer), Error> {
     let mut cfg = Config {
         method: Method::Tfp,
         tfp_window,

@@ -12,40 +12,15 @@ use spiv_core::wire::pair::PairHead;
 use spiv_formats::image::write_levels;
 use spiv_formats::vectors::{write_vectors, write_vectors_uncertain};
 
-use crate::downlink::{control_for, Downlink, DownlinkError, DownlinkReport};
+use crate::downlink::{control_for, Downlink, DownlinkReport};
 use crate::motion::control::Ask;
 use crate::motion::ladder::{self, LadderSettings, Measurement};
 use crate::motion::make::pair_input;
 use crate::piv::{piv, Field, PivError, Settings};
-use crate::receive::source::{Source, SourceError};
+use crate::receive::source::Source;
 use crate::receive::{receive, Event, FrameLimit, ReceivedFrame, Report};
 use crate::receive::{receiver_settings, upright_f32};
-
-/// Why the live loop stopped.
-#[derive(Debug, thiserror::Error)]
-pub enum LiveError {
-    /// The source of the messages.
-    #[error(transparent)]
-    Source(#[from] SourceError),
-    /// PIV of a pair.
-    #[error(transparent)]
-    Piv(#[from] PivError),
-    /// A control message could not be made or sent.
-    #[error(transparent)]
-    Downlink(#[from] DownlinkError),
-    /// Writing a frame or the vectors.
-    #[error(transparent)]
-    Format(#[from] spiv_formats::FormatError),
-    /// The control messages have nowhere to go.
-    #[error("control: {0}")]
-    Control(String),
-    /// Bytes arrived but none of them made a message.
-    #[error("no valid message in the stream (not spiv wire format?)")]
-    NotWire,
-    /// An ask the wire cannot carry.
-    #[error("ask: {0}")]
-    Ask(#[from] spiv_core::wire::WireError),
-}
+use crate::Error;
 
 /// What the loop does with what it receives.
 #[derive(Debug, Clone, PartialEq)]
@@ -82,7 +57,7 @@ pub struct LiveReport {
 /// Where the closed loop's control messages go: into `path` (a file or a
 /// FIFO that `spiv-firmware-sim --control` reads), or back on `source`'s
 /// own link (TCP, USB OUT) when `path` is `None`.
-pub fn open_downlink(source: &dyn Source, path: Option<&Path>) -> Result<Downlink, LiveError> {
+pub fn open_downlink(source: &dyn Source, path: Option<&Path>) -> Result<Downlink, Error> {
     match path {
         Some(path) => {
             let f = std::fs::OpenOptions::new()
@@ -90,12 +65,12 @@ pub fn open_downlink(source: &dyn Source, path: Option<&Path>) -> Result<Downlin
                 .create(true)
                 .truncate(true)
                 .open(path)
-                .map_err(|e| LiveError::Control(format!("{}: {e}", path.display())))?;
+                .map_err(|e| Error::io(format!("control: {}", path.display()), e))?;
             Ok(Downlink::new(Box::new(f)))
         }
         None => match source.downlink() {
             Some(out) => Ok(Downlink::new(out?)),
-            None => Err(LiveError::Control(format!(
+            None => Err(Error::Control(format!(
                 "{} has no way back to the sidecar; give a path for the control messages",
                 source.name()
             ))),
@@ -113,7 +88,7 @@ pub fn run_live(
     opts: &LiveOptions,
     mut downlink: Option<Downlink>,
     progress: impl FnMut(&Report),
-) -> Result<LiveReport, LiveError> {
+) -> Result<LiveReport, Error> {
     let core = spiv_core::Params::default();
     if let Some(d) = &opts.out {
         std::fs::create_dir_all(d).map_err(spiv_formats::io_err(d))?;
@@ -128,7 +103,7 @@ pub fn run_live(
     };
     let mut vectors = 0usize;
     let mut ladder = LadderHost::new(opts.ladder.clone());
-    let received = receive::<LiveError>(
+    let received = receive::<Error>(
         source,
         opts.max_frame,
         |e| {
@@ -148,7 +123,7 @@ pub fn run_live(
                     vectors += v.len();
                     if let Some(d) = downlink.as_mut() {
                         let next = head.pair.wrapping_add(1);
-                        let messages = ask.messages(next, pair.size, true)?;
+                        let messages = ask.messages(next, pair.size, true).map_err(Error::ask)?;
                         ladder.sent(next, &ask);
                         d.send_ask(&messages, ask.warm());
                     }
@@ -183,7 +158,7 @@ pub fn run_live(
         progress,
     )?;
     if received.bytes > 0 && received.messages == 0 {
-        return Err(LiveError::NotWire);
+        return Err(Error::NotWire);
     }
     Ok(LiveReport {
         received,
@@ -266,7 +241,7 @@ impl LadderHost {
 }
 
 /// Writes a received frame as `frame_NNNNN_{a,b}.png`, upright.
-fn save_frame(dir: &Path, f: &ReceivedFrame) -> Result<(), LiveError> {
+fn save_frame(dir: &Path, f: &ReceivedFrame) -> Result<(), Error> {
     let path = dir.join(format!(
         "frame_{:05}_{}.png",
         f.end.pair,

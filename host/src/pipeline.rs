@@ -9,13 +9,12 @@ use spiv_core::Params;
 use spiv_firmware_sim::scene::SceneParams;
 use spiv_firmware_sim::simulation::{simulate_planes, Request, Simulated};
 use spiv_formats::vectors::Vector;
-use spiv_formats::FormatError;
 
 use crate::baseline;
 use crate::link::{dwell_caps, mc_transfer, transfer, transfer_with, Transfer};
 use crate::metrics::{region_error, row_profile, ProfileRow, RegionError};
-use crate::piv::{piv, to_f32, Field, PivError, Settings};
-use crate::reconstruct::ReconstructError;
+use crate::piv::{piv, to_f32, Field, Settings};
+use crate::Error;
 use spiv_core::motion::Refine;
 use spiv_core::Method;
 use spiv_firmware_sim::firmware::Config;
@@ -69,29 +68,6 @@ impl Job {
             wide: Some(s),
         }
     }
-}
-
-/// Errors of a run.
-#[derive(Debug, thiserror::Error)]
-pub enum JobError {
-    /// Simulating.
-    #[error(transparent)]
-    Format(#[from] FormatError),
-    /// Reconstructing.
-    #[error(transparent)]
-    Reconstruct(#[from] ReconstructError),
-    /// PIV.
-    #[error(transparent)]
-    Piv(#[from] PivError),
-    /// The sidecar link.
-    #[error(transparent)]
-    Link(#[from] crate::link::LinkError),
-    /// A pair did not come through the link.
-    #[error("the sidecar link delivered no {0} pair")]
-    NoPair(&'static str),
-    /// `spiv flow`.
-    #[error(transparent)]
-    Flow(#[from] crate::flow::FlowError),
 }
 
 /// The kinds of frames compared.
@@ -201,7 +177,7 @@ pub struct LinkSummary {
 }
 
 /// Runs `job`; `stage` is told the name of each stage as it starts.
-pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, JobError> {
+pub fn run(job: &Job, mut stage: impl FnMut(&str)) -> Result<Outcome, Error> {
     let t0 = std::time::Instant::now();
     stage("simulating both cameras");
     let (data, sim) = simulate_planes(&job.request)?;
@@ -245,8 +221,8 @@ fn exact(t: &Transfer) -> bool {
 }
 
 /// The first pair `t` received, upright; `what` names it in the error.
-fn upright(t: &Transfer, what: &'static str) -> Result<[Vec<u16>; 2], JobError> {
-    let [a, b] = t.pairs.first().ok_or(JobError::NoPair(what))?;
+fn upright(t: &Transfer, what: &'static str) -> Result<[Vec<u16>; 2], Error> {
+    let [a, b] = t.pairs.first().ok_or(Error::NoPair(what))?;
     Ok([a.upright(), b.upright()])
 }
 
@@ -258,7 +234,7 @@ fn sidecar_frames(
     job: &Job,
     sim: &Simulated,
     data: &[u8],
-) -> Result<(SpikeFrames, LinkSummary), JobError> {
+) -> Result<(SpikeFrames, LinkSummary), Error> {
     let p = &job.request.scene;
     let (w, h) = (p.width, p.height);
     let [ka, kb] = sim.meta.capture.pair;
@@ -331,7 +307,7 @@ fn compensated(
     base: Config,
     tfp: &[Vec<u16>; 2],
     adaptive: &[Vec<u16>; 2],
-) -> Result<Compensated, JobError> {
+) -> Result<Compensated, Error> {
     let p = &job.request.scene;
     let (w, h) = (p.width, p.height);
     let (wu, hu) = (usize::from(w), usize::from(h));
@@ -438,7 +414,7 @@ fn measure_pairs(
     job: &Job,
     sim: &Simulated,
     frames: SpikeFrames,
-) -> Result<(Vec<Vector>, Vec<Measured>), JobError> {
+) -> Result<(Vec<Vector>, Vec<Measured>), Error> {
     let p = &job.request.scene;
     let (w, h) = (p.width, p.height);
     let (wu, hu) = (usize::from(w), usize::from(h));

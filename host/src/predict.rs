@@ -11,7 +11,8 @@ use spiv_core::motion::{refine, Motion, Refine};
 use spiv_core::{reconstruct_compensated, Params, WorkspaceSizes};
 use spiv_formats::Vector;
 
-use crate::reconstruct::{Planes, ReconstructError};
+use crate::reconstruct::Planes;
+use crate::Error;
 
 /// Rounds of prediction for a motion-compensated pair made offline (`spiv
 /// run`, `spiv flow`, the benches): the TFP pair at the same ticks predicts
@@ -279,7 +280,7 @@ pub fn compensated_frame(
     core: &Params,
     pred: &Prediction,
     refine_cfg: Option<Refine>,
-) -> Result<(Vec<u16>, Prediction, LabelStats), ReconstructError> {
+) -> Result<(Vec<u16>, Prediction, LabelStats), Error> {
     let (w, h) = (planes.width, planes.height);
     let mut ring = planes.ring(k, core.n_max)?;
     let tick = ring.tick;

@@ -12,38 +12,8 @@ use spiv_formats::dat::{DatOptions, DatReader};
 use spiv_formats::npz::read_npz_spikes;
 use spiv_formats::FormatError;
 
+use crate::Error;
 use spiv_core::buffers::{HistoryBuf, WorkspaceBuf};
-
-/// Everything that can go wrong making a frame from a file.
-#[derive(Debug, thiserror::Error)]
-pub enum ReconstructError {
-    /// The file.
-    #[error(transparent)]
-    Format(#[from] FormatError),
-    /// The core refused.
-    #[error("{0}")]
-    Core(#[from] spiv_core::Error),
-    /// A tick past the end.
-    #[error("tick {tick} is not in the recording (planes 0..{planes})")]
-    TickOutside {
-        /// Requested.
-        tick: u64,
-        /// Planes in the file.
-        planes: u64,
-    },
-    /// A window the core cannot hold.
-    #[error("window {0} out of range (1..=255)")]
-    Window(u32),
-    /// Motion-compensated frames need a predicted motion, which one frame
-    /// alone does not have.
-    #[error(
-        "method mc needs the host's predicted motion: it runs in the sidecar's loop (`spiv-firmware-sim --method mc`, `spiv run`)"
-    )]
-    NeedsMotion,
-    /// The time ladder's frames come in pairs along a measured flow.
-    #[error("method ladder makes pairs along a measured flow, not one frame: `spiv flow` runs it")]
-    Ladder,
-}
 
 /// A reconstructed frame, upright (row 0 at the top).
 #[derive(Debug, Clone)]
@@ -97,12 +67,12 @@ pub fn frame_from_planes(
     method: Method,
     window: u16,
     p: &Params,
-) -> Result<Frame, ReconstructError> {
+) -> Result<Frame, Error> {
     let (w, h) = (planes.width, planes.height);
     let pb = usize::from(w) * usize::from(h) / 8;
     let n = (planes.data.len() / pb.max(1)) as u64;
     if at < planes.first || at >= planes.first + n {
-        return Err(ReconstructError::TickOutside {
+        return Err(Error::TickOutside {
             tick: at,
             planes: planes.first + n,
         });
@@ -114,8 +84,8 @@ pub fn frame_from_planes(
     let mut out = vec![0u16; px];
     let fs = p.full_scale;
     let stats = match method {
-        Method::Mc => return Err(ReconstructError::NeedsMotion),
-        Method::Ladder => return Err(ReconstructError::Ladder),
+        Method::Mc => return Err(Error::NeedsMotion),
+        Method::Ladder => return Err(Error::Ladder),
         Method::Tfp => {
             let mut counts = vec![0u8; px];
             tfp(&hist, k, window, fs, &mut counts, &mut out)?;
@@ -168,7 +138,7 @@ impl Ring {
 impl Planes {
     /// The planes in a ring at least `window` deep (at most the 256 the
     /// core holds: the last ones), with the ring tick of file tick `k`.
-    pub fn ring(&self, k: u64, window: u16) -> Result<Ring, ReconstructError> {
+    pub fn ring(&self, k: u64, window: u16) -> Result<Ring, Error> {
         let (w, h) = (self.width, self.height);
         let pb = usize::from(w) * usize::from(h) / 8;
         let n = self.data.len() / pb.max(1);
@@ -186,7 +156,7 @@ impl Planes {
         let tick = k
             .checked_sub(self.first + skip as u64)
             .and_then(|t| u32::try_from(t).ok())
-            .ok_or(ReconstructError::TickOutside {
+            .ok_or(Error::TickOutside {
                 tick: k,
                 planes: self.first + n as u64,
             })?;
@@ -243,9 +213,9 @@ pub fn frame_from_file(
     window: u16,
     p: &Params,
     opts: FileOptions,
-) -> Result<Frame, ReconstructError> {
+) -> Result<Frame, Error> {
     if !(1..=255).contains(&window) {
-        return Err(ReconstructError::Window(u32::from(window)));
+        return Err(Error::Window(u32::from(window)));
     }
     let is_npz = path
         .extension()
@@ -269,7 +239,7 @@ pub fn frame_from_file(
         };
         let mut r = DatReader::open(path, w, h, opts.dat)?;
         if at >= r.planes() {
-            return Err(ReconstructError::TickOutside {
+            return Err(Error::TickOutside {
                 tick: at,
                 planes: r.planes(),
             });

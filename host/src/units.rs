@@ -1,6 +1,8 @@
 //! Physical units: a recording's calibration (pixel size on the object,
 //! tick rate) turns displacements in px per pair into velocities in m/s.
 
+use crate::Error;
+
 /// Largest pixel size accepted, mm (a 1 m pixel is no camera).
 pub const MAX_PIXEL_MM: f64 = 1000.0;
 /// Largest tick rate accepted, Hz (spike cameras run at 20–40 kHz).
@@ -15,31 +17,16 @@ pub struct Calibration {
     pub tick_hz: f64,
 }
 
-/// A calibration out of range.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum UnitsError {
-    /// The pixel size.
-    #[error("pixel size {0} mm: must be finite, above 0 and at most {MAX_PIXEL_MM}")]
-    PixelSize(f64),
-    /// The tick rate.
-    #[error("tick rate {0} Hz: must be finite, above 0 and at most {MAX_TICK_HZ}")]
-    TickRate(f64),
-    /// Half a calibration: a pixel size without a tick rate, or the other
-    /// way round (the missing half is named).
-    #[error("half a calibration: {0} is missing (give both the pixel size and the tick rate, or neither)")]
-    Half(&'static str),
-}
-
 impl Calibration {
     /// A calibration of `pixel_mm` mm per pixel and `tick_hz` ticks per
     /// second, each finite, above 0 and within [`MAX_PIXEL_MM`],
     /// [`MAX_TICK_HZ`].
-    pub fn new(pixel_mm: f64, tick_hz: f64) -> Result<Calibration, UnitsError> {
+    pub fn new(pixel_mm: f64, tick_hz: f64) -> Result<Calibration, Error> {
         if !(pixel_mm > 0.0 && pixel_mm <= MAX_PIXEL_MM) {
-            return Err(UnitsError::PixelSize(pixel_mm));
+            return Err(Error::PixelSize(pixel_mm));
         }
         if !(tick_hz > 0.0 && tick_hz <= MAX_TICK_HZ) {
-            return Err(UnitsError::TickRate(tick_hz));
+            return Err(Error::TickRate(tick_hz));
         }
         Ok(Calibration { pixel_mm, tick_hz })
     }
@@ -51,18 +38,18 @@ impl Calibration {
         pixel_mm: Option<f64>,
         tick_hz: Option<f64>,
         meta: Option<Calibration>,
-    ) -> Result<Option<Calibration>, UnitsError> {
+    ) -> Result<Option<Calibration>, Error> {
         let px = pixel_mm.or(meta.map(|m| m.pixel_mm));
         let hz = tick_hz.or(meta.map(|m| m.tick_hz));
         match (px, hz) {
             (Some(p), Some(h)) => Calibration::new(p, h).map(Some),
             (Some(p), None) => {
                 Calibration::new(p, 1.0)?;
-                Err(UnitsError::Half("the tick rate (Hz)"))
+                Err(Error::Half("the tick rate (Hz)"))
             }
             (None, Some(h)) => {
                 Calibration::new(1.0, h)?;
-                Err(UnitsError::Half("the pixel size (mm)"))
+                Err(Error::Half("the pixel size (mm)"))
             }
             (None, None) => Ok(None),
         }
@@ -101,16 +88,16 @@ mod tests {
             .unwrap()
             .unwrap();
         assert_eq!((r.pixel_mm, r.tick_hz), (0.05, 20_000.0));
-        assert_eq!(
+        assert!(matches!(
             Calibration::resolve(Some(0.05), None, None),
-            Err(UnitsError::Half("the tick rate (Hz)"))
-        );
+            Err(Error::Half("the tick rate (Hz)"))
+        ));
         let e = Calibration::resolve(None, Some(20_000.0), None).unwrap_err();
         assert!(
             e.to_string().contains("the pixel size (mm) is missing"),
             "{e}"
         );
-        assert_eq!(Calibration::resolve(None, None, None), Ok(None));
+        assert!(matches!(Calibration::resolve(None, None, None), Ok(None)));
         for bad in [0.0, -1.0, f64::NAN, f64::INFINITY, 2e3] {
             assert!(Calibration::new(bad, 1.0).is_err(), "{bad}");
             assert!(

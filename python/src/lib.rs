@@ -29,12 +29,12 @@ use spiv_formats::dat::{unpack_upright, DatOptions, DatReader};
 use spiv_formats::grid::Grid;
 use spiv_formats::image::read_gray;
 use spiv_formats::{FormatError, State, Vector, MAX_FRAME_PIXELS};
-use spiv_host::flow::{FlowError, FlowRequest, MeanField, Recording};
-use spiv_host::live::{open_downlink, run_live, LiveError, LiveOptions};
+use spiv_host::flow::{FlowRequest, MeanField, Recording};
+use spiv_host::live::{open_downlink, run_live, LiveOptions};
 use spiv_host::piv::options::PivOptions;
 use spiv_host::piv::{piv as run_piv, PivError};
 use spiv_host::receive::{FrameLimit, Spec};
-use spiv_host::reconstruct::{frame_from_planes, FileOptions, Planes, ReconstructError};
+use spiv_host::reconstruct::{frame_from_planes, FileOptions, Planes};
 use spiv_host::units::Calibration;
 
 /// mimalloc instead of the system allocator, as in the `spiv` binary: PIV
@@ -80,43 +80,21 @@ impl From<FormatError> for Failure {
     }
 }
 
-impl From<ReconstructError> for Failure {
-    fn from(e: ReconstructError) -> Self {
-        match e {
-            ReconstructError::Format(f) => f.into(),
-            e => Failure::Value(e.to_string()),
-        }
-    }
-}
-
 impl From<PivError> for Failure {
     fn from(e: PivError) -> Self {
-        match e {
-            PivError::Format(f) => f.into(),
-            e => Failure::Value(e.to_string()),
-        }
+        spiv_host::Error::from(e).into()
     }
 }
 
-impl From<FlowError> for Failure {
-    fn from(e: FlowError) -> Self {
-        match e {
-            FlowError::Format(f) => f.into(),
-            FlowError::Reconstruct(r) => r.into(),
-            FlowError::Piv(p) => p.into(),
-            e => Failure::Value(e.to_string()),
-        }
-    }
-}
-
-impl From<LiveError> for Failure {
-    fn from(e: LiveError) -> Self {
-        match e {
-            LiveError::Format(f) => f.into(),
-            LiveError::Piv(p) => p.into(),
-            LiveError::Source(s) => Failure::Io(s.to_string()),
-            LiveError::Downlink(d) => Failure::Io(d.to_string()),
-            e => Failure::Value(e.to_string()),
+/// The one mapping of the host's errors to Python: the operating
+/// system's failures ([`spiv_host::Error::is_io`]) as `OSError`, every
+/// refused value as `SpivError`.
+impl From<spiv_host::Error> for Failure {
+    fn from(e: spiv_host::Error) -> Self {
+        if e.is_io() {
+            Failure::Io(e.to_string())
+        } else {
+            Failure::Value(e.to_string())
         }
     }
 }

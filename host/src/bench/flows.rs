@@ -24,10 +24,10 @@ use spiv_formats::dense::DenseField;
 use spiv_formats::{State, Vector};
 
 use crate::flow::{run_flow, FlowOptions, Recording};
-use crate::pipeline::JobError;
 use crate::piv::options::PivOptions;
 use crate::piv::{deform, piv, to_f32, Field};
 use crate::reconstruct::{frame_from_planes, Planes};
+use crate::Error;
 
 /// One family of scenes: a scene, its speed and the recording's length.
 #[derive(Debug, Clone, PartialEq)]
@@ -202,7 +202,7 @@ pub fn family_rows(
     seed: u64,
     vectors: Option<&std::path::Path>,
     dense: bool,
-) -> Result<Vec<FlowsRow>, JobError> {
+) -> Result<Vec<FlowsRow>, Error> {
     let mut p = SceneParams::new(fam.scene);
     if let Some(s) = fam.speed {
         p.top_speed = s;
@@ -220,7 +220,7 @@ pub fn family_rows(
     let user = PivOptions::default().settings()?;
     let cam = |f: &Vec<u16>| to_f32(f, w, h);
     let planes = Planes::simulated(p.width, p.height, data.clone());
-    let tfp = |k: u32| -> Result<_, JobError> {
+    let tfp = |k: u32| -> Result<_, Error> {
         let f = frame_from_planes(&planes, u64::from(k), Method::Tfp, 8, &Params::default())?;
         Ok(to_f32(&f.data, w, h))
     };
@@ -304,7 +304,7 @@ pub fn dump(
     scene: &Scene,
     dt: f64,
     out: &crate::flow::FlowOutcome,
-) -> Result<(), JobError> {
+) -> Result<(), Error> {
     use std::io::Write;
     let mut f = std::fs::OpenOptions::new()
         .create(true)

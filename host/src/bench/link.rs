@@ -26,8 +26,9 @@ use spiv_firmware_sim::firmware::Control;
 
 use crate::link::{mc_transfer, piv_pairs, tfp_field, transfer_with, Transfer};
 use crate::metrics::{region_error, row_profile};
-use crate::pipeline::{Job, JobError};
+use crate::pipeline::Job;
 use crate::piv::Settings;
+use crate::Error;
 use spiv_formats::vectors::Vector;
 
 /// What the link benchmark runs.
@@ -136,7 +137,7 @@ pub struct LinkRow {
 
 /// Runs the benchmark on the three paper scenes; `progress` is called after
 /// each scene × seed.
-pub fn link_bench(b: &LinkBench, mut progress: impl FnMut()) -> Result<Vec<LinkRow>, JobError> {
+pub fn link_bench(b: &LinkBench, mut progress: impl FnMut()) -> Result<Vec<LinkRow>, Error> {
     let scenes = [
         SceneKind::PaperLinear,
         SceneKind::PaperQuadratic,
@@ -205,7 +206,7 @@ struct Stream<'a> {
 }
 
 impl SeedRun {
-    fn new(b: &LinkBench, kind: SceneKind, seed: u64) -> Result<SeedRun, JobError> {
+    fn new(b: &LinkBench, kind: SceneKind, seed: u64) -> Result<SeedRun, Error> {
         let p = SceneParams::new(kind);
         let (w, h, dt) = (p.width, p.height, p.pair_dt);
         let job = Job::new(p.clone(), seed);
@@ -261,7 +262,7 @@ impl SeedRun {
 
     /// The stream of `frames`; `None` for motion-compensated frames when
     /// the TFP pair predicted nothing.
-    fn stream(&self, frames: LinkFrames) -> Result<Option<Stream<'_>>, JobError> {
+    fn stream(&self, frames: LinkFrames) -> Result<Option<Stream<'_>>, Error> {
         let (job, base) = (&self.job, self.base);
         let stream = match frames {
             LinkFrames::Tfp => Stream {
@@ -307,7 +308,7 @@ impl SeedRun {
     /// frames and adds bytes and the paper's metric (Tables 1–2: the u(y)
     /// profile of the valid vectors, a lost row counting as 0) to `acc`,
     /// one per M.
-    fn measure(&self, b: &LinkBench, s: &Stream<'_>, acc: &mut [Acc]) -> Result<(), JobError> {
+    fn measure(&self, b: &LinkBench, s: &Stream<'_>, acc: &mut [Acc]) -> Result<(), Error> {
         let (w, h) = self.size;
         for (&f, e) in b.every.iter().zip(acc.iter_mut()) {
             let mut cfg = s.cfg;

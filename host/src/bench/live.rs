@@ -17,7 +17,7 @@ use spiv_firmware_sim::simulation::{simulate_planes, Request};
 use super::flows::{Family, Score};
 use crate::flow::{run_flow, FlowOptions, Recording};
 use crate::motion::control::Delivery;
-use crate::pipeline::JobError;
+use crate::Error;
 
 /// Pairs whose errors count: those after the third.
 pub const SKIPPED: usize = 3;
@@ -91,7 +91,7 @@ pub fn modes(seed: u64) -> Vec<(&'static str, Delivery)> {
 }
 
 /// The rows of one family and seed, `pairs` pairs after the third.
-pub fn live_rows(fam: &Family, seed: u64, pairs: usize) -> Result<Vec<LiveRow>, JobError> {
+pub fn live_rows(fam: &Family, seed: u64, pairs: usize) -> Result<Vec<LiveRow>, Error> {
     let mut p = SceneParams::new(fam.scene);
     if let Some(s) = fam.speed {
         p.top_speed = s;

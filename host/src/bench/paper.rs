@@ -6,7 +6,8 @@ use serde::Serialize;
 use spiv_firmware_sim::scene::{SceneKind, SceneParams};
 
 use crate::metrics::{mean_ci, rmae_ratio, MeanCi};
-use crate::pipeline::{run as run_job, FrameKind, Job, JobError};
+use crate::pipeline::{run as run_job, FrameKind, Job};
+use crate::Error;
 
 /// The paper's own numbers for a profile (Li et al. 2025, Table 2): the
 /// spike camera's glare-row RMAE, and the frame/spike RMAE ratio where it
@@ -72,7 +73,7 @@ pub fn paper_bench(
     seeds: u64,
     dwell_cap: Option<f64>,
     mut progress: impl FnMut(),
-) -> Result<Vec<PaperTable>, JobError> {
+) -> Result<Vec<PaperTable>, Error> {
     let mut tables = Vec::new();
     for (kind, paper_rmae, paper_ratio) in PAPER {
         // [kind][glare rmae, glare rmse, rest rmae, rest rmse]
@@ -139,7 +140,7 @@ pub struct Blasius {
 
 /// Runs `spiv run`'s job on the Blasius scene for seeds `1..=seeds`, with
 /// the default dwell cap. `progress` is called after each run.
-pub fn blasius_bench(seeds: u64, mut progress: impl FnMut()) -> Result<Blasius, JobError> {
+pub fn blasius_bench(seeds: u64, mut progress: impl FnMut()) -> Result<Blasius, Error> {
     let mut dev = vec![Vec::new(); FrameKind::ALL.len()];
     let mut lost = vec![0usize; FrameKind::ALL.len()];
     let mut u_pair = 0.0;

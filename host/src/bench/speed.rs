@@ -13,12 +13,13 @@ use spiv_formats::vectors::Vector;
 
 use crate::link::{dwell_caps, transfer};
 use crate::metrics::{region_error, row_profile};
-use crate::pipeline::{Job, JobError};
+use crate::pipeline::Job;
 use crate::piv::{piv, to_f32, Interp, Settings};
 use crate::receive::upright_f32;
 use crate::reconstruct::{frame_from_planes, Method, Planes};
 use crate::reference::{adaptive_frame, SpikeVolume};
-use crate::report::plot::{self, PlotError};
+use crate::report::plot::{self, plot_error};
+use crate::Error;
 use plotters::prelude::*;
 
 /// One configuration: its name, wall time per frame pair and error.
@@ -37,7 +38,7 @@ pub struct SpeedRow {
 /// and the core's frames (TFP, adaptive at several window limits, dwell
 /// caps, through the sidecar and the wire, the f64 reference), each with
 /// PIV; `progress` is called after each of the 15 groups.
-pub fn speed_against_error(mut progress: impl FnMut()) -> Result<Vec<SpeedRow>, JobError> {
+pub fn speed_against_error(mut progress: impl FnMut()) -> Result<Vec<SpeedRow>, Error> {
     let b = SpeedBench::new()?;
     let mut rows: Vec<SpeedRow> = Vec::new();
     let mut push = |row: SpeedRow| {
@@ -66,7 +67,7 @@ struct SpeedBench {
 }
 
 impl SpeedBench {
-    fn new() -> Result<SpeedBench, JobError> {
+    fn new() -> Result<SpeedBench, Error> {
         let job = Job::new(SceneParams::new(SceneKind::PaperLinear), 1);
         let (data, sim) = simulate_planes(&job.request)?;
         let (w, h) = (job.request.scene.width, job.request.scene.height);
@@ -110,7 +111,7 @@ impl SpeedBench {
         a: &Array2<f32>,
         b: &Array2<f32>,
         s: &Settings,
-    ) -> Result<(f64, f64, crate::piv::Field), JobError> {
+    ) -> Result<(f64, f64, crate::piv::Field), Error> {
         let mut times = [0.0f64; 3];
         let mut field = None;
         for t in times.iter_mut() {
@@ -119,7 +120,7 @@ impl SpeedBench {
             *t = start.elapsed().as_secs_f64() * 1e3;
         }
         times.sort_by(f64::total_cmp);
-        let f = field.ok_or(JobError::NoPair("PIV"))?;
+        let f = field.ok_or(Error::NoPair("PIV"))?;
         let rmse = self.rmse(&f.vectors());
         Ok((times[1], rmse, f))
     }
@@ -132,7 +133,7 @@ impl SpeedBench {
 
     /// Both frames of the pair by the core's `m` with window `n`: the time
     /// and the two frames.
-    fn core_pair(&self, m: Method, n: u16) -> Result<(f64, Array2<f32>, Array2<f32>), JobError> {
+    fn core_pair(&self, m: Method, n: u16) -> Result<(f64, Array2<f32>, Array2<f32>), Error> {
         let t = Instant::now();
         let a = frame_from_planes(&self.planes, self.ka, m, n, &self.job.core)?;
         let b = frame_from_planes(&self.planes, self.kb, m, n, &self.job.core)?;
@@ -141,7 +142,7 @@ impl SpeedBench {
     }
 
     /// The frame camera through three PIV configurations.
-    fn frame_camera(&self, push: &mut impl FnMut(SpeedRow)) -> Result<(), JobError> {
+    fn frame_camera(&self, push: &mut impl FnMut(SpeedRow)) -> Result<(), Error> {
         let base = self.job.piv.clone();
         let cfgs = [
             ("PIV 64,32,32 B-spline", base.clone()),
@@ -176,7 +177,7 @@ impl SpeedBench {
     }
 
     /// The core's TFP and adaptive frames at several window limits.
-    fn core_frames(&self, push: &mut impl FnMut(SpeedRow)) -> Result<(), JobError> {
+    fn core_frames(&self, push: &mut impl FnMut(SpeedRow)) -> Result<(), Error> {
         let spike = &self.job.piv;
         for (m, n) in [
             (Method::Tfp, 8),
@@ -197,7 +198,7 @@ impl SpeedBench {
     }
 
     /// Adaptive windows capped per band by the TFP pair's field.
-    fn dwell_capped(&self, push: &mut impl FnMut(SpeedRow)) -> Result<(), JobError> {
+    fn dwell_capped(&self, push: &mut impl FnMut(SpeedRow)) -> Result<(), Error> {
         let (spike, core) = (&self.job.piv, &self.job.core);
         let (_, h) = self.size();
         for cap in [6.0, 8.0, 16.0] {
@@ -223,7 +224,7 @@ impl SpeedBench {
     /// host's decoder and reassembly; lossless and lossy. Time = firmware +
     /// wire + receiver for both pairs (TFP and adaptive) + PIV on the
     /// adaptive pair.
-    fn sidecar(&self, push: &mut impl FnMut(SpeedRow)) -> Result<(), JobError> {
+    fn sidecar(&self, push: &mut impl FnMut(SpeedRow)) -> Result<(), Error> {
         use spiv_core::wire::Encoding;
         let spike = &self.job.piv;
         let (w, h) = (self.planes.width, self.planes.height);
@@ -240,7 +241,7 @@ impl SpeedBench {
             base.encoding = enc;
             let (caps, _) = dwell_caps(&self.planes.data, w, h, &base, 8, 8.0, spike)?;
             let ad_t = transfer(&self.planes.data, w, h, base, caps)?;
-            let [a, b] = ad_t.pairs.first().ok_or(JobError::NoPair("adaptive"))?;
+            let [a, b] = ad_t.pairs.first().ok_or(Error::NoPair("adaptive"))?;
             let (a, b) = (upright_f32(a), upright_f32(b));
             let rec_ms = t.elapsed().as_secs_f64() * 1e3;
             let (ms, rmse, _) = self.piv(&a, &b, spike)?;
@@ -264,7 +265,7 @@ impl SpeedBench {
     /// wide baseline on top (`crate::baseline`: two more compensated
     /// frames 4·dt apart around the pair, their PIV from the pair's field,
     /// each vector chosen; time = the pair's row + that).
-    fn compensated(&self, push: &mut impl FnMut(SpeedRow)) -> Result<(), JobError> {
+    fn compensated(&self, push: &mut impl FnMut(SpeedRow)) -> Result<(), Error> {
         let (job, planes) = (&self.job, &self.planes);
         let t = Instant::now();
         let (_, ta, tb) = self.core_pair(Method::Tfp, 8)?;
@@ -277,7 +278,7 @@ impl SpeedBench {
             crate::predict::MotionModel::Auto,
         );
         let refine = Some(spiv_core::motion::Refine::default());
-        let frame = |k: u64| -> Result<Array2<f32>, JobError> {
+        let frame = |k: u64| -> Result<Array2<f32>, Error> {
             let f = crate::predict::compensated_frame(planes, k, &job.core, &vel, refine)?.0;
             Ok(self.upright(&f))
         };
@@ -322,7 +323,7 @@ impl SpeedBench {
     }
 
     /// The f64 reference of the adaptive frame.
-    fn reference(&self) -> Result<SpeedRow, JobError> {
+    fn reference(&self) -> Result<SpeedRow, Error> {
         let (job, (wu, hu)) = (&self.job, self.size());
         let t = Instant::now();
         let vol = SpikeVolume::from_packed(&self.planes.data, wu, hu, 0);
@@ -363,8 +364,8 @@ fn piv_name(s: &Settings) -> String {
 }
 
 /// The speed-against-error chart of `spiv bench speed` (log time, error).
-pub fn pareto(path: &Path, rows: &[SpeedRow]) -> Result<(), PlotError> {
-    pareto_inner(path, rows).map_err(|m| PlotError::new(path, m))
+pub fn pareto(path: &Path, rows: &[SpeedRow]) -> Result<(), Error> {
+    pareto_inner(path, rows).map_err(|m| plot_error(path, m))
 }
 
 fn pareto_inner(path: &Path, rows: &[SpeedRow]) -> Result<(), String> {

@@ -12,10 +12,10 @@ use spiv_firmware_sim::scene::{SceneKind, SceneParams};
 use spiv_firmware_sim::simulation::{simulate_planes, Request};
 use spiv_formats::dense::DenseField;
 
-use crate::pipeline::JobError;
 use crate::piv::dense::{for_piv, DenseMode, Flow};
 use crate::piv::{deform, piv, to_f32, Settings};
 use crate::reconstruct::{frame_from_planes, Method, Planes};
+use crate::Error;
 
 /// One method on one pair.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
@@ -55,7 +55,7 @@ fn epe_and_outliers(f: &Flow, truth: &DenseField) -> (f64, f64) {
 
 /// The rows for `seed`: per scene, per pair, window PIV with the library's
 /// defaults, with the dense fallback, and the dense stage.
-pub fn turbulence_rows(seed: u64) -> Result<Vec<TurbulenceRow>, JobError> {
+pub fn turbulence_rows(seed: u64) -> Result<Vec<TurbulenceRow>, Error> {
     let mut rows = Vec::new();
     for kind in [SceneKind::Turbulence, SceneKind::LargeShift] {
         let p = SceneParams::new(kind);
@@ -74,7 +74,7 @@ pub fn turbulence_rows(seed: u64) -> Result<Vec<TurbulenceRow>, JobError> {
             .sum::<f64>()
             / truth.u.len().max(1) as f64;
         let planes = Planes::simulated(w, h, data);
-        let tfp = |k: u32| -> Result<Array2<f32>, JobError> {
+        let tfp = |k: u32| -> Result<Array2<f32>, Error> {
             let f = frame_from_planes(&planes, u64::from(k), Method::Tfp, 8, &Params::default())?;
             Ok(to_f32(&f.data, usize::from(w), usize::from(h)))
         };

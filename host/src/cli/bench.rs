@@ -206,7 +206,7 @@ fn live(
     let mut rows: Vec<LiveRow> = Vec::new();
     for f in &fams {
         for &seed in &seeds {
-            rows.extend(live_rows(f, seed, pairs).map_err(CliError::Job)?);
+            rows.extend(live_rows(f, seed, pairs)?);
             b.inc(1);
         }
     }
@@ -280,7 +280,7 @@ fn flows(
     let mut rows: Vec<FlowsRow> = Vec::new();
     for f in &fams {
         for &seed in &seeds {
-            rows.extend(family_rows(f, seed, vectors, dense).map_err(CliError::Job)?);
+            rows.extend(family_rows(f, seed, vectors, dense)?);
             b.inc(1);
         }
     }
@@ -326,7 +326,7 @@ fn flows(
 
 fn turbulence(seed: u64, json_out: Option<&PathBuf>) -> Result<(), CliError> {
     use spiv_host::bench::turbulence::turbulence_rows;
-    let rows = turbulence_rows(seed).map_err(CliError::Job)?;
+    let rows = turbulence_rows(seed)?;
     println!(
         "{:<12} {:<13} {:<27} {:>13} {:>9} {:>9} {:>9} {:>9}",
         "scene", "frames", "method", "measured", "EPE px", "> 3 px", "mean |d|", "ms"

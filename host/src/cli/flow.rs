@@ -110,7 +110,7 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
             allow_truncated: a.allow_truncated,
         },
     };
-    let rec = Recording::open(&a.input, &fopts).map_err(flow_err)?;
+    let rec = Recording::open(&a.input, &fopts)?;
     let o = FlowRequest {
         dt: a.dt,
         every: a.every,
@@ -131,8 +131,7 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
             .map(spiv_host::piv::load_mask)
             .transpose()?,
     }
-    .options(&rec, &a.input)
-    .map_err(flow_err)?;
+    .options(&rec, &a.input)?;
     let o = spiv_host::flow::FlowOptions { y_up: a.y_up, ..o };
     std::fs::create_dir_all(&a.out)
         .map_err(|e| CliError::Usage(format!("{}: {e}", a.out.display())))?;
@@ -144,7 +143,7 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
     };
     let t0 = std::time::Instant::now();
     let stop = super::interrupt()?;
-    let out = run_flow_until(&rec, &o, |i, _| b.set_position(i as u64), stop).map_err(flow_err)?;
+    let out = run_flow_until(&rec, &o, |i, _| b.set_position(i as u64), stop)?;
     b.finish_and_clear();
     if out.pairs.is_empty() {
         return Err(CliError::Interrupted(format!(
@@ -224,16 +223,4 @@ fn run_line(
         seconds,
         a.out.display()
     )
-}
-
-fn flow_err(e: spiv_host::flow::FlowError) -> CliError {
-    use spiv_host::flow::FlowError;
-    match e {
-        FlowError::Format(f) => CliError::Format(f),
-        FlowError::Reconstruct(r) => CliError::Reconstruct(r),
-        FlowError::Piv(p) => CliError::Piv(p),
-        FlowError::Schedule(s) => CliError::Usage(s),
-        FlowError::Core(c) => CliError::Usage(format!("core: {c}")),
-        FlowError::Wire(w) => CliError::Usage(format!("wire: {w}")),
-    }
 }

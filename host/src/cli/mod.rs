@@ -18,24 +18,13 @@ pub enum CliError {
     /// Reading or writing a file.
     #[error(transparent)]
     Format(#[from] spiv_formats::FormatError),
-    /// Making a frame.
-    #[error(transparent)]
-    Reconstruct(#[from] spiv_host::reconstruct::ReconstructError),
     /// PIV.
     #[error(transparent)]
     Piv(#[from] spiv_host::piv::PivError),
-    /// The main job.
+    /// The host library: a frame, a flow, the main job, a source, the
+    /// live loop.
     #[error(transparent)]
-    Job(#[from] spiv_host::pipeline::JobError),
-    /// Receiving from a sidecar.
-    #[error(transparent)]
-    Source(#[from] spiv_host::receive::SourceError),
-    /// Talking back to it.
-    #[error(transparent)]
-    Downlink(#[from] spiv_host::downlink::DownlinkError),
-    /// The live closed loop.
-    #[error(transparent)]
-    Live(#[from] spiv_host::live::LiveError),
+    Host(#[from] spiv_host::Error),
     /// A bad option value.
     #[error("{0}")]
     Usage(String),

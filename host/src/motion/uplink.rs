@@ -21,6 +21,7 @@ use spiv_core::wire::sender::{Link, SendError};
 use spiv_core::wire::{Kind, Message, WireError};
 
 use crate::receive::assemble::{Assembler, FrameLimit, ReceivedFrame};
+use crate::Error;
 
 /// Bytes of one pair on the wire, by what they carry: the core's
 /// [`PairCost`], for the host's reports (serialisable).
@@ -81,17 +82,6 @@ fn wire(e: SendError<std::convert::Infallible>) -> WireError {
     }
 }
 
-/// Why a pair could not be sent.
-#[derive(Debug, thiserror::Error)]
-pub enum UplinkError {
-    /// The core refused (its state could not be resumed).
-    #[error("core: {0}")]
-    Core(#[from] spiv_core::Error),
-    /// The wire refused (a pair the head cannot carry, buffers too small).
-    #[error("wire: {0}")]
-    Wire(#[from] WireError),
-}
-
 /// One stream of live-loop pairs out of a `width × height` sensor, kept
 /// in memory: the sidecar's sender ([`PairSender`]).
 #[derive(Debug)]
@@ -116,7 +106,7 @@ impl Uplink {
         (pair, mid, dt): (u32, u32, u16),
         ask: &Asked<'_>,
         cold_reach: u16,
-    ) -> Result<(Vec<Vec<u8>>, PairBytes), UplinkError> {
+    ) -> Result<(Vec<Vec<u8>>, PairBytes), Error> {
         let mut link = Keep::default();
         let cost = maker
             .send((pair, mid, dt), ask, cold_reach, &mut self.out, &mut link)

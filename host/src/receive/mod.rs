@@ -13,9 +13,10 @@ use spiv_core::wire::{Decoder, Kind, MAX_ENCODED};
 
 use crate::motion::uplink::PairReader;
 use crate::piv::Settings;
+use crate::Error;
 
 pub use assemble::{Assembler, AssemblyStats, FrameLimit, Pairer, ReceivedFrame};
-pub use source::{Source, SourceError, Spec};
+pub use source::{Source, Spec};
 
 /// The PIV settings `spiv receive --piv` uses on each received pair: the
 /// given window of each pass (px) and [`Settings::for_spike_frames`].
@@ -83,7 +84,7 @@ pub fn receive<E>(
     mut progress: impl FnMut(&Report),
 ) -> Result<Report, E>
 where
-    E: From<SourceError>,
+    E: From<Error>,
 {
     let mut rx = vec![0u8; MAX_ENCODED];
     let mut dec = Decoder::new(&mut rx);
@@ -167,7 +168,7 @@ mod tests {
 
     struct Bytes(std::io::Cursor<Vec<u8>>);
     impl Source for Bytes {
-        fn read(&mut self, buf: &mut [u8]) -> Result<usize, SourceError> {
+        fn read(&mut self, buf: &mut [u8]) -> Result<usize, Error> {
             use std::io::Read;
             Ok(self.0.read(buf).unwrap_or(0))
         }
@@ -224,7 +225,7 @@ mod tests {
     /// Receives `bytes`; returns the report and the frames delivered.
     fn frames_of(bytes: Vec<u8>) -> (Report, Vec<ReceivedFrame>) {
         let mut got = Vec::new();
-        let r = receive::<SourceError>(
+        let r = receive::<Error>(
             &mut Bytes(std::io::Cursor::new(bytes)),
             FrameLimit::default(),
             |e| {

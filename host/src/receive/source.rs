@@ -5,39 +5,21 @@
 //! ([`Source::downlink`]: the connection's other direction, the bulk OUT
 //! endpoint).
 
+use crate::Error;
 use std::io::Read;
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-/// Errors of opening or reading a source.
-#[derive(Debug, thiserror::Error)]
-pub enum SourceError {
-    /// Reading failed.
-    #[error("{what}: {source}")]
-    Io {
-        /// Which source.
-        what: String,
-        /// The OS error.
-        source: std::io::Error,
-    },
-    /// libusb failed or no device matched.
-    #[error("usb: {0}")]
-    Usb(String),
-    /// A `VID:PID` that is not two hex numbers.
-    #[error("usb: `{0}` is not VID:PID in hex (e.g. c0de:cafe)")]
-    BadId(String),
-}
-
 /// A stream of bytes from the sidecar.
 pub trait Source {
     /// Reads up to `buf.len()` bytes; `Ok(0)` at the end of the stream.
-    fn read(&mut self, buf: &mut [u8]) -> Result<usize, SourceError>;
+    fn read(&mut self, buf: &mut [u8]) -> Result<usize, Error>;
     /// A short name for messages.
     fn name(&self) -> String;
     /// Where control messages to the sidecar go on this link, if it has a
     /// way back (TCP, USB); `None` for pipes and files.
-    fn downlink(&self) -> Option<Result<Box<dyn std::io::Write + Send>, SourceError>> {
+    fn downlink(&self) -> Option<Result<Box<dyn std::io::Write + Send>, Error>> {
         None
     }
 }
@@ -51,13 +33,13 @@ pub struct Reader<R: Read> {
 }
 
 impl<R: Read> Source for Reader<R> {
-    fn read(&mut self, buf: &mut [u8]) -> Result<usize, SourceError> {
+    fn read(&mut self, buf: &mut [u8]) -> Result<usize, Error> {
         loop {
             match self.inner.read(buf) {
                 Ok(n) => return Ok(n),
                 Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
                 Err(source) => {
-                    return Err(SourceError::Io {
+                    return Err(Error::Io {
                         what: self.name.clone(),
                         source,
                     })
@@ -68,12 +50,12 @@ impl<R: Read> Source for Reader<R> {
     fn name(&self) -> String {
         self.name.clone()
     }
-    fn downlink(&self) -> Option<Result<Box<dyn std::io::Write + Send>, SourceError>> {
+    fn downlink(&self) -> Option<Result<Box<dyn std::io::Write + Send>, Error>> {
         let s = self.back.as_ref()?;
         Some(
             s.try_clone()
                 .map(|s| Box::new(s) as Box<dyn std::io::Write + Send>)
-                .map_err(|source| SourceError::Io {
+                .map_err(|source| Error::Io {
                     what: self.name.clone(),
                     source,
                 }),
@@ -91,9 +73,9 @@ pub fn pipe() -> Reader<std::io::Stdin> {
 }
 
 /// A file of recorded messages.
-pub fn file(path: &Path) -> Result<Reader<std::fs::File>, SourceError> {
+pub fn file(path: &Path) -> Result<Reader<std::fs::File>, Error> {
     let name = path.display().to_string();
-    let f = std::fs::File::open(path).map_err(|source| SourceError::Io {
+    let f = std::fs::File::open(path).map_err(|source| Error::Io {
         what: name.clone(),
         source,
     })?;
@@ -106,13 +88,13 @@ pub fn file(path: &Path) -> Result<Reader<std::fs::File>, SourceError> {
 
 /// Connects to a sidecar listening at `addr`, retrying for up to `wait`
 /// (the sidecar may still be starting).
-pub fn tcp(addr: &str, wait: Duration) -> Result<Reader<TcpStream>, SourceError> {
+pub fn tcp(addr: &str, wait: Duration) -> Result<Reader<TcpStream>, Error> {
     let t0 = std::time::Instant::now();
     loop {
         match TcpStream::connect(addr) {
             Ok(s) => {
                 let name = format!("tcp {addr}");
-                let back = s.try_clone().map_err(|source| SourceError::Io {
+                let back = s.try_clone().map_err(|source| Error::Io {
                     what: name.clone(),
                     source,
                 })?;
@@ -127,7 +109,7 @@ pub fn tcp(addr: &str, wait: Duration) -> Result<Reader<TcpStream>, SourceError>
                 std::thread::sleep(Duration::from_millis(50));
             }
             Err(source) => {
-                return Err(SourceError::Io {
+                return Err(Error::Io {
                     what: format!("tcp {addr}"),
                     source,
                 })
@@ -149,8 +131,8 @@ pub const USB_EP_IN: u8 = 0x81;
 pub const USB_EP_OUT: u8 = 0x01;
 
 /// Parses `VID:PID` in hex.
-pub fn parse_vid_pid(s: &str) -> Result<(u16, u16), SourceError> {
-    let bad = || SourceError::BadId(s.to_string());
+pub fn parse_vid_pid(s: &str) -> Result<(u16, u16), Error> {
+    let bad = || Error::BadId(s.to_string());
     let (v, p) = s.split_once(':').ok_or_else(bad)?;
     Ok((
         u16::from_str_radix(v, 16).map_err(|_| bad())?,
@@ -175,13 +157,13 @@ pub enum Spec {
 }
 
 /// Opens `spec`.
-pub fn open(spec: &Spec) -> Result<Box<dyn Source>, SourceError> {
+pub fn open(spec: &Spec) -> Result<Box<dyn Source>, Error> {
     Ok(match spec {
         #[cfg(feature = "usb")]
         Spec::Usb(v, p) => Box::new(Usb::open(*v, *p)?),
         #[cfg(not(feature = "usb"))]
         Spec::Usb(..) => {
-            return Err(SourceError::Usb(
+            return Err(Error::Usb(
                 "this build of spiv has no USB support (built without the `usb` feature)"
                     .to_string(),
             ))
@@ -197,7 +179,7 @@ pub fn open(spec: &Spec) -> Result<Box<dyn Source>, SourceError> {
 mod usb {
     use std::time::Duration;
 
-    use super::{Source, SourceError, USB_EP_IN, USB_EP_OUT, USB_INTERFACE};
+    use super::{Error, Source, USB_EP_IN, USB_EP_OUT, USB_INTERFACE};
 
     /// A sidecar on USB: bulk IN reads into buffers of whole 512-byte packets.
     pub struct Usb {
@@ -227,17 +209,17 @@ mod usb {
 
     impl Usb {
         /// Opens the first device with `vid:pid` and claims its interface.
-        pub fn open(vid: u16, pid: u16) -> Result<Usb, SourceError> {
+        pub fn open(vid: u16, pid: u16) -> Result<Usb, Error> {
             use rusb::UsbContext;
-            let usb = |e: rusb::Error| SourceError::Usb(e.to_string());
+            let usb = |e: rusb::Error| Error::Usb(e.to_string());
             // Never the global context: it panics when libusb cannot start.
             let ctx = rusb::Context::new().map_err(|e| {
-                SourceError::Usb(format!(
+                Error::Usb(format!(
                     "cannot initialise libusb ({e}); is USB available here?"
                 ))
             })?;
             let handle = ctx.open_device_with_vid_pid(vid, pid).ok_or_else(|| {
-                SourceError::Usb(format!(
+                Error::Usb(format!(
                     "no device {vid:04x}:{pid:04x} attached (or no permission to open it)"
                 ))
             })?;
@@ -251,7 +233,7 @@ mod usb {
     }
 
     impl Source for Usb {
-        fn read(&mut self, buf: &mut [u8]) -> Result<usize, SourceError> {
+        fn read(&mut self, buf: &mut [u8]) -> Result<usize, Error> {
             // A multiple of the high-speed packet size, so libusb never overflows.
             let n = (buf.len() / 512 * 512).max(512).min(buf.len());
             loop {
@@ -262,14 +244,14 @@ mod usb {
                     Ok(k) => return Ok(k),
                     Err(rusb::Error::Timeout) => continue,
                     Err(rusb::Error::NoDevice) => return Ok(0),
-                    Err(e) => return Err(SourceError::Usb(e.to_string())),
+                    Err(e) => return Err(Error::Usb(e.to_string())),
                 }
             }
         }
         fn name(&self) -> String {
             self.name.clone()
         }
-        fn downlink(&self) -> Option<Result<Box<dyn std::io::Write + Send>, SourceError>> {
+        fn downlink(&self) -> Option<Result<Box<dyn std::io::Write + Send>, Error>> {
             Some(Ok(Box::new(UsbOut(self.handle.clone()))))
         }
     }

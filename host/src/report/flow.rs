@@ -8,26 +8,12 @@ use serde_json::json;
 use spiv_formats::grid::Grid;
 use spiv_formats::image::write_levels;
 use spiv_formats::vectors::{write_vectors_with, Column};
-use spiv_formats::FormatError;
 use spiv_formats::Vector;
 
 use crate::flow::{FlowOptions, FlowOutcome};
 
-use super::plot::{self, PlotError};
-
-/// Everything writing a flow run's files can refuse.
-#[derive(Debug, thiserror::Error)]
-pub enum WriteError {
-    /// A file.
-    #[error(transparent)]
-    Format(#[from] FormatError),
-    /// A plot.
-    #[error(transparent)]
-    Plot(#[from] PlotError),
-    /// `summary.json`.
-    #[error("{0}: {1}")]
-    Io(String, std::io::Error),
-}
+use super::plot;
+use crate::Error;
 
 pub use super::RunInfo;
 
@@ -43,7 +29,7 @@ pub fn write_flow(
     out: &FlowOutcome,
     opts: &FlowOptions,
     info: RunInfo<'_>,
-) -> Result<(), WriteError> {
+) -> Result<(), Error> {
     let cal = opts.calibration;
     let dt = f64::from(opts.dt);
     // Sigma columns, then u and v in m/s when calibrated.
@@ -128,7 +114,7 @@ pub fn write_flow(
     }
     let path = dir.join("summary.json");
     let text = serde_json::to_string_pretty(&flow_summary(out, opts, info)).unwrap_or_default();
-    std::fs::write(&path, text).map_err(|e| WriteError::Io(path.display().to_string(), e))
+    std::fs::write(&path, text).map_err(|e| Error::io(path.display().to_string(), e))
 }
 
 /// `mean_speed.png` and `mean_vorticity.png` of the mean field `mean` of
@@ -139,7 +125,7 @@ fn colour_maps(
     out: &FlowOutcome,
     opts: &FlowOptions,
     mean: &crate::flow::MeanField,
-) -> Result<(), WriteError> {
+) -> Result<(), Error> {
     let (cal, dt) = (opts.calibration, f64::from(opts.dt));
     let (w, h) = (u32::from(out.size.0), u32::from(out.size.1));
     let (speed, mut vorticity) = speed_and_vorticity(&mean.vectors, &out.grid);

@@ -6,8 +6,9 @@ use std::path::Path;
 
 use crate::flow::{FlowOptions, FlowOutcome};
 
-use super::flow::{speed_and_vorticity, WriteError};
-use super::plot::{self, NodeScalar, PlotError};
+use super::flow::speed_and_vorticity;
+use super::plot::{self, plot_error, NodeScalar};
+use crate::Error;
 
 /// Most frames a movie holds: a longer run shows every k-th pair.
 pub const MOVIE_FRAMES: usize = 240;
@@ -18,7 +19,7 @@ pub const MOVIE_FPS: u16 = 10;
 /// than [`MOVIE_FRAMES`]), each pair's speed in m/s when calibrated (else
 /// px per pair) on one viridis scale from 0 to the 99th percentile of the
 /// shown pairs' valid speeds, at [`MOVIE_FPS`] frames per second, looping.
-pub fn write_movie(path: &Path, out: &FlowOutcome, opts: &FlowOptions) -> Result<(), WriteError> {
+pub fn write_movie(path: &Path, out: &FlowOutcome, opts: &FlowOptions) -> Result<(), Error> {
     let n = out.pairs.len();
     let dt = f64::from(opts.dt);
     let (k, unit) = match opts.calibration {
@@ -42,13 +43,12 @@ pub fn write_movie(path: &Path, out: &FlowOutcome, opts: &FlowOptions) -> Result
         *all.select_nth_unstable_by(at, f64::total_cmp).1
     };
     let size = (u32::from(out.size.0), u32::from(out.size.1));
-    let e = |msg: String| PlotError::new(path, msg);
+    let e = |msg: String| plot_error(path, msg);
     let (w, h) = plot::node_map_size(size);
     let (Ok(w), Ok(h)) = (u16::try_from(w), u16::try_from(h)) else {
         return Err(e(format!("{w}x{h} px: a GIF frame holds at most 65535x65535")).into());
     };
-    let file =
-        std::fs::File::create(path).map_err(|x| WriteError::Io(path.display().to_string(), x))?;
+    let file = std::fs::File::create(path).map_err(|x| Error::io(path.display().to_string(), x))?;
     let mut gif = gif::Encoder::new(std::io::BufWriter::new(file), w, h, &[])
         .map_err(|x| e(x.to_string()))?;
     gif.set_repeat(gif::Repeat::Infinite)

@@ -9,31 +9,20 @@ use plotters::prelude::*;
 use plotters::style::{register_font, FontStyle};
 
 use crate::metrics::ProfileRow;
+use crate::Error;
 use spiv_formats::{State, Vector};
 
-/// A plotting failure, as text (plotters' errors are generic over backends).
-#[derive(Debug, thiserror::Error)]
-#[error("plot {path}: {msg}")]
-pub struct PlotError {
-    path: String,
-    msg: String,
-}
-
-impl PlotError {
-    /// A failure writing `path`.
-    pub fn new(path: &Path, msg: String) -> PlotError {
-        PlotError {
-            path: path.display().to_string(),
-            msg,
-        }
-    }
-}
-
-fn err(path: &Path) -> impl Fn(String) -> PlotError + '_ {
-    move |msg| PlotError {
-        path: path.display().to_string(),
+/// A plotting failure writing `path` (plotters' errors are generic over
+/// backends, so they arrive as text).
+pub fn plot_error(path: &Path, msg: String) -> Error {
+    Error::Plot {
+        path: format!("plot {}", path.display()),
         msg,
     }
+}
+
+fn err(path: &Path) -> impl Fn(String) -> Error + '_ {
+    move |msg| plot_error(path, msg)
 }
 
 static FONT: Once = Once::new();
@@ -73,7 +62,7 @@ pub fn profile(
     truth: &[(f64, f64)],
     series: &[Series<'_>],
     glare_limit: f64,
-) -> Result<(), PlotError> {
+) -> Result<(), Error> {
     font();
     let e = err(path);
     let root = BitMapBackend::new(path, (720, 560)).into_drawing_area();
@@ -182,7 +171,7 @@ pub fn vectors(
     field: &[Vector],
     scale: f64,
     caption: VectorCaption<'_>,
-) -> Result<(), PlotError> {
+) -> Result<(), Error> {
     font();
     let e = err(path);
     let k = 2u32;
@@ -316,7 +305,7 @@ pub fn node_map(
     grid: &spiv_formats::grid::Grid,
     s: NodeScalar<'_>,
     glare: &[bool],
-) -> Result<(), PlotError> {
+) -> Result<(), Error> {
     let e = err(path);
     let size = node_map_size((width, height));
     let root = BitMapBackend::new(path, size).into_drawing_area();
@@ -331,7 +320,7 @@ pub fn node_map_rgb(
     grid: &spiv_formats::grid::Grid,
     s: NodeScalar<'_>,
     glare: &[bool],
-) -> Result<(Vec<u8>, (u32, u32)), PlotError> {
+) -> Result<(Vec<u8>, (u32, u32)), Error> {
     let e = err(Path::new("(memory)"));
     let size = node_map_size((width, height));
     let mut rgb = vec![0u8; size.0 as usize * size.1 as usize * 3];
