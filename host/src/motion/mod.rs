@@ -1,5 +1,7 @@
 //! The host's motion estimate: a pair's 2-D flow measured from the spikes
-//! themselves, over as many planes as the recording holds around it.
+//! themselves, over as many planes as the recording holds around it. The
+//! estimator is the `spiv-estimator` crate, re-exported here; `make` and
+//! `uplink` feed it the core's pairs from a recording or a wire.
 //!
 //! - [`events`]: the spikes as the core's innovation events — spikes less
 //!   what each pixel's own static light predicts — and the frames the
@@ -18,14 +20,10 @@
 //!   stage's one flow fitted to every pair of consecutive short frames,
 //!   each pair's disagreement with it the uncertainty.
 
-pub mod compensate;
-pub mod control;
-pub mod ensemble;
-pub mod events;
-pub mod ladder;
+pub use spiv_estimator::{compensate, control, ensemble, events, ladder};
 pub mod make;
 pub mod uplink;
 
-pub use compensate::{Velocity, WarpFlow};
-pub use events::Events;
-pub use ladder::{measure, LadderSettings, Measurement, PairInput};
+pub use spiv_estimator::{
+    measure, Events, LadderSettings, Measurement, PairInput, Velocity, WarpFlow,
+};

@@ -43,13 +43,13 @@
 use ndarray::Array2;
 use rayon::prelude::*;
 
-use crate::piv::dense::{dense_frames, dense_frames_from, DenseSettings, Flow, Steps};
-use crate::piv::{Field, State};
 use spiv_formats::grid::Grid;
+use spiv_piv::dense::{dense_frames, dense_frames_from, DenseSettings, Flow, Steps};
+use spiv_piv::{Field, State};
 
-use super::compensate::WarpFlow;
-use super::events::Events;
-use super::Velocity;
+use crate::compensate::WarpFlow;
+use crate::events::Events;
+use crate::Velocity;
 
 /// Ticks per frame of the ensemble.
 pub const FRAME: u64 = 6;
@@ -255,7 +255,7 @@ fn look(
     grid: &Grid,
     (r, c): (usize, usize),
 ) -> Option<(f64, f64)> {
-    use crate::piv::dense::sample;
+    use spiv_piv::dense::sample;
     let (h, w) = a.dim();
     let side = LOOK;
     let (cx, cy) = grid.centre(r, c);
@@ -316,8 +316,8 @@ fn matched(
         for x in x0..(x0 + side).min(w) {
             let (u, v) = (flow.u[[y, x]], flow.v[[y, x]]);
             let (xf, yf) = (x as f32, y as f32);
-            let pa = f64::from(crate::piv::dense::sample(a, yf - 0.5 * v, xf - 0.5 * u));
-            let pb = f64::from(crate::piv::dense::sample(b, yf + 0.5 * v, xf + 0.5 * u));
+            let pa = f64::from(spiv_piv::dense::sample(a, yf - 0.5 * v, xf - 0.5 * u));
+            let pb = f64::from(spiv_piv::dense::sample(b, yf + 0.5 * v, xf + 0.5 * u));
             sa += pa;
             sb += pb;
             saa += pa * pa;

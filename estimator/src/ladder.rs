@@ -2,7 +2,7 @@
 //! separations that grow as the motion becomes known.
 //!
 //! Rung `s` makes two compensated innovation frames
-//! ([`super::compensated`]) from adjacent, disjoint stretches of the
+//! ([`spiv_core::rungs::rung_frames`]) from adjacent, disjoint stretches of the
 //! recording — A from the `s` ticks before the pair's midpoint, B from the
 //! `s` ticks after — each showing the particles where they are at its own
 //! centre, `s` ticks apart, and PIV measures the displacement between them
@@ -18,10 +18,10 @@
 //! along the field so far, so the frames gather more light and the same
 //! pixel error becomes a smaller velocity error. A vector of an
 //! uncompensated rung that the first usable compensated rung cannot
-//! confirm is dropped ([`unconfirmed`]).
+//! confirm is dropped (`unconfirmed`).
 //!
 //! Every vector of every rung carries its uncertainty from the correlation
-//! statistics ([`crate::piv::correlate::uncertainty`]), scaled to the
+//! statistics ([`spiv_piv::correlate::uncertainty`]), scaled to the
 //! pair's `dt`; each grid node keeps the rung whose valid vector is the
 //! most certain. Where the flow curves or shears too much for a longer
 //! rung, its vectors fail validation or come out less certain, and the
@@ -31,7 +31,7 @@
 //!
 //! Where the ladder's field is not usable in the end, or flags more than
 //! [`ENSEMBLE_FLAGGED`] of its vectors (eddies below the windows,
-//! displacements beyond them), the dense ensemble ([`super::ensemble`])
+//! displacements beyond them), the dense ensemble ([`crate::ensemble`])
 //! measures the pair instead, if its field is usable. It leaves the mask
 //! out as the compensated rungs do; the flow job flags masked nodes.
 
@@ -39,17 +39,15 @@ use ndarray::Array2;
 
 use rayon::prelude::*;
 
-use crate::piv::{
-    piv_ensemble, piv_predicted, validate, Field, PivError, Settings, State, NO_SIGMA,
-};
+use spiv_piv::{piv_ensemble, piv_predicted, validate, Field, PivError, Settings, State, NO_SIGMA};
 
-use crate::piv::dense::Flow;
-use crate::piv::Grid;
+use spiv_piv::dense::Flow;
+use spiv_piv::Grid;
 
-use super::compensate::WarpFlow;
-use super::ensemble;
-use super::events::Events;
-use super::Velocity;
+use crate::compensate::WarpFlow;
+use crate::ensemble;
+use crate::events::Events;
+use crate::Velocity;
 
 /// Separations of the rungs, ticks, shortest first.
 pub const SEPARATIONS: [u32; 6] = [4, 8, 16, 32, 64, 128];
@@ -83,8 +81,8 @@ pub struct LadderSettings {
     pub piv: Settings,
     /// Pixels the uncompensated bootstrap rungs leave out of their
     /// correlation (upright, the frames' size; `true`: masked): a wall, a
-    /// body, a region outside the flow ([`compensated_rung`] says why the
-    /// compensated rungs do not).
+    /// body, a region outside the flow. The compensated rungs keep every
+    /// pixel.
     pub mask: Option<Array2<bool>>,
 }
 
@@ -95,7 +93,7 @@ impl Default for LadderSettings {
             bootstrap_longest: BOOTSTRAP_LONGEST,
             bootstrap_reach: BOOTSTRAP_REACH,
             piv: Settings {
-                clip: crate::piv::Clip::Off,
+                clip: spiv_piv::Clip::Off,
                 highpass: 0.0,
                 ..Settings::for_compensated_frames()
             },
@@ -118,10 +116,10 @@ pub struct Rung {
 }
 
 impl Rung {
-    /// Whether its field was usable ([`crate::piv::usable_counts`]): the
+    /// Whether its field was usable ([`spiv_piv::usable_counts`]): the
     /// ladder climbs past a rung only when it is.
     pub fn usable(&self) -> bool {
-        crate::piv::usable_counts(self.counts)
+        spiv_piv::usable_counts(self.counts)
     }
 }
 
@@ -257,7 +255,7 @@ impl Climb {
 ///
 /// With rung frames along a flow (`input.start`), each rung is measured by
 /// PIV predicted by the estimate so far (the start, then the kept field),
-/// shortest first; the first rung must confirm the start ([`confirms`]).
+/// shortest first; the first rung must confirm the start (`confirms`).
 /// A start it does not confirm is dropped: the pair climbs from its
 /// events as an unestimated pair does when it carries them, else from the
 /// first rung's own field. Without rung frames, the pair climbs from its

@@ -17,9 +17,9 @@ use spiv_core::wire::ask::{ask_parts, encode_ask, MAX_ASK_PAYLOAD};
 use spiv_core::wire::control::control_header;
 use spiv_core::wire::{encode_message, Header, Kind, WireError, MAX_ENCODED};
 
-use super::compensate::WarpFlow;
-use super::ladder::{per_ticks, LadderSettings, Measurement};
-use crate::piv::Field;
+use crate::compensate::WarpFlow;
+use crate::ladder::{per_ticks, LadderSettings, Measurement};
+use spiv_piv::Field;
 
 /// What the next pair is made with.
 #[derive(Debug, Clone)]
@@ -342,7 +342,7 @@ impl AskLink {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::piv::{Grid, State};
+    use spiv_piv::{Grid, State};
 
     const SIZE: (u16, u16) = (64, 48);
 
@@ -370,7 +370,7 @@ mod tests {
             separation: ndarray::Array2::zeros((grid.ny, grid.nx)),
             rungs: rungs
                 .iter()
-                .map(|&(separation, ok)| super::super::ladder::Rung {
+                .map(|&(separation, ok)| crate::ladder::Rung {
                     separation,
                     counts: if ok { (n, 0, 0) } else { (0, 0, n) },
                     kept: 0,

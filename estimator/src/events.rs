@@ -14,7 +14,7 @@ use ndarray::Array2;
 use spiv_core::light::Event;
 use spiv_core::warp::{scatter, subtract_rates, Window, SCALE};
 
-use super::compensate::WarpFlow;
+use crate::compensate::WarpFlow;
 
 /// A stretch of events: ticks `first..first + ticks`.
 #[derive(Debug, Clone, PartialEq)]
@@ -45,7 +45,7 @@ pub struct Events {
 impl Events {
     /// The events of ticks `first..first + per_tick.len()` (each tick's
     /// pixel and sign, stored order, in pixel order as the core's pair
-    /// holds them: [`super::make::CoreEvents`]) with the static rates of the
+    /// holds them: [`spiv_core::pairs::CoreEvents`]) with the static rates of the
     /// `stored_width × height` pixels, for frames `crop_width` px wide.
     pub fn from_ticks(
         (stored_width, height): (usize, usize),

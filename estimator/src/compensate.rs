@@ -9,7 +9,7 @@ use ndarray::Array2;
 use spiv_core::buffers::FlowBuf;
 use spiv_core::warp::Flow as CoreFlow;
 
-use crate::piv::{validate, Field};
+use spiv_piv::{validate, Field};
 
 /// A velocity per pixel, px per tick (u right, v down), upright.
 #[derive(Debug, Clone)]

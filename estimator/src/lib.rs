@@ -1,0 +1,30 @@
+//! # spiv-estimator — a pair's flow from the spikes around it
+//!
+//! The estimator behind `spiv flow`, over what the sidecar's core makes of
+//! a stream of spike planes (`spiv_core::pairs`): its innovation events
+//! and the rung frames it warps along the flow known so far.
+//!
+//! | module | owns |
+//! |---|---|
+//! | [`events`] | the spikes as the core's innovation events — spikes less what each pixel's own static light predicts — and the frames the core's warp makes of them |
+//! | [`compensate`] | the flows frames follow: per pixel ([`Velocity`], px per tick) and on the core's node grid ([`WarpFlow`]) |
+//! | [`ladder`] | the time ladder: disjoint compensated frames at growing separations, PIV on each, the most certain vector per node |
+//! | [`ensemble`] | where window PIV cannot start the ladder, the dense stage's one flow fitted to every pair of consecutive short frames, each pair's disagreement with it the uncertainty |
+//! | [`control`] | the loop between pairs: what the next pair is made with (the ask), from what the estimator measured |
+//!
+//! Units: time in ticks (one spike plane), space in pixels of the upright
+//! image (x right, y down the rows); a [`ladder::Measurement`]'s field is
+//! in px per pair of the `dt` it was asked for, a [`Velocity`] in px per
+//! tick. Errors: the PIV engine's ([`spiv_piv::PivError`]) and the wire's
+//! ([`spiv_core::wire::WireError`]); the estimator adds none.
+#![warn(missing_docs)]
+
+pub mod compensate;
+pub mod control;
+pub mod ensemble;
+pub mod events;
+pub mod ladder;
+
+pub use compensate::{Velocity, WarpFlow};
+pub use events::Events;
+pub use ladder::{measure, LadderSettings, Measurement, PairInput};
