@@ -18,15 +18,15 @@ use spiv_core::wire::control::control_header;
 use spiv_core::wire::{encode_message, Header, Kind, WireError, MAX_ENCODED};
 
 use crate::compensate::WarpFlow;
-use crate::ladder::{per_ticks, LadderSettings, Measurement};
-use spiv_piv::Field;
+use crate::ladder::{LadderSettings, Measurement};
+use crate::units::PerTick;
 
 /// What the next pair is made with.
 #[derive(Debug, Clone)]
 pub struct Ask {
-    /// The flow its rung frames follow: node velocities, px per tick, on
-    /// the ladder's grid (`None`: no rung frames).
-    pub flow: Option<Field>,
+    /// The flow its rung frames follow: node velocities on the ladder's
+    /// grid (`None`: no rung frames).
+    pub flow: Option<PerTick>,
     /// Separations of the rung frames, ticks, shortest first.
     pub rungs: Vec<u32>,
     /// Ticks on each side of the midpoint whose events it carries (0:
@@ -52,8 +52,8 @@ impl Ask {
     /// bootstrap reach.
     ///
     /// ```
-    /// use spiv_host::motion::control::Ask;
-    /// use spiv_host::motion::ladder::LadderSettings;
+    /// use spiv_estimator::control::Ask;
+    /// use spiv_estimator::ladder::LadderSettings;
     /// let cfg = LadderSettings::default();
     /// let a = Ask::cold(&cfg);
     /// assert!(!a.warm() && a.reach == cfg.bootstrap_reach);
@@ -69,7 +69,7 @@ impl Ask {
         }
     }
 
-    /// What the pair after `m` (measured over `dt` ticks) is made with: its
+    /// What the pair after `m` is made with: its
     /// rung frames along `m`'s field when that field is usable, with its
     /// events too when `m` was measured from its events alone or by the
     /// dense ensemble; else its events alone. The rung frames are those of
@@ -77,13 +77,13 @@ impl Ask {
     /// shortest at which `m`'s climb stopped ([`highest_rung`]): the ladder
     /// climbs no further than the first rung that fails, so a longer one
     /// would cross the wire unread.
-    pub fn after(m: &Measurement, dt: f64, cfg: &LadderSettings) -> Ask {
+    pub fn after(m: &Measurement, cfg: &LadderSettings) -> Ask {
         if !m.field.usable() {
             return Ask::cold(cfg);
         }
         let top = highest_rung(m, cfg);
         Ask {
-            flow: Some(per_ticks(&m.field, 1.0 / dt.max(1e-9))),
+            flow: Some(m.field.per_tick()),
             rungs: cfg
                 .separations
                 .iter()
@@ -165,8 +165,8 @@ pub struct Heard {
     pub rungs: Rungs,
     /// The flow the rung frames follow, as the wire carried it.
     pub flow: WarpFlow,
-    /// The field it was sent from, px per tick (`None` without a flow).
-    pub start: Option<Field>,
+    /// The field it was sent from (`None` without a flow).
+    pub start: Option<PerTick>,
 }
 
 impl Heard {
@@ -174,8 +174,8 @@ impl Heard {
     /// bootstrap reach ([`Ask::cold`]).
     ///
     /// ```
-    /// use spiv_host::motion::control::Heard;
-    /// use spiv_host::motion::ladder::LadderSettings;
+    /// use spiv_estimator::control::Heard;
+    /// use spiv_estimator::ladder::LadderSettings;
     /// let cfg = LadderSettings::default();
     /// let h = Heard::cold(&cfg);
     /// assert!(h.flow.is_still() && h.start.is_none());
@@ -242,7 +242,7 @@ pub struct AskLink {
     /// Messages in flight: the pair they arrive for, their bytes.
     sent: VecDeque<(usize, Vec<u8>)>,
     /// The fields the asks in flight were sent from, by `from_pair`.
-    starts: VecDeque<(u32, Option<Field>)>,
+    starts: VecDeque<(u32, Option<PerTick>)>,
     /// The sidecar's ear.
     ear: AskEar,
     current: Heard,
@@ -342,7 +342,7 @@ impl AskLink {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use spiv_piv::{Grid, State};
+    use spiv_piv::{Field, Grid, State};
 
     const SIZE: (u16, u16) = (64, 48);
 
@@ -366,7 +366,7 @@ mod tests {
         field.state.fill(State::Valid);
         let n = grid.len();
         Measurement {
-            field,
+            field: crate::units::PerPair::new(field, crate::units::Ticks(10.0)),
             separation: ndarray::Array2::zeros((grid.ny, grid.nx)),
             rungs: rungs
                 .iter()
@@ -390,7 +390,7 @@ mod tests {
     #[test]
     fn asks_stop_at_the_rung_that_failed() {
         let cfg = LadderSettings::default();
-        let ask = |r: &[(u32, bool)]| Ask::after(&climbed(r), 10.0, &cfg).rungs;
+        let ask = |r: &[(u32, bool)]| Ask::after(&climbed(r), &cfg).rungs;
         let all: Vec<u32> = cfg
             .separations
             .iter()
@@ -409,7 +409,7 @@ mod tests {
         // No usable field: events alone.
         let mut m = climbed(&[(16, true)]);
         m.field.state.fill(State::Invalid);
-        assert!(!Ask::after(&m, 10.0, &cfg).warm());
+        assert!(!Ask::after(&m, &cfg).warm());
     }
 
     /// An ask sent after pair `i` makes pair `i + 1 + late` on; until
@@ -492,7 +492,7 @@ mod tests {
         f.v.fill(-0.05);
         f.state.fill(State::Valid);
         let ask = Ask {
-            flow: Some(f.clone()),
+            flow: Some(PerTick(f.clone())),
             rungs: vec![16, 32, 64],
             reach: 0,
         };

@@ -10,12 +10,14 @@
 //! | [`compensate`] | the flows frames follow: per pixel ([`Velocity`], px per tick) and on the core's node grid ([`WarpFlow`]) |
 //! | [`ladder`] | the time ladder: disjoint compensated frames at growing separations, PIV on each, the most certain vector per node |
 //! | [`ensemble`] | where window PIV cannot start the ladder, the dense stage's one flow fitted to every pair of consecutive short frames, each pair's disagreement with it the uncertainty |
+//! | [`units`] | ticks, px per tick and px per pair as types: [`units::Ticks`], [`units::PerTick`], [`units::PerPair`] |
 //! | [`control`] | the loop between pairs: what the next pair is made with (the ask), from what the estimator measured |
 //!
 //! Units: time in ticks (one spike plane), space in pixels of the upright
-//! image (x right, y down the rows); a [`ladder::Measurement`]'s field is
-//! in px per pair of the `dt` it was asked for, a [`Velocity`] in px per
-//! tick. Errors: the PIV engine's ([`spiv_piv::PivError`]) and the wire's
+//! image (x right, y down the rows); at the boundary they are types
+//! ([`units`]): a [`ladder::measure`] takes its `dt` as [`units::Ticks`]
+//! and reports a [`units::PerPair`], and the flow a pair follows is a
+//! [`units::PerTick`]; a [`Velocity`] is in px per tick. Errors: the PIV engine's ([`spiv_piv::PivError`]) and the wire's
 //! ([`spiv_core::wire::WireError`]); the estimator adds none.
 #![warn(missing_docs)]
 
@@ -24,6 +26,7 @@ pub mod control;
 pub mod ensemble;
 pub mod events;
 pub mod ladder;
+pub mod units;
 
 pub use compensate::{Velocity, WarpFlow};
 pub use events::Events;

@@ -46,6 +46,7 @@ use crate::reconstruct::{frame_from_planes, FileOptions, Planes};
 use crate::units::Calibration;
 use crate::Error;
 use spiv_core::pairs::{CorePair, PairMaker, LIGHT_TRAIN};
+use spiv_estimator::units::{PerPair, Ticks};
 
 /// The TFP window of the dwell cap's bootstrap pair, ticks.
 pub const BOOTSTRAP_WINDOW: u16 = 8;
@@ -523,7 +524,7 @@ fn measured_pair(
     Measured {
         method: Method::Ladder,
         separation: m.separation.iter().copied().collect(),
-        field: m.field,
+        field: m.field.into_field(),
         frames,
         caps: Vec::new(),
         bootstrapped: false,
@@ -1202,11 +1203,11 @@ fn ladder_loop(
         let (core, bytes) = make_pair(&mut maker, wire.as_mut(), (i, mid, opts.dt), heard, cfg)?;
         let bytes = bytes.filter(|_| reported);
         let input = pair_input(&core, w, rec.flip, heard.start.as_ref());
-        let mut m = ladder::measure(&input, mid, dt as f64, cfg, (w, hu), reported)?;
+        let mut m = ladder::measure(&input, mid, Ticks(dt as f64), cfg, (w, hu), reported)?;
         if let Some(mask) = &opts.mask {
             masked_out(&mut m.field, mask);
         }
-        link.send(i, Ask::after(&m, dt as f64, cfg))?;
+        link.send(i, Ask::after(&m, cfg))?;
         if !reported {
             continue;
         }
@@ -1395,7 +1396,7 @@ impl DenseSum {
         let (flow, k) = match measured {
             Some(f) => (f, 1.0),
             None => {
-                let start = crate::motion::ladder::per_ticks(&m.field, m.frame_ticks / dt);
+                let start = PerPair::new(m.field.clone(), Ticks(dt)).over(Ticks(m.frame_ticks));
                 (
                     crate::piv::dense::for_piv(a, b, &start).0,
                     dt / m.frame_ticks,

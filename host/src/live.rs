@@ -16,11 +16,12 @@ use crate::downlink::{control_for, Downlink, DownlinkReport};
 use crate::motion::control::Ask;
 use crate::motion::ladder::{self, LadderSettings, Measurement};
 use crate::motion::make::pair_input;
-use crate::piv::{piv, Field, PivError, Settings};
+use crate::piv::{piv, PivError, Settings};
 use crate::receive::source::Source;
 use crate::receive::{receive, Event, FrameLimit, ReceivedFrame, Report};
 use crate::receive::{receiver_settings, upright_f32};
 use crate::Error;
+use spiv_estimator::units::{PerTick, Ticks};
 
 /// What the loop does with what it receives.
 #[derive(Debug, Clone, PartialEq)]
@@ -180,7 +181,7 @@ const ASKS_KEPT: usize = 64;
 #[derive(Debug)]
 struct LadderHost {
     cfg: LadderSettings,
-    starts: VecDeque<(u32, Option<Field>)>,
+    starts: VecDeque<(u32, Option<PerTick>)>,
 }
 
 impl LadderHost {
@@ -204,8 +205,15 @@ impl LadderHost {
         let input = pair_input(pair, w, true, start.as_ref());
         let dt = f64::from(head.dt.max(1));
         let rescue = head.pair >= crate::flow::WARMUP as u32;
-        let m = ladder::measure(&input, u64::from(head.mid), dt, &self.cfg, (w, h), rescue)?;
-        let ask = Ask::after(&m, dt, &self.cfg);
+        let m = ladder::measure(
+            &input,
+            u64::from(head.mid),
+            Ticks(dt),
+            &self.cfg,
+            (w, h),
+            rescue,
+        )?;
+        let ask = Ask::after(&m, &self.cfg);
         Ok((m, ask))
     }
 
@@ -213,7 +221,7 @@ impl LadderHost {
     /// fields of older asks are forgotten. A pair without rung frames
     /// followed no ask (`NO_ASK`): the asks in flight stay for the pairs
     /// after it.
-    fn start_for(&mut self, pair: &CorePair) -> Option<Field> {
+    fn start_for(&mut self, pair: &CorePair) -> Option<PerTick> {
         if pair.rungs.is_empty() {
             return None;
         }
@@ -272,11 +280,11 @@ mod tests {
     }
 
     fn ask(u: f64) -> Ask {
-        let mut f = Field::unmeasured(Grid::new(64, 48, 16, 8).unwrap());
+        let mut f = crate::piv::Field::unmeasured(Grid::new(64, 48, 16, 8).unwrap());
         f.u.fill(u);
         f.state.fill(State::Valid);
         Ask {
-            flow: Some(f),
+            flow: Some(PerTick(f)),
             rungs: vec![16, 32],
             reach: 0,
         }
@@ -292,7 +300,7 @@ mod tests {
         host.sent(2, &ask(0.2));
         assert!(host.start_for(&pair(NO_ASK, 0)).is_none());
         assert!(host.start_for(&pair(NO_ASK, 0)).is_none());
-        let u = |f: Option<Field>| f.map(|f| f.u[[0, 0]]);
+        let u = |f: Option<PerTick>| f.map(|f| f.u[[0, 0]]);
         assert_eq!(u(host.start_for(&pair(2, 2))), Some(0.2));
         // The ask of pair 1 was overtaken: gone.
         assert_eq!(u(host.start_for(&pair(1, 2))), None);

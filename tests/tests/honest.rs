@@ -182,13 +182,23 @@ fn a_wrong_prediction_is_not_confirmed() {
     let cfg = LadderSettings::default();
     for k in [2.0, -1.0] {
         let ask = Ask {
-            flow: Some(predicted(&scene, size, k)),
+            flow: Some(spiv_host::motion::units::PerTick(predicted(
+                &scene, size, k,
+            ))),
             rungs: vec![16, 32, 64],
             reach: cfg.bootstrap_reach,
         };
         let input = input_of(&planes, 80, &ask, cfg.bootstrap_reach).expect("made");
         assert_eq!(input.rungs.len(), 3);
-        let m = measure(&input, 80, f64::from(dt), &cfg, size, true).expect("measures");
+        let m = measure(
+            &input,
+            80,
+            spiv_host::motion::units::Ticks(f64::from(dt)),
+            &cfg,
+            size,
+            true,
+        )
+        .expect("measures");
         assert_eq!(m.confirmed, Some(false), "prediction × {k} confirmed");
         let pr = PairResult {
             method: spiv_core::Method::Ladder,

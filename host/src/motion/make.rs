@@ -10,14 +10,14 @@ use spiv_core::Error;
 use super::control::{Ask, Heard};
 use super::events::{upright, Events};
 use super::ladder::PairInput;
-use crate::piv::Field;
 use crate::reconstruct::Planes;
+use spiv_estimator::units::PerTick;
 
 /// What the estimator reads of `pair`: its rung frames upright, cropped
 /// to `crop` columns, in spikes; its events ([`Events`]); and `start`, the
 /// field its rung frames followed, when it has rung frames (rows stored
 /// bottom-up when `flip`).
-pub fn pair_input(pair: &CorePair, crop: usize, flip: bool, start: Option<&Field>) -> PairInput {
+pub fn pair_input(pair: &CorePair, crop: usize, flip: bool, start: Option<&PerTick>) -> PairInput {
     let (w, h) = (usize::from(pair.size.0), usize::from(pair.size.1));
     let crop = crop.min(w);
     let mut input = PairInput::default();

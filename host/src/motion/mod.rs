@@ -20,7 +20,7 @@
 //!   stage's one flow fitted to every pair of consecutive short frames,
 //!   each pair's disagreement with it the uncertainty.
 
-pub use spiv_estimator::{compensate, control, ensemble, events, ladder};
+pub use spiv_estimator::{compensate, control, ensemble, events, ladder, units};
 pub mod make;
 pub mod uplink;
 

@@ -281,7 +281,7 @@ mod tests {
         f.v.fill(-0.1);
         f.state.fill(State::Valid);
         let ask = Ask {
-            flow: Some(f),
+            flow: Some(spiv_estimator::units::PerTick(f)),
             rungs: vec![16, 32, 64],
             reach: 20,
         };

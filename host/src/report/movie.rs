@@ -46,7 +46,9 @@ pub fn write_movie(path: &Path, out: &FlowOutcome, opts: &FlowOptions) -> Result
     let e = |msg: String| plot_error(path, msg);
     let (w, h) = plot::node_map_size(size);
     let (Ok(w), Ok(h)) = (u16::try_from(w), u16::try_from(h)) else {
-        return Err(e(format!("{w}x{h} px: a GIF frame holds at most 65535x65535")).into());
+        return Err(e(format!(
+            "{w}x{h} px: a GIF frame holds at most 65535x65535"
+        )));
     };
     let file = std::fs::File::create(path).map_err(|x| Error::io(path.display().to_string(), x))?;
     let mut gif = gif::Encoder::new(std::io::BufWriter::new(file), w, h, &[])
