@@ -28,17 +28,8 @@
 //! nothing is reported there; a flow beyond what the pyramid reaches
 //! leaves the frames unmatched too.
 //!
-//! What was measured to choose it (tuning seeds 1–5, dense EPE of the flow
-//! carried along its paths over the pair, px per pair; `docs/piv.md`):
-//! the mean of each consecutive pair's own pyramid, as before, 1.40–1.64 on
-//! turbulence seeds 1–2 in 6.5–8.0 s; one flow fitted to the consecutive
-//! pairs 1.41–1.45 in 1.1 s; with the pairs two apart 1.01–1.13; with the
-//! divergence penalty raised from 0.05 to 0.5 and 6 warps, and pairs three
-//! apart at full resolution, 0.87 on turbulence and 1.07 on large-shift
-//! (seeds 1–5) in 1.0–1.4 s; without the pairs whose paths leave the
-//! image, 0.85 and 0.72; with the second pass, 0.776 and 0.603.
-//! [`FRAME`] stays 6 ticks (4: 1.33–1.41 with steps 1, 2; 8 lost seed 3's
-//! pyramid).
+//! What was measured to choose this design and its constants:
+//! `docs/results.md#the-constants-and-what-chose-them`.
 
 use ndarray::Array2;
 use rayon::prelude::*;
@@ -77,10 +68,8 @@ pub fn settings() -> DenseSettings {
 
 /// Ticks of the second pass's frames, on the first pass's frame centres,
 /// their spikes summed along the first pass's flow (clipped to the
-/// ensemble's span). Tuning seeds, dense EPE px per pair: turbulence
-/// (1–5) 0.847 with the first pass alone, 0.765 with 12 ticks, 0.777
-/// with 18; large-shift (1–3) 0.760, 0.631, 0.645 (24: 0.657). A third
-/// pass gained nothing (0.755 → 0.763, turbulence 1–3).
+/// ensemble's span); chosen on the tuning seeds
+/// (`docs/results.md#the-constants-and-what-chose-them`).
 pub const SHARP: u64 = 12;
 
 /// Node spacing of the first pass's flow as the second pass's frames
@@ -99,19 +88,14 @@ pub const MIN_MATCH: f64 = 0.2;
 /// Side of the window around a node's centre over which each pair's own
 /// correction (`look`) is measured, px: the vector is the flow at the
 /// centre, so its uncertainty is that of the flow there, not of the mean
-/// over the node's window (a 32-px window's looks agreed four times too
-/// well: 12–23 % of true errors within 1σ on the tuning seeds; 16 px
-/// 30–44 %; 8 px 50–70 %).
+/// over the node's window (a wider window's looks agree too well:
+/// `docs/results.md#the-constants-and-what-chose-them`).
 pub const LOOK: usize = 8;
 
-/// Scale of the looks' standard error in a vector's uncertainty, from the
-/// tuning seeds 1–5: true errors within 1σ at 1.0 / 1.1 / 1.2 with the
-/// first pass alone, turbulence 50.0–61.6 / 53.1–64.7 / 56.7–68.2 %,
-/// large-shift 64.0–70.4 / 67.2–73.6 / 71.3–77.8 %. With the second pass,
-/// 1.15 gives turbulence 65.7 % and large-shift 82.0 % (its errors fell
-/// more); 1.0 would give 60.0 / 77.1, and looks on the second pass's
-/// frames, which share spikes, 52.8 / 68.8: no scale puts both within
-/// 60–76 %, and the wider one errs on the cautious side.
+/// Scale of the looks' standard error in a vector's uncertainty: the one
+/// that puts the most families' true errors within 1σ 60–76 % of the
+/// time on the tuning seeds, erring on the cautious side
+/// (`docs/results.md#the-constants-and-what-chose-them`).
 pub const SPREAD: f64 = 1.15;
 
 /// A pair measured by the dense ensemble.

@@ -47,6 +47,7 @@ use spiv_piv::Grid;
 use crate::compensate::WarpFlow;
 use crate::ensemble;
 use crate::events::Events;
+use crate::units::{PerPair, PerTick, Ticks};
 use crate::Velocity;
 
 /// Separations of the rungs, ticks, shortest first.
@@ -126,9 +127,10 @@ impl Rung {
 /// A pair measured by the ladder.
 #[derive(Debug, Clone)]
 pub struct Measurement {
-    /// The field in px per `dt` ticks, each vector's uncertainty per `dt`
-    /// in `sigma`; all invalid when no rung fit or measured.
-    pub field: Field,
+    /// The field in px per pair of the `dt` ticks asked for, each
+    /// vector's uncertainty likewise in `sigma`; all invalid when no rung
+    /// fit or measured.
+    pub field: PerPair,
     /// The separation (ticks) of the rung each vector came from; 0 where
     /// it was replaced or is invalid.
     pub separation: Array2<u32>,
@@ -163,9 +165,9 @@ pub struct PairInput {
     /// The events around the midpoint, when the pair carries them (a pair
     /// made with no flow to follow, or one that asked for them).
     pub events: Option<Events>,
-    /// The flow the rung frames follow: node velocities (px per tick) on
-    /// the grid of the ladder's PIV.
-    pub start: Option<Field>,
+    /// The flow the rung frames follow: node velocities on the grid of
+    /// the ladder's PIV.
+    pub start: Option<PerTick>,
     /// The rung frames along `start`, shortest separation first: the
     /// separation (ticks) and frames A (before the midpoint) and B (after
     /// it), upright, in spikes.
@@ -273,11 +275,12 @@ impl Climb {
 pub fn measure(
     input: &PairInput,
     mid: u64,
-    dt: f64,
+    dt: Ticks,
     cfg: &LadderSettings,
     (w, h): (usize, usize),
     rescue: bool,
 ) -> Result<Measurement, PivError> {
+    let Ticks(dt) = dt;
     let mut confirmed = None;
     let climb = match (&input.start, input.rungs.is_empty()) {
         (Some(start), false) => {
@@ -285,7 +288,7 @@ pub fn measure(
             // rung frames go on from where they left it.
             let from = match &input.events {
                 Some(ev) => cold(ev, mid, dt, cfg)?,
-                None => Climb::new(Some(start.clone()), dt),
+                None => Climb::new(Some(start.0.clone()), dt),
             };
             let (c, ok) = warm(input, start, from, dt, cfg)?;
             confirmed = Some(ok);
@@ -316,7 +319,7 @@ pub fn measure(
         None => {
             return match ensemble_pair(input, mid, dt, cfg, &rungs)? {
                 Some(m) => Ok(Measurement { confirmed, ..m }),
-                None => nothing(w, h, cfg, rungs, confirmed),
+                None => nothing((w, h), dt, cfg, rungs, confirmed),
             }
         }
     };
@@ -336,7 +339,7 @@ pub fn measure(
         }
     }
     Ok(Measurement {
-        field,
+        field: PerPair::new(field, Ticks(dt)),
         separation,
         rungs,
         frames,
@@ -473,12 +476,9 @@ fn climb_events(
 }
 
 /// Largest share of flagged vectors in the ladder's field with which it
-/// stands without asking the dense ensemble. On the tuning seeds (1–5 of
-/// `spiv bench flows`) the ladder flags at most 4 % on every family it
-/// measures well but the vortex array at 1 px/tick (8–16 %; asking the
-/// ensemble at 10 % there took the glare rows from 1.181 to 1.242 px per
-/// pair and the other rows from 0.472 to 0.441, seeds 1–5); its usable
-/// fields on large shifts flag 25–33 % at twice the ensemble's error.
+/// stands without asking the dense ensemble: above what the ladder flags
+/// on the families it measures well, below what its usable fields on
+/// large shifts flag (`docs/results.md#the-constants-and-what-chose-them`).
 pub const ENSEMBLE_FLAGGED: f64 = 0.2;
 
 /// The pair measured by the dense ensemble ([`ensemble::measure`], within
@@ -523,7 +523,7 @@ fn ensemble_pair(
     let (u, v) = e.velocity.displacements(dt);
     let dense = Flow { u, v };
     Ok(Some(Measurement {
-        field,
+        field: PerPair::new(field, Ticks(dt)),
         separation,
         rungs,
         frames: Some(RungFrames {
@@ -545,15 +545,15 @@ fn grid_of(w: usize, h: usize, cfg: &LadderSettings) -> Result<Grid, PivError> {
 /// The measurement of a pair no rung fits: every vector of the grid
 /// invalid, with no uncertainty.
 fn nothing(
-    w: usize,
-    h: usize,
+    (w, h): (usize, usize),
+    dt: f64,
     cfg: &LadderSettings,
     rungs: Vec<Rung>,
     confirmed: Option<bool>,
 ) -> Result<Measurement, PivError> {
     let grid = grid_of(w, h, cfg)?;
     Ok(Measurement {
-        field: Field::unmeasured(grid),
+        field: PerPair::new(Field::unmeasured(grid), Ticks(dt)),
         separation: Array2::zeros((grid.ny, grid.nx)),
         rungs,
         frames: None,
@@ -561,16 +561,6 @@ fn nothing(
         confirmed,
         ensemble: false,
     })
-}
-
-/// `f` with displacements and uncertainties times `k` (a field over `t`
-/// ticks as one over `k·t`).
-pub fn per_ticks(f: &Field, k: f64) -> Field {
-    let mut o = f.clone();
-    o.u.mapv_inplace(|x| x * k);
-    o.v.mapv_inplace(|x| x * k);
-    o.sigma.mapv_inplace(|(a, b)| (a * k, b * k));
-    o
 }
 
 /// Rung `s` without an estimate: the uncompensated frames of consecutive
@@ -721,7 +711,7 @@ fn path_sigma(e: &Field, idx: (usize, usize), (du, dv): (f64, f64)) -> (f64, f64
 /// through the interpolated field, so the residual corrects the velocity
 /// averaged along the path, not at the node.
 fn per_tick(f: &Field, s: f64) -> Field {
-    per_ticks(f, 1.0 / s)
+    PerTick::from_displacements(f, Ticks(s)).0
 }
 
 /// Keeps, per node, `f`'s valid vector where it is more certain than the
@@ -867,11 +857,8 @@ const FLOOR: f64 = 0.015;
 /// Scales each kept vector's correlation uncertainty by [`CORRELATION`]
 /// (where a change is known: a vector of a climb's first rung from
 /// nothing keeps it whole) and adds its change from the estimate that predicted its rung ([`changes`]) times
-/// [`CHANGE`] in quadrature. The constants were fitted on
-/// `spiv bench flows --seeds 1-3 --vectors` (every family but turbulence,
-/// whose errors no local model covers) for 60–76 % of error components
-/// within 1σ; on those seeds the families ranged from 55 % (large-shift)
-/// to 83 % (the paper's linear and quadratic profiles).
+/// [`CHANGE`] in quadrature. The constants are fitted for 60–76 % of
+/// error components within 1σ (`docs/results.md#the-constants-and-what-chose-them`).
 fn with_change(b: &mut Field, change: &Array2<(f64, f64)>) {
     for (sg, &(cu, cv)) in b.sigma.iter_mut().zip(change.iter()) {
         if cu.is_nan() || cv.is_nan() {

@@ -35,11 +35,8 @@ pub const SEPARATION: u32 = 4;
 /// [`crate::predict::ROUNDS`] rounds of the pair alone. The pair's frames
 /// share most of their spikes and read about half way between the
 /// prediction and the truth (`crate::predict::ROUNDS`), so a prediction
-/// from the wide baseline, finer on the slow rows, leaves less there.
-/// Measured (`spiv bench paper --seeds 30`, glare rows of the wide
-/// baseline, linear / quadratic / log): none 0.007 / 0.028 / 0.032, one
-/// 0.006 / 0.026 / 0.027 (a second, in place of two rounds of the pair
-/// alone: 0.005 / 0.028 / 0.031).
+/// from the wide baseline, finer on the slow rows, leaves less there
+/// (`docs/results.md#the-constants-and-what-chose-them`).
 pub const ROUNDS: usize = 1;
 
 /// Largest change of the displacement across one window, over the wide
@@ -82,7 +79,7 @@ pub fn reach(dt: u32, s: u32) -> u32 {
 /// The wide pair's predictor filter keeps quadratics at the grid's edges
 /// ([`Edge::Quadratic`]) whatever `settings` say: next to a glare band
 /// the line's edge bias was most of what the quadratic glare rows
-/// measured (`spiv bench paper --seeds 30`: 0.026 → 0.020), while the
+/// measured (`docs/results.md#the-constants-and-what-chose-them`), while the
 /// pair's own PIV, which predicts the loop's rounds, keeps the line
 /// ([`Edge`]).
 pub fn measure(

@@ -23,12 +23,9 @@ use crate::Error;
 /// most of their spikes, and a shared spike moves between them by exactly
 /// the predicted displacement, so PIV of the pair reads about half way
 /// between the prediction and the truth (`host/examples/hybrid_probe.rs`,
-/// `PSCALE`): each round halves what is left of the prediction's error.
-/// Measured (`spiv bench paper --seeds 30`, velocities in 1/4096 px/tick,
-/// glare rows of the wide baseline, linear / quadratic / log): two rounds
-/// 0.007 / 0.032 / 0.045, four 0.007 / 0.028 / 0.032, six or eight no
-/// better beyond the seeds' spread. Live, the previous pair's field plays
-/// the later rounds' part.
+/// `PSCALE`): each round halves what is left of the prediction's error
+/// (`docs/results.md#the-constants-and-what-chose-them`). Live, the previous pair's field plays the later
+/// rounds' part.
 pub const ROUNDS: usize = 4;
 
 /// Velocities per stored row, 1/4096 px per tick: `(vx, vy)`.

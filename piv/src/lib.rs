@@ -94,9 +94,9 @@ pub struct Settings {
     /// (module docs). On in the library's defaults, `spiv piv` and the
     /// Python `piv`; off for the closed loops' spike frames
     /// ([`Settings::for_spike_frames`]), which predict only from what a
-    /// pass validated on its own: with it on, their numbers moved where
-    /// one n_max streaks the paper's adaptive frames (paper-linear seed 1,
-    /// other rows: nothing measured → RMAE 0.26 from relaxed vectors).
+    /// pass validated on its own: with it on, relaxed vectors appear
+    /// where one n_max streaks the paper's adaptive frames
+    /// (`docs/results.md#the-constants-and-what-chose-them`).
     #[serde(default = "yes")]
     pub rescue: bool,
     /// The predictor filter's stencil at the grid's edges
@@ -188,14 +188,8 @@ impl Settings {
     /// peak is broad and not a parabola, and the 9-point Gaussian
     /// regression over its 3 × 3 (Nobach & Honkanen 2005) places it better;
     /// the quintic spline resamples those edges with less error than the
-    /// cubic one. `spiv bench paper --seeds 20`, compensated glare rows
-    /// (linear / quadratic / log): 0.018 / 0.099 / 0.073 with the
-    /// parabola, the cubic spline and five passes; 0.016 / 0.079 / 0.063
-    /// with the Gaussian peak alone; 0.017 / 0.059 / 0.064 with all three
-    /// (other rows' RMSE 0.021 / 0.026 / 0.030 → 0.020 / 0.022 / 0.025
-    /// px). The other frames keep the parabola: on the adaptive pair the
-    /// Gaussian helped the glare rows (0.123 → 0.097 linear) but not the
-    /// TFP pair (0.082 → 0.090).
+    /// cubic one. The other frames keep the parabola, which does better
+    /// on TFP pairs (`docs/results.md#the-constants-and-what-chose-them`).
     pub fn for_compensated_frames() -> Settings {
         Settings {
             windows: COMPENSATED_WINDOWS.to_vec(),
@@ -848,9 +842,8 @@ struct Rung {
     /// Undeformed peaks beyond the quarter rule are measured again over
     /// an area twice the window's side (rescue rungs only: on a pass that
     /// validates, the wider view adds nothing but a chance to lock onto a
-    /// stray bright feature — one hot pixel of the paper's adaptive frames
-    /// 40 px from its twin made a whole patch of the log profile's seed 9
-    /// agree on the wrong 56 px).
+    /// stray bright feature, such as a hot pixel of the paper's adaptive
+    /// frames 40 px from its twin).
     recheck: bool,
     /// The peaks' uncertainties are computed: on the last pass, whose
     /// field is reported (a coarser field that stands in for a failed one

@@ -33,14 +33,9 @@ use super::{Field, State};
 /// node low by a sixth of its second difference. Next to a glare band,
 /// where the spike frames show no particle within about 18 px of the wall,
 /// that edge window sees only its upper half and keeps the bias
-/// (`host/examples/wall_probe.rs`). The quadratic does not: measured as the
-/// wide baseline's edge (`spiv_host::baseline::measure`; `spiv bench paper
-/// --seeds 30`, glare rows linear / quadratic / log), 0.006 / 0.026 /
-/// 0.027 with the line, 0.007 / 0.020 / 0.026 with the quadratic.
-/// It damps an edge alternation less (to 0.6, the line to 1/3). That is
-/// why the pairs that predict the closed loop keep the line: with the
-/// quadratic there, `spiv flow`'s linear glare rows went 0.0053 → 0.0077
-/// (four recordings, one of them 0.0055 → 0.0165).
+/// (`host/examples/wall_probe.rs`). The quadratic does not, but it damps
+/// an edge alternation less (to 0.6, the line to 1/3), so the pairs that
+/// predict the closed loop keep the line (`docs/results.md#the-constants-and-what-chose-them`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Edge {
