@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
-# The RTL against spiv-core, frame for frame: verilates fpga/rtl with the
-# C++ testbench fpga/tb/tb_tfp.cpp linked to spiv-core's C ABI (the
-# spiv-ffi static library) and runs it on the committed strip and on a
-# paper-linear and a vortex-array recording that `spiv simulate` makes,
-# at several windows and schedules. CI runs it (.ci/run); it needs
+# The RTL against spiv-core, frame for frame and event for event:
+# verilates fpga/rtl with the C++ testbenches fpga/tb/tb_tfp.cpp (the TFP
+# frame) and fpga/tb/tb_light.cpp (the static-light model and its events),
+# linked to spiv-core's C ABI (the spiv-ffi static library), and runs them
+# on the committed strip and on a paper-linear and a vortex-array
+# recording that `spiv simulate` makes, at several windows and schedules;
+# the light model also on a synthetic recording of every light level. CI runs it (.ci/run); it needs
 # verilator (Debian: apt-get install verilator) and the `spiv` binary
 # (cargo build --bin spiv; SPIV_BIN names another).
 set -euo pipefail
@@ -27,6 +29,18 @@ verilator --cc --exe --build -O2 -j 2 -Wall -Wno-DECLFILENAME -Wno-UNUSEDSIGNAL 
   exit 1
 }
 tb="$work/obj/Vspiv_tfp"
+
+# The static-light model: 8 pixels per clock.
+LP=8
+verilator --cc --exe --build -O2 -j 2 -Wall -Wno-DECLFILENAME -Wno-UNUSEDSIGNAL \
+  --Mdir "$work/light" -GW=$W -GH=$H -GP=$LP \
+  -CFLAGS "-DTB_W=$W -DTB_H=$H -DTB_P=$LP -I$root/ffi/include" \
+  -LDFLAGS "$target/debug/libspiv_ffi.a -lpthread -ldl -lm" \
+  "$root/fpga/rtl/spiv_light.sv" "$root/fpga/tb/tb_light.cpp" >"$work/verilator-light.log" 2>&1 || {
+  tail -30 "$work/verilator-light.log"
+  exit 1
+}
+tb_light="$work/light/Vspiv_light"
 
 for scene in paper-linear vortex-array; do
   "$spiv" simulate --scene "$scene" --seed 7 --width $W --height $H --ticks 300 \
@@ -53,4 +67,21 @@ runs=(
 for r in "${runs[@]}"; do
   # shellcheck disable=SC2086
   printf '%-40s %s\n' "$(basename "$(dirname ${r%% *})")/$(basename ${r%% *}) ${r#* }" "$($tb $r)"
+done
+
+# FILE FIRST [pause]: the first plane's tick 0, or near 2^16 (the last
+# spike's 16-bit tick wraps); planes back to back, or with in_valid low
+# every third clock. synth:9000 spans periods past the longest the model
+# holds (4,095 ticks).
+light_runs=(
+  "firmware-sim/cortex-m4/data/strip.dat 0"
+  "firmware-sim/cortex-m4/data/strip.dat 65530 pause"
+  "$work/paper-linear/spikes.dat 0"
+  "$work/vortex-array/spikes.dat 65400 pause"
+  "$work/all.dat 3"
+  "synth:9000 65000"
+)
+for r in "${light_runs[@]}"; do
+  # shellcheck disable=SC2086
+  printf 'light %-34s %s\n' "$(basename ${r%% *}) ${r#* }" "$($tb_light $r)"
 done

@@ -195,6 +195,44 @@ typedef struct SpivGuide {
   uint16_t tile;
 } SpivGuide;
 
+// The static-light model's per-pixel state in the caller's arrays, each
+// of at least `len ≥ width·height` entries ([`spiv_core::light`]: last
+// spike tick mod 2¹⁶, period in 1/16 tick, mean rate in 2⁻²⁴ spikes per
+// tick, ticks of short intervals, lead in 1/16 tick, flags), and where
+// the model stands: the tick the next plane gets and the ticks seen.
+typedef struct SpivLight {
+  // Tick of each pixel's last spike, mod 2¹⁶.
+  uint16_t *last;
+  // Period estimate, 1/16 tick (0: none).
+  uint16_t *period;
+  // Mean rate, 2⁻²⁴ spikes per tick.
+  uint32_t *rate;
+  // Ticks of short intervals since the last agreeing one.
+  uint16_t *short_run;
+  // The spike train's lead on its period chain, 1/16 tick.
+  int8_t *lead;
+  // Bit 7: has spiked; bits 0–3: agreements with the period.
+  uint8_t *flags;
+  // Entries in each array.
+  size_t len;
+  // The tick the next plane gets.
+  uint32_t next;
+  // Ticks taken so far.
+  uint32_t seen;
+} SpivLight;
+
+// One innovation event: pixel `index` (stored row-major) at `tick`,
+// `sign` +1 (a spike the static light did not predict) or −1 (a
+// predicted spike that did not come).
+typedef struct SpivEvent {
+  // Pixel, stored row-major.
+  uint32_t index;
+  // Tick of the spike or of the prediction.
+  uint32_t tick;
+  // +1 or −1.
+  int8_t sign;
+} SpivEvent;
+
 // A one-line message for a status code (a static C string).
 const char *spiv_status_message(int32_t status);
 
@@ -319,5 +357,34 @@ enum SpivStatus spiv_downlink(struct SpivSidecar *sc,
                               uint32_t *heard,
                               uint32_t *applied,
                               uint32_t *refused);
+
+// Starts the static-light model of a `width × height` sensor in `l`'s
+// arrays (cleared), the first plane pushed getting tick `first`.
+//
+// # Safety
+// `l` is writable and its arrays hold `l.len` writable entries each.
+enum SpivStatus spiv_light_init(struct SpivLight *l,
+                                uint16_t width,
+                                uint16_t height,
+                                uint32_t first);
+
+// Takes the next spike plane (`len` = `width·height/8` bytes) into the
+// light model `l` and writes the events it settles to `events` (room for
+// `cap`, at least `width·height`: a pixel settles one event per plane at
+// most), their number to `n`: +1 events of this plane's tick and −1
+// events of earlier ticks, in pixel order. Refused before anything
+// changes when `cap` is short.
+//
+// # Safety
+// `l` as for [`spiv_light_init`]; `plane` holds `len` readable bytes;
+// `events` holds `cap` writable entries; `n` is writable.
+enum SpivStatus spiv_light_push(struct SpivLight *l,
+                                uint16_t width,
+                                uint16_t height,
+                                const uint8_t *plane,
+                                size_t len,
+                                struct SpivEvent *events,
+                                size_t cap,
+                                size_t *n);
 
 #endif  /* SPIV_CORE_H */

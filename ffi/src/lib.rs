@@ -21,6 +21,11 @@
 //!   predictions or caps ([`SpivGuide`]), [`spiv_send_frame`] to code and
 //!   frame it into wire messages.
 //!
+//! And, apart from any handle, the live loop's **static-light model**
+//! ([`spiv_light_init`], [`spiv_light_push`]: per plane, the innovation
+//! events each pixel settles) over six arrays the caller owns
+//! ([`SpivLight`]): what `fpga/tb/tb_light.cpp` holds the RTL to.
+//!
 //! Units: ticks (one spike plane each), pixels, velocities in 1/4096 px per
 //! tick, gray levels `0..=full_scale`. Planes are Vidar bit planes in stored
 //! row order, `width·height/8` bytes (docs/protocol.md, docs/formats.md).
@@ -1171,6 +1176,169 @@ pub unsafe extern "C" fn spiv_downlink(
                 }
             }
         }
+        Ok(())
+    })())
+}
+
+/// The static-light model's per-pixel state in the caller's arrays, each
+/// of at least `len ≥ width·height` entries ([`spiv_core::light`]: last
+/// spike tick mod 2¹⁶, period in 1/16 tick, mean rate in 2⁻²⁴ spikes per
+/// tick, ticks of short intervals, lead in 1/16 tick, flags), and where
+/// the model stands: the tick the next plane gets and the ticks seen.
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+pub struct SpivLight {
+    /// Tick of each pixel's last spike, mod 2¹⁶.
+    pub last: *mut u16,
+    /// Period estimate, 1/16 tick (0: none).
+    pub period: *mut u16,
+    /// Mean rate, 2⁻²⁴ spikes per tick.
+    pub rate: *mut u32,
+    /// Ticks of short intervals since the last agreeing one.
+    pub short_run: *mut u16,
+    /// The spike train's lead on its period chain, 1/16 tick.
+    pub lead: *mut i8,
+    /// Bit 7: has spiked; bits 0–3: agreements with the period.
+    pub flags: *mut u8,
+    /// Entries in each array.
+    pub len: usize,
+    /// The tick the next plane gets.
+    pub next: u32,
+    /// Ticks taken so far.
+    pub seen: u32,
+}
+
+/// One innovation event: pixel `index` (stored row-major) at `tick`,
+/// `sign` +1 (a spike the static light did not predict) or −1 (a
+/// predicted spike that did not come).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default)]
+pub struct SpivEvent {
+    /// Pixel, stored row-major.
+    pub index: u32,
+    /// Tick of the spike or of the prediction.
+    pub tick: u32,
+    /// +1 or −1.
+    pub sign: i8,
+}
+
+/// The light model's state borrowed from `l`.
+///
+/// # Safety
+/// Each array of `l` holds `l.len` writable entries that nothing else
+/// uses during the call.
+unsafe fn light_state<'s>(l: &SpivLight) -> Result<spiv_core::light::LightState<'s>, SpivStatus> {
+    if l.last.is_null()
+        || l.period.is_null()
+        || l.rate.is_null()
+        || l.short_run.is_null()
+        || l.lead.is_null()
+        || l.flags.is_null()
+    {
+        return Err(SpivStatus::SpivErrNull);
+    }
+    // SAFETY: the function's contract: six arrays of `len` entries.
+    unsafe {
+        Ok(spiv_core::light::LightState {
+            last: core::slice::from_raw_parts_mut(l.last, l.len),
+            period: core::slice::from_raw_parts_mut(l.period, l.len),
+            rate: core::slice::from_raw_parts_mut(l.rate, l.len),
+            short: core::slice::from_raw_parts_mut(l.short_run, l.len),
+            lead: core::slice::from_raw_parts_mut(l.lead, l.len),
+            flags: core::slice::from_raw_parts_mut(l.flags, l.len),
+        })
+    }
+}
+
+/// Starts the static-light model of a `width × height` sensor in `l`'s
+/// arrays (cleared), the first plane pushed getting tick `first`.
+///
+/// # Safety
+/// `l` is writable and its arrays hold `l.len` writable entries each.
+#[no_mangle]
+pub unsafe extern "C" fn spiv_light_init(
+    l: *mut SpivLight,
+    width: u16,
+    height: u16,
+    first: u32,
+) -> SpivStatus {
+    status((|| {
+        // SAFETY: writable or null.
+        let l = unsafe { l.as_mut() }.ok_or(SpivStatus::SpivErrNull)?;
+        // SAFETY: the caller's promise on the arrays.
+        let state = unsafe { light_state(l)? };
+        let light =
+            spiv_core::light::Light::new(width, height, first, state).map_err(core_status)?;
+        let c = light.clock();
+        l.next = c.next;
+        l.seen = c.seen;
+        Ok(())
+    })())
+}
+
+/// Takes the next spike plane (`len` = `width·height/8` bytes) into the
+/// light model `l` and writes the events it settles to `events` (room for
+/// `cap`, at least `width·height`: a pixel settles one event per plane at
+/// most), their number to `n`: +1 events of this plane's tick and −1
+/// events of earlier ticks, in pixel order. Refused before anything
+/// changes when `cap` is short.
+///
+/// # Safety
+/// `l` as for [`spiv_light_init`]; `plane` holds `len` readable bytes;
+/// `events` holds `cap` writable entries; `n` is writable.
+#[no_mangle]
+pub unsafe extern "C" fn spiv_light_push(
+    l: *mut SpivLight,
+    width: u16,
+    height: u16,
+    plane: *const u8,
+    len: usize,
+    events: *mut SpivEvent,
+    cap: usize,
+    n: *mut usize,
+) -> SpivStatus {
+    status((|| {
+        // SAFETY: writable or null.
+        let (l, n) = match unsafe { (l.as_mut(), n.as_mut()) } {
+            (Some(l), Some(n)) => (l, n),
+            _ => return Err(SpivStatus::SpivErrNull),
+        };
+        // SAFETY: the caller's promise.
+        let plane = unsafe { bytes(plane, len)? };
+        let view = spiv_core::PlaneView::new(plane, width, height).map_err(core_status)?;
+        if cap < usize::from(width) * usize::from(height) {
+            return Err(SpivStatus::SpivErrBuffer);
+        }
+        if events.is_null() {
+            return Err(SpivStatus::SpivErrNull);
+        }
+        // SAFETY: `cap` writable entries (the caller's promise).
+        let out = unsafe { core::slice::from_raw_parts_mut(events, cap) };
+        // SAFETY: the caller's promise on the arrays.
+        let state = unsafe { light_state(l)? };
+        let clock = spiv_core::light::LightClock {
+            next: l.next,
+            seen: l.seen,
+        };
+        let mut light =
+            spiv_core::light::Light::resume(width, height, clock, state).map_err(core_status)?;
+        let mut k = 0usize;
+        light
+            .push(&view, |e| {
+                if let Some(slot) = out.get_mut(k) {
+                    *slot = SpivEvent {
+                        index: e.index,
+                        tick: e.tick,
+                        sign: e.sign,
+                    };
+                }
+                k += 1;
+            })
+            .map_err(core_status)?;
+        let c = light.clock();
+        l.next = c.next;
+        l.seen = c.seen;
+        *n = k.min(cap);
         Ok(())
     })())
 }

@@ -571,3 +571,156 @@ proptest! {
         }
     }
 }
+
+/// The light model's arrays, owned.
+struct LightArrays {
+    last: Vec<u16>,
+    period: Vec<u16>,
+    rate: Vec<u32>,
+    short_run: Vec<u16>,
+    lead: Vec<i8>,
+    flags: Vec<u8>,
+}
+
+impl LightArrays {
+    fn new(px: usize) -> LightArrays {
+        LightArrays {
+            last: vec![0; px],
+            period: vec![0; px],
+            rate: vec![0; px],
+            short_run: vec![0; px],
+            lead: vec![0; px],
+            flags: vec![0; px],
+        }
+    }
+
+    fn handle(&mut self) -> SpivLight {
+        SpivLight {
+            last: self.last.as_mut_ptr(),
+            period: self.period.as_mut_ptr(),
+            rate: self.rate.as_mut_ptr(),
+            short_run: self.short_run.as_mut_ptr(),
+            lead: self.lead.as_mut_ptr(),
+            flags: self.flags.as_mut_ptr(),
+            len: self.last.len(),
+            next: 0,
+            seen: 0,
+        }
+    }
+}
+
+/// The static-light model through the C ABI settles the events the
+/// core's model settles on the same planes (the strip, from a tick near
+/// the 16-bit wrap), with the same state after every plane; a short
+/// event buffer, a short array or a plane of the wrong size is refused
+/// before anything changes.
+#[test]
+fn light_model_through_the_abi() {
+    use spiv_core::light::{Light, LightState};
+    let px = usize::from(W) * usize::from(H);
+    let mut c = LightArrays::new(px);
+    let mut l = c.handle();
+    // SAFETY: six arrays of `px` entries each.
+    assert_eq!(
+        unsafe { spiv_light_init(&mut l, W, H, 65_500) },
+        SpivStatus::SpivOk
+    );
+    let mut r = LightArrays::new(px);
+    let state = LightState {
+        last: &mut r.last,
+        period: &mut r.period,
+        rate: &mut r.rate,
+        short: &mut r.short_run,
+        lead: &mut r.lead,
+        flags: &mut r.flags,
+    };
+    let mut core = Light::new(W, H, 65_500, state).expect("model");
+    let data = strip();
+    let mut events = vec![SpivEvent::default(); px];
+    let mut total = 0usize;
+    for plane in data.chunks_exact(PLANE) {
+        let mut n = 0usize;
+        // SAFETY: the handle's arrays, a whole plane, `px` event slots.
+        let s = unsafe {
+            spiv_light_push(
+                &mut l,
+                W,
+                H,
+                plane.as_ptr(),
+                PLANE,
+                events.as_mut_ptr(),
+                px,
+                &mut n,
+            )
+        };
+        assert_eq!(s, SpivStatus::SpivOk);
+        let mut want = Vec::new();
+        let view = spiv_core::PlaneView::new(plane, W, H).expect("plane");
+        core.push(&view, |e| want.push((e.index, e.tick, e.sign)))
+            .expect("push");
+        let got: Vec<_> = events[..n]
+            .iter()
+            .map(|e| (e.index, e.tick, e.sign))
+            .collect();
+        assert_eq!(got, want);
+        assert_eq!(l.next, core.next_tick());
+        total += n;
+    }
+    assert!(total > 10_000, "{total} events");
+    assert_eq!((c.last, c.period, c.rate), (r.last, r.period, r.rate));
+    assert_eq!(
+        (c.short_run, c.lead, c.flags),
+        (r.short_run, r.lead, r.flags)
+    );
+
+    let mut c = LightArrays::new(px);
+    let mut l = c.handle();
+    // SAFETY: as above.
+    assert_eq!(
+        unsafe { spiv_light_init(&mut l, W, H, 0) },
+        SpivStatus::SpivOk
+    );
+    let plane = &data[..PLANE];
+    let mut n = 7usize;
+    // SAFETY: a buffer one event short of a plane's worst case.
+    let s = unsafe {
+        spiv_light_push(
+            &mut l,
+            W,
+            H,
+            plane.as_ptr(),
+            PLANE,
+            events.as_mut_ptr(),
+            px - 1,
+            &mut n,
+        )
+    };
+    assert_eq!((s, n, l.next), (SpivStatus::SpivErrBuffer, 7, 0));
+    // SAFETY: half a plane.
+    let s = unsafe {
+        spiv_light_push(
+            &mut l,
+            W,
+            H,
+            plane.as_ptr(),
+            PLANE / 2,
+            events.as_mut_ptr(),
+            px,
+            &mut n,
+        )
+    };
+    assert_eq!((s, l.next), (SpivStatus::SpivErrPlane, 0));
+    let mut short = LightArrays::new(px - 1);
+    let mut l = short.handle();
+    // SAFETY: arrays one entry short: refused, nothing written.
+    assert_eq!(
+        unsafe { spiv_light_init(&mut l, W, H, 0) },
+        SpivStatus::SpivErrBuffer
+    );
+    l.flags = ptr::null_mut();
+    // SAFETY: a null array.
+    assert_eq!(
+        unsafe { spiv_light_init(&mut l, W, H, 0) },
+        SpivStatus::SpivErrNull
+    );
+}
