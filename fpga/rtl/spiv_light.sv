@@ -22,7 +22,7 @@
 // period's learning, the top bits of t * 0x9E3779B9, is the same for every
 // pixel of a plane too, and worked out once per plane.
 //
-// Latency 4 clocks from in_bits to out_valid. in_valid may pause; planes
+// Latency 5 clocks from in_bits to out_valid. in_valid may pause; planes
 // are W * H / P beats back to back in stored pixel order (pixel y * W + x
 // in lane x % P of beat (y * W + x) / P), the first getting tick `first`.
 
@@ -141,19 +141,22 @@ module spiv_light #(
         s2_r <= s1_r;
     end
 
-    // ---- stages 3 and 4: each pixel's update; written back --------------
-    logic             s3_valid;
-    logic [ABITS-1:0] s3_beat;
-    logic [31:0]      s3_tick;
-    logic [SB*P-1:0]  s4_state;
+    // ---- stages 3 to 5: each pixel's update; written back ---------------
+    logic             s3_valid, s4_valid;
+    logic [ABITS-1:0] s3_beat, s4_beat;
+    logic [31:0]      s3_tick, s4_tick;
+    logic [SB*P-1:0]  s4_state;   // the new states, as stage 4 left them
     always_ff @(posedge clk) begin
         s3_valid <= s2_valid;
         s3_beat <= s2_beat;
         s3_tick <= s2_tick;
-        out_valid <= s3_valid;
-        out_tick <= s3_tick;
+        s4_valid <= s3_valid;
+        s4_beat <= s3_beat;
+        s4_tick <= s3_tick;
+        out_valid <= s4_valid;
+        out_tick <= s4_tick;
         out_state <= s4_state;
-        if (s3_valid) mem[s3_beat] <= s4_state;
+        if (s4_valid) mem[s4_beat] <= s4_state;
     end
 
     // tolerance(p) = min(1 + p/16, 16); early_tolerance(p) = min(p/16, 16)
@@ -191,139 +194,176 @@ module spiv_light #(
             wire [2:0]  count  = s2_state[SB*g +: 3];
             wire        spike  = s2_bits[g];
 
-            // Stage 3: the rate's step |d| + floor(k / 2) times R(k), and
-            // the rest of the update, registered.
-            logic        s3_neg, s3_zero;
-            logic [24:0] s3_rate;
-            logic [RS+25:0] s3_prod;
-            logic [SB-1:0] s3_rest;     // the state with the rate field 0
-            logic        s3_plus, s3_minus;
-            logic [4:0]  s3_late;
+            // Stage 3: the rate's step |d| + floor(k / 2) times R(k); the
+            // update's comparisons and operands, registered.
+            logic        a_neg, a_zero;
+            logic [24:0] a_rate;
+            logic [RS+25:0] a_prod;
+            logic        a_spike, a_spiked, a_periodic, a_in_window, a_minus;
+            logic        a_far, a_init, a_agrees;
+            logic [2:0]  a_count;
+            logic [15:0] a_period, a_last, a_t16, a_iv;
+            logic [8:0]  a_short;
+            logic [16:0] a_run;
+            logic signed [7:0] a_lead;
+            logic [4:0]  a_late;
+            logic        a_short_p;               // p < 8: the lead is kept
+            logic signed [31:0] a_acc, a_thr, a_d;
+            logic [3:0]  a_shift;
+            logic [31:0] a_u;
 
             always_ff @(posedge clk) begin
                 logic [24:0] mag;
                 logic [24:0] x;
                 // d = (spike ? 2^24 : 0) - rate; its magnitude and sign.
                 mag = spike ? 25'h100_0000 - rate : rate;
-                s3_neg <= !spike && rate != 0;
-                s3_zero <= mag == 0;
+                a_neg <= !spike && rate != 0;
+                a_zero <= mag == 0;
                 x = mag + {16'd0, s2_k[8:1]};
-                s3_prod <= {{(RS+1){1'b0}}, x} * {25'd0, s2_r};
-                s3_rate <= rate;
+                a_prod <= {{(RS+1){1'b0}}, x} * {25'd0, s2_r};
+                a_rate <= rate;
             end
 
             always_ff @(posedge clk) begin
-                logic [15:0] since, p, per_n, iv;
+                logic [15:0] since, p, iv;
                 logic [4:0]  late, early;
-                logic        periodic, in_window, extra;
-                logic signed [7:0] lead_n;
-                logic [8:0]  short_n;
-                logic [2:0]  count_n;
-                logic        spiked_n, minus;
-                logic [15:0] last_n;
-                logic signed [31:0] acc, d, ad, lim, thr, step;
-                logic signed [31:0] lead32, since16, per32;
-                logic [15:0] fifth;
+                logic        periodic;
+                logic signed [31:0] d, ad, per32;
                 logic [3:0]  shift;
-                logic [31:0] u;
-                logic [16:0] run;
                 since = s2_tick[15:0] - last;
-                lead32 = {{24{lead[7]}}, lead};
-                since16 = $signed({12'd0, since, 4'd0});
                 per32 = $signed({16'd0, period});
                 p = (period >> 4) == 16'd0 ? 16'd1 : (period >> 4);
                 late = late_of(p);
                 early = early_of(p);
                 periodic = spiked && count >= 3'd2;
-                lead_n = lead;
-                short_n = short_;
-                count_n = count;
-                spiked_n = spiked;
-                per_n = period;
-                last_n = last;
+                iv = {since[11:0], 4'd0};
+                d = $signed({16'd0, iv}) - per32;
+                ad = (d < 0) ? -d : d;
+                shift = (count >= 3'd2) ? settled_of(period) : 4'd1;
+                a_spike <= spike;
+                a_spiked <= spiked;
+                a_periodic <= periodic;
+                // The predicted window: p - early ..= p + late ticks
+                // (p <= 4095: p + late never saturates 16 bits).
+                a_in_window <= periodic
+                    && ({1'b0, since} + {12'd0, early} >= {1'b0, p})
+                    && (since <= p + {11'd0, late});
+                a_minus <= periodic && since == p + {11'd0, late};
+                a_short_p <= p < 16'd8;
+                // ahead()'s sum before its leak.
+                a_acc <= $signed({{24{lead[7]}}, lead}) + $signed({12'd0, since, 4'd0}) - per32;
+                a_thr <= 32'sd24 + $signed({23'd0, early, 4'd0});
+                // learn()'s cases: past the longest period, a first
+                // interval, an agreeing one (|d| <= max(period / 5, 16),
+                // with no division: |d| <= floor(period / 5) iff
+                // 5 |d| <= period).
+                a_far <= since > 16'd4095;
+                a_init <= count == 3'd0 || period == 16'd0;
+                a_agrees <= ad <= 32'sd16 || (ad <<< 2) + ad <= per32;
+                a_d <= d;
+                a_iv <= iv;
+                a_shift <= shift;
+                a_u <= s2_hash >> (6'd32 - {2'd0, shift});
+                a_run <= {8'd0, short_} + {1'b0, since};
+                a_count <= count;
+                a_period <= period;
+                a_last <= last;
+                a_t16 <= s2_tick[15:0];
+                a_short <= short_;
+                a_lead <= lead;
+                a_late <= late;
+            end
+
+            // Stage 4: the update; the product once more registered.
+            logic        b_neg, b_zero;
+            logic [24:0] b_rate;
+            logic [RS+25:0] b_prod;
+            logic [SB-1:0] b_rest;      // the state with the rate field 0
+            logic        b_plus, b_minus;
+            logic [4:0]  b_late;
+            always_ff @(posedge clk) begin
+                b_neg <= a_neg;
+                b_zero <= a_zero;
+                b_rate <= a_rate;
+                b_prod <= a_prod;
+                b_late <= a_late;
+            end
+
+            always_ff @(posedge clk) begin
+                logic [15:0] per_n, last_n;
+                logic        extra, spiked_n, minus;
+                logic signed [7:0] lead_n;
+                logic [8:0]  short_n;
+                logic [2:0]  count_n;
+                logic signed [31:0] acc, step;
+                lead_n = a_lead;
+                short_n = a_short;
+                count_n = a_count;
+                spiked_n = a_spiked;
+                per_n = a_period;
+                last_n = a_last;
                 extra = 1'b0;
                 minus = 1'b0;
-                if (spike) begin
-                    // The predicted window: p - early ..= p + late ticks.
-                    // (p <= 4095: p + late never saturates 16 bits)
-                    in_window = periodic
-                        && ({1'b0, since} + {12'd0, early} >= {1'b0, p})
-                        && (since <= p + {11'd0, late});
-                    if (!in_window) begin
+                if (a_spike) begin
+                    if (!a_in_window) begin
                         extra = 1'b1;
                         lead_n = 8'sd0;
-                    end else if (p < 16'd8) begin
+                    end else if (a_short_p) begin
                         // ahead(): the lead gains the spike's deviation
                         // from the period and leaks an eighth.
-                        acc = lead32 + since16 - per32;
-                        acc = acc - (acc >>> 3);
-                        thr = 32'sd24 + $signed({23'd0, early, 4'd0});
-                        extra = acc < -thr;
-                        if (extra) acc = acc + per32;
+                        acc = a_acc - (a_acc >>> 3);
+                        extra = acc < -a_thr;
+                        if (extra) acc = acc + $signed({16'd0, a_period});
                         lead_n = (acc > 32'sd127) ? 8'sd127
                                : (acc < -32'sd128) ? -8'sd128 : acc[7:0];
                     end else begin
                         lead_n = 8'sd0;
                     end
-                    if (spiked) begin
+                    if (a_spiked) begin
                         // learn(): the period and agreements.
-                        if (since > 16'd4095) begin
+                        if (a_far) begin
                             per_n = 16'd0;
                             count_n = 3'd0;
                             short_n = 9'd0;
-                        end else if (count == 3'd0 || period == 16'd0) begin
-                            per_n = {since[11:0], 4'd0};
+                        end else if (a_init) begin
+                            per_n = a_iv;
                             count_n = 3'd1;
                             short_n = 9'd0;
+                        end else if (a_agrees) begin
+                            step = (a_d + $signed(a_u)) >>> a_shift;
+                            per_n = a_period + step[15:0];
+                            count_n = (a_count == 3'd7) ? 3'd7 : a_count + 3'd1;
+                            short_n = 9'd0;
+                        end else if (a_d < 0 && a_run < 17'd512) begin
+                            short_n = a_run[8:0];
+                        end else if (a_d > 0 && a_count > 3'd2) begin
+                            count_n = a_count - 3'd2;
                         end else begin
-                            iv = {since[11:0], 4'd0};
-                            d = $signed({16'd0, iv}) - per32;
-                            ad = (d < 0) ? -d : d;
-                            // period / 5, exact for 16 bits: * ceil(2^18 / 5) >> 18
-                            fifth = 16'(({17'd0, period} * 33'd52429) >> 18);
-                            lim = $signed({16'd0, (fifth > 16'd16) ? fifth : 16'd16});
-                            if (ad <= lim) begin
-                                shift = (count >= 3'd2) ? settled_of(period) : 4'd1;
-                                u = s2_hash >> (6'd32 - {2'd0, shift});
-                                step = (d + $signed(u)) >>> shift;
-                                per_n = period + step[15:0];
-                                count_n = (count == 3'd7) ? 3'd7 : count + 3'd1;
-                                short_n = 9'd0;
-                            end else begin
-                                run = {8'd0, short_} + {1'b0, since};
-                                if (d < 0 && run < 17'd512) begin
-                                    short_n = run[8:0];
-                                end else if (d > 0 && count > 3'd2) begin
-                                    count_n = count - 3'd2;
-                                end else begin
-                                    per_n = iv;
-                                    count_n = 3'd1;
-                                    short_n = 9'd0;
-                                end
-                            end
+                            per_n = a_iv;
+                            count_n = 3'd1;
+                            short_n = 9'd0;
                         end
                     end
-                    last_n = s2_tick[15:0];
+                    last_n = a_t16;
                     spiked_n = 1'b1;
-                end else if (periodic && since == p + {11'd0, late}) begin
+                end else if (a_minus) begin
                     minus = 1'b1;
-                    count_n = count - 3'd1;
+                    count_n = a_count - 3'd1;
                 end
-                s3_rest <= {last_n, per_n, 25'd0, short_n, lead_n, spiked_n, count_n};
-                s3_plus <= spike && extra;
-                s3_minus <= minus;
-                s3_late <= late;
+                b_rest <= {last_n, per_n, 25'd0, short_n, lead_n, spiked_n, count_n};
+                b_plus <= a_spike && extra;
+                b_minus <= minus;
             end
 
-            // Stage 4: the rate stepped by sign * floor(x / k); out.
+            // Stage 5: the rate stepped by sign * floor(x / k); out.
             logic [24:0] q;
-            assign q = s3_zero ? 25'd0 : s3_prod[RS +: 25];
-            assign s4_state[SB*g +: SB] = s3_rest
-                | {32'd0, (s3_neg ? s3_rate - q : s3_rate + q), 21'd0};
+            assign q = b_zero ? 25'd0 : b_prod[RS +: 25];
+            assign s4_state[SB*g +: SB] = b_rest
+                | {32'd0, (b_neg ? b_rate - q : b_rate + q), 21'd0};
             always_ff @(posedge clk) begin
-                out_plus[g] <= s3_plus;
-                out_minus[g] <= s3_minus;
-                out_late[5*g +: 5] <= s3_late;
+                out_plus[g] <= b_plus;
+                out_minus[g] <= b_minus;
+                out_late[5*g +: 5] <= b_late;
             end
         end
     endgenerate
