@@ -127,6 +127,7 @@ module spiv_light #(
     logic [ABITS-1:0] s2_beat;
     logic [P-1:0]     s2_bits;
     logic [SB*P-1:0]  s2_state;
+    logic [16*P-1:0]  s2_since;   // ticks since each pixel's last spike, mod 2^16
     logic [31:0]      s2_tick, s2_hash;
     logic [8:0]       s2_k;
     logic [RS:0]      s2_r;
@@ -135,6 +136,8 @@ module spiv_light #(
         s2_beat <= s1_beat;
         s2_bits <= s1_bits;
         s2_state <= s1_state;
+        for (int l = 0; l < P; l = l + 1)
+            s2_since[16*l +: 16] <= s1_tick[15:0] - s1_state[SB*l + 62 +: 16];
         s2_tick <= s1_tick;
         s2_hash <= s1_hash;
         s2_k <= s1_k;
@@ -194,11 +197,11 @@ module spiv_light #(
             wire [2:0]  count  = s2_state[SB*g +: 3];
             wire        spike  = s2_bits[g];
 
-            // Stage 3: the rate's step |d| + floor(k / 2) times R(k); the
+            // Stage 3: the rate's step x = |d| + floor(k / 2); the
             // update's comparisons and operands, registered.
             logic        a_neg, a_zero;
-            logic [24:0] a_rate;
-            logic [RS+25:0] a_prod;
+            logic [24:0] a_rate, a_x;
+            logic [RS:0] a_r;
             logic        a_spike, a_spiked, a_periodic, a_in_window, a_minus;
             logic        a_far, a_init, a_agrees;
             logic [2:0]  a_count;
@@ -220,7 +223,8 @@ module spiv_light #(
                 a_neg <= !spike && rate != 0;
                 a_zero <= mag == 0;
                 x = mag + {16'd0, s2_k[8:1]};
-                a_prod <= {{(RS+1){1'b0}}, x} * {25'd0, s2_r};
+                a_x <= x;
+                a_r <= s2_r;
                 a_rate <= rate;
             end
 
@@ -228,9 +232,10 @@ module spiv_light #(
                 logic [15:0] since, p, iv;
                 logic [4:0]  late, early;
                 logic        periodic;
-                logic signed [31:0] d, ad, per32;
+                logic signed [31:0] d, per32;
+                logic [19:0] iv5;
                 logic [3:0]  shift;
-                since = s2_tick[15:0] - last;
+                since = s2_since[16*g +: 16];
                 per32 = $signed({16'd0, period});
                 p = (period >> 4) == 16'd0 ? 16'd1 : (period >> 4);
                 late = late_of(p);
@@ -238,7 +243,7 @@ module spiv_light #(
                 periodic = spiked && count >= 3'd2;
                 iv = {since[11:0], 4'd0};
                 d = $signed({16'd0, iv}) - per32;
-                ad = (d < 0) ? -d : d;
+                iv5 = {2'd0, iv, 2'd0} + {4'd0, iv};
                 shift = (count >= 3'd2) ? settled_of(period) : 4'd1;
                 a_spike <= spike;
                 a_spiked <= spiked;
@@ -254,12 +259,17 @@ module spiv_light #(
                 a_acc <= $signed({{24{lead[7]}}, lead}) + $signed({12'd0, since, 4'd0}) - per32;
                 a_thr <= 32'sd24 + $signed({23'd0, early, 4'd0});
                 // learn()'s cases: past the longest period, a first
-                // interval, an agreeing one (|d| <= max(period / 5, 16),
-                // with no division: |d| <= floor(period / 5) iff
-                // 5 |d| <= period).
+                // interval, an agreeing one: |d| <= max(period / 5, 16)
+                // with d = iv - period, without a division or |d|:
+                // |d| <= 16 iff iv + 16 >= period and iv <= period + 16;
+                // |d| <= floor(period / 5) iff 5 |d| <= period iff
+                // 5 iv <= 6 period and 5 iv >= 4 period.
                 a_far <= since > 16'd4095;
                 a_init <= count == 3'd0 || period == 16'd0;
-                a_agrees <= ad <= 32'sd16 || (ad <<< 2) + ad <= per32;
+                a_agrees <= ({1'b0, iv} + 17'd16 >= {1'b0, period}
+                             && {1'b0, iv} <= {1'b0, period} + 17'd16)
+                         || (iv5 <= {2'd0, period, 2'd0} + {3'd0, period, 1'b0}
+                             && iv5 >= {2'd0, period, 2'd0});
                 a_d <= d;
                 a_iv <= iv;
                 a_shift <= shift;
@@ -274,10 +284,10 @@ module spiv_light #(
                 a_late <= late;
             end
 
-            // Stage 4: the update; the product once more registered.
+            // Stage 4: the update; x times R(k) in two halves of R.
             logic        b_neg, b_zero;
             logic [24:0] b_rate;
-            logic [RS+25:0] b_prod;
+            logic [41:0] b_lo, b_hi;    // x * R[16:0], x * R[33:17]
             logic [SB-1:0] b_rest;      // the state with the rate field 0
             logic        b_plus, b_minus;
             logic [4:0]  b_late;
@@ -285,7 +295,8 @@ module spiv_light #(
                 b_neg <= a_neg;
                 b_zero <= a_zero;
                 b_rate <= a_rate;
-                b_prod <= a_prod;
+                b_lo <= {17'd0, a_x} * {25'd0, a_r[16:0]};
+                b_hi <= {17'd0, a_x} * {25'd0, a_r[RS:17]};
                 b_late <= a_late;
             end
 
@@ -357,7 +368,9 @@ module spiv_light #(
 
             // Stage 5: the rate stepped by sign * floor(x / k); out.
             logic [24:0] q;
-            assign q = b_zero ? 25'd0 : b_prod[RS +: 25];
+            logic [RS+25:0] prod;
+            assign prod = {b_hi, 17'd0};
+            assign q = b_zero ? 25'd0 : 25'((prod + {17'd0, b_lo}) >> RS);
             assign s4_state[SB*g +: SB] = b_rest
                 | {32'd0, (b_neg ? b_rate - q : b_rate + q), 21'd0};
             always_ff @(posedge clk) begin
