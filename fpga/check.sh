@@ -30,17 +30,17 @@ verilator --cc --exe --build -O2 -j 2 -Wall -Wno-DECLFILENAME -Wno-UNUSEDSIGNAL 
 }
 tb="$work/obj/Vspiv_tfp"
 
-# The static-light model: 8 pixels per clock.
-LP=8
-verilator --cc --exe --build -O2 -j 2 -Wall -Wno-DECLFILENAME -Wno-UNUSEDSIGNAL \
-  --Mdir "$work/light" -GW=$W -GH=$H -GP=$LP \
-  -CFLAGS "-DTB_W=$W -DTB_H=$H -DTB_P=$LP -I$root/ffi/include" \
-  -LDFLAGS "$target/debug/libspiv_ffi.a -lpthread -ldl -lm" \
-  "$root/fpga/rtl/spiv_light.sv" "$root/fpga/tb/tb_light.cpp" >"$work/verilator-light.log" 2>&1 || {
-  tail -30 "$work/verilator-light.log"
-  exit 1
-}
-tb_light="$work/light/Vspiv_light"
+# The static-light model: 8 pixels per clock, and 32 (as placed).
+for LP in 8 32; do
+  verilator --cc --exe --build -O2 -j 2 -Wall -Wno-DECLFILENAME -Wno-UNUSEDSIGNAL \
+    --Mdir "$work/light$LP" -GW=$W -GH=$H -GP=$LP \
+    -CFLAGS "-DTB_W=$W -DTB_H=$H -DTB_P=$LP -I$root/ffi/include" \
+    -LDFLAGS "$target/debug/libspiv_ffi.a -lpthread -ldl -lm" \
+    "$root/fpga/rtl/spiv_light.sv" "$root/fpga/tb/tb_light.cpp" >"$work/verilator-light.log" 2>&1 || {
+    tail -30 "$work/verilator-light.log"
+    exit 1
+  }
+done
 
 for scene in paper-linear vortex-array; do
   "$spiv" simulate --scene "$scene" --seed 7 --width $W --height $H --ticks 300 \
@@ -66,13 +66,16 @@ runs=(
 )
 for r in "${runs[@]}"; do
   # shellcheck disable=SC2086
-  printf '%-40s %s\n' "$(basename "$(dirname ${r%% *})")/$(basename ${r%% *}) ${r#* }" "$($tb $r)"
+  # (the run's result first: a failing run ends the script here)
+  got=$($tb $r)
+  printf '%-40s %s\n' "$(basename "$(dirname ${r%% *})")/$(basename ${r%% *}) ${r#* }" "$got"
 done
 
 # FILE FIRST [pause]: the first plane's tick 0, or near 2^16 (the last
 # spike's 16-bit tick wraps); planes back to back, or with in_valid low
 # every third clock. synth:9000 spans periods past the longest the model
-# holds (4,095 ticks).
+# holds (4,095 ticks). The 32-lane model (fpga/synth.sh places it) runs
+# the recording and the synthetic planes again.
 light_runs=(
   "firmware-sim/cortex-m4/data/strip.dat 0"
   "firmware-sim/cortex-m4/data/strip.dat 65530 pause"
@@ -83,5 +86,11 @@ light_runs=(
 )
 for r in "${light_runs[@]}"; do
   # shellcheck disable=SC2086
-  printf 'light %-34s %s\n' "$(basename ${r%% *}) ${r#* }" "$($tb_light $r)"
+  got=$("$work/light8/Vspiv_light" $r)
+  printf 'light/8  %-31s %s\n' "$(basename ${r%% *}) ${r#* }" "$got"
+done
+for r in "$work/vortex-array/spikes.dat 65400 pause" "synth:9000 65000"; do
+  # shellcheck disable=SC2086
+  got=$("$work/light32/Vspiv_light" $r)
+  printf 'light/32 %-31s %s\n' "$(basename ${r%% *}) ${r#* }" "$got"
 done

@@ -34,7 +34,7 @@ extern "C" {
 #endif
 
 static const int W = TB_W, H = TB_H, P = TB_P;
-static_assert(P == 8, "the testbench drives 8 pixels per clock");
+static_assert(P == 8 || P == 32, "the testbench drives 8 or 32 pixels per clock");
 static const int PX = W * H, BEATS = PX / P, PLANE_BYTES = PX / 8, SB = 78;
 
 // The core's state and events after one plane.
@@ -94,6 +94,15 @@ static std::vector<uint8_t> synthetic(size_t planes, uint64_t seed) {
         }
     }
     return out;
+}
+
+// Bits lo..lo + n of an output port, narrow or wide.
+static uint32_t lanes(uint64_t v, int lo, int n) {
+    return (uint32_t)((v >> lo) & ((1ull << n) - 1));
+}
+template <std::size_t N>
+static uint32_t lanes(const VlWide<N>& w, int lo, int n) {
+    return field(w, lo, n);
 }
 
 static std::vector<uint8_t> read_file(const char* path) {
@@ -188,8 +197,8 @@ int main(int argc, char** argv) {
         }
         for (int l = 0; l < P; ++l) {
             const int p = (int)(got % BEATS) * P + l;
-            const int plus = (m.out_plus >> l) & 1, minus = (m.out_minus >> l) & 1;
-            const uint32_t late = (uint32_t)((m.out_late >> (5 * l)) & 31);
+            const int plus = lanes(m.out_plus, l, 1), minus = lanes(m.out_minus, l, 1);
+            const uint32_t late = lanes(m.out_late, 5 * l, 5);
             int sign = plus ? 1 : minus ? -1 : 0;
             uint32_t tick = plus ? m.out_tick : m.out_tick - late;
             if (plus && minus) sign = 2;
@@ -221,7 +230,9 @@ int main(int argc, char** argv) {
         m.in_valid = feed;
         if (feed) {
             const uint8_t* plane = &dat[(fed / BEATS) * PLANE_BYTES];
-            m.in_bits = plane[(fed % BEATS)];  // P = 8: one byte per beat
+            uint32_t bits = 0;  // P / 8 bytes per beat, the first lowest
+            for (int b = 0; b < P / 8; ++b) bits |= (uint32_t)plane[(fed % BEATS) * (P / 8) + b] << (8 * b);
+            m.in_bits = bits;
             ++fed;
         }
         clock();
