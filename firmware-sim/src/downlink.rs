@@ -14,8 +14,9 @@ use std::io::Read;
 use std::sync::mpsc::{channel, Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
 
-use crate::firmware::{FaultCounts, Faults, Faulty, Firmware, FirmwareError, Link};
+use crate::firmware::{FaultCounts, Faults, Faulty, Firmware, Link};
 use crate::ladder::LadderFirmware;
+use crate::Error;
 
 /// Control bytes arriving from the host.
 #[derive(Debug)]
@@ -169,7 +170,7 @@ impl ControlStream {
 
     /// Call before each plane: the firmware hears whatever arrived, and,
     /// pacing, waits for the host when the plane begins a pair.
-    pub fn before_plane<L: Link>(&mut self, fw: &mut Firmware<L>) -> Result<(), FirmwareError> {
+    pub fn before_plane<L: Link>(&mut self, fw: &mut Firmware<L>) -> Result<(), Error> {
         let pair = fw.pair_due();
         self.pace(fw, pair)
     }
@@ -177,11 +178,11 @@ impl ControlStream {
     /// Call before the live loop sends pair `pair`
     /// ([`crate::ladder::LadderFirmware::pair_due`]): it hears whatever
     /// arrived and, pacing, waits for the host's answer to the pair before.
-    pub fn before_pair<F: Hears>(&mut self, fw: &mut F, pair: u32) -> Result<(), FirmwareError> {
+    pub fn before_pair<F: Hears>(&mut self, fw: &mut F, pair: u32) -> Result<(), Error> {
         self.pace(fw, Some(pair))
     }
 
-    fn pace<F: Hears>(&mut self, fw: &mut F, pair: Option<u32>) -> Result<(), FirmwareError> {
+    fn pace<F: Hears>(&mut self, fw: &mut F, pair: Option<u32>) -> Result<(), Error> {
         while let Ok(b) = self.rx.try_recv() {
             fw.hear(&b);
         }
@@ -220,7 +221,7 @@ pub trait Hears {
     fn answers(&self) -> u64;
     /// Pushes out what the uplink holds (the host can only answer what it
     /// received).
-    fn flush(&mut self) -> Result<(), FirmwareError>;
+    fn flush(&mut self) -> Result<(), Error>;
 }
 
 impl<L: Link> Hears for Firmware<L> {
@@ -231,7 +232,7 @@ impl<L: Link> Hears for Firmware<L> {
         let d = self.downlink();
         u64::from(d.heard) + u64::from(d.refused)
     }
-    fn flush(&mut self) -> Result<(), FirmwareError> {
+    fn flush(&mut self) -> Result<(), Error> {
         Firmware::flush(self)
     }
 }
@@ -244,7 +245,7 @@ impl<L: Link> Hears for LadderFirmware<L> {
         let (heard, refused) = self.heard();
         heard + refused
     }
-    fn flush(&mut self) -> Result<(), FirmwareError> {
+    fn flush(&mut self) -> Result<(), Error> {
         LadderFirmware::flush(self)
     }
 }

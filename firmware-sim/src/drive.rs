@@ -3,19 +3,9 @@
 //! planes when given a downlink.
 
 use crate::downlink::ControlStream;
-use crate::firmware::{Config, Firmware, FirmwareError, Link};
+use crate::firmware::{Config, Firmware, Link};
 use crate::ladder::{LadderConfig, LadderFirmware};
-
-/// Why a driven run stopped.
-#[derive(Debug, thiserror::Error)]
-pub enum DriveError {
-    /// The firmware.
-    #[error(transparent)]
-    Firmware(#[from] FirmwareError),
-    /// The input.
-    #[error(transparent)]
-    Format(#[from] spiv_formats::FormatError),
-}
+use crate::Error;
 
 /// Runs the firmware on a simulated scene, the planes streamed straight
 /// from the sensor into the loop (never stored). `req.ticks` is set from
@@ -29,7 +19,7 @@ pub fn run_on_scene<L: Link>(
     keep: bool,
     mut downlink: Option<&mut ControlStream>,
     progress: impl FnMut(u32, u32),
-) -> Result<(Firmware<L>, crate::simulation::Simulated), DriveError> {
+) -> Result<(Firmware<L>, crate::simulation::Simulated), Error> {
     let mut req = req.clone();
     if let Some(p) = cfg.schedule.pairs {
         req.ticks = Some(cfg.ticks_for(p).max(req.scene.pair_dt + 1));
@@ -38,7 +28,7 @@ pub fn run_on_scene<L: Link>(
     if keep {
         fw.keep = Some(Vec::new());
     }
-    let mut failed: Option<FirmwareError> = None;
+    let mut failed: Option<Error> = None;
     let sim = crate::simulation::simulate(&req, progress, |plane| {
         if failed.is_some() || fw.done() {
             return Ok(());
@@ -53,7 +43,7 @@ pub fn run_on_scene<L: Link>(
         Ok(())
     })?;
     if let Some(e) = failed {
-        return Err(e.into());
+        return Err(e);
     }
     fw.finish()?;
     Ok((fw, sim))
@@ -71,7 +61,7 @@ pub fn run_on_dat<L: Link>(
     link: L,
     keep: bool,
     mut downlink: Option<&mut ControlStream>,
-) -> Result<Firmware<L>, DriveError> {
+) -> Result<Firmware<L>, Error> {
     let mut r = spiv_formats::dat::DatReader::open(path, width, height, opts)?;
     let mut fw = Firmware::new(r.width(), r.height(), cfg, link)?;
     if keep {
@@ -93,7 +83,7 @@ pub fn run_on_dat<L: Link>(
 fn drain<L: Link>(
     fw: &mut LadderFirmware<L>,
     mut downlink: Option<&mut ControlStream>,
-) -> Result<(), FirmwareError> {
+) -> Result<(), Error> {
     loop {
         if let (Some(i), Some(d)) = (fw.pair_due(), downlink.as_deref_mut()) {
             d.before_pair(fw, i)?;
@@ -113,7 +103,7 @@ pub fn run_ladder_on_dat<L: Link>(
     cfg: LadderConfig,
     link: L,
     mut downlink: Option<&mut ControlStream>,
-) -> Result<LadderFirmware<L>, DriveError> {
+) -> Result<LadderFirmware<L>, Error> {
     let mut r = spiv_formats::dat::DatReader::open(path, width, height, opts)?;
     let mut fw = LadderFirmware::new((r.width(), r.height()), cfg, link)?;
     let mut plane = vec![0u8; r.out_plane_bytes()];
@@ -135,14 +125,14 @@ pub fn run_ladder_on_scene<L: Link>(
     cfg: LadderConfig,
     link: L,
     mut downlink: Option<&mut ControlStream>,
-) -> Result<LadderFirmware<L>, DriveError> {
+) -> Result<LadderFirmware<L>, Error> {
     let mut req = req.clone();
     if let Some(mid) = cfg.pairs.and_then(|p| cfg.mid(p.max(1) - 1)) {
         let lead = spiv_core::rungs::lead(cfg.longest, cfg.cold_reach);
         req.ticks = Some(mid.saturating_add(lead).saturating_add(1));
     }
     let mut fw = LadderFirmware::new((req.scene.width, req.scene.height), cfg, link)?;
-    let mut failed: Option<FirmwareError> = None;
+    let mut failed: Option<Error> = None;
     crate::simulation::simulate(
         &req,
         |_, _| {},
@@ -160,7 +150,7 @@ pub fn run_ladder_on_scene<L: Link>(
         },
     )?;
     if let Some(e) = failed {
-        return Err(e.into());
+        return Err(e);
     }
     fw.end()?;
     drain(&mut fw, downlink)?;

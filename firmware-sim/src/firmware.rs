@@ -17,33 +17,15 @@ use spiv_core::wire::sender::Slot;
 
 pub use spiv_core::sidecar::{capped_frame, Config, CAP_BAND};
 
-/// Why the firmware stopped.
-#[derive(Debug, thiserror::Error)]
-pub enum FirmwareError {
-    /// The core refused.
-    #[error("core: {0}")]
-    Core(#[from] spiv_core::Error),
-    /// Framing.
-    #[error("wire: {0}")]
-    Wire(#[from] spiv_core::wire::WireError),
-    /// The link.
-    #[error("link: {0}")]
-    Link(#[from] std::io::Error),
-    /// A configuration the firmware cannot run.
-    #[error("configuration: {0}")]
-    Config(spiv_core::sidecar::ConfigError),
-    /// A live-loop schedule the firmware cannot run.
-    #[error("schedule: {0}")]
-    Schedule(&'static str),
-}
+use crate::Error;
 
-impl From<SidecarError<std::io::Error>> for FirmwareError {
+impl From<SidecarError<std::io::Error>> for Error {
     fn from(e: SidecarError<std::io::Error>) -> Self {
         match e {
-            SidecarError::Core(c) => FirmwareError::Core(c),
-            SidecarError::Wire(w) => FirmwareError::Wire(w),
-            SidecarError::Link(l) => FirmwareError::Link(l),
-            SidecarError::Config(c) => FirmwareError::Config(c),
+            SidecarError::Core(c) => Error::Core(c),
+            SidecarError::Wire(w) => Error::Wire(w),
+            SidecarError::Link(l) => Error::Link(l),
+            SidecarError::Config(c) => Error::Config(c),
         }
     }
 }
@@ -138,7 +120,7 @@ pub struct Firmware<L: Link> {
 
 impl<L: Link> Firmware<L> {
     /// A firmware for a `width × height` sensor sending to `link`.
-    pub fn new(width: u16, height: u16, cfg: Config, link: L) -> Result<Self, FirmwareError> {
+    pub fn new(width: u16, height: u16, cfg: Config, link: L) -> Result<Self, Error> {
         let sidecar = Sidecar::new::<std::io::Error>(width, height, cfg)?;
         Ok(Firmware {
             buf: SidecarBuf::new(width, height, &cfg)?,
@@ -166,7 +148,7 @@ impl<L: Link> Firmware<L> {
     }
 
     /// Pushes out what the link holds.
-    pub fn flush(&mut self) -> Result<(), FirmwareError> {
+    pub fn flush(&mut self) -> Result<(), Error> {
         Ok(self.link.flush()?)
     }
 
@@ -187,7 +169,7 @@ impl<L: Link> Firmware<L> {
 
     /// Ingests the next plane (stored row order, `width·height/8` bytes) and
     /// sends every frame whose window it completes.
-    pub fn push_plane(&mut self, plane: &[u8]) -> Result<(), FirmwareError> {
+    pub fn push_plane(&mut self, plane: &[u8]) -> Result<(), Error> {
         let mut mem = self.buf.memory(self.sidecar.next_tick())?;
         self.sidecar.push_plane(
             &mut mem,
@@ -204,7 +186,7 @@ impl<L: Link> Firmware<L> {
     }
 
     /// Sends the final status and flushes the link.
-    pub fn finish(&mut self) -> Result<Counters, FirmwareError> {
+    pub fn finish(&mut self) -> Result<Counters, Error> {
         let sent = self
             .sidecar
             .finish(&mut self.buf.send(), &mut CoreLink(&mut self.link))?;
@@ -376,7 +358,7 @@ pub fn run_on_planes<L: Link>(
     control: Control,
     link: L,
     keep: bool,
-) -> Result<Firmware<L>, FirmwareError> {
+) -> Result<Firmware<L>, Error> {
     let mut fw = Firmware::new(width, height, cfg, link)?;
     if !control.is_empty() {
         fw.hear(&control.message(0, 0, width, height)?);

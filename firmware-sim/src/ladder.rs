@@ -22,7 +22,8 @@ use std::collections::VecDeque;
 use spiv_core::rungs::{lead, ring_depth, PairCost, BOOTSTRAP_REACH, LONGEST_RUNG};
 use spiv_core::wire::sender::SendError;
 
-use crate::firmware::{FirmwareError, Link};
+use crate::firmware::Link;
+use crate::Error;
 use spiv_core::pairs::{AskEar, PairMaker, PairSender, LIGHT_TRAIN};
 
 /// What the live loop makes and when.
@@ -69,17 +70,15 @@ impl LadderConfig {
     }
 
     /// Checks the numbers: `dt` 1..=65535, `every ≥ dt`, rungs 2..=255.
-    pub fn check(&self) -> Result<(), FirmwareError> {
+    pub fn check(&self) -> Result<(), Error> {
         if !(1..=u32::from(u16::MAX)).contains(&self.dt) {
-            return Err(FirmwareError::Schedule("dt must be 1..=65535 ticks"));
+            return Err(Error::Schedule("dt must be 1..=65535 ticks"));
         }
         if self.every < self.dt {
-            return Err(FirmwareError::Schedule("pairs every fewer ticks than dt"));
+            return Err(Error::Schedule("pairs every fewer ticks than dt"));
         }
         if !(2..=255).contains(&self.longest) {
-            return Err(FirmwareError::Schedule(
-                "the longest rung must be 2..=255 ticks",
-            ));
+            return Err(Error::Schedule("the longest rung must be 2..=255 ticks"));
         }
         Ok(())
     }
@@ -132,11 +131,7 @@ impl<L: Link> spiv_core::wire::sender::Link for CoreLink<'_, L> {
 impl<L: Link> LadderFirmware<L> {
     /// A loop for a `width × height` sensor whose first plane is tick 0,
     /// sending to `link`.
-    pub fn new(
-        (width, height): (u16, u16),
-        cfg: LadderConfig,
-        link: L,
-    ) -> Result<Self, FirmwareError> {
+    pub fn new((width, height): (u16, u16), cfg: LadderConfig, link: L) -> Result<Self, Error> {
         cfg.check()?;
         let depth = ring_depth(cfg.longest, cfg.cold_reach) as usize;
         Ok(LadderFirmware {
@@ -169,7 +164,7 @@ impl<L: Link> LadderFirmware<L> {
     /// on them played backwards (as a sidecar that ran before the stream
     /// would have seen the light), then every plane goes into the ring in
     /// order ([`LadderFirmware::step`]).
-    pub fn take(&mut self, plane: &[u8]) -> Result<(), FirmwareError> {
+    pub fn take(&mut self, plane: &[u8]) -> Result<(), Error> {
         self.counts.planes = self.counts.planes.saturating_add(1);
         self.queue.push_back(plane.to_vec());
         if !self.trained && self.queue.len() > LIGHT_TRAIN {
@@ -178,7 +173,7 @@ impl<L: Link> LadderFirmware<L> {
         Ok(())
     }
 
-    fn train(&mut self) -> Result<(), FirmwareError> {
+    fn train(&mut self) -> Result<(), Error> {
         let planes: Vec<&[u8]> = self.queue.iter().skip(1).map(Vec::as_slice).collect();
         self.maker.train(&planes, LIGHT_TRAIN)?;
         self.trained = true;
@@ -187,7 +182,7 @@ impl<L: Link> LadderFirmware<L> {
 
     /// The planes ended: the pairs they hold are made with what the ring
     /// holds.
-    pub fn end(&mut self) -> Result<(), FirmwareError> {
+    pub fn end(&mut self) -> Result<(), Error> {
         if !self.trained {
             self.train()?;
         }
@@ -217,7 +212,7 @@ impl<L: Link> LadderFirmware<L> {
     /// Does one thing: sends the pair due, or puts the next waiting plane
     /// into the ring. `false` when there is nothing to do until the next
     /// plane (or ever, once ended).
-    pub fn step(&mut self) -> Result<bool, FirmwareError> {
+    pub fn step(&mut self) -> Result<bool, Error> {
         if let Some(i) = self.pair_due() {
             self.send_pair(i)?;
             return Ok(true);
@@ -234,7 +229,7 @@ impl<L: Link> LadderFirmware<L> {
         }
     }
 
-    fn send_pair(&mut self, i: u32) -> Result<(), FirmwareError> {
+    fn send_pair(&mut self, i: u32) -> Result<(), Error> {
         let mid = self.cfg.mid(i).ok_or(spiv_core::Error::TickOverflow)?;
         let ask = self.ear.asked();
         let dt = u16::try_from(self.cfg.dt).unwrap_or(u16::MAX);
@@ -248,8 +243,8 @@ impl<L: Link> LadderFirmware<L> {
                 &mut CoreLink(&mut self.link),
             )
             .map_err(|e| match e {
-                SendError::Wire(w) => FirmwareError::Wire(w),
-                SendError::Link(l) => FirmwareError::Link(l),
+                SendError::Wire(w) => Error::Wire(w),
+                SendError::Link(l) => Error::Link(l),
             })?;
         let c = &mut self.counts;
         c.pairs += 1;
@@ -268,7 +263,7 @@ impl<L: Link> LadderFirmware<L> {
     }
 
     /// Pushes out what the link holds.
-    pub fn flush(&mut self) -> Result<(), FirmwareError> {
+    pub fn flush(&mut self) -> Result<(), Error> {
         Ok(self.link.flush()?)
     }
 
@@ -282,7 +277,7 @@ impl<L: Link> LadderFirmware<L> {
     }
 
     /// Flushes the link; the counts.
-    pub fn finish(&mut self) -> Result<LadderCounts, FirmwareError> {
+    pub fn finish(&mut self) -> Result<LadderCounts, Error> {
         self.link.flush()?;
         Ok(self.counts())
     }

@@ -9,6 +9,7 @@
 //! | [`downlink`] | the host's control bytes, read on a thread with faults injected, heard between planes; optional pacing |
 //! | [`firmware`] | the simulated sidecar: the core's loop (`spiv_core::sidecar`) over owned buffers, its links, fault injection and drivers |
 //! | [`ladder`] | the simulated sidecar's live loop of the time ladder: pairs as the asks heard say, up the link |
+//! | [`error`] | the crate's one error type, [`Error`] |
 //! | [`cli`] | what the two binaries share on the command line |
 //!
 //! So every test of spiv runs without hardware. Data flows one way: scene →
@@ -17,9 +18,12 @@
 
 pub mod downlink;
 pub mod drive;
+pub mod error;
 pub mod firmware;
 pub mod ladder;
 pub mod meta;
 pub mod scene;
 pub mod sensor;
 pub mod simulation;
+
+pub use error::Error;

@@ -14,9 +14,7 @@ use spiv_core::downlink::DownlinkStats;
 use spiv_core::wire::{crc32, frame_crc, Encoding};
 use spiv_core::Method;
 use spiv_firmware_sim::downlink::ControlStream;
-use spiv_firmware_sim::drive::{
-    run_ladder_on_dat, run_ladder_on_scene, run_on_dat, run_on_scene, DriveError,
-};
+use spiv_firmware_sim::drive::{run_ladder_on_dat, run_ladder_on_scene, run_on_dat, run_on_scene};
 use spiv_firmware_sim::firmware::{
     Config, Counters, FaultCounts, Faults, Faulty, Firmware, Plain, SentFrame,
 };
@@ -173,7 +171,7 @@ enum Error {
     #[error("{0}")]
     Usage(String),
     #[error(transparent)]
-    Drive(#[from] DriveError),
+    Sim(#[from] spiv_firmware_sim::Error),
     #[error(transparent)]
     Format(#[from] spiv_formats::FormatError),
     #[error("{0}")]
@@ -184,9 +182,9 @@ fn main() {
     let args: Args = spiv_args::parse_or_exit("spiv-firmware-sim");
     match run(&args) {
         Ok(()) => {}
-        Err(Error::Drive(DriveError::Firmware(
-            spiv_firmware_sim::firmware::FirmwareError::Link(e),
-        ))) if e.kind() == std::io::ErrorKind::BrokenPipe => {
+        Err(Error::Sim(spiv_firmware_sim::Error::Link(e)))
+            if e.kind() == std::io::ErrorKind::BrokenPipe =>
+        {
             eprintln!("spiv-firmware-sim: error: the receiver closed the link");
             std::process::exit(1);
         }

@@ -6,7 +6,8 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 use spiv_formats::capture::{read_json, write_json, Capture};
-use spiv_formats::FormatError;
+
+use crate::Error;
 
 use crate::scene::SceneParams;
 use crate::sensor::{FrameCameraParams, SensorParams};
@@ -55,12 +56,12 @@ pub struct SceneInfo {
 
 impl SceneMeta {
     /// Writes it as pretty JSON.
-    pub fn write(&self, path: &Path) -> Result<(), FormatError> {
-        write_json(path, self)
+    pub fn write(&self, path: &Path) -> Result<(), Error> {
+        Ok(write_json(path, self)?)
     }
 
     /// Reads one.
-    pub fn read(path: &Path) -> Result<SceneMeta, FormatError> {
-        read_json(path)
+    pub fn read(path: &Path) -> Result<SceneMeta, Error> {
+        Ok(read_json(path)?)
     }
 }

@@ -19,6 +19,8 @@ use spiv_formats::image::write_levels;
 use spiv_formats::vectors::{write_profile, write_vectors};
 use spiv_formats::FormatError;
 
+use crate::Error;
+
 /// What to simulate.
 #[derive(Debug, Clone)]
 pub struct Request {
@@ -51,7 +53,7 @@ impl Request {
     }
 
     /// Planes written and the pair in file ticks.
-    pub fn layout(&self) -> Result<(u32, [u32; 2]), FormatError> {
+    pub fn layout(&self) -> Result<(u32, [u32; 2]), Error> {
         let dt = self.scene.pair_dt;
         match self.ticks {
             None => Ok((dt + 2 * self.margin + 1, [self.margin, self.margin + dt])),
@@ -59,10 +61,10 @@ impl Request {
                 let ka = (n - 1 - dt) / 2;
                 Ok((n, [ka, ka + dt]))
             }
-            Some(n) => Err(FormatError::Parse {
+            Some(n) => Err(Error::Format(FormatError::Parse {
                 path: "--ticks".into(),
                 msg: format!("{n} ticks cannot hold a pair {dt} ticks apart"),
-            }),
+            })),
         }
     }
 }
@@ -88,7 +90,7 @@ pub fn simulate(
     req: &Request,
     mut progress: impl FnMut(u32, u32),
     mut sink: impl FnMut(&[u8]) -> Result<(), FormatError>,
-) -> Result<Simulated, FormatError> {
+) -> Result<Simulated, Error> {
     let p = &req.scene;
     let pb = plane_bytes(p.width, p.height)?;
     let (ticks, pair) = req.layout()?;
@@ -144,28 +146,28 @@ pub fn simulate(
 
 /// The frame camera's digital numbers as the image file holds them: 8-bit
 /// as is, deeper ADCs spread over 16 bits.
-pub fn write_frame(
-    path: &Path,
-    req: &Request,
-    w: u16,
-    h: u16,
-    f: &[u16],
-) -> Result<(), FormatError> {
+pub fn write_frame(path: &Path, req: &Request, w: u16, h: u16, f: &[u16]) -> Result<(), Error> {
     if req.camera.bits <= 8 {
-        write_levels(path, u32::from(w), u32::from(h), f, 255)
+        Ok(write_levels(path, u32::from(w), u32::from(h), f, 255)?)
     } else {
         let max = u32::from(req.camera.max_dn()).max(1);
         let v: Vec<u16> = f
             .iter()
             .map(|&d| ((u32::from(d) * 65535 + max / 2) / max) as u16)
             .collect();
-        write_levels(path, u32::from(w), u32::from(h), &v, u16::MAX)
+        Ok(write_levels(
+            path,
+            u32::from(w),
+            u32::from(h),
+            &v,
+            u16::MAX,
+        )?)
     }
 }
 
 /// [`simulate`] with the spike planes kept in memory, back to back (stored
 /// row order): for runs that use the stream more than once.
-pub fn simulate_planes(req: &Request) -> Result<(Vec<u8>, Simulated), FormatError> {
+pub fn simulate_planes(req: &Request) -> Result<(Vec<u8>, Simulated), Error> {
     let mut planes = Vec::new();
     let sim = simulate(
         req,
@@ -184,7 +186,7 @@ pub fn simulate_to_dir(
     req: &Request,
     dir: &Path,
     progress: impl FnMut(u32, u32),
-) -> Result<Simulated, FormatError> {
+) -> Result<Simulated, Error> {
     std::fs::create_dir_all(dir).map_err(spiv_formats::io_err(dir))?;
     let (w, h) = (req.scene.width, req.scene.height);
     let mut writer = DatWriter::create(&dir.join("spikes.dat"), w, h)?;

@@ -1,7 +1,7 @@
 //! The host's one error type: what every fallible public function of
 //! `spiv-host` returns. The crates below keep their own (`FormatError`,
 //! `PivError`, the core's `Error` and `WireError`, the simulator's
-//! `FirmwareError`); each converts into it with `?`.
+//! `spiv_firmware_sim::Error`); each converts into it with `?`.
 
 use spiv_core::wire::WireError;
 use spiv_formats::FormatError;
@@ -30,10 +30,10 @@ pub enum Error {
         /// What the core's decoder found.
         source: WireError,
     },
-    /// The simulated sidecar.
+    /// The simulated camera or sidecar.
     #[cfg(feature = "sim")]
     #[error(transparent)]
-    Firmware(#[from] spiv_firmware_sim::firmware::FirmwareError),
+    Sim(#[from] spiv_firmware_sim::Error),
     /// Reading or writing bytes: a source, a report file.
     #[error("{what}: {source}")]
     Io {
@@ -137,6 +137,10 @@ impl Error {
     /// Whether the error is the operating system's (a file or a device
     /// that could not be read or written) rather than a value refused.
     pub fn is_io(&self) -> bool {
+        #[cfg(feature = "sim")]
+        if let Error::Sim(e) = self {
+            return e.is_io();
+        }
         matches!(
             self,
             Error::Io { .. }

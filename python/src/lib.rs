@@ -86,6 +86,13 @@ impl From<PivError> for Failure {
     }
 }
 
+#[cfg(feature = "sim")]
+impl From<spiv_firmware_sim::Error> for Failure {
+    fn from(e: spiv_firmware_sim::Error) -> Self {
+        spiv_host::Error::from(e).into()
+    }
+}
+
 /// The one mapping of the host's errors to Python: the operating
 /// system's failures ([`spiv_host::Error::is_io`]) as `OSError`, every
 /// refused value as `SpivError`.

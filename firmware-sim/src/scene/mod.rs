@@ -42,11 +42,6 @@ pub enum SceneKind {
     VortexArray,
 }
 
-/// A scene name that is none of [`SceneKind::ALL`].
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("unknown scene '{0}' (one of: {names})", names = SceneKind::ALL.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", "))]
-pub struct UnknownScene(pub String);
-
 impl SceneKind {
     /// Every scene, by name.
     pub const ALL: [(&'static str, SceneKind); 9] = [
@@ -67,8 +62,8 @@ impl SceneKind {
     }
 
     /// The scene of a name, or the error that lists the names.
-    pub fn parse(name: &str) -> Result<SceneKind, UnknownScene> {
-        Self::from_name(name).ok_or_else(|| UnknownScene(name.to_string()))
+    pub fn parse(name: &str) -> Result<SceneKind, crate::Error> {
+        Self::from_name(name).ok_or_else(|| crate::Error::UnknownScene(name.to_string()))
     }
 
     /// Its name.

@@ -25,6 +25,9 @@ pub enum CliError {
     /// live loop.
     #[error(transparent)]
     Host(#[from] spiv_host::Error),
+    /// The simulated camera or sidecar.
+    #[error(transparent)]
+    Sim(#[from] spiv_firmware_sim::Error),
     /// A bad option value.
     #[error("{0}")]
     Usage(String),
