@@ -117,7 +117,7 @@ impl Ask {
         from_pair: u32,
         (width, height): (u16, u16),
         flip: bool,
-    ) -> Result<Vec<Vec<u8>>, WireError> {
+    ) -> Result<Vec<Vec<u8>>, crate::Error> {
         let mut rungs = Rungs::events(u16::try_from(self.reach).unwrap_or(u16::MAX));
         let flow = match &self.flow {
             Some(f) if !self.rungs.is_empty() => WarpFlow::from_field(f, usize::from(height), flip),
@@ -147,7 +147,7 @@ impl Ask {
             out.push(wire[..n].to_vec());
         }
         if out.is_empty() {
-            return Err(WireError::Payload);
+            return Err(WireError::Payload.into());
         }
         Ok(out)
     }
@@ -193,7 +193,7 @@ impl Heard {
 
     /// `ask` through the wire at once (no loss): what a core hears of it,
     /// for a `width × height` sensor (bottom-up when `flip`).
-    pub fn of(ask: &Ask, size: (u16, u16), flip: bool) -> Result<Heard, WireError> {
+    pub fn of(ask: &Ask, size: (u16, u16), flip: bool) -> Result<Heard, crate::Error> {
         let mut link = AskLink::new(Delivery::default(), &LadderSettings::default(), size, flip);
         link.send(0, ask.clone())?;
         Ok(link.ask_for(1).clone())
@@ -304,7 +304,7 @@ impl AskLink {
     /// Sends `ask`, measured after pair `i`: it applies from pair `i + 1`
     /// and arrives for pair `i + 1 + late`. Refused when the wire cannot
     /// carry it ([`Ask::messages`]).
-    pub fn send(&mut self, i: usize, ask: Ask) -> Result<(), WireError> {
+    pub fn send(&mut self, i: usize, ask: Ask) -> Result<(), crate::Error> {
         let from = u32::try_from(i + 1).map_err(|_| WireError::Field)?;
         let messages = ask.messages(from, self.size, self.flip)?;
         let start = ask.flow.filter(|_| !ask.rungs.is_empty());

@@ -279,7 +279,7 @@ pub fn measure(
     cfg: &LadderSettings,
     (w, h): (usize, usize),
     rescue: bool,
-) -> Result<Measurement, PivError> {
+) -> Result<Measurement, crate::Error> {
     let Ticks(dt) = dt;
     let mut confirmed = None;
     let climb = match (&input.start, input.rungs.is_empty()) {
@@ -319,7 +319,7 @@ pub fn measure(
         None => {
             return match ensemble_pair(input, mid, dt, cfg, &rungs)? {
                 Some(m) => Ok(Measurement { confirmed, ..m }),
-                None => nothing((w, h), dt, cfg, rungs, confirmed),
+                None => Ok(nothing((w, h), dt, cfg, rungs, confirmed)?),
             }
         }
     };

@@ -85,6 +85,9 @@ pub enum Error {
     /// why).
     #[error("{0}")]
     Schedule(String),
+    /// A value out of range, named as the CLI names it.
+    #[error("{0}")]
+    Request(String),
     /// The simulated link delivered no pair of a kind the job needs.
     #[error("the sidecar link delivered no {0} pair")]
     NoPair(&'static str),
@@ -98,6 +101,15 @@ pub enum Error {
     /// way round (the missing half is named).
     #[error("half a calibration: {0} is missing (give both the pixel size and the tick rate, or neither)")]
     Half(&'static str),
+}
+
+impl From<spiv_estimator::Error> for Error {
+    fn from(e: spiv_estimator::Error) -> Error {
+        match e {
+            spiv_estimator::Error::Piv(p) => Error::Piv(p),
+            spiv_estimator::Error::Ask(source) => Error::ask(source),
+        }
+    }
 }
 
 impl From<WireError> for Error {

@@ -16,7 +16,7 @@ use crate::downlink::{control_for, Downlink, DownlinkReport};
 use crate::motion::control::Ask;
 use crate::motion::ladder::{self, LadderSettings, Measurement};
 use crate::motion::make::pair_input;
-use crate::piv::{piv, PivError, Settings};
+use crate::piv::{piv, Settings};
 use crate::receive::source::Source;
 use crate::receive::{receive, Event, FrameLimit, ReceivedFrame, Report};
 use crate::receive::{receiver_settings, upright_f32};
@@ -124,7 +124,7 @@ pub fn run_live(
                     vectors += v.len();
                     if let Some(d) = downlink.as_mut() {
                         let next = head.pair.wrapping_add(1);
-                        let messages = ask.messages(next, pair.size, true).map_err(Error::ask)?;
+                        let messages = ask.messages(next, pair.size, true)?;
                         ladder.sent(next, &ask);
                         d.send_ask(&messages, ask.warm());
                     }
@@ -195,11 +195,7 @@ impl LadderHost {
     /// Measures `pair` (upright, stored bottom-up as the wire carries
     /// frames): its field in px per the head's `dt` ticks, and the ask for
     /// the pairs after it.
-    fn measure(
-        &mut self,
-        head: &PairHead,
-        pair: &CorePair,
-    ) -> Result<(Measurement, Ask), PivError> {
+    fn measure(&mut self, head: &PairHead, pair: &CorePair) -> Result<(Measurement, Ask), Error> {
         let start = self.start_for(pair);
         let (w, h) = (usize::from(pair.size.0), usize::from(pair.size.1));
         let input = pair_input(pair, w, true, start.as_ref());

@@ -6,13 +6,10 @@ use spiv_firmware_sim::scene::{SceneKind, SceneParams};
 use spiv_firmware_sim::simulation::Request;
 use spiv_formats::MAX_FRAME_PIXELS;
 
+use crate::Error;
+
 /// Longest turbulence simulation, ticks.
 pub const MAX_TURBULENCE_TICKS: u32 = 10_000;
-
-/// A value out of range, named as the CLI names it.
-#[derive(Debug, thiserror::Error)]
-#[error("{0}")]
-pub struct SimulateError(pub String);
 
 /// What to simulate; `None` takes the scene's default.
 #[derive(Debug, Clone, PartialEq)]
@@ -62,9 +59,9 @@ impl SimulateRequest {
     }
 
     /// The simulator's request, or the first value out of range.
-    pub fn request(&self) -> Result<Request, SimulateError> {
-        let bad = |m: String| Err(SimulateError(m));
-        let kind = SceneKind::parse(&self.scene).map_err(|e| SimulateError(e.to_string()))?;
+    pub fn request(&self) -> Result<Request, Error> {
+        let bad = |m: String| Err(Error::Request(m));
+        let kind = SceneKind::parse(&self.scene).map_err(|e| Error::Request(e.to_string()))?;
         let mut p = SceneParams::new(kind);
         p.width = self.width.unwrap_or(p.width);
         p.height = self.height.unwrap_or(p.height);
@@ -156,10 +153,10 @@ mod tests {
         assert!(r.request().is_ok());
         r.width = Some(65528);
         r.height = Some(65528);
-        assert!(r.request().unwrap_err().0.contains("at most"));
+        assert!(r.request().unwrap_err().to_string().contains("at most"));
         let mut r = SimulateRequest::new("paper-linear", 1);
         r.shift = Some((1.0, 0.0));
-        assert!(r.request().unwrap_err().0.contains("uniform"));
+        assert!(r.request().unwrap_err().to_string().contains("uniform"));
         assert!(SimulateRequest::new("nope", 1).request().is_err());
     }
 }

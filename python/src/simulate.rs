@@ -105,7 +105,7 @@ mod with_sim {
             flow_seed,
         }
         .request()
-        .map_err(|e| SpivError::new_err(e.0))?;
+        .map_err(err)?;
         let (w, h) = (req.scene.width, req.scene.height);
         let (n, _) = req.layout().map_err(err)?;
         let px = u64::from(w) * u64::from(h);

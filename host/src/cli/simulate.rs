@@ -71,8 +71,7 @@ pub fn run(a: &SimulateArgs) -> Result<(), CliError> {
         speed: a.speed,
         flow_seed: a.flow_seed,
     }
-    .request()
-    .map_err(|e| CliError::Usage(e.0))?;
+    .request()?;
     let (ticks, _) = req.layout()?;
     let bar = ProgressBar::new(u64::from(ticks));
     bar.set_style(

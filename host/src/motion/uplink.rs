@@ -91,7 +91,7 @@ pub struct Uplink {
 
 impl Uplink {
     /// A stream for a sensor of `width × height` stored pixels.
-    pub fn new(size: (u16, u16)) -> Result<Uplink, WireError> {
+    pub fn new(size: (u16, u16)) -> Result<Uplink, Error> {
         Ok(Uplink {
             out: PairSender::new(size)?,
         })
