@@ -5,9 +5,11 @@
 # linked to spiv-core's C ABI (the spiv-ffi static library), and runs them
 # on the committed strip and on a paper-linear and a vortex-array
 # recording that `spiv simulate` makes, at several windows and schedules;
-# the light model also on a synthetic recording of every light level. CI runs it (.ci/run); it needs
-# verilator (Debian: apt-get install verilator) and the `spiv` binary
-# (cargo build --bin spiv; SPIV_BIN names another).
+# the light model also on a synthetic recording of every light level. CI
+# runs it (.ci/run); it needs verilator (Debian: apt-get install
+# verilator) and the `spiv` binary (cargo build --bin spiv; SPIV_BIN names
+# another). Each run's result is taken before it is printed, so a failing
+# run ends the script.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 root="$PWD"
@@ -66,7 +68,6 @@ runs=(
 )
 for r in "${runs[@]}"; do
   # shellcheck disable=SC2086
-  # (the run's result first: a failing run ends the script here)
   got=$($tb $r)
   printf '%-40s %s\n' "$(basename "$(dirname ${r%% *})")/$(basename ${r%% *}) ${r#* }" "$got"
 done
