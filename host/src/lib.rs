@@ -11,7 +11,7 @@
 //! | [`piv`] | the PIV engine (the `spiv-piv` crate, usable alone), stage by stage: `filter`, `resample`, `deform`, `correlate`, `peak`, `validate` |
 //! | [`dwell`] | the dwell cap: window limits per band from a predicted field, and the banded adaptive frame |
 //! | [`flow`] | the main job on any spike recording (`spiv flow`): each pair measured by the time ladder ([`motion`]) or, by `--method`, from plain frames through the core; the mean field, glare, outputs' orientation |
-//! | [`motion`] | the time ladder and the dense ensemble: a pair's 2-D flow from the spikes around it, with its uncertainty |
+//! | [`motion`] | the flow estimator (the `spiv-estimator` crate, re-exported: the time ladder and the dense ensemble) and what feeds it the core's pairs from a recording or a wire |
 //! | [`live`] | the live closed loop: frames from a sidecar, PIV on each pair, the motion sent back |
 //! | [`simulate`] | a simulation as a user asks for it, its sizes bounded |
 //! | [`error`] | the crate's one error type, [`Error`] |
