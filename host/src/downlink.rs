@@ -116,7 +116,7 @@ impl Downlink {
     }
 
     /// Sends an ask of the live loop of the time ladder (its messages,
-    /// [`crate::motion::control::Ask::messages`]); `with_motion` when it
+    /// [`crate::estimator::control::Ask::messages`]); `with_motion` when it
     /// carries a flow. A link that refuses is counted, not fatal.
     pub fn send_ask(&mut self, messages: &[Vec<u8>], with_motion: bool) {
         let mut write = || -> std::io::Result<()> {

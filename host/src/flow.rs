@@ -3,7 +3,7 @@
 //! robust mean. No window needs hand-tuning.
 //!
 //! - `ladder` (the default, beyond the paper): the time ladder
-//!   ([`crate::motion::ladder`]). Around each pair's midpoint the
+//!   ([`crate::estimator::ladder`]). Around each pair's midpoint the
 //!   recording's own planes measure the flow: disjoint frames of the
 //!   spikes' innovation, compensated along the motion known so far, at
 //!   separations growing from 4 ticks as long as the flow and the recording
@@ -35,10 +35,10 @@ use spiv_formats::npz::read_npz_spikes;
 use spiv_formats::{FormatError, State, Vector};
 
 use crate::dwell::{adaptive_banded, caps_for};
-use crate::motion::control::{Ask, AskLink, Delivery, Heard};
-use crate::motion::ladder::{self, LadderSettings, Rung};
-use crate::motion::make::pair_input;
-use crate::motion::uplink::{PairBytes, PairReader, Uplink};
+use crate::estimator::control::{Ask, AskLink, Delivery, Heard};
+use crate::estimator::ladder::{self, LadderSettings, Rung};
+use crate::estimator::make::pair_input;
+use crate::estimator::uplink::{PairBytes, PairReader, Uplink};
 use crate::piv::validate::median;
 use crate::piv::{piv, to_f32, Field, PivError, Settings, NO_SIGMA};
 use crate::receive::assemble::FrameLimit;

@@ -10,8 +10,8 @@
 //! | [`baseline`] | the wide baseline: a second compensated pair several pair separations apart, centred on the pair, kept per vector where the flow allows |
 //! | [`piv`] | the PIV engine (the `spiv-piv` crate, usable alone), stage by stage: `filter`, `resample`, `deform`, `correlate`, `peak`, `validate` |
 //! | [`dwell`] | the dwell cap: window limits per band from a predicted field, and the banded adaptive frame |
-//! | [`flow`] | the main job on any spike recording (`spiv flow`): each pair measured by the time ladder ([`motion`]) or, by `--method`, from plain frames through the core; the mean field, glare, outputs' orientation |
-//! | [`motion`] | the flow estimator (the `spiv-estimator` crate, re-exported: the time ladder and the dense ensemble) and what feeds it the core's pairs from a recording or a wire |
+//! | [`flow`] | the main job on any spike recording (`spiv flow`): each pair measured by the time ladder ([`estimator`]) or, by `--method`, from plain frames through the core; the mean field, glare, outputs' orientation |
+//! | [`estimator`] | the flow estimator (the `spiv-estimator` crate, re-exported: the time ladder and the dense ensemble) and what feeds it the core's pairs from a recording or a wire |
 //! | [`live`] | the live closed loop: frames from a sidecar, PIV on each pair, the motion sent back |
 //! | [`simulate`] | a simulation as a user asks for it, its sizes bounded |
 //! | [`error`] | the crate's one error type, [`Error`] |
@@ -38,12 +38,12 @@ pub mod bench;
 pub mod downlink;
 pub mod dwell;
 pub mod error;
+pub mod estimator;
 pub mod flow;
 #[cfg(feature = "sim")]
 pub mod link;
 pub mod live;
 pub mod metrics;
-pub mod motion;
 #[cfg(feature = "sim")]
 pub mod pipeline;
 pub use spiv_piv as piv;

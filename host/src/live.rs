@@ -13,9 +13,9 @@ use spiv_formats::image::write_levels;
 use spiv_formats::vectors::{write_vectors, write_vectors_uncertain};
 
 use crate::downlink::{control_for, Downlink, DownlinkReport};
-use crate::motion::control::Ask;
-use crate::motion::ladder::{self, LadderSettings, Measurement};
-use crate::motion::make::pair_input;
+use crate::estimator::control::Ask;
+use crate::estimator::ladder::{self, LadderSettings, Measurement};
+use crate::estimator::make::pair_input;
 use crate::piv::{piv, Settings};
 use crate::receive::source::Source;
 use crate::receive::{receive, Event, FrameLimit, ReceivedFrame, Report};

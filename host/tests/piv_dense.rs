@@ -246,7 +246,7 @@ fn chord(n: usize, om: f64) -> impl Fn(f64, f64) -> (f64, f64) {
 
 #[test]
 fn frames_fit_one_flow_along_curved_paths() {
-    use spiv_host::motion::ensemble;
+    use spiv_host::estimator::ensemble;
     use spiv_host::piv::dense::dense_frames;
     let n = 96;
     let pts = points(n, 700, 11);
@@ -279,7 +279,7 @@ fn frames_fit_one_flow_along_curved_paths() {
 
 #[test]
 fn frames_from_a_flow_correct_it() {
-    use spiv_host::motion::ensemble;
+    use spiv_host::estimator::ensemble;
     use spiv_host::piv::dense::{dense_frames, dense_frames_from, Flow};
     let n = 96;
     let pts = points(n, 700, 11);
@@ -315,7 +315,7 @@ fn frames_from_a_flow_correct_it() {
 
 #[test]
 fn frames_degenerate_give_finite_zero_flow() {
-    use spiv_host::motion::ensemble;
+    use spiv_host::estimator::ensemble;
     use spiv_host::piv::dense::dense_frames;
     let none = dense_frames(&[], ensemble::STEPS, &ensemble::settings());
     assert_eq!(none.u.dim(), (0, 0));
@@ -343,7 +343,7 @@ fn frames_degenerate_give_finite_zero_flow() {
 
 #[test]
 fn frames_without_smoothness_stay_finite() {
-    use spiv_host::motion::ensemble;
+    use spiv_host::estimator::ensemble;
     use spiv_host::piv::dense::{dense_frames, DenseSettings};
     let pts = points(48, 150, 5);
     let frames: Vec<Array2<f32>> = (0..4)

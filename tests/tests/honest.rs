@@ -12,10 +12,10 @@ use ndarray::Array2;
 use spiv_firmware_sim::scene::{Scene, SceneKind, SceneParams};
 use spiv_firmware_sim::simulation::{simulate_planes, Request};
 use spiv_formats::State;
+use spiv_host::estimator::control::Ask;
+use spiv_host::estimator::make::input_of;
+use spiv_host::estimator::{measure, LadderSettings};
 use spiv_host::flow::{run_flow, FlowOptions, PairResult, Recording};
-use spiv_host::motion::control::Ask;
-use spiv_host::motion::make::input_of;
-use spiv_host::motion::{measure, LadderSettings};
 use spiv_host::piv::{Field, NO_SIGMA};
 use spiv_host::reconstruct::Planes;
 
@@ -182,7 +182,7 @@ fn a_wrong_prediction_is_not_confirmed() {
     let cfg = LadderSettings::default();
     for k in [2.0, -1.0] {
         let ask = Ask {
-            flow: Some(spiv_host::motion::units::PerTick(predicted(
+            flow: Some(spiv_host::estimator::units::PerTick(predicted(
                 &scene, size, k,
             ))),
             rungs: vec![16, 32, 64],
@@ -193,7 +193,7 @@ fn a_wrong_prediction_is_not_confirmed() {
         let m = measure(
             &input,
             80,
-            spiv_host::motion::units::Ticks(f64::from(dt)),
+            spiv_host::estimator::units::Ticks(f64::from(dt)),
             &cfg,
             size,
             true,

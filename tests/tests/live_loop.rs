@@ -11,8 +11,8 @@ use spiv_firmware_sim::simulation::{simulate_to_dir, Request};
 use spiv_formats::dat::DatOptions;
 use spiv_formats::vectors::read_vectors;
 use spiv_formats::{State, Vector};
+use spiv_host::estimator::control::Delivery;
 use spiv_host::flow::{run_flow, FlowOptions, FlowOutcome, Recording};
-use spiv_host::motion::control::Delivery;
 use spiv_host::reconstruct::FileOptions;
 
 /// A recording of `ticks` planes of the scene `p` at `seed`, in a

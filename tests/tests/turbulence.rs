@@ -2,7 +2,7 @@
 //! every PIV window, at up to 25 px per pair (the third-party spike-flow
 //! recordings' form: 256×256 px, 62 planes, pairs 21 ticks apart). Window
 //! PIV cannot start the time ladder there; the dense ensemble
-//! (`spiv_host::motion::ensemble`) measures the pair instead.
+//! (`spiv_host::estimator::ensemble`) measures the pair instead.
 //!
 //! Before it, the same recordings gave 60 % of the vectors flagged and an
 //! error of 4.0 px per pair on the rest (`spiv bench flows --seeds 1-5
@@ -15,8 +15,8 @@
 use spiv_firmware_sim::scene::{SceneKind, SceneParams};
 use spiv_firmware_sim::simulation::{simulate_planes, Request};
 use spiv_formats::State;
+use spiv_host::estimator::ensemble;
 use spiv_host::flow::{run_flow, FlowOptions, Recording};
-use spiv_host::motion::ensemble;
 
 #[test]
 fn turbulence_is_measured_densely_with_honest_uncertainty() {

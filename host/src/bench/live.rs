@@ -8,15 +8,15 @@
 //! Per family, seed and mode it reports the EPE of the measured vectors
 //! (px per pair) in the glare and other rows over the pairs after the
 //! third, the share of vectors flagged there, the pair's frames and
-//! events on the wire ([`crate::motion::uplink`]) against the raw spikes
+//! events on the wire ([`crate::estimator::uplink`]) against the raw spikes
 //! between pairs, and the lateness of the asks in pairs.
 
 use spiv_firmware_sim::scene::SceneParams;
 use spiv_firmware_sim::simulation::{simulate_planes, Request};
 
 use super::flows::{Family, Score};
+use crate::estimator::control::Delivery;
 use crate::flow::{run_flow, FlowOptions, Recording};
-use crate::motion::control::Delivery;
 use crate::Error;
 
 /// Pairs whose errors count: those after the third.
@@ -101,7 +101,7 @@ pub fn live_rows(fam: &Family, seed: u64, pairs: usize) -> Result<Vec<LiveRow>, 
     let every = 4 * dt;
     let wanted = SKIPPED + pairs;
     // The longest rung's reach on both sides, and the pairs between.
-    let longest = crate::motion::ladder::SEPARATIONS
+    let longest = crate::estimator::ladder::SEPARATIONS
         .iter()
         .copied()
         .max()

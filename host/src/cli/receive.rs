@@ -4,8 +4,8 @@ use std::path::PathBuf;
 
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
+use spiv_host::estimator::ladder::LadderSettings;
 use spiv_host::live::{open_downlink, run_live, LiveOptions};
-use spiv_host::motion::ladder::LadderSettings;
 use spiv_host::predict::MotionModel;
 use spiv_host::receive::source::{open, parse_vid_pid};
 use spiv_host::receive::{FrameLimit, Spec};

@@ -164,7 +164,7 @@ impl Assembler {
         }
         if h.kind == Kind::PairHead {
             // A live-loop pair's head: its parts are frames, and the
-            // pair's reader (`motion::uplink::PairReader`) reads the head.
+            // pair's reader (`estimator::uplink::PairReader`) reads the head.
             return None;
         }
         let id = h.frame_id;

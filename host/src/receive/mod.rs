@@ -11,7 +11,7 @@ use spiv_core::pairs::CorePair;
 use spiv_core::wire::pair::PairHead;
 use spiv_core::wire::{Decoder, Kind, MAX_ENCODED};
 
-use crate::motion::uplink::PairReader;
+use crate::estimator::uplink::PairReader;
 use crate::piv::Settings;
 use crate::Error;
 
@@ -68,7 +68,7 @@ pub enum Event {
     /// Both frames of a pair arrived.
     Pair(Box<[ReceivedFrame; 2]>),
     /// A pair of the live loop of the time ladder arrived whole: its head
-    /// and what the sidecar made ([`crate::motion::uplink::PairReader`]).
+    /// and what the sidecar made ([`crate::estimator::uplink::PairReader`]).
     Ladder(Box<(PairHead, CorePair)>),
 }
 

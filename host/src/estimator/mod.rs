@@ -1,4 +1,4 @@
-//! The host's motion estimate: a pair's 2-D flow measured from the spikes
+//! The flow estimator on the host: a pair's 2-D flow measured from the spikes
 //! themselves, over as many planes as the recording holds around it. The
 //! estimator is the `spiv-estimator` crate, re-exported here; `make` and
 //! `uplink` feed it the core's pairs from a recording or a wire.

@@ -52,7 +52,7 @@ impl PairBytes {
     /// Every byte of the pair.
     ///
     /// ```
-    /// use spiv_host::motion::uplink::PairBytes;
+    /// use spiv_host::estimator::uplink::PairBytes;
     /// let b = PairBytes { head: 120, rung_frames: 9000, events: 0, rates: 0 };
     /// assert_eq!(b.total(), 9120);
     /// ```
@@ -246,7 +246,7 @@ impl PairReader {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::motion::control::{Ask, Heard};
+    use crate::estimator::control::{Ask, Heard};
     use crate::piv::{Field, Grid, State};
     use spiv_core::wire::{Decoder, MAX_ENCODED};
     use spiv_firmware_sim::scene::{SceneKind, SceneParams};
@@ -312,7 +312,7 @@ mod tests {
         let mut m = maker();
         let mut up = Uplink::new((W, H)).unwrap();
         let mut reader = PairReader::new(FrameLimit::default());
-        let cold = Heard::cold(&crate::motion::ladder::LadderSettings::default());
+        let cold = Heard::cold(&crate::estimator::ladder::LadderSettings::default());
         for (k, (mid, ask)) in [(150, warm()), (160, cold), (200, warm())]
             .into_iter()
             .enumerate()
