@@ -573,6 +573,7 @@ proptest! {
 }
 
 /// The light model's arrays, owned.
+#[derive(Debug, PartialEq)]
 struct LightArrays {
     last: Vec<u16>,
     period: Vec<u16>,
@@ -609,6 +610,34 @@ impl LightArrays {
     }
 }
 
+/// One plane (`plane.len()` bytes) through `spiv_light_push` into
+/// `events`, with room said to be `cap` (at most `events.len()`): the
+/// status and the events written.
+fn light_push(
+    l: &mut SpivLight,
+    plane: &[u8],
+    events: &mut [SpivEvent],
+    cap: usize,
+) -> (SpivStatus, usize) {
+    assert!(cap <= events.len());
+    let mut n = usize::MAX;
+    // SAFETY: `plane.len()` readable bytes, `cap` writable event slots,
+    // and the arrays `l` was made over (the caller's).
+    let s = unsafe {
+        spiv_light_push(
+            l,
+            W,
+            H,
+            plane.as_ptr(),
+            plane.len(),
+            events.as_mut_ptr(),
+            cap,
+            &mut n,
+        )
+    };
+    (s, n)
+}
+
 /// The static-light model through the C ABI settles the events the
 /// core's model settles on the same planes (the strip, from a tick near
 /// the 16-bit wrap), with the same state after every plane; a short
@@ -639,20 +668,7 @@ fn light_model_through_the_abi() {
     let mut events = vec![SpivEvent::default(); px];
     let mut total = 0usize;
     for plane in data.chunks_exact(PLANE) {
-        let mut n = 0usize;
-        // SAFETY: the handle's arrays, a whole plane, `px` event slots.
-        let s = unsafe {
-            spiv_light_push(
-                &mut l,
-                W,
-                H,
-                plane.as_ptr(),
-                PLANE,
-                events.as_mut_ptr(),
-                px,
-                &mut n,
-            )
-        };
+        let (s, n) = light_push(&mut l, plane, &mut events, px);
         assert_eq!(s, SpivStatus::SpivOk);
         let mut want = Vec::new();
         let view = spiv_core::PlaneView::new(plane, W, H).expect("plane");
@@ -667,11 +683,7 @@ fn light_model_through_the_abi() {
         total += n;
     }
     assert!(total > 10_000, "{total} events");
-    assert_eq!((c.last, c.period, c.rate), (r.last, r.period, r.rate));
-    assert_eq!(
-        (c.short_run, c.lead, c.flags),
-        (r.short_run, r.lead, r.flags)
-    );
+    assert_eq!(c, r);
 
     let mut c = LightArrays::new(px);
     let mut l = c.handle();
@@ -681,34 +693,10 @@ fn light_model_through_the_abi() {
         SpivStatus::SpivOk
     );
     let plane = &data[..PLANE];
-    let mut n = 7usize;
-    // SAFETY: a buffer one event short of a plane's worst case.
-    let s = unsafe {
-        spiv_light_push(
-            &mut l,
-            W,
-            H,
-            plane.as_ptr(),
-            PLANE,
-            events.as_mut_ptr(),
-            px - 1,
-            &mut n,
-        )
-    };
-    assert_eq!((s, n, l.next), (SpivStatus::SpivErrBuffer, 7, 0));
-    // SAFETY: half a plane.
-    let s = unsafe {
-        spiv_light_push(
-            &mut l,
-            W,
-            H,
-            plane.as_ptr(),
-            PLANE / 2,
-            events.as_mut_ptr(),
-            px,
-            &mut n,
-        )
-    };
+    // A buffer one event short of a plane's worst case; half a plane.
+    let (s, n) = light_push(&mut l, plane, &mut events, px - 1);
+    assert_eq!((s, n, l.next), (SpivStatus::SpivErrBuffer, usize::MAX, 0));
+    let (s, _) = light_push(&mut l, &plane[..PLANE / 2], &mut events, px);
     assert_eq!((s, l.next), (SpivStatus::SpivErrPlane, 0));
     let mut short = LightArrays::new(px - 1);
     let mut l = short.handle();

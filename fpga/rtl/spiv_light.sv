@@ -202,7 +202,7 @@ module spiv_light #(
             logic        a_neg, a_zero;
             logic [24:0] a_rate, a_x;
             logic [RS:0] a_r;
-            logic        a_spike, a_spiked, a_periodic, a_in_window, a_minus;
+            logic        a_spike, a_spiked, a_in_window, a_minus;
             logic        a_far, a_init, a_agrees;
             logic [2:0]  a_count;
             logic [15:0] a_period, a_last, a_t16, a_iv;
@@ -247,7 +247,6 @@ module spiv_light #(
                 shift = (count >= 3'd2) ? settled_of(period) : 4'd1;
                 a_spike <= spike;
                 a_spiked <= spiked;
-                a_periodic <= periodic;
                 // The predicted window: p - early ..= p + late ticks
                 // (p <= 4095: p + late never saturates 16 bits).
                 a_in_window <= periodic

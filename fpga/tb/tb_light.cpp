@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "Vspiv_light.h"
+#include "read_file.h"
 #include "verilated.h"
 
 extern "C" {
@@ -103,17 +104,6 @@ static uint32_t lanes(uint64_t v, int lo, int n) {
 template <std::size_t N>
 static uint32_t lanes(const VlWide<N>& w, int lo, int n) {
     return field(w, lo, n);
-}
-
-static std::vector<uint8_t> read_file(const char* path) {
-    std::vector<uint8_t> out;
-    FILE* f = std::fopen(path, "rb");
-    if (!f) return out;
-    uint8_t buf[1 << 16];
-    size_t n;
-    while ((n = std::fread(buf, 1, sizeof buf, f)) > 0) out.insert(out.end(), buf, buf + n);
-    std::fclose(f);
-    return out;
 }
 
 int main(int argc, char** argv) {

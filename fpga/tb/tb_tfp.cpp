@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "Vspiv_tfp.h"
+#include "read_file.h"
 #include "verilated.h"
 
 extern "C" {
@@ -55,17 +56,6 @@ struct Bench {
         }
     }
 };
-
-static std::vector<uint8_t> read_file(const char* path) {
-    std::vector<uint8_t> out;
-    FILE* f = std::fopen(path, "rb");
-    if (!f) return out;
-    uint8_t buf[1 << 16];
-    size_t n;
-    while ((n = std::fread(buf, 1, sizeof buf, f)) > 0) out.insert(out.end(), buf, buf + n);
-    std::fclose(f);
-    return out;
-}
 
 int main(int argc, char** argv) {
     if (argc != 6) {

@@ -1,98 +1,52 @@
 //! `spiv.simulate`: a recording from the simulated camera (the `sim`
 //! feature; without it the function says how to build it in).
 
-#[cfg(feature = "sim")]
-pub(crate) use with_sim::simulate;
-#[cfg(not(feature = "sim"))]
-pub(crate) use without_sim::simulate;
+use std::path::PathBuf;
 
-#[cfg(not(feature = "sim"))]
-mod without_sim {
-    use std::path::PathBuf;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
 
-    use pyo3::prelude::*;
-    use pyo3::types::PyDict;
-
-    use crate::SpivError;
-
-    /// A simulated recording, as `spiv simulate`: this build of the module
-    /// has no simulator, so it raises `SpivError` saying how to build one.
-    #[pyfunction]
-    #[pyo3(signature = (scene="paper-linear", seed=1, width=None, height=None, ticks=None, dt=None, shift=None, spacing=None, out=None, speed=None, flow_seed=None))]
-    #[allow(clippy::too_many_arguments, unused_variables)]
-    pub(crate) fn simulate<'py>(
-        py: Python<'py>,
-        scene: &str,
-        seed: u64,
-        width: Option<u16>,
-        height: Option<u16>,
-        ticks: Option<u32>,
-        dt: Option<u32>,
-        shift: Option<(f64, f64)>,
-        spacing: Option<f64>,
-        out: Option<PathBuf>,
-        speed: Option<f64>,
-        flow_seed: Option<u64>,
-    ) -> PyResult<Bound<'py, PyDict>> {
-        Err(SpivError::new_err(NO_SIMULATOR))
-    }
-
-    /// What `simulate` says in a build without the simulator.
-    const NO_SIMULATOR: &str = "this build of spiv has no simulator: install it with \
-    MATURIN_PEP517_ARGS=\"--features sim\" pip install ./python \
-    (or simulate with the spiv CLI and read its spikes.dat)";
-}
-
-#[cfg(feature = "sim")]
-mod with_sim {
-    use std::path::{Path, PathBuf};
-
-    use numpy::IntoPyArray;
-    use pyo3::prelude::*;
-    use pyo3::types::PyDict;
-    use spiv_firmware_sim::simulation::{simulate_planes, simulate_to_dir};
-    use spiv_formats::dat::{unpack_upright, DatOptions, DatReader};
-    use spiv_formats::grid::Grid;
-    use spiv_formats::Vector;
-    use spiv_host::simulate::SimulateRequest;
-
-    use crate::{array2, array3, err, field_arrays, Failure, SpivError, MAX_ARRAY_BYTES};
-
-    /// A simulated recording (the same as `spiv simulate`): `scene` is
-    /// "paper-linear", "paper-quadratic", "paper-log", "blasius", "uniform",
-    /// "vortex", "turbulence", "large-shift" or "vortex-array"; `width`,
-    /// `height` px; `ticks` planes; `dt` the pair's separation, ticks; `shift`
-    /// the uniform scene's (u, v) px per pair; `spacing` the minimum particle
-    /// spacing, px; `speed` the top speed of the shear scenes and the vortex
-    /// array, px/tick; `flow_seed` the seed of a turbulence field or of the
-    /// vortex array's offset and drift; `out` a folder to also
-    /// write `spiv simulate`'s files to (spikes.dat, scene.json, frame_a.png,
-    /// frame_b.png, truth.csv, truth.flo, profile.csv).
-    ///
-    /// Returns a dict: `spikes` `uint8 (ticks, height, width)` upright 0/1,
-    /// `frames` the frame camera's pair `uint16 (2, height, width)` with its
-    /// `frame_full_scale`, `pair` the pair's ticks `(k_a, k_b)`, and `truth`
-    /// a dict of `x, y, u, v` `(ny, nx)` on the 32-px, 16-px-step grid of
-    /// `truth.csv` (px per pair, v down), and `truth_dense`, `u, v` per pixel
-    /// `float32 (height, width)` (`truth.flo`).
-    #[pyfunction]
-    #[pyo3(signature = (scene="paper-linear", seed=1, width=None, height=None, ticks=None, dt=None, shift=None, spacing=None, out=None, speed=None, flow_seed=None))]
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn simulate<'py>(
-        py: Python<'py>,
-        scene: &str,
-        seed: u64,
-        width: Option<u16>,
-        height: Option<u16>,
-        ticks: Option<u32>,
-        dt: Option<u32>,
-        shift: Option<(f64, f64)>,
-        spacing: Option<f64>,
-        out: Option<PathBuf>,
-        speed: Option<f64>,
-        flow_seed: Option<u64>,
-    ) -> PyResult<Bound<'py, PyDict>> {
-        let req = SimulateRequest {
+/// A simulated recording (the same as `spiv simulate`): `scene` is
+/// "paper-linear", "paper-quadratic", "paper-log", "blasius", "uniform",
+/// "vortex", "turbulence", "large-shift" or "vortex-array"; `width`,
+/// `height` px; `ticks` planes; `dt` the pair's separation, ticks; `shift`
+/// the uniform scene's (u, v) px per pair; `spacing` the minimum particle
+/// spacing, px; `speed` the top speed of the shear scenes and the vortex
+/// array, px/tick; `flow_seed` the seed of a turbulence field or of the
+/// vortex array's offset and drift; `out` a folder to also
+/// write `spiv simulate`'s files to (spikes.dat, scene.json, frame_a.png,
+/// frame_b.png, truth.csv, truth.flo, profile.csv).
+///
+/// Returns a dict: `spikes` `uint8 (ticks, height, width)` upright 0/1,
+/// `frames` the frame camera's pair `uint16 (2, height, width)` with its
+/// `frame_full_scale`, `pair` the pair's ticks `(k_a, k_b)`, and `truth`
+/// a dict of `x, y, u, v` `(ny, nx)` on the 32-px, 16-px-step grid of
+/// `truth.csv` (px per pair, v down), and `truth_dense`, `u, v` per pixel
+/// `float32 (height, width)` (`truth.flo`).
+///
+/// A build without the `sim` feature raises `SpivError` saying how to
+/// build one that has it.
+#[pyfunction]
+#[pyo3(signature = (scene="paper-linear", seed=1, width=None, height=None, ticks=None, dt=None, shift=None, spacing=None, out=None, speed=None, flow_seed=None))]
+#[allow(clippy::too_many_arguments)]
+#[cfg_attr(not(feature = "sim"), allow(unused_variables))]
+pub(crate) fn simulate<'py>(
+    py: Python<'py>,
+    scene: &str,
+    seed: u64,
+    width: Option<u16>,
+    height: Option<u16>,
+    ticks: Option<u32>,
+    dt: Option<u32>,
+    shift: Option<(f64, f64)>,
+    spacing: Option<f64>,
+    out: Option<PathBuf>,
+    speed: Option<f64>,
+    flow_seed: Option<u64>,
+) -> PyResult<Bound<'py, PyDict>> {
+    #[cfg(feature = "sim")]
+    {
+        let req = spiv_host::simulate::SimulateRequest {
             scene: scene.into(),
             seed,
             width,
@@ -105,7 +59,37 @@ mod with_sim {
             flow_seed,
         }
         .request()
-        .map_err(err)?;
+        .map_err(crate::err)?;
+        with_sim::simulate(py, req, out)
+    }
+    #[cfg(not(feature = "sim"))]
+    Err(crate::SpivError::new_err(
+        "this build of spiv has no simulator: install it with \
+         MATURIN_PEP517_ARGS=\"--features sim\" pip install ./python \
+         (or simulate with the spiv CLI and read its spikes.dat)",
+    ))
+}
+
+#[cfg(feature = "sim")]
+mod with_sim {
+    use std::path::{Path, PathBuf};
+
+    use numpy::IntoPyArray;
+    use pyo3::prelude::*;
+    use pyo3::types::PyDict;
+    use spiv_firmware_sim::simulation::{simulate_planes, simulate_to_dir, Request};
+    use spiv_formats::dat::{unpack_upright, DatOptions, DatReader};
+    use spiv_formats::grid::Grid;
+    use spiv_formats::Vector;
+
+    use crate::{array2, array3, err, field_arrays, Failure, SpivError, MAX_ARRAY_BYTES};
+
+    /// [`super::simulate`] on a checked request.
+    pub(crate) fn simulate<'py>(
+        py: Python<'py>,
+        req: Request,
+        out: Option<PathBuf>,
+    ) -> PyResult<Bound<'py, PyDict>> {
         let (w, h) = (req.scene.width, req.scene.height);
         let (n, _) = req.layout().map_err(err)?;
         let px = u64::from(w) * u64::from(h);
@@ -134,10 +118,7 @@ mod with_sim {
 
     /// Simulates `req` (writing `spiv simulate`'s files to `out` too, and
     /// reading the planes back from them) with its truth on the 32-px grid.
-    fn simulated(
-        req: &spiv_firmware_sim::simulation::Request,
-        out: Option<&Path>,
-    ) -> Result<Simulation, Failure> {
+    fn simulated(req: &Request, out: Option<&Path>) -> Result<Simulation, Failure> {
         let (w, h) = (req.scene.width, req.scene.height);
         let (planes, sim) = match out {
             None => simulate_planes(req)?,
