@@ -8,6 +8,7 @@
 //! simulated sidecar (`spiv_firmware_sim::ladder`) runs it between planes, so the host
 //! measures the same frames either way.
 
+use crate::error::LinkError;
 use std::vec;
 use std::vec::Vec;
 
@@ -22,7 +23,7 @@ use crate::warp::Flow;
 use crate::wire::ask::{AskAssembly, AskProgress, AskView, Part, MAX_FLOW_NODES};
 use crate::wire::codec::Lossy;
 use crate::wire::pair::NO_ASK;
-use crate::wire::sender::{tile_rows, Link, SendBuffers, SendError, Sender};
+use crate::wire::sender::{tile_rows, Link, SendBuffers, Sender};
 use crate::wire::{Decoder, DecoderState, Kind, WireError, MAX_ENCODED, MAX_PAYLOAD};
 use crate::Error;
 
@@ -207,13 +208,13 @@ impl PairMaker {
         cold_reach: u16,
         out: &mut PairSender,
         link: &mut L,
-    ) -> Result<PairCost, SendError<L::Error>> {
+    ) -> Result<PairCost, LinkError<L::Error>> {
         let px = usize::from(self.width) * usize::from(self.height);
         let (rungs, events) = self.plan(mid, ask, cold_reach);
         let light = Light::resume(self.width, self.height, self.clock, self.light.state())
-            .map_err(|_| SendError::Wire(WireError::Payload))?;
+            .map_err(|_| LinkError::from(WireError::Payload))?;
         let ring = EventRing::resume(&mut self.entries, &mut self.starts, self.cursor)
-            .map_err(|_| SendError::Wire(WireError::Payload))?;
+            .map_err(|_| LinkError::from(WireError::Payload))?;
         let plan = PairPlan {
             pair,
             mid,
@@ -263,7 +264,7 @@ pub struct PairSender {
 
 impl PairSender {
     /// A stream for a sensor of `width × height` stored pixels.
-    pub fn new((width, height): (u16, u16)) -> Result<PairSender, WireError> {
+    pub fn new((width, height): (u16, u16)) -> Result<PairSender, Error> {
         let rows = tile_rows(width, height, true, Lossy::DEFAULT.block);
         let px = usize::from(width) * usize::from(height);
         Ok(PairSender {
@@ -400,7 +401,7 @@ impl AskEar {
                 {
                     AskView::parse(msg.payload)
                 }
-                _ => Err(WireError::Payload),
+                _ => Err(WireError::Payload.into()),
             };
             match view.map(|v| asm.take(&v)) {
                 Ok(Part::Whole) => match asm.head() {

@@ -15,13 +15,13 @@
 //! allocation. Events the ring cannot hold are counted
 //! ([`EventRing::lost`]), never silently dropped.
 
-use crate::error::Error;
+use crate::error::{Error, LinkError};
 use crate::light::{Event, Light, MAX_TOLERANCE};
 use crate::method::Method;
 use crate::warp::{scatter, subtract_rates, Flow, Window, SCALE};
 use crate::wire::codec::Lossy;
 use crate::wire::pair::{PairHead, MAX_EVENT_TICKS};
-use crate::wire::sender::{FrameInfo, Link, SendBuffers, SendError, Sender, Slot};
+use crate::wire::sender::{FrameInfo, Link, SendBuffers, Sender, Slot};
 use crate::wire::{Encoding, WireError};
 
 pub use crate::wire::pair::MAX_RUNGS;
@@ -530,15 +530,15 @@ pub fn send_pair<L: Link>(
     (ring, light): (&EventRing<'_>, &Light<'_>),
     plan: &PairPlan<'_>,
     scratch: PairScratch<'_>,
-) -> Result<PairCost, SendError<L::Error>> {
+) -> Result<PairCost, LinkError<L::Error>> {
     let px = usize::from(light.width()) * usize::from(light.height());
     let n = 2 * plan.rungs.separations().len();
     if scratch.frames.len() < n * px || scratch.levels.len() < px || scratch.plane.len() < px {
-        return Err(SendError::Wire(WireError::TooLarge));
+        return Err(LinkError::from(WireError::TooLarge));
     }
     let (a, b) = plan.events.unwrap_or((0, 0));
     if plan.events.is_some() && (a < ring.ticks().start || b > ring.ticks().end) {
-        return Err(SendError::Wire(WireError::Payload));
+        return Err(LinkError::from(WireError::Payload));
     }
     if n > 0 {
         rung_frames(
@@ -549,7 +549,7 @@ pub fn send_pair<L: Link>(
             &plan.rungs,
             scratch.frames,
         )
-        .map_err(|_| SendError::Wire(WireError::Payload))?;
+        .map_err(|_| LinkError::from(WireError::Payload))?;
     }
     let frames = &scratch.frames[..n * px];
     let head = pair_head(plan, frames, px)?;
@@ -608,12 +608,12 @@ pub fn send_pair<L: Link>(
 
 /// The head of the pair `plan` describes, its rung frames `frames` (`px`
 /// samples each): each frame's offset its smallest sample.
-fn pair_head<E>(plan: &PairPlan<'_>, frames: &[i16], px: usize) -> Result<PairHead, SendError<E>> {
+fn pair_head<E>(plan: &PairPlan<'_>, frames: &[i16], px: usize) -> Result<PairHead, LinkError<E>> {
     let (a, b) = plan.events.unwrap_or((0, 0));
     let ev_ticks = u16::try_from(b.saturating_sub(a))
         .ok()
         .filter(|&t| t <= MAX_EVENT_TICKS)
-        .ok_or(SendError::Wire(WireError::Payload))?;
+        .ok_or(LinkError::from(WireError::Payload))?;
     let seps = plan.rungs.separations();
     let mut head = PairHead {
         pair: plan.pair,

@@ -16,7 +16,7 @@
 //! copies of frames; `()` is the probe that does nothing (and costs nothing).
 
 use crate::downlink::{Downlink, DownlinkBuffers, DownlinkStats, Fit};
-use crate::error::Error;
+use crate::error::{ConfigError, Error, LinkError};
 use crate::frame::{reconstruct_adaptive, reconstruct_compensated, reconstruct_rows};
 use crate::gray::Gray;
 use crate::history::History;
@@ -27,10 +27,8 @@ use crate::plane::PlaneView;
 use crate::state::{Workspace, WorkspaceSizes};
 use crate::window::{tfi, tfp};
 use crate::wire::codec::{tile_scratch, Lossy};
-use crate::wire::sender::{
-    tile_rows, FrameInfo, Link, Schedule, SendBuffers, SendError, Sender, Sent, Slot,
-};
-use crate::wire::{Encoding, WireError, MAX_PAYLOAD};
+use crate::wire::sender::{tile_rows, FrameInfo, Link, Schedule, SendBuffers, Sender, Sent, Slot};
+use crate::wire::Encoding;
 
 /// Rows per band of the optional window caps (upright rows, top first).
 pub const CAP_BAND: u16 = 32;
@@ -188,92 +186,6 @@ impl Config {
     }
 }
 
-/// A configuration the sidecar cannot run.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum ConfigError {
-    /// The frame window is outside `1..=255` ticks (`2..=255` for TFI).
-    Window(u16),
-    /// `every` below `dt`, or `dt` zero.
-    Schedule {
-        /// Ticks between pairs.
-        every: u32,
-        /// Ticks between the frames of a pair.
-        dt: u32,
-    },
-    /// One row of this many pixels does not fit one payload.
-    RowTooWide(u16),
-    /// The frame loop does not make this method's frames (the time
-    /// ladder's are made by the live loop's pairs, [`crate::rungs`]).
-    Method(Method),
-}
-
-impl core::fmt::Display for ConfigError {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match self {
-            ConfigError::Window(w) => write!(f, "window {w} out of range (1..=255)"),
-            ConfigError::Schedule { every, dt } => {
-                write!(f, "pair every {every} ticks must be at least dt = {dt} > 0")
-            }
-            ConfigError::RowTooWide(w) => write!(
-                f,
-                "a row of {w} px does not fit one {MAX_PAYLOAD}-byte payload"
-            ),
-            ConfigError::Method(m) => write!(
-                f,
-                "the frame loop does not make {} frames (the live loop of pairs does)",
-                m.name()
-            ),
-        }
-    }
-}
-
-/// Why the loop stopped.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum SidecarError<E> {
-    /// The core refused (a plane of the wrong size, buffers too small, …).
-    Core(Error),
-    /// Coding or framing failed.
-    Wire(WireError),
-    /// The link refused the bytes.
-    Link(E),
-    /// A configuration the sidecar cannot run.
-    Config(ConfigError),
-}
-
-impl<E> From<Error> for SidecarError<E> {
-    fn from(e: Error) -> Self {
-        SidecarError::Core(e)
-    }
-}
-
-impl<E> From<WireError> for SidecarError<E> {
-    fn from(e: WireError) -> Self {
-        SidecarError::Wire(e)
-    }
-}
-
-impl<E> From<SendError<E>> for SidecarError<E> {
-    fn from(e: SendError<E>) -> Self {
-        match e {
-            SendError::Wire(w) => SidecarError::Wire(w),
-            SendError::Link(l) => SidecarError::Link(l),
-        }
-    }
-}
-
-impl<E: core::fmt::Display> core::fmt::Display for SidecarError<E> {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match self {
-            SidecarError::Core(e) => write!(f, "core: {e}"),
-            SidecarError::Wire(e) => write!(f, "wire: {e}"),
-            SidecarError::Link(e) => write!(f, "link: {e}"),
-            SidecarError::Config(e) => write!(f, "configuration: {e}"),
-        }
-    }
-}
-
 /// The memory the loop works in, borrowed for one call.
 #[derive(Debug)]
 pub struct Memory<'a, G: Gray> {
@@ -364,27 +276,27 @@ pub struct Sidecar {
 
 impl Sidecar {
     /// The loop for a `width × height` sensor; checks the configuration.
-    pub fn new<E>(width: u16, height: u16, cfg: Config) -> Result<Sidecar, SidecarError<E>> {
+    pub fn new(width: u16, height: u16, cfg: Config) -> Result<Sidecar, Error> {
         for m in [cfg.method, cfg.bootstrap] {
             if m == Method::Ladder {
-                return Err(SidecarError::Config(ConfigError::Method(m)));
+                return Err(Error::Config(ConfigError::Method(m)));
             }
         }
         let window = cfg.window();
         // TFI needs two ticks to see an interval.
         let least = if cfg.method == Method::Tfi { 2 } else { 1 };
         if !(least..=255).contains(&window) {
-            return Err(SidecarError::Config(ConfigError::Window(window)));
+            return Err(Error::Config(ConfigError::Window(window)));
         }
         if cfg.method == Method::Mc
             && cfg.bootstrap == Method::Tfp
             && !(1..=255).contains(&cfg.tfp_window)
         {
-            return Err(SidecarError::Config(ConfigError::Window(cfg.tfp_window)));
+            return Err(Error::Config(ConfigError::Window(cfg.tfp_window)));
         }
         let s = &cfg.schedule;
         if s.dt == 0 || s.every < s.dt {
-            return Err(SidecarError::Config(ConfigError::Schedule {
+            return Err(Error::Config(ConfigError::Schedule {
                 every: s.every,
                 dt: s.dt,
             }));
@@ -392,7 +304,7 @@ impl Sidecar {
         cfg.params.validate(cfg.depth())?;
         let rows = tile_rows(width, height, cfg.params.full_scale > 255, cfg.lossy.block);
         if rows == 0 {
-            return Err(SidecarError::Config(ConfigError::RowTooWide(width)));
+            return Err(Error::Config(ConfigError::RowTooWide(width)));
         }
         Ok(Sidecar {
             cfg,
@@ -471,7 +383,7 @@ impl Sidecar {
         plane: &[u8],
         link: &mut L,
         probe: &mut P,
-    ) -> Result<(), SidecarError<L::Error>> {
+    ) -> Result<(), LinkError<L::Error>> {
         probe.enter(Stage::Ingest);
         let newest = Self::ingest(&mut mem.history, plane)?;
         probe.leave(Stage::Ingest);
@@ -508,7 +420,7 @@ impl Sidecar {
         &mut self,
         send: &mut SendBuffers<'_>,
         link: &mut L,
-    ) -> Result<Sent, SidecarError<L::Error>> {
+    ) -> Result<Sent, LinkError<L::Error>> {
         self.sync_downlink();
         self.sender.send_status(send, link)?;
         Ok(self.sender.sent)
@@ -554,7 +466,7 @@ impl Sidecar {
         slot: Slot,
         method: Method,
         link: &mut L,
-    ) -> Result<(), SendError<L::Error>> {
+    ) -> Result<(), LinkError<L::Error>> {
         let info = FrameInfo {
             slot,
             method,

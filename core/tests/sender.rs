@@ -1,10 +1,9 @@
 //! The sender: tile sizes, the pair schedule, and a frame through the
 //! decoder.
 
+use spiv_core::error::LinkError;
 use spiv_core::wire::codec::Lossy;
-use spiv_core::wire::sender::{
-    tile_rows, FrameInfo, Link, Schedule, SendBuffers, SendError, Sender, Slot,
-};
+use spiv_core::wire::sender::{tile_rows, FrameInfo, Link, Schedule, SendBuffers, Sender, Slot};
 use spiv_core::wire::{
     frame_crc, Decoder, Encoding, FrameEnd, Kind, WireError, MAX_ENCODED, MAX_PAYLOAD,
 };
@@ -134,6 +133,6 @@ fn a_frame_arrives_as_tiles_and_an_end_with_its_crc() {
             &Lossy::default(),
             &mut link
         ),
-        Err(SendError::Wire(WireError::Payload))
+        Err(LinkError::from(WireError::Payload))
     );
 }

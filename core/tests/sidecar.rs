@@ -7,7 +7,8 @@
 #![cfg(feature = "std")]
 
 use spiv_core::buffers::{SidecarBuf, WorkspaceBuf};
-use spiv_core::sidecar::{Config, ConfigError, Probe, Sidecar, SidecarError};
+use spiv_core::error::{ConfigError, Error, LinkError};
+use spiv_core::sidecar::{Config, Probe, Sidecar};
 use spiv_core::window::{tfi, tfp};
 use spiv_core::wire::control::{
     control_header, encode_control, ControlHead, MAX_CONTROL_ENCODED, MAX_CONTROL_PAYLOAD,
@@ -108,7 +109,7 @@ fn control(
 
 fn run(cfg: Config, planes: &[Vec<u8>]) -> (Vec<(Slot, Vec<u16>)>, Vec<u8>) {
     let mut buf = SidecarBuf::<u16>::new(W, H, &cfg).unwrap();
-    let mut sc = Sidecar::new::<()>(W, H, cfg).unwrap();
+    let mut sc = Sidecar::new(W, H, cfg).unwrap();
     if cfg.method == Method::Mc {
         sc.hear(&mut buf.downlink(), &mc_control());
     }
@@ -179,11 +180,8 @@ fn the_frame_loop_refuses_the_ladders_method() {
         let mut cfg = Config::new(40, 9);
         cfg.method = method;
         cfg.bootstrap = bootstrap;
-        let got = Sidecar::new::<()>(W, H, cfg).map(|_| ());
-        assert_eq!(
-            got,
-            Err(SidecarError::Config(ConfigError::Method(Method::Ladder)))
-        );
+        let got = Sidecar::new(W, H, cfg).map(|_| ());
+        assert_eq!(got, Err(Error::Config(ConfigError::Method(Method::Ladder))));
     }
 }
 
@@ -228,30 +226,27 @@ fn bad_configurations_and_planes_are_refused() {
     cfg.method = Method::Tfp;
     cfg.tfp_window = 0;
     assert_eq!(
-        Sidecar::new::<()>(W, H, cfg).unwrap_err(),
-        SidecarError::Config(ConfigError::Window(0))
+        Sidecar::new(W, H, cfg).unwrap_err(),
+        Error::Config(ConfigError::Window(0))
     );
     let mut cfg = Config::new(10, 5);
     cfg.schedule.every = 4;
     assert!(matches!(
-        Sidecar::new::<()>(W, H, cfg),
-        Err(SidecarError::Config(ConfigError::Schedule {
-            every: 4,
-            dt: 5
-        }))
+        Sidecar::new(W, H, cfg),
+        Err(Error::Config(ConfigError::Schedule { every: 4, dt: 5 }))
     ));
     assert!(matches!(
-        Sidecar::new::<()>(20_000, 8, Config::new(10, 5)),
-        Err(SidecarError::Config(ConfigError::RowTooWide(20_000)))
+        Sidecar::new(20_000, 8, Config::new(10, 5)),
+        Err(Error::Config(ConfigError::RowTooWide(20_000)))
     ));
     let cfg = Config::new(10, 5);
     let mut buf = SidecarBuf::<u16>::new(W, H, &cfg).unwrap();
     let mut mem = buf.memory(0).unwrap();
-    let mut sc = Sidecar::new::<()>(W, H, cfg).unwrap();
+    let mut sc = Sidecar::new(W, H, cfg).unwrap();
     let short = vec![0u8; PX / 8 - 1];
     assert!(matches!(
         sc.push_plane(&mut mem, &short, &mut Bytes(Vec::new()), &mut ()),
-        Err(SidecarError::Core(spiv_core::Error::PlaneSize { .. }))
+        Err(LinkError::Core(Error::PlaneSize { .. }))
     ));
     assert_eq!(sc.sent().planes, 0, "a refused plane is not counted");
 }
@@ -267,7 +262,7 @@ fn an_mc_sidecar_that_heard_no_motion_sends_its_bootstrap_frames() {
         cfg.schedule.pairs = Some(2);
         let mut buf = SidecarBuf::<u16>::new(W, H, &cfg).unwrap();
         let mut mem = buf.memory(0).unwrap();
-        let mut sc = Sidecar::new::<()>(W, H, cfg).unwrap();
+        let mut sc = Sidecar::new(W, H, cfg).unwrap();
         let (mut link, mut kept) = (Bytes(Vec::new()), Kept::default());
         for p in &planes {
             sc.push_plane(&mut mem, p, &mut link, &mut kept).unwrap();
@@ -296,7 +291,7 @@ fn an_unknown_method_code_is_a_malformed_frame_end() {
     let mut b = end.to_bytes();
     assert_eq!(FrameEnd::parse(&b), Ok(end));
     b[5] = 5;
-    assert_eq!(FrameEnd::parse(&b), Err(WireError::Payload));
+    assert_eq!(FrameEnd::parse(&b), Err(WireError::Payload.into()));
 }
 
 /// The frame ends' methods and the last status of a message stream.
@@ -334,7 +329,7 @@ fn run_heard(planes: &[Vec<u8>], mut talk: impl FnMut(usize, Option<u32>) -> Vec
     cfg.schedule.every = 30;
     cfg.schedule.pairs = Some(4);
     let mut buf = SidecarBuf::<u16>::new(W, H, &cfg).unwrap();
-    let mut sc = Sidecar::new::<()>(W, H, cfg).unwrap();
+    let mut sc = Sidecar::new(W, H, cfg).unwrap();
     let (mut link, mut kept) = (Bytes(Vec::new()), Kept::default());
     for (i, p) in planes.iter().enumerate() {
         if sc.done() {
@@ -438,7 +433,7 @@ fn caps_and_a_lower_n_max_from_the_host_make_the_adaptive_frame() {
     cfg.schedule.pairs = Some(1);
     for (n_max, caps) in [(0u16, vec![8u16]), (20, vec![])] {
         let mut buf = SidecarBuf::<u16>::new(W, H, &cfg).unwrap();
-        let mut sc = Sidecar::new::<()>(W, H, cfg).unwrap();
+        let mut sc = Sidecar::new(W, H, cfg).unwrap();
         sc.hear(
             &mut buf.downlink(),
             &control(0, 0, n_max, (&[], &[]), &caps, (W, H)),
@@ -490,7 +485,7 @@ proptest::proptest! {
     ) {
         let cfg = Config::new(40, 9);
         let mut buf = SidecarBuf::<u16>::new(W, H, &cfg).unwrap();
-        let mut sc = Sidecar::new::<()>(W, H, cfg).unwrap();
+        let mut sc = Sidecar::new(W, H, cfg).unwrap();
         let zero = vec![0i16; usize::from(H)];
         let good = control(0, 9, 0, (&mc_velocity(), &zero), &[4], (W, H));
         let mut stream = junk.clone();

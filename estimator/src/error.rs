@@ -10,7 +10,13 @@ pub enum Error {
     #[error(transparent)]
     Piv(#[from] PivError),
     /// An ask the wire cannot carry (a flow grid larger than an ask
-    /// holds).
+    /// holds): the core's refusal.
     #[error("ask: {0}")]
-    Ask(#[from] WireError),
+    Ask(#[from] spiv_core::Error),
+}
+
+impl From<WireError> for Error {
+    fn from(e: WireError) -> Self {
+        Error::Ask(e.into())
+    }
 }

@@ -45,17 +45,16 @@ use core::ffi::{c_char, c_void};
 use core::mem::{align_of, size_of};
 
 use spiv_core::downlink::DownlinkBuffers;
+use spiv_core::error::LinkError;
 use spiv_core::motion::{Motion, Refine};
 use spiv_core::region::Region;
 use spiv_core::sidecar::{
-    make_frame, Config, FrameBuffers, Guide, Memory, Probe, RefineBuffers, Sidecar, SidecarError,
+    make_frame, Config, FrameBuffers, Guide, Memory, Probe, RefineBuffers, Sidecar,
 };
 use spiv_core::state::Buffers;
 use spiv_core::wire::codec::Lossy;
 use spiv_core::wire::control::MAX_CONTROL_ENCODED;
-use spiv_core::wire::sender::{
-    tile_rows, FrameInfo, Link, SendBuffers, SendError, Sender, Sent, Slot,
-};
+use spiv_core::wire::sender::{tile_rows, FrameInfo, Link, SendBuffers, Sender, Sent, Slot};
 use spiv_core::wire::{frame_crc, Encoding, MAX_ENCODED, MAX_PAYLOAD};
 use spiv_core::{Gray, History, Method, Params, Workspace, WorkspaceSizes};
 
@@ -267,7 +266,7 @@ fn config(c: &SpivConfig) -> Result<Config, SpivStatus> {
     // Whole-byte planes, then the loop's own checks (window, schedule,
     // parameters, tile width).
     spiv_core::plane::plane_bytes(c.width, c.height).ok_or(bad)?;
-    Sidecar::new::<()>(c.width, c.height, cfg).map_err(|_| bad)?;
+    Sidecar::new(c.width, c.height, cfg).map_err(|_| bad)?;
     Ok(cfg)
 }
 
@@ -471,7 +470,7 @@ pub unsafe extern "C" fn spiv_init(
         return SpivStatus::SpivErrMemory;
     }
     let (Ok(sidecar), Ok(sender)) = (
-        Sidecar::new::<()>(c.width, c.height, cfg),
+        Sidecar::new(c.width, c.height, cfg),
         Sender::new(
             c.width,
             c.height,
@@ -697,23 +696,15 @@ fn core_status(e: spiv_core::Error) -> SpivStatus {
         E::PlaneSize { .. } | E::PlaneMismatch => SpivStatus::SpivErrPlane,
         E::TickUnavailable | E::TickOverflow => SpivStatus::SpivErrTick,
         E::BufferTooSmall { .. } => SpivStatus::SpivErrBuffer,
-        E::BadDimensions | E::BadBand | E::BadParam(_) => SpivStatus::SpivErrConfig,
+        E::BadDimensions | E::BadBand | E::BadParam(_) | E::Config(_) => SpivStatus::SpivErrConfig,
+        E::Wire(_) => SpivStatus::SpivErrWire,
     }
 }
 
-fn send_status<E>(e: SendError<E>) -> SpivStatus {
+fn link_status<E>(e: LinkError<E>) -> SpivStatus {
     match e {
-        SendError::Wire(_) => SpivStatus::SpivErrWire,
-        SendError::Link(_) => SpivStatus::SpivErrLink,
-    }
-}
-
-fn sidecar_status<E>(e: SidecarError<E>) -> SpivStatus {
-    match e {
-        SidecarError::Core(c) => core_status(c),
-        SidecarError::Wire(_) => SpivStatus::SpivErrWire,
-        SidecarError::Link(_) => SpivStatus::SpivErrLink,
-        SidecarError::Config(_) => SpivStatus::SpivErrConfig,
+        LinkError::Core(c) => core_status(c),
+        LinkError::Link(_) => SpivStatus::SpivErrLink,
     }
 }
 
@@ -796,7 +787,7 @@ fn push<G: Gray + Plain>(
     };
     st.sidecar
         .push_plane(&mut mem, plane, &mut CLink(link), &mut probe)
-        .map_err(sidecar_status)
+        .map_err(link_status)
 }
 
 /// Ingests the next spike plane (`len` = `width·height/8` bytes, stored row
@@ -877,12 +868,12 @@ pub unsafe extern "C" fn spiv_finish(
         let sent = if st.mode == Mode::Manual {
             st.sender
                 .send_status(&mut p.send, &mut l)
-                .map_err(send_status)?;
+                .map_err(link_status)?;
             st.sender.sent
         } else {
             st.sidecar
                 .finish(&mut p.send, &mut l)
-                .map_err(sidecar_status)?
+                .map_err(link_status)?
         };
         // SAFETY: writable or null (the caller's promise).
         if let Some(o) = unsafe { out.as_mut() } {
@@ -1091,7 +1082,7 @@ fn send_made<G: Gray + Plain>(
             &st.cfg.lossy,
             &mut l,
         )
-        .map_err(send_status)?;
+        .map_err(link_status)?;
     l.frame(describe(frame_id, slot, made.method, p.frame), p.frame);
     Ok(())
 }

@@ -18,7 +18,8 @@
 use std::convert::Infallible;
 
 use spiv_core::buffers::SidecarBuf;
-use spiv_core::sidecar::{Config, Probe, Sidecar, SidecarError};
+use spiv_core::error::LinkError;
+use spiv_core::sidecar::{Config, Probe, Sidecar};
 use spiv_core::wire::sender::{Link, Slot};
 use spiv_core::wire::{crc32, frame_crc};
 
@@ -99,9 +100,9 @@ fn light() -> Result<(), spiv_core::Error> {
     Ok(())
 }
 
-fn main() -> Result<(), SidecarError<Infallible>> {
+fn main() -> Result<(), LinkError<Infallible>> {
     if std::env::args().nth(1).as_deref() == Some("light") {
-        return light().map_err(SidecarError::Core);
+        return Ok(light()?);
     }
     // `spiv-firmware-sim`'s defaults and the firmware's: first frame at
     // n_max/2, one pair, 8-bit frames, Rice tiles.

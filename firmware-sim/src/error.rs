@@ -2,6 +2,7 @@
 //! `spiv-firmware-sim` returns (the scene, the simulation's files, the
 //! simulated sidecar and its drivers).
 
+use spiv_core::error::LinkError;
 use spiv_formats::FormatError;
 
 use crate::scene::SceneKind;
@@ -9,18 +10,13 @@ use crate::scene::SceneKind;
 /// Why a simulation or a simulated sidecar stopped.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    /// The core refused.
+    /// The core refused: a plane, a frame the wire cannot carry, a
+    /// configuration the sidecar cannot run.
     #[error("core: {0}")]
     Core(#[from] spiv_core::Error),
-    /// Framing.
-    #[error("wire: {0}")]
-    Wire(#[from] spiv_core::wire::WireError),
     /// The link.
     #[error("link: {0}")]
     Link(#[from] std::io::Error),
-    /// A configuration the firmware cannot run.
-    #[error("configuration: {0}")]
-    Config(spiv_core::sidecar::ConfigError),
     /// A live-loop schedule the firmware cannot run.
     #[error("schedule: {0}")]
     Schedule(&'static str),
@@ -30,6 +26,15 @@ pub enum Error {
     /// A scene name that is none of [`SceneKind::ALL`].
     #[error("unknown scene '{0}' (one of: {names})", names = SceneKind::ALL.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", "))]
     UnknownScene(String),
+}
+
+impl From<LinkError<std::io::Error>> for Error {
+    fn from(e: LinkError<std::io::Error>) -> Self {
+        match e {
+            LinkError::Core(c) => Error::Core(c),
+            LinkError::Link(l) => Error::Link(l),
+        }
+    }
 }
 
 impl Error {

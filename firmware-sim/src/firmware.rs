@@ -11,24 +11,13 @@
 
 use spiv_core::buffers::SidecarBuf;
 use spiv_core::downlink::DownlinkStats;
-use spiv_core::sidecar::{Probe, Sidecar, SidecarError};
+use spiv_core::sidecar::{Probe, Sidecar};
 pub use spiv_core::wire::control::Control;
 use spiv_core::wire::sender::Slot;
 
 pub use spiv_core::sidecar::{capped_frame, Config, CAP_BAND};
 
 use crate::Error;
-
-impl From<SidecarError<std::io::Error>> for Error {
-    fn from(e: SidecarError<std::io::Error>) -> Self {
-        match e {
-            SidecarError::Core(c) => Error::Core(c),
-            SidecarError::Wire(w) => Error::Wire(w),
-            SidecarError::Link(l) => Error::Link(l),
-            SidecarError::Config(c) => Error::Config(c),
-        }
-    }
-}
 
 /// Where messages go: one call per whole message (delimiter included).
 pub trait Link {
@@ -121,7 +110,7 @@ pub struct Firmware<L: Link> {
 impl<L: Link> Firmware<L> {
     /// A firmware for a `width × height` sensor sending to `link`.
     pub fn new(width: u16, height: u16, cfg: Config, link: L) -> Result<Self, Error> {
-        let sidecar = Sidecar::new::<std::io::Error>(width, height, cfg)?;
+        let sidecar = Sidecar::new(width, height, cfg)?;
         Ok(Firmware {
             buf: SidecarBuf::new(width, height, &cfg)?,
             sidecar,

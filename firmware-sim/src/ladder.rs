@@ -20,7 +20,6 @@
 use std::collections::VecDeque;
 
 use spiv_core::rungs::{lead, ring_depth, PairCost, BOOTSTRAP_REACH, LONGEST_RUNG};
-use spiv_core::wire::sender::SendError;
 
 use crate::firmware::Link;
 use crate::Error;
@@ -233,19 +232,13 @@ impl<L: Link> LadderFirmware<L> {
         let mid = self.cfg.mid(i).ok_or(spiv_core::Error::TickOverflow)?;
         let ask = self.ear.asked();
         let dt = u16::try_from(self.cfg.dt).unwrap_or(u16::MAX);
-        let cost = self
-            .maker
-            .send(
-                (i, mid, dt),
-                &ask,
-                self.cfg.cold_reach,
-                &mut self.out,
-                &mut CoreLink(&mut self.link),
-            )
-            .map_err(|e| match e {
-                SendError::Wire(w) => Error::Wire(w),
-                SendError::Link(l) => Error::Link(l),
-            })?;
+        let cost = self.maker.send(
+            (i, mid, dt),
+            &ask,
+            self.cfg.cold_reach,
+            &mut self.out,
+            &mut CoreLink(&mut self.link),
+        )?;
         let c = &mut self.counts;
         c.pairs += 1;
         c.warm += u32::from(cost.rung_frames > 0);

@@ -34,7 +34,7 @@ pub fn run(input: &[u8]) {
     cfg.refine =
         (head.first().is_some_and(|b| b & 1 == 1)).then(spiv_core::motion::Refine::default);
     let mut buf = SidecarBuf::<u8>::new(W, H, &cfg).expect("buffers");
-    let mut sc = Sidecar::new::<()>(W, H, cfg).expect("configuration");
+    let mut sc = Sidecar::new(W, H, cfg).expect("configuration");
     let chunk = head.get(1).map_or(64, |&c| usize::from(c % 64) + 1);
     let mut parts = data.chunks(chunk);
     // Planes of a fixed pattern; downlink bytes heard between them.

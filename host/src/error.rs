@@ -20,7 +20,7 @@ pub enum Error {
     Piv(#[from] PivError),
     /// The core refused its input or its memory.
     #[error("core: {0}")]
-    Core(#[from] spiv_core::Error),
+    Core(spiv_core::Error),
     /// A wire message, control message or ask that does not hold;
     /// `what` says which.
     #[error("{what}: {source}")]
@@ -112,6 +112,14 @@ impl From<spiv_estimator::Error> for Error {
     }
 }
 
+/// The core's refusals: those of the wire's decoders say they came from
+/// the wire; the others are the core's.
+impl From<spiv_core::Error> for Error {
+    fn from(e: spiv_core::Error) -> Error {
+        Error::from_core("wire", e)
+    }
+}
+
 impl From<WireError> for Error {
     fn from(source: WireError) -> Error {
         Error::Wire {
@@ -131,18 +139,21 @@ impl Error {
     }
 
     /// A control message from the host that does not hold.
-    pub fn control(source: WireError) -> Error {
-        Error::Wire {
-            what: "control",
-            source,
-        }
+    pub fn control(source: impl Into<spiv_core::Error>) -> Error {
+        Error::from_core("control", source.into())
     }
 
     /// An ask from the host that does not hold.
-    pub fn ask(source: WireError) -> Error {
-        Error::Wire {
-            what: "ask",
-            source,
+    pub fn ask(source: impl Into<spiv_core::Error>) -> Error {
+        Error::from_core("ask", source.into())
+    }
+
+    /// The core's refusal; a wire refusal says which link (`what`) it
+    /// came from.
+    fn from_core(what: &'static str, e: spiv_core::Error) -> Error {
+        match e {
+            spiv_core::Error::Wire(source) => Error::Wire { what, source },
+            e => Error::Core(e),
         }
     }
 

@@ -10,7 +10,7 @@
 //! converge in a shear; the last one deforms by the field as it stands.
 //!
 //! A pass on the undeformed images that fails (fewer than a quarter of
-//! its windows validate) is a signal, not a verdict: rescue rungs measure
+//! its windows validate) is a signal, not a verdict: rescue passes measure
 //! a coarser field that then predicts it — the same windows over an
 //! extended search area in B, windows twice the side, and last the same
 //! windows with weak peaks judged by their neighbours (the median test
@@ -90,7 +90,7 @@ pub struct Settings {
     /// in `spiv piv` and the Python `piv`.
     #[serde(default)]
     pub dense_fallback: bool,
-    /// Try the rescue rungs when a pass on the undeformed images fails
+    /// Try the rescue passes when a pass on the undeformed images fails
     /// (module docs). On in the library's defaults, `spiv piv` and the
     /// Python `piv`; off for the closed loops' spike frames
     /// ([`Settings::for_spike_frames`]), which predict only from what a
@@ -168,7 +168,7 @@ impl Settings {
     /// The frame camera's pair in `spiv run` and the benches gets the same
     /// (six passes measured no better for it: other-row RMAE 0.004 / 0.005
     /// / 0.003 against 0.003 / 0.006 / 0.002).
-    /// Without the rescue rungs: the closed loops predict only from what
+    /// Without the rescue passes: the closed loops predict only from what
     /// a pass validated on its own.
     pub fn for_spike_frames() -> Settings {
         Settings {
@@ -536,10 +536,10 @@ struct Measured {
 impl Passes<'_> {
     /// Every pass of the settings' windows, from `initial` if given: each
     /// pass but the last deforms by the filtered predictor, a failed pass
-    /// on undeformed images is rescued by coarser rungs, and a failed pass
+    /// on undeformed images is rescued by coarser passes, and a failed pass
     /// after a good one on the same grid leaves that one standing.
     fn measure(&self, initial: Option<&Field>) -> Result<Measured, PivError> {
-        measured(&|by, rung| self.run(by, rung), self.s, self.size, initial)
+        measured(&|by, spec| self.run(by, spec), self.s, self.size, initial)
     }
 }
 
@@ -564,13 +564,13 @@ fn measured(
     let npass = s.windows.len();
     // What the standing pass was run on, to run it again with its
     // uncertainties should a failed last pass leave it standing.
-    let mut prev_input: Option<(Option<Field>, Rung)> = None;
+    let mut prev_input: Option<(Option<Field>, PassSpec)> = None;
     for (pi, &size) in s.windows.iter().enumerate() {
         let last = pi + 1 == npass;
-        let rung = Rung {
+        let spec = PassSpec {
             relaxed,
             sigma: last,
-            ..Rung::plain(size)
+            ..PassSpec::plain(size)
         };
         // Every pass but the last deforms by the filtered predictor
         // (`smooth`); the last one measures the residual of the field as
@@ -580,8 +580,8 @@ fn measured(
             _ => None,
         };
         let by = filtered.or_else(|| predictor.clone());
-        let (mut field, mut support) = run(by.as_ref(), rung)?;
-        let mut input = (by, rung);
+        let (mut field, mut support) = run(by.as_ref(), spec)?;
+        let mut input = (by, spec);
         let good_same_grid = prev
             .as_ref()
             .is_some_and(|(f, sup)| *sup >= MIN_SUPPORT && f.grid == field.grid);
@@ -589,19 +589,19 @@ fn measured(
             // A pass on the undeformed images failed: a signal, not a
             // verdict. Larger displacements than the window's quarter rule
             // or too few particles per window both fail so; the rescue
-            // rungs measure a coarser field, which then predicts (deforms)
+            // passes measure a coarser field, which then predicts (deforms)
             // this pass again.
             if let Some((coarse, how)) = rescue(run, size, w, h)? {
                 relaxed |= how.relaxed;
-                let rung = Rung {
+                let spec = PassSpec {
                     relaxed,
                     sigma: last,
-                    ..Rung::plain(size)
+                    ..PassSpec::plain(size)
                 };
-                let (f2, s2) = run(Some(&coarse), rung)?;
+                let (f2, s2) = run(Some(&coarse), spec)?;
                 if s2 >= MIN_SUPPORT {
                     (field, support) = (f2, s2);
-                    input = (Some(coarse.clone()), rung);
+                    input = (Some(coarse.clone()), spec);
                 }
                 good = Some(coarse);
             }
@@ -624,14 +624,14 @@ fn measured(
         prev_input = Some(input);
     }
     let (mut field, support) = prev.ok_or_else(|| PivError::Settings("no windows given".into()))?;
-    if let Some((by, rung)) = prev_input.filter(|(_, r)| !r.sigma) {
+    if let Some((by, spec)) = prev_input.filter(|(_, r)| !r.sigma) {
         // The last pass failed and an earlier one on its grid stands:
         // the same pass again (the same vectors), with uncertainties.
         field = run(
             by.as_ref(),
-            Rung {
+            PassSpec {
                 sigma: true,
-                ..rung
+                ..spec
             },
         )?
         .0;
@@ -733,11 +733,11 @@ struct Passes<'a> {
 }
 
 impl Passes<'_> {
-    /// One pass of `rung.size`-px windows on the images deformed by `by`
+    /// One pass of `spec.size`-px windows on the images deformed by `by`
     /// (or as they are): its field and support.
-    fn run(&self, by: Option<&Field>, rung: Rung) -> Result<(Field, f64), PivError> {
+    fn run(&self, by: Option<&Field>, spec: PassSpec) -> Result<(Field, f64), PivError> {
         let (h, w) = self.size;
-        let size = rung.size;
+        let size = spec.size;
         let step = self.s.step(size);
         let grid = Grid::new(w, h, size, step).ok_or(PivError::TooSmall(w, h, size))?;
         let (deformed, pred, outside) = match by {
@@ -771,7 +771,7 @@ impl Passes<'_> {
             self.mask,
             excluded,
             grid,
-            rung,
+            spec,
             pred.as_ref(),
             self.s,
         ))
@@ -826,11 +826,11 @@ pub const NO_SIGMA: (f64, f64) = (f64::INFINITY, f64::INFINITY);
 
 /// A pass on the images deformed by a field (or as they are), giving its
 /// field and support.
-type PassFn<'a> = dyn Fn(Option<&Field>, Rung) -> Result<(Field, f64), PivError> + 'a;
+type PassFn<'a> = dyn Fn(Option<&Field>, PassSpec) -> Result<(Field, f64), PivError> + 'a;
 
 /// How one pass correlates and validates.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct Rung {
+struct PassSpec {
     /// Window side, px.
     size: usize,
     /// Side of the area of B searched, px (≥ size).
@@ -840,7 +840,7 @@ struct Rung {
     /// applied until nothing more fails, keeps it.
     relaxed: bool,
     /// Undeformed peaks beyond the quarter rule are measured again over
-    /// an area twice the window's side (rescue rungs only: on a pass that
+    /// an area twice the window's side (rescue passes only: on a pass that
     /// validates, the wider view adds nothing but a chance to lock onto a
     /// stray bright feature, such as a hot pixel of the paper's adaptive
     /// frames 40 px from its twin).
@@ -851,9 +851,9 @@ struct Rung {
     sigma: bool,
 }
 
-impl Rung {
-    fn plain(size: usize) -> Rung {
-        Rung {
+impl PassSpec {
+    fn plain(size: usize) -> PassSpec {
+        PassSpec {
             size,
             search: size,
             relaxed: false,
@@ -863,7 +863,7 @@ impl Rung {
     }
 }
 
-/// The rescue rungs of a failed pass of `size`-px windows, tried in turn
+/// The rescue passes of a failed pass of `size`-px windows, tried in turn
 /// on the undeformed images until one passes:
 /// 1. the same windows searched over an area twice their side in B
 ///    (OpenPIV's extended search area: the quarter rule then holds for
@@ -873,35 +873,35 @@ impl Rung {
 ///    (frames whose true peaks stand barely above the next, as spike
 ///    frames' do), the median test iterated.
 ///
-/// Rungs that do not fit the image are skipped. The winner is a coarse
+/// Passes that do not fit the image are skipped. The winner is a coarse
 /// field that predicts the pass again (the multigrid predictor); `None`
-/// when every rung fails too.
+/// when every rescue pass fails too.
 fn rescue(
     run: &PassFn<'_>,
     size: usize,
     w: usize,
     h: usize,
-) -> Result<Option<(Field, Rung)>, PivError> {
-    let fits = |r: &Rung| r.search <= w.min(h) && r.search <= MAX_SEARCH;
-    let rungs = [
-        Rung {
+) -> Result<Option<(Field, PassSpec)>, PivError> {
+    let fits = |r: &PassSpec| r.search <= w.min(h) && r.search <= MAX_SEARCH;
+    let specs = [
+        PassSpec {
             search: 2 * size,
-            ..Rung::plain(size)
+            ..PassSpec::plain(size)
         },
-        Rung::plain(2 * size),
-        Rung {
+        PassSpec::plain(2 * size),
+        PassSpec {
             relaxed: true,
-            ..Rung::plain(size)
+            ..PassSpec::plain(size)
         },
     ];
-    for rung in rungs.into_iter().filter(fits) {
-        let rung = Rung {
+    for spec in specs.into_iter().filter(fits) {
+        let spec = PassSpec {
             recheck: true,
-            ..rung
+            ..spec
         };
-        let (f, support) = run(None, rung)?;
+        let (f, support) = run(None, spec)?;
         if support >= MIN_SUPPORT {
-            return Ok(Some((f, rung)));
+            return Ok(Some((f, spec)));
         }
     }
     Ok(None)
@@ -912,10 +912,10 @@ fn rescue(
 /// px; a streak's correlation is a ridge many px long.
 const MAX_PEAK_WIDTH: f64 = 4.0;
 
-/// Sweeps of the median test on a relaxed rung.
+/// Sweeps of the median test on a relaxed pass.
 const RELAXED_SWEEPS: usize = 4;
 
-/// The largest search area a rescue rung correlates, px.
+/// The largest search area a rescue pass correlates, px.
 const MAX_SEARCH: usize = 1024;
 
 /// Fills `field` (a failed pass) from `from` (a field that passed, on
@@ -957,7 +957,7 @@ fn pass(
     mask: Option<&Array2<bool>>,
     excluded: Option<&Array2<bool>>,
     grid: Grid,
-    rung: Rung,
+    spec: PassSpec,
     pred: Option<&(Array2<f32>, Array2<f32>)>,
     s: &Settings,
 ) -> (Field, f64) {
@@ -967,13 +967,13 @@ fn pass(
     // the image): B's `search`-px area around the window, A's window at
     // its place inside it, the rest of A at the window's mean (zero after
     // the correlation removes the mean).
-    let search = if rung.search > n && rung.search <= w.min(h) {
-        rung.search
+    let search = if spec.search > n && spec.search <= w.min(h) {
+        spec.search
     } else {
         n
     };
     let plan = Plan::new(search);
-    let wide = (rung.recheck && pred.is_none() && search == n && 2 * n <= w.min(h))
+    let wide = (spec.recheck && pred.is_none() && search == n && 2 * n <= w.min(h))
         .then(|| Plan::new(2 * n));
     let ctx = PassWindows {
         pairs,
@@ -983,7 +983,7 @@ fn pass(
         plan: &plan,
         wide: wide.as_ref(),
         pred,
-        rung,
+        spec,
         s,
     };
     let results: Vec<WindowResult> = (0..grid.len())
@@ -993,7 +993,7 @@ fn pass(
             |(sc, wide_sc), k| ctx.window(k, sc, wide_sc),
         )
         .collect();
-    assembled(grid, results, rung, s)
+    assembled(grid, results, spec, s)
 }
 
 /// What a pass's windows share.
@@ -1007,7 +1007,7 @@ struct PassWindows<'a> {
     /// beyond the quarter rule on undeformed images.
     wide: Option<&'a Plan>,
     pred: Option<&'a (Array2<f32>, Array2<f32>)>,
-    rung: Rung,
+    spec: PassSpec,
     s: &'a Settings,
 }
 
@@ -1030,7 +1030,7 @@ impl PassWindows<'_> {
             origin: (x0, y0),
             n,
         };
-        let mut peak = region.correlate(self.plan, sc, self.s.subpixel, self.rung.sigma);
+        let mut peak = region.correlate(self.plan, sc, self.s.subpixel, self.spec.sigma);
         // Undeformed, a peak beyond the quarter rule may be an alias (a
         // displacement beyond half the window wraps around) or a match by
         // chance: the window is measured again over an area twice its
@@ -1040,7 +1040,7 @@ impl PassWindows<'_> {
         if let (Ok(p), Some(plan2)) = (&peak, self.wide) {
             if p.dx.hypot(p.dy) > n as f64 / 4.0 {
                 let sc2 = wide_sc.get_or_insert_with(|| Ensemble::new(plan2));
-                if let Ok(q) = region.correlate(plan2, sc2, self.s.subpixel, self.rung.sigma) {
+                if let Ok(q) = region.correlate(plan2, sc2, self.s.subpixel, self.spec.sigma) {
                     let differs = (q.dx - p.dx).hypot(q.dy - p.dy) > 1.0;
                     if differs && q.ratio > p.ratio && q.width <= MAX_PEAK_WIDTH {
                         peak = Ok(q);
@@ -1077,7 +1077,7 @@ impl PassWindows<'_> {
             // no position to measure: where the peak ratio is judged by the
             // neighbours, a cluster of ridges would agree on wherever noise
             // put their maxima (near zero, next to a static glare).
-            Ok(p) if self.rung.relaxed && p.width > MAX_PEAK_WIDTH => (
+            Ok(p) if self.spec.relaxed && p.width > MAX_PEAK_WIDTH => (
                 pu + p.dx,
                 pv + p.dy,
                 p.ratio,
@@ -1093,10 +1093,10 @@ impl PassWindows<'_> {
 
 /// A pass's field from its windows' results: states from the peaks and
 /// the peak ratio, the normalised median test (repeated on a relaxed
-/// rung), the share of windows with signal that passed (the support),
+/// pass), the share of windows with signal that passed (the support),
 /// replacement and the replaced vectors' uncertainties.
-fn assembled(grid: Grid, results: Vec<WindowResult>, rung: Rung, s: &Settings) -> (Field, f64) {
-    let min_ratio = if rung.relaxed {
+fn assembled(grid: Grid, results: Vec<WindowResult>, spec: PassSpec, s: &Settings) -> (Field, f64) {
+    let min_ratio = if spec.relaxed {
         1.0
     } else {
         s.validation.min_peak_ratio
@@ -1128,7 +1128,7 @@ fn assembled(grid: Grid, results: Vec<WindowResult>, rung: Rung, s: &Settings) -
     }
     // Relaxed: until nothing more fails (a cluster of chance peaks loses
     // its support one ring at a time), at most a few sweeps.
-    let sweeps = if rung.relaxed { RELAXED_SWEEPS } else { 1 };
+    let sweeps = if spec.relaxed { RELAXED_SWEEPS } else { 1 };
     for _ in 0..sweeps {
         let rejected = validate::median_test(
             &u,
@@ -1152,7 +1152,7 @@ fn assembled(grid: Grid, results: Vec<WindowResult>, rung: Rung, s: &Settings) -
         s.replace_iterations,
     );
     validate::replaced_uncertainty(&u, &v, &state, &mut sigma);
-    if rung.relaxed {
+    if spec.relaxed {
         // Weak peaks the neighbours confirm are used (they deform the next
         // pass and are reported) but never called valid: valid keeps
         // meaning a peak that stands on its own and agrees with its
@@ -1373,21 +1373,21 @@ mod tests {
     use std::cell::RefCell;
 
     /// A stand-in for a pass on a 128² image: the support `supports[k]`
-    /// for the k-th call, uncertainties only where the rung asks for them.
-    /// Returns the rungs it was called with.
-    fn passes(windows: &[usize], supports: &[f64]) -> (Measured, Vec<Rung>) {
+    /// for the k-th call, uncertainties only where the spec asks for them.
+    /// Returns the passes it was called with.
+    fn passes(windows: &[usize], supports: &[f64]) -> (Measured, Vec<PassSpec>) {
         let s = Settings {
             windows: windows.to_vec(),
             rescue: false,
             ..Settings::default()
         };
         let calls = RefCell::new(Vec::new());
-        let run = |_: Option<&Field>, rung: Rung| {
+        let run = |_: Option<&Field>, spec: PassSpec| {
             let k = calls.borrow().len();
-            calls.borrow_mut().push(rung);
-            let grid = Grid::new(128, 128, rung.size, s.step(rung.size)).expect("grid");
+            calls.borrow_mut().push(spec);
+            let grid = Grid::new(128, 128, spec.size, s.step(spec.size)).expect("grid");
             let mut f = Field::unmeasured(grid);
-            if rung.sigma {
+            if spec.sigma {
                 f.sigma.fill((0.05, 0.05));
             }
             Ok((f, supports[k]))
@@ -1407,7 +1407,7 @@ mod tests {
     #[test]
     fn a_pass_left_standing_is_run_again_with_uncertainties() {
         // The last 32-px pass fails: the one before it stands, and is run
-        // once more (same rung, same input) to give its uncertainties.
+        // once more (same spec, same input) to give its uncertainties.
         let (m, calls) = passes(&[64, 32, 32], &[1.0, 1.0, 0.0, 1.0]);
         let asked: Vec<(usize, bool)> = calls.iter().map(|r| (r.size, r.sigma)).collect();
         assert_eq!(asked, [(64, false), (32, false), (32, true), (32, true)]);

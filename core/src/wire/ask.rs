@@ -28,6 +28,7 @@
 //! nodes are read in place ([`AskView::node`]).
 
 use super::{WireError, MAX_PAYLOAD};
+use crate::error::Error;
 use crate::rungs::{Rungs, MAX_RUNGS};
 use crate::warp::{Flow, MAX_PITCH};
 
@@ -119,9 +120,9 @@ fn head_ok(h: &AskHead, rows: usize) -> bool {
 impl<'a> AskView<'a> {
     /// Parses and checks a payload ([`head_ok`]'s ranges, and a length of
     /// exactly the head and its nodes).
-    pub fn parse(b: &'a [u8]) -> Result<Self, WireError> {
+    pub fn parse(b: &'a [u8]) -> Result<Self, Error> {
         if b.len() < ASK_HEAD {
-            return Err(WireError::Payload);
+            return Err(WireError::Payload.into());
         }
         let mut separations = [0u16; MAX_RUNGS];
         for (k, s) in separations.iter_mut().enumerate() {
@@ -144,7 +145,7 @@ impl<'a> AskView<'a> {
         let body = b.len() - ASK_HEAD;
         let row = NODE * usize::from(head.nx).max(1);
         if !body.is_multiple_of(row) || !head_ok(&head, body / row) {
-            return Err(WireError::Payload);
+            return Err(WireError::Payload.into());
         }
         // Separations past `count` are not the ask's.
         let mut head = head;
@@ -178,7 +179,7 @@ impl<'a> AskView<'a> {
 /// use spiv_core::warp::Flow;
 /// use spiv_core::wire::ask::{ask_parts, encode_ask, AskView, MAX_ASK_PAYLOAD};
 ///
-/// # fn main() -> Result<(), spiv_core::wire::WireError> {
+/// # fn main() -> Result<(), spiv_core::Error> {
 /// let v = [410i16; 6]; // 0.1 px per tick
 /// let flow = Flow { nx: 3, ny: 2, x0: 128, y0: 128, pitch: 256, vx: &v, vy: &v, ax: &v, ay: &v };
 /// let mut rungs = Rungs::events(0);
@@ -207,7 +208,7 @@ pub fn encode_ask(
     flow: &Flow<'_>,
     (row0, rows): (u16, u16),
     out: &mut [u8],
-) -> Result<usize, WireError> {
+) -> Result<usize, Error> {
     let still = flow.is_still();
     let head = AskHead {
         from_pair,
@@ -222,7 +223,7 @@ pub fn encode_ask(
     let nx = usize::from(head.nx);
     let n = nx * usize::from(rows);
     if !head_ok(&head, usize::from(rows)) || (!still && flow.check().is_err()) {
-        return Err(WireError::Payload);
+        return Err(WireError::Payload.into());
     }
     let len = ASK_HEAD + NODE * n;
     let out = out.get_mut(..len).ok_or(WireError::TooLarge)?;
@@ -564,7 +565,7 @@ mod tests {
         // Too small a buffer.
         assert_eq!(
             encode_ask(1, &Rungs::events(8), &f, (0, 2), &mut buf[..10]),
-            Err(WireError::TooLarge)
+            Err(WireError::TooLarge.into())
         );
     }
 

@@ -35,6 +35,7 @@
 //! [`MAX_CONTROL_ENCODED`] bytes.
 
 use super::{Encoding, Header, Kind, WireError, CRC_LEN, HEADER_LEN};
+use crate::error::Error;
 
 /// Most velocities in a control, node rows × columns (8192 rows at a
 /// pitch of 4 per row; a 1024-row sensor in 4 columns at a pitch of 2).
@@ -87,9 +88,9 @@ impl<'a> ControlView<'a> {
     /// velocities and [`MAX_CAPS`] caps; when there are nodes, a pitch
     /// ≥ 1, 1..=[`crate::motion::MAX_COLS`] columns and a tile that is a
     /// positive multiple of 64 px.
-    pub fn parse(b: &'a [u8]) -> Result<Self, WireError> {
+    pub fn parse(b: &'a [u8]) -> Result<Self, Error> {
         if b.len() < CONTROL_HEAD {
-            return Err(WireError::Payload);
+            return Err(WireError::Payload.into());
         }
         let head = ControlHead {
             from_pair: u32::from_le_bytes([b[0], b[1], b[2], b[3]]),
@@ -106,7 +107,7 @@ impl<'a> ControlView<'a> {
             || (nodes > 0 && !grid_ok(&head))
             || b.len() != CONTROL_HEAD + 4 * velocities + 2 * caps
         {
-            return Err(WireError::Payload);
+            return Err(WireError::Payload.into());
         }
         let (nodes, caps) = b[CONTROL_HEAD..].split_at(4 * velocities);
         Ok(ControlView { head, nodes, caps })
@@ -185,14 +186,14 @@ pub fn encode_control(
     vy: &[i16],
     caps: &[u16],
     out: &mut [u8],
-) -> Result<usize, WireError> {
+) -> Result<usize, Error> {
     let velocities = vx.len().min(vy.len());
     let cols = usize::from(head.cols.max(1));
     if velocities > MAX_NODES
         || caps.len() > MAX_CAPS
         || (velocities > 0 && (!grid_ok(head) || !velocities.is_multiple_of(cols)))
     {
-        return Err(WireError::Payload);
+        return Err(WireError::Payload.into());
     }
     let nodes = velocities / cols;
     let len = CONTROL_HEAD + 4 * velocities + 2 * caps.len();
@@ -270,7 +271,7 @@ impl Control {
         seq: u32,
         width: u16,
         height: u16,
-    ) -> Result<std::vec::Vec<u8>, WireError> {
+    ) -> Result<std::vec::Vec<u8>, Error> {
         let (vx, vy) = &self.motion;
         let cols = usize::from(self.cols.max(1));
         let rows = vx.len().min(vy.len()) / cols;
@@ -360,7 +361,7 @@ mod tests {
         let zero = ControlHead { pitch: 0, ..head };
         assert_eq!(
             encode_control(&zero, &[1], &[1], &[], &mut buf),
-            Err(WireError::Payload)
+            Err(WireError::Payload.into())
         );
         // Columns and tiles: none, too many, a tile off the word grid, and
         // velocities that are not whole node rows.
@@ -375,7 +376,7 @@ mod tests {
         ] {
             assert_eq!(
                 encode_control(&bad, &[1], &[1], &[], &mut buf),
-                Err(WireError::Payload),
+                Err(WireError::Payload.into()),
                 "{bad:?}"
             );
             let mut b = buf;
@@ -386,7 +387,7 @@ mod tests {
         let two = ControlHead { cols: 2, ..head };
         assert_eq!(
             encode_control(&two, &[1, 2, 3], &[1, 2, 3], &[], &mut buf),
-            Err(WireError::Payload)
+            Err(WireError::Payload.into())
         );
     }
 

@@ -1,6 +1,7 @@
 //! The 30-byte message header.
 
 use super::{Encoding, Kind, WireError, HEADER_LEN, MAGIC, VERSION};
+use crate::error::Error;
 
 /// A message header (the 30 bytes before the payload).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -69,7 +70,7 @@ impl Header {
     /// bad[0] ^= 1; // the magic
     /// assert!(Header::parse(&bad).is_err());
     /// ```
-    pub fn parse(b: &[u8]) -> Result<Header, WireError> {
+    pub fn parse(b: &[u8]) -> Result<Header, Error> {
         let b: &[u8; HEADER_LEN] = b
             .get(..HEADER_LEN)
             .and_then(|s| s.try_into().ok())
@@ -77,10 +78,10 @@ impl Header {
         let u16_at = |i: usize| u16::from_le_bytes([b[i], b[i + 1]]);
         let u32_at = |i: usize| u32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
         if u16_at(0) != MAGIC {
-            return Err(WireError::Magic);
+            return Err(WireError::Magic.into());
         }
         if b[2] != VERSION {
-            return Err(WireError::Version);
+            return Err(WireError::Version.into());
         }
         Ok(Header {
             kind: Kind::from_u8(b[3]).ok_or(WireError::Field)?,

@@ -2,6 +2,7 @@
 //! checksum) and the firmware's status counters.
 
 use super::{Crc32, WireError};
+use crate::error::Error;
 use crate::method::Method;
 
 /// Payload of [`super::Kind::FrameEnd`] (20 bytes): which pair the frame belongs
@@ -49,7 +50,7 @@ impl FrameEnd {
     }
 
     /// Parses a payload.
-    pub fn parse(b: &[u8]) -> Result<FrameEnd, WireError> {
+    pub fn parse(b: &[u8]) -> Result<FrameEnd, Error> {
         let b: &[u8; Self::LEN] = b.try_into().map_err(|_| WireError::Payload)?;
         Ok(FrameEnd {
             pair: u32::from_le_bytes([b[0], b[1], b[2], b[3]]),
@@ -107,9 +108,9 @@ impl Status {
     }
 
     /// Parses a payload of [`Status::LEN`] or [`Status::LEN_V0`] bytes.
-    pub fn parse(b: &[u8]) -> Result<Status, WireError> {
+    pub fn parse(b: &[u8]) -> Result<Status, Error> {
         if b.len() != Self::LEN && b.len() != Self::LEN_V0 {
-            return Err(WireError::Payload);
+            return Err(WireError::Payload.into());
         }
         let u32_at = |i: usize| match b.get(i..i + 4) {
             Some(s) => u32::from_le_bytes([s[0], s[1], s[2], s[3]]),

@@ -45,6 +45,7 @@ pub mod pair;
 pub mod sender;
 pub mod stream;
 
+pub use crate::error::WireError;
 pub use crc::{crc32, Crc32};
 pub use header::Header;
 pub use message::{frame_crc, FrameEnd, Status};
@@ -160,52 +161,6 @@ impl Encoding {
     }
 }
 
-/// Why bytes were not a message, or a message could not be written.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum WireError {
-    /// More bytes than the receive buffer before a delimiter (dropped).
-    Overflow,
-    /// Not valid COBS.
-    Cobs,
-    /// Shorter than a header and a CRC, or `payload_len` disagrees with the
-    /// message length.
-    Length,
-    /// The CRC does not match.
-    Crc,
-    /// Wrong magic.
-    Magic,
-    /// A version this code does not read.
-    Version,
-    /// Unknown kind or encoding.
-    Field,
-    /// A payload above [`MAX_PAYLOAD`], or an output buffer too small.
-    TooLarge,
-    /// A payload that does not decode to the rows its header names.
-    Payload,
-}
-
-impl core::fmt::Display for WireError {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        f.write_str(match self {
-            WireError::Overflow => "message longer than the receive buffer",
-            WireError::Cobs => "invalid COBS framing",
-            WireError::Length => "message length disagrees with its header",
-            WireError::Crc => "CRC mismatch",
-            WireError::Magic => "bad magic",
-            WireError::Version => "unsupported protocol version",
-            WireError::Field => "unknown message kind or encoding",
-            WireError::TooLarge => "payload or buffer too large",
-            WireError::Payload => "payload does not decode to its rows",
-        })
-    }
-}
-
-#[cfg(feature = "std")]
-extern crate std;
-#[cfg(feature = "std")]
-impl std::error::Error for WireError {}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -273,7 +228,7 @@ mod tests {
         let mut wire = [0u8; 128];
         let n = encode_message(&header(0), &[9; 8], &mut wire).unwrap();
         let mut input = &wire[..n];
-        assert_eq!(dec.feed(&mut input), Some(Err(WireError::Overflow)));
+        assert_eq!(dec.feed(&mut input), Some(Err(WireError::Overflow.into())));
         let mut input = &wire[..n];
         assert!(dec.feed(&mut input).unwrap().is_ok());
     }

@@ -15,6 +15,7 @@
 //! ```
 
 use super::WireError;
+use crate::error::Error;
 
 /// Most rungs a pair carries (the head's slots; what an ask asks for at
 /// most, [`crate::rungs::Rungs`]).
@@ -77,13 +78,13 @@ impl PairHead {
 
     /// Whether the fields are in range: at most [`MAX_RUNGS`] separations,
     /// each at least 1 tick, at most [`MAX_EVENT_TICKS`] of events.
-    pub fn check(&self) -> Result<(), WireError> {
+    pub fn check(&self) -> Result<(), Error> {
         let count = usize::from(self.count);
         if count > MAX_RUNGS
             || self.separations[..count].contains(&0)
             || self.ev_ticks > MAX_EVENT_TICKS
         {
-            return Err(WireError::Payload);
+            return Err(WireError::Payload.into());
         }
         Ok(())
     }
@@ -110,7 +111,7 @@ impl PairHead {
 
     /// Parses and checks a payload (its `parts` must be what the rest
     /// says).
-    pub fn parse(b: &[u8]) -> Result<PairHead, WireError> {
+    pub fn parse(b: &[u8]) -> Result<PairHead, Error> {
         let b: &[u8; Self::LEN] = b.try_into().map_err(|_| WireError::Payload)?;
         let u16_at = |i: usize| u16::from_le_bytes([b[i], b[i + 1]]);
         let u32_at = |i: usize| u32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
@@ -132,7 +133,7 @@ impl PairHead {
         }
         h.check()?;
         if u16_at(68) != h.parts() {
-            return Err(WireError::Payload);
+            return Err(WireError::Payload.into());
         }
         Ok(h)
     }

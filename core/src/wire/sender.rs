@@ -7,6 +7,7 @@
 //! No allocation: the payload, COBS and codec buffers are the caller's
 //! ([`SendBuffers`]); bytes leave through the caller's [`Link`].
 
+use crate::error::{Error, LinkError};
 use crate::gray::Gray;
 use crate::wire::codec::{decode_tile, encode_tile, Lossy};
 use crate::wire::{
@@ -19,22 +20,6 @@ pub trait Link {
     type Error;
     /// Sends one whole message (COBS-framed, delimiter included).
     fn send(&mut self, message: &[u8]) -> Result<(), Self::Error>;
-}
-
-/// Why a frame could not be sent.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum SendError<E> {
-    /// Coding or framing failed (a buffer too small, a bad setting).
-    Wire(WireError),
-    /// The link refused the bytes.
-    Link(E),
-}
-
-impl<E> From<WireError> for SendError<E> {
-    fn from(e: WireError) -> Self {
-        SendError::Wire(e)
-    }
 }
 
 /// When frames are made: pair `p` has its frames at ticks
@@ -179,9 +164,9 @@ pub struct Sender {
 impl Sender {
     /// A sender of `width × height` frames in bands of `tile_rows` rows
     /// (see [`tile_rows`]).
-    pub fn new(width: u16, height: u16, tile_rows: u16) -> Result<Self, WireError> {
+    pub fn new(width: u16, height: u16, tile_rows: u16) -> Result<Self, Error> {
         if width == 0 || height == 0 || tile_rows == 0 {
-            return Err(WireError::Field);
+            return Err(WireError::Field.into());
         }
         Ok(Sender {
             width,
@@ -210,7 +195,7 @@ impl Sender {
         encoding: Encoding,
         lossy: &Lossy,
         link: &mut L,
-    ) -> Result<(), SendError<L::Error>> {
+    ) -> Result<(), LinkError<L::Error>> {
         let w = usize::from(self.width);
         let n = w * usize::from(self.height);
         let frame = frame.get_mut(..n).ok_or(WireError::Payload)?;
@@ -285,7 +270,7 @@ impl Sender {
         buf: &mut SendBuffers<'_>,
         head: &super::pair::PairHead,
         link: &mut L,
-    ) -> Result<(), SendError<L::Error>> {
+    ) -> Result<(), LinkError<L::Error>> {
         head.check()?;
         let h = self.header(
             Kind::PairHead,
@@ -304,7 +289,7 @@ impl Sender {
         &mut self,
         buf: &mut SendBuffers<'_>,
         link: &mut L,
-    ) -> Result<(), SendError<L::Error>> {
+    ) -> Result<(), LinkError<L::Error>> {
         let s = Status {
             planes: self.sent.planes,
             frames: self.sent.frames,
@@ -347,9 +332,9 @@ impl Sender {
         buf: &SendBuffers<'_>,
         n: usize,
         link: &mut L,
-    ) -> Result<(), SendError<L::Error>> {
+    ) -> Result<(), LinkError<L::Error>> {
         let bytes = buf.wire.get(..n).ok_or(WireError::TooLarge)?;
-        link.send(bytes).map_err(SendError::Link)?;
+        link.send(bytes).map_err(LinkError::Link)?;
         self.seq = self.seq.wrapping_add(1);
         self.sent.messages = self.sent.messages.wrapping_add(1);
         self.sent.bytes = self.sent.bytes.saturating_add(n as u64);

@@ -3,6 +3,7 @@
 //! the next delimiter.
 
 use super::{crc32, Crc32, Header, WireError, CRC_LEN, HEADER_LEN, MAX_PAYLOAD};
+use crate::error::Error;
 
 /// Frames one message into `out`: COBS of header, payload and CRC, then the
 /// `0x00` delimiter. Returns the bytes written (at most [`MAX_ENCODED`]).
@@ -14,7 +15,7 @@ use super::{crc32, Crc32, Header, WireError, CRC_LEN, HEADER_LEN, MAX_PAYLOAD};
 /// use spiv_core::wire::{encode_message, Decoder, Encoding, Header, Kind, WireError};
 /// use spiv_core::wire::{MAX_ENCODED, MAX_MESSAGE};
 ///
-/// # fn main() -> Result<(), WireError> {
+/// # fn main() -> Result<(), spiv_core::Error> {
 /// let header = Header {
 ///     kind: Kind::Status,
 ///     seq: 0,
@@ -37,9 +38,9 @@ use super::{crc32, Crc32, Header, WireError, CRC_LEN, HEADER_LEN, MAX_PAYLOAD};
 /// # Ok(())
 /// # }
 /// ```
-pub fn encode_message(header: &Header, payload: &[u8], out: &mut [u8]) -> Result<usize, WireError> {
+pub fn encode_message(header: &Header, payload: &[u8], out: &mut [u8]) -> Result<usize, Error> {
     if payload.len() > MAX_PAYLOAD {
-        return Err(WireError::TooLarge);
+        return Err(WireError::TooLarge.into());
     }
     let mut h = *header;
     h.payload_len = payload.len() as u32;
@@ -142,7 +143,7 @@ impl<'b> Decoder<'b> {
     /// Consumes `input` up to and including the next delimiter that closes
     /// a non-empty chunk; returns that chunk as a message or as the reason
     /// it is not one. `None` once `input` is used up with no chunk closed.
-    pub fn feed<'s>(&'s mut self, input: &mut &[u8]) -> Option<Result<Message<'s>, WireError>> {
+    pub fn feed<'s>(&'s mut self, input: &mut &[u8]) -> Option<Result<Message<'s>, Error>> {
         loop {
             let Some(pos) = input.iter().position(|&b| b == 0) else {
                 self.take(input);
@@ -158,7 +159,7 @@ impl<'b> Decoder<'b> {
                 self.state.overflow = false;
                 self.state.len = 0;
                 self.state.stats.overflow += 1;
-                return Some(Err(WireError::Overflow));
+                return Some(Err(WireError::Overflow.into()));
             }
             if self.state.len == 0 {
                 continue;
@@ -184,7 +185,7 @@ impl<'b> Decoder<'b> {
         }
     }
 
-    fn check(&mut self, len: usize) -> Result<Message<'_>, WireError> {
+    fn check(&mut self, len: usize) -> Result<Message<'_>, Error> {
         let r = validate(&mut self.buf[..len]);
         let (header, n) = match r {
             Ok(v) => v,
@@ -214,21 +215,21 @@ impl<'b> Decoder<'b> {
 
 /// COBS-decodes a chunk in place and checks it; returns the header and the
 /// payload length.
-fn validate(chunk: &mut [u8]) -> Result<(Header, usize), WireError> {
+fn validate(chunk: &mut [u8]) -> Result<(Header, usize), Error> {
     let n = cobs::decode_in_place(chunk).map_err(|_| WireError::Cobs)?;
     let msg = chunk.get(..n).ok_or(WireError::Cobs)?;
     if n < HEADER_LEN + CRC_LEN {
-        return Err(WireError::Length);
+        return Err(WireError::Length.into());
     }
     let (body, crc) = msg.split_at(n - CRC_LEN);
     let want = u32::from_le_bytes([crc[0], crc[1], crc[2], crc[3]]);
     if crc32(body) != want {
-        return Err(WireError::Crc);
+        return Err(WireError::Crc.into());
     }
     let header = Header::parse(body)?;
     let plen = body.len() - HEADER_LEN;
     if header.payload_len as usize != plen || plen > MAX_PAYLOAD {
-        return Err(WireError::Length);
+        return Err(WireError::Length.into());
     }
     Ok((header, plen))
 }

@@ -37,14 +37,13 @@ use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
 use panic_semihosting as _;
 use spiv_core::downlink::DownlinkBuffers;
+use spiv_core::error::LinkError;
 use spiv_core::light::{Light, LightState};
 use spiv_core::motion::Refine;
 use spiv_core::plane::PlaneView;
 use spiv_core::region::Region;
 use spiv_core::rungs::{rung_frames, EventRing, Rungs};
-use spiv_core::sidecar::{
-    Config, Memory, Probe, RefineBuffers, Sidecar, SidecarError, Stage, CAP_BAND,
-};
+use spiv_core::sidecar::{Config, Memory, Probe, RefineBuffers, Sidecar, Stage, CAP_BAND};
 use spiv_core::state::{Buffers, STATE_MILLIBYTES_PER_PIXEL};
 use spiv_core::warp::Flow;
 use spiv_core::wire::codec::{encode_tile, tile_scratch, Lossy};
@@ -280,15 +279,13 @@ fn main() -> ! {
 /// What went wrong, for the one error line.
 enum Failure {
     Core(spiv_core::Error),
-    Wire(spiv_core::wire::WireError),
     Memory(&'static str),
 }
 
 impl core::fmt::Display for Failure {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
-            Failure::Core(e) => write!(f, "core: {e:?}"),
-            Failure::Wire(e) => write!(f, "wire: {e}"),
+            Failure::Core(e) => write!(f, "core: {e}"),
             Failure::Memory(m) => f.write_str(m),
         }
     }
@@ -300,20 +297,12 @@ impl From<spiv_core::Error> for Failure {
     }
 }
 
-impl From<SidecarError<Infallible>> for Failure {
-    fn from(e: SidecarError<Infallible>) -> Self {
+impl From<LinkError<Infallible>> for Failure {
+    fn from(e: LinkError<Infallible>) -> Self {
         match e {
-            SidecarError::Core(c) => Failure::Core(c),
-            SidecarError::Wire(w) => Failure::Wire(w),
-            SidecarError::Config(_) => Failure::Memory("configuration refused"),
-            SidecarError::Link(never) => match never {},
+            LinkError::Core(c) => Failure::Core(c),
+            LinkError::Link(never) => match never {},
         }
-    }
-}
-
-impl From<spiv_core::wire::WireError> for Failure {
-    fn from(e: spiv_core::wire::WireError) -> Self {
-        Failure::Wire(e)
     }
 }
 
@@ -484,7 +473,7 @@ fn codec_mark(k: usize, begin: bool) {
 /// The sidecar loop over the committed strip with `cfg`; motion-compensated
 /// (`mc`) after hearing [`CONTROL`]. Prints the parity line.
 fn strip(ram: &mut Ram, cfg: Config, mc: bool) -> Result<(), Failure> {
-    let mut sidecar = Sidecar::new::<Infallible>(W, H, cfg)?;
+    let mut sidecar = Sidecar::new(W, H, cfg)?;
     let sizes = if mc { MC_SIZES } else { SIZES };
     let workspace = Workspace::new(
         sizes,

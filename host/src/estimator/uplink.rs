@@ -13,12 +13,13 @@
 //!   1 (−1) and 2 (+1);
 //! - with the events, the static rate of every stored pixel (16-bit).
 
+use spiv_core::error::LinkError;
 use spiv_core::pairs::{Asked, CoreEvents, CorePair, PairMaker, PairSender};
 use spiv_core::rungs::PairCost;
 use spiv_core::warp::SCALE;
 use spiv_core::wire::pair::PairHead;
-use spiv_core::wire::sender::{Link, SendError};
-use spiv_core::wire::{Kind, Message, WireError};
+use spiv_core::wire::sender::Link;
+use spiv_core::wire::{Kind, Message};
 
 use crate::receive::assemble::{Assembler, FrameLimit, ReceivedFrame};
 use crate::Error;
@@ -75,10 +76,10 @@ impl Link for Keep {
     }
 }
 
-fn wire(e: SendError<std::convert::Infallible>) -> WireError {
+fn core(e: LinkError<std::convert::Infallible>) -> spiv_core::Error {
     match e {
-        SendError::Wire(w) => w,
-        SendError::Link(never) => match never {},
+        LinkError::Core(c) => c,
+        LinkError::Link(never) => match never {},
     }
 }
 
@@ -110,7 +111,7 @@ impl Uplink {
         let mut link = Keep::default();
         let cost = maker
             .send((pair, mid, dt), ask, cold_reach, &mut self.out, &mut link)
-            .map_err(wire)?;
+            .map_err(core)?;
         Ok((link.messages, cost.into()))
     }
 }

@@ -48,6 +48,7 @@ mod range;
 mod rice;
 mod sparse;
 
+use crate::error::Error;
 use crate::gray::Gray;
 use crate::method::Method;
 use crate::wire::{Encoding, WireError};
@@ -128,7 +129,7 @@ pub fn encode_tile<G: Gray>(
     lossy: &Lossy,
     scratch: &mut [u16],
     out: &mut [u8],
-) -> Result<(Encoding, usize), WireError> {
+) -> Result<(Encoding, usize), Error> {
     let n = usize::from(width) * usize::from(rows);
     let samples = samples.get(..n).ok_or(WireError::Payload)?;
     // The largest level by a fold the compiler vectorises (`any` stops
@@ -158,7 +159,7 @@ pub fn encode_tile<G: Gray>(
     match (tried, lossless) {
         (Ok(len), _) if len < raw_len => Ok((want, len)),
         (_, Some(l)) => encode_tile(l, samples, width, rows, lossy, scratch, out),
-        _ => encode_raw(samples, wide, out).map(|l| (raw, l)),
+        _ => Ok((raw, encode_raw(samples, wide, out)?)),
     }
 }
 
@@ -191,14 +192,14 @@ pub fn decode_tile<G: Gray>(
     rows: u16,
     scratch: &mut [u16],
     out: &mut [G],
-) -> Result<(), WireError> {
+) -> Result<(), Error> {
     let n = usize::from(width) * usize::from(rows);
     let out = out.get_mut(..n).ok_or(WireError::TooLarge)?;
     match enc {
-        Encoding::None => Err(WireError::Payload),
+        Encoding::None => Err(WireError::Payload.into()),
         Encoding::Raw8 => {
             if payload.len() != n {
-                return Err(WireError::Payload);
+                return Err(WireError::Payload.into());
             }
             for (o, &b) in out.iter_mut().zip(payload) {
                 *o = level(i32::from(b))?;
@@ -207,17 +208,17 @@ pub fn decode_tile<G: Gray>(
         }
         Encoding::Raw16 => {
             if payload.len() != 2 * n {
-                return Err(WireError::Payload);
+                return Err(WireError::Payload.into());
             }
             for (o, b) in out.iter_mut().zip(payload.chunks_exact(2)) {
                 *o = level(i32::from(u16::from_le_bytes([b[0], b[1]])))?;
             }
             Ok(())
         }
-        Encoding::Rice => rice::decode(payload, width, out),
-        Encoding::Sparse => sparse::decode(payload, width, rows, scratch, out),
-        Encoding::Context => context::decode(payload, width, out),
-        Encoding::SparseContext => sparse::decode_context(payload, width, rows, scratch, out),
+        Encoding::Rice => Ok(rice::decode(payload, width, out)?),
+        Encoding::Sparse => Ok(sparse::decode(payload, width, rows, scratch, out)?),
+        Encoding::Context => Ok(context::decode(payload, width, out)?),
+        Encoding::SparseContext => Ok(sparse::decode_context(payload, width, rows, scratch, out)?),
     }
 }
 
@@ -414,7 +415,7 @@ mod tests {
                 &mut scratch,
                 &mut [0u8; 96 * 40][..s.len()]
             ),
-            Err(WireError::Payload)
+            Err(WireError::Payload.into())
         );
         if matches!(enc, Encoding::Context | Encoding::SparseContext) {
             assert_eq!(
@@ -426,7 +427,7 @@ mod tests {
                     &mut scratch,
                     &mut [0u8; 96 * 40][..s.len()]
                 ),
-                Err(WireError::Payload)
+                Err(WireError::Payload.into())
             );
         }
         (enc, back, len)
@@ -502,7 +503,7 @@ mod tests {
         let mut narrow = [0u8; 32];
         assert_eq!(
             decode_tile(enc, &buf[..len], 8, 4, &mut [], &mut narrow),
-            Err(WireError::Payload)
+            Err(WireError::Payload.into())
         );
     }
 }
