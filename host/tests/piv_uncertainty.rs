@@ -87,3 +87,26 @@ fn unmeasured_vectors_have_no_uncertainty() {
         assert!(su.is_infinite() && sv.is_infinite());
     }
 }
+
+/// Without `uncertainty` (what `spiv piv` and Python's `piv` run, whose
+/// outputs carry none) the field is the same, vector for vector, and no
+/// vector claims an uncertainty.
+#[test]
+fn skipping_the_uncertainty_leaves_the_vectors() {
+    let p = SceneParams {
+        shift: (3.3, -1.7),
+        ..params(SceneKind::Uniform)
+    };
+    let pr = pair(p, 4);
+    let with = piv(&pr.a, &pr.b, None, &Settings::default()).expect("piv");
+    let s = Settings {
+        uncertainty: false,
+        ..Settings::default()
+    };
+    let without = piv(&pr.a, &pr.b, None, &s).expect("piv");
+    assert_eq!(with.u, without.u);
+    assert_eq!(with.v, without.v);
+    assert_eq!(with.state, without.state);
+    assert!(with.sigma.iter().any(|s| s.0.is_finite()));
+    assert!(without.sigma.iter().all(|&s| s == spiv_host::piv::NO_SIGMA));
+}

@@ -27,13 +27,14 @@ pub fn highpass(img: &Array2<f32>, sigma: f32) -> Array2<f32> {
                 }
             }
         });
-    // Down columns: stripes of whole rows, one lane per column.
+    // Down columns: stripes of whole rows, one lane per column; the three
+    // passes alternate between the stripe and one buffer.
     for_column_blocks(&mut bg, |block, w| {
         let mut tmp = vec![0.0f32; block.len()];
-        for _ in 0..3 {
-            box_columns(block, &mut tmp, w, r);
-            block.copy_from_slice(&tmp);
-        }
+        box_columns(block, &mut tmp, w, r);
+        box_columns(&tmp, block, w, r);
+        box_columns(block, &mut tmp, w, r);
+        block.copy_from_slice(&tmp);
     });
     bg.zip_mut_with(img, |b, &v| *b = v - *b);
     bg
@@ -191,23 +192,33 @@ pub fn for_column_blocks(img: &mut Array2<f32>, f: impl Fn(&mut [f32], usize) + 
 /// or without any area.
 pub fn clipped_areas(img: &Array2<f32>, level: Option<f32>, grow: usize) -> Option<Array2<bool>> {
     let l = level?;
-    let clipped = img.mapv(|v| v >= l);
     // An area needs a row with 2·CLIP_CORE + 1 clipped pixels in a row;
     // clipped particle cores (a few px) have none, and then no area exists.
     let side = 2 * CLIP_CORE + 1;
-    let has_run = clipped.rows().into_iter().any(|row| {
-        let mut run = 0;
-        row.iter().any(|&c| {
-            run = if c { run + 1 } else { 0 };
-            run >= side
-        })
-    });
-    if !has_run {
+    if !img.rows().into_iter().any(|row| has_run(&row, l, side)) {
         return None;
     }
+    let clipped = img.mapv(|v| v >= l);
     let full = (side * side) as u32;
     let eroded = box_count(&clipped, CLIP_CORE, |c| c == full);
     Some(box_count(&eroded, CLIP_CORE + grow, |c| c > 0))
+}
+
+/// Whether `row` holds `side` consecutive values at or above `level`. Any
+/// `side` consecutive positions hold a multiple of `side`, so only runs
+/// through those positions are measured: a `side`-th of the row is read
+/// where nothing is clipped.
+fn has_run(row: &ndarray::ArrayView1<'_, f32>, level: f32, side: usize) -> bool {
+    let w = row.len();
+    let at = |j: usize| row[j] >= level;
+    (0..w).step_by(side.max(1)).any(|j| {
+        if !at(j) {
+            return false;
+        }
+        let left = (1..side).take_while(|&k| k <= j && at(j - k)).count();
+        let right = (1..side).take_while(|&k| j + k < w && at(j + k)).count();
+        left + 1 + right >= side
+    })
 }
 
 /// Radius of the erosion that tells a clipped area from a clipped particle.
@@ -295,6 +306,32 @@ mod tests {
         assert_eq!(hp, want);
         let flat = Array2::from_elem((16, 16), 7.0f32);
         assert!(highpass(&flat, 3.0).iter().all(|v| v.abs() < 1e-4));
+    }
+
+    /// The run test that reads every `side`-th value against a scan of
+    /// every value, on rows with runs of every length at every offset.
+    #[test]
+    fn has_run_matches_a_full_scan() {
+        for side in [1, 2, 7] {
+            for len in 0..12 {
+                for start in 0..16 {
+                    let row = ndarray::Array1::from_shape_fn(30, |j| {
+                        if (start..start + len).contains(&j) {
+                            9.0
+                        } else {
+                            1.0
+                        }
+                    });
+                    let mut run = 0;
+                    let want = row.iter().any(|&v| {
+                        run = if v >= 9.0 { run + 1 } else { 0 };
+                        run >= side
+                    });
+                    let got = has_run(&row.view(), 9.0, side);
+                    assert_eq!(got, want, "side {side}, run {start}..{}", start + len);
+                }
+            }
+        }
     }
 
     /// The separable running counts against counting every square.

@@ -104,6 +104,12 @@ pub struct Settings {
     /// wide baseline's measurement (`spiv_host::baseline::measure`).
     #[serde(default)]
     pub edge: smooth::Edge,
+    /// Compute each reported vector's uncertainty ([`Field::sigma`]). On
+    /// in the library's defaults; `spiv piv` and the Python `piv`, whose
+    /// outputs carry no uncertainty, turn it off, and their fields hold
+    /// [`NO_SIGMA`].
+    #[serde(default = "yes")]
+    pub uncertainty: bool,
 }
 
 fn yes() -> bool {
@@ -157,6 +163,7 @@ impl Default for Settings {
             dense_fallback: false,
             rescue: true,
             edge: smooth::Edge::Line,
+            uncertainty: true,
         }
     }
 }
@@ -569,7 +576,7 @@ fn measured(
         let last = pi + 1 == npass;
         let spec = PassSpec {
             relaxed,
-            sigma: last,
+            sigma: last && s.uncertainty,
             ..PassSpec::plain(size)
         };
         // Every pass but the last deforms by the filtered predictor
@@ -595,7 +602,7 @@ fn measured(
                 relaxed |= how.relaxed;
                 let spec = PassSpec {
                     relaxed,
-                    sigma: last,
+                    sigma: last && s.uncertainty,
                     ..PassSpec::plain(size)
                 };
                 let (f2, s2) = run(Some(&coarse), spec)?;
@@ -624,7 +631,7 @@ fn measured(
         prev_input = Some(input);
     }
     let (mut field, support) = prev.ok_or_else(|| PivError::Settings("no windows given".into()))?;
-    if let Some((by, spec)) = prev_input.filter(|(_, r)| !r.sigma) {
+    if let Some((by, spec)) = prev_input.filter(|(_, r)| s.uncertainty && !r.sigma) {
         // The last pass failed and an earlier one on its grid stands:
         // the same pass again (the same vectors), with uncertainties.
         field = run(
@@ -1315,8 +1322,8 @@ impl Region<'_> {
             let (da, db) = (&mut sc.a[i * k..(i + 1) * k], &mut sc.b[i * k..(i + 1) * k]);
             match (ra.as_slice(), rb.as_slice()) {
                 (Some(ra), Some(rb)) => {
-                    da.copy_from_slice(&ra[bx..bx + k]);
-                    db.copy_from_slice(&rb[bx..bx + k]);
+                    copy_row(da, &ra[bx..bx + k]);
+                    copy_row(db, &rb[bx..bx + k]);
                 }
                 _ => {
                     for j in 0..k {
@@ -1329,6 +1336,24 @@ impl Region<'_> {
         if search > n {
             pad_outside(&mut sc.a, &sc.masked, search, (x0 - bx, y0 - by), n);
         }
+    }
+}
+
+/// `dst.copy_from_slice(src)`, inlined for the common window sides: a
+/// library `memcpy` call per 32-sample row cost more than the copy.
+#[inline(always)]
+fn copy_row(dst: &mut [f32], src: &[f32]) {
+    fn fixed<const N: usize>(dst: &mut [f32], src: &[f32]) -> bool {
+        match (<&mut [f32; N]>::try_from(dst), <&[f32; N]>::try_from(src)) {
+            (Ok(d), Ok(s)) => {
+                *d = *s;
+                true
+            }
+            _ => false,
+        }
+    }
+    if !(fixed::<32>(dst, src) || fixed::<64>(dst, src) || fixed::<16>(dst, src)) {
+        dst.copy_from_slice(src);
     }
 }
 

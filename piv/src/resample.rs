@@ -227,8 +227,8 @@ impl Resampler {
 /// For the 4-tap kernels (when both images use the same one) one loop does
 /// both: the kernels are symmetric, so A's fraction is 1 − B's and its
 /// weights are B's reversed (tap block one pixel further left) — one set of
-/// weight polynomials per pixel instead of two. x and y go through the
-/// same 4-lane vector (offset, floor, whole part, fraction); a tap block's
+/// weight polynomials per pixel instead of two. Four neighbours that share
+/// their displacement's whole part go together ([`span4`]); a tap block's
 /// origin is tested with one unsigned compare per axis (a negative origin
 /// wraps to a huge one); a pixel whose taps leave the padded buffer takes
 /// [`Resampler::at`].
@@ -258,30 +258,29 @@ pub fn row_pair(
     let (last_x, last_y) = (pw as u64 - 4, ph as u64 - 4);
     let origin = PAD as i64 - 1;
     let half = f32x4::splat(0.5);
-    for (j, (((pa, pb), &du), &dv)) in oa.iter_mut().zip(ob.iter_mut()).zip(u).zip(v).enumerate() {
+    // B's tap block from (j + kx − 1, i + ky − 1); A's from
+    // (j − kx − 2, i − ky − 2) with the reversed weights, (kx, ky) = ⌊d/2⌋;
+    // their (column, row) in the padded buffer. (NaN or beyond ±2³¹ px
+    // truncates to i32::MIN on x86, far outside.)
+    let origins = |j: usize, kx: i32, ky: i32| {
+        let (kx, ky) = (i64::from(kx), i64::from(ky));
+        (
+            (j as i64 + kx + origin) as u64,
+            (i as i64 + ky + origin) as u64,
+            (j as i64 - kx - 1 + origin) as u64,
+            (i as i64 - ky - 1 + origin) as u64,
+        )
+    };
+    // One pixel: the 4×4 taps of each image with one horizontal sum, or
+    // `Resampler::at` where they leave the padded buffer.
+    let one = |j: usize, du: f32, dv: f32| -> (f32, f32) {
         let d = f32x4::new([du, dv, 0.0, 0.0]) * half;
         let f = d.floor();
         let t = (d - f).to_array();
-        // (NaN or beyond ±2³¹ px: i32::MIN on x86, far outside.)
         let kk = f.fast_trunc_int().to_array();
-        let (kx, ky) = (i64::from(kk[0]), i64::from(kk[1]));
-        // B's tap block from (j + kx − 1, i + ky − 1); A's from
-        // (j − kx − 2, i − ky − 2) with the reversed weights.
-        let (xb, yb) = (
-            (j as i64 + kx + origin) as u64,
-            (i as i64 + ky + origin) as u64,
-        );
-        let (xa, ya) = (
-            (j as i64 - kx - 1 + origin) as u64,
-            (i as i64 - ky - 1 + origin) as u64,
-        );
-        let fast = xb <= last_x && yb <= last_y && xa <= last_x && ya <= last_y;
-        if fast {
+        let (xb, yb, xa, ya) = origins(j, kk[0], kk[1]);
+        if xb <= last_x && yb <= last_y && xa <= last_x && ya <= last_y {
             let (wx, wy) = (weights4(k, t[0]), weights4(k, t[1]));
-            let rev = |w: f32x4| {
-                let [w0, w1, w2, w3] = w.to_array();
-                f32x4::new([w3, w2, w1, w0])
-            };
             let tap = |r: &Resampler, x: u64, y: u64, wx: f32x4, wy: f32x4| {
                 let base = y as usize * pw + x as usize;
                 match r.data.get(base..base + 3 * pw + 4) {
@@ -289,15 +288,104 @@ pub fn row_pair(
                     None => 0.0,
                 }
             };
-            *pb = tap(b, xb, yb, wx, wy);
-            *pa = tap(a, xa, ya, rev(wx), rev(wy));
+            (tap(a, xa, ya, rev(wx), rev(wy)), tap(b, xb, yb, wx, wy))
         } else {
             let dd = d.to_array();
             let (x, y) = (j as f64, i as f64);
-            *pa = a.at(x - f64::from(dd[0]), y - f64::from(dd[1]));
-            *pb = b.at(x + f64::from(dd[0]), y + f64::from(dd[1]));
+            (
+                a.at(x - f64::from(dd[0]), y - f64::from(dd[1])),
+                b.at(x + f64::from(dd[0]), y + f64::from(dd[1])),
+            )
         }
+    };
+    let n = oa.len().min(ob.len()).min(u.len()).min(v.len());
+    let mut j = 0;
+    // Four pixels at a time where they share (kx, ky), as neighbours of a
+    // smooth field mostly do: their tap blocks then sit side by side, so
+    // each tap is one 4-lane load across the four pixels, weighted by
+    // lanes of per-pixel weights — no horizontal sums. The products are
+    // added in [`dot4`]'s order, so every sample equals the one-pixel
+    // path's.
+    while j + 4 <= n {
+        let lanes = |s: &[f32]| f32x4::new([s[j], s[j + 1], s[j + 2], s[j + 3]]);
+        let (dx, dy) = (lanes(u) * half, lanes(v) * half);
+        let (fx, fy) = (dx.floor(), dy.floor());
+        let (kx, ky) = (
+            fx.fast_trunc_int().to_array(),
+            fy.fast_trunc_int().to_array(),
+        );
+        let shared = kx.iter().all(|&x| x == kx[0]) && ky.iter().all(|&y| y == ky[0]);
+        let (xb, yb, xa, ya) = origins(j, kx[0], ky[0]);
+        // The four blocks span 7 columns.
+        let inside = xb + 3 <= last_x && yb <= last_y && xa + 3 <= last_x && ya <= last_y;
+        if shared && inside {
+            let wx = weights_across(k, dx - fx);
+            let wy = weights_across(k, dy - fy);
+            let sb = span4(&b.data, yb as usize * pw + xb as usize, pw, wx, wy);
+            let [wx0, wx1, wx2, wx3] = wx;
+            let [wy0, wy1, wy2, wy3] = wy;
+            let sa = span4(
+                &a.data,
+                ya as usize * pw + xa as usize,
+                pw,
+                [wx3, wx2, wx1, wx0],
+                [wy3, wy2, wy1, wy0],
+            );
+            oa[j..j + 4].copy_from_slice(&sa.to_array());
+            ob[j..j + 4].copy_from_slice(&sb.to_array());
+        } else {
+            for l in j..j + 4 {
+                (oa[l], ob[l]) = one(l, u[l], v[l]);
+            }
+        }
+        j += 4;
     }
+    for l in j..n {
+        (oa[l], ob[l]) = one(l, u[l], v[l]);
+    }
+}
+
+/// `w` with its lanes in reverse order: A's weights, B's mirrored.
+#[inline(always)]
+fn rev(w: f32x4) -> f32x4 {
+    let [w0, w1, w2, w3] = w.to_array();
+    f32x4::new([w3, w2, w1, w0])
+}
+
+/// The weights of the four taps of `k` for four fractions `t` (one pixel
+/// per lane): element `c` is tap `c`'s weight for each pixel, as
+/// [`weights4`] computes it.
+#[inline(always)]
+fn weights_across(k: &Kernel4, t: f32x4) -> [f32x4; 4] {
+    std::array::from_fn(|c| {
+        ((f32x4::splat(k[3][c]) * t + f32x4::splat(k[2][c])) * t + f32x4::splat(k[1][c])) * t
+            + f32x4::splat(k[0][c])
+    })
+}
+
+/// Four neighbouring pixels sampled from the tap blocks starting at
+/// `base`, `base + 1`, … (row length `pw`) with their own weights (lanes):
+/// for each tap column the rows weighted by `wy` and summed, then the
+/// columns weighted by `wx` and summed, in [`dot4`]'s order. Taps beyond
+/// `data` count as 0.
+#[inline(always)]
+fn span4(data: &[f32], base: usize, pw: usize, wx: [f32x4; 4], wy: [f32x4; 4]) -> f32x4 {
+    const NONE: [f32; 7] = [0.0; 7];
+    let row = |r: usize| -> &[f32; 7] {
+        let at = base + r * pw;
+        data.get(at..at + 7)
+            .and_then(|s| <&[f32; 7]>::try_from(s).ok())
+            .unwrap_or(&NONE)
+    };
+    let rows = [row(0), row(1), row(2), row(3)];
+    let col = |c: usize| {
+        let tap = |r: usize| {
+            let q: &[f32; 4] = rows[r][c..c + 4].try_into().unwrap_or(&[0.0; 4]);
+            f32x4::from(*q) * wy[r]
+        };
+        (tap(0) + tap(1)) + (tap(2) + tap(3))
+    };
+    ((col(0) * wx[0] + col(1) * wx[1]) + col(2) * wx[2]) + col(3) * wx[3]
 }
 
 /// Mirror index into 0..n (whole-sample symmetric).

@@ -5,6 +5,7 @@
 //! edges and corners.
 
 use ndarray::Array2;
+use rayon::prelude::*;
 
 pub use spiv_formats::State;
 
@@ -159,26 +160,34 @@ pub fn median_test(
     }
     let (ny, nx) = u.dim();
     let before = state.clone();
+    // Rows in parallel: each reads only `before`.
+    let failed: Vec<Vec<usize>> = (0..ny)
+        .into_par_iter()
+        .map(|r| {
+            let mut nu = Eight::<f64>::default();
+            let mut nv = Eight::<f64>::default();
+            (0..nx)
+                .filter(|&c| {
+                    if before[[r, c]] != State::Valid {
+                        return false;
+                    }
+                    neighbours(u, v, &before, (r, c), (&mut nu, &mut nv));
+                    // Unsupported (fewer than 2 neighbours): no neighbour
+                    // agrees or disagrees, and a lone vector among rejected
+                    // ones is as likely noise as not.
+                    nu.n < 2
+                        || [(&mut nu, u[[r, c]]), (&mut nv, v[[r, c]])]
+                            .into_iter()
+                            .any(|(vals, x)| normalised_residual(vals.values(), x, eps) > threshold)
+                })
+                .collect()
+        })
+        .collect();
     let mut rejected = 0;
-    let mut nu = Eight::<f64>::default();
-    let mut nv = Eight::<f64>::default();
-    for r in 0..ny {
-        for c in 0..nx {
-            if before[[r, c]] != State::Valid {
-                continue;
-            }
-            neighbours(u, v, &before, (r, c), (&mut nu, &mut nv));
-            // Unsupported (fewer than 2 neighbours): no neighbour agrees or
-            // disagrees, and a lone vector among rejected ones is as likely
-            // noise as not.
-            let fails = nu.n < 2
-                || [(&mut nu, u[[r, c]]), (&mut nv, v[[r, c]])]
-                    .into_iter()
-                    .any(|(vals, x)| normalised_residual(vals.values(), x, eps) > threshold);
-            if fails {
-                state[[r, c]] = State::Invalid;
-                rejected += 1;
-            }
+    for (r, cols) in failed.into_iter().enumerate() {
+        for c in cols {
+            state[[r, c]] = State::Invalid;
+            rejected += 1;
         }
     }
     rejected

@@ -391,6 +391,11 @@ fn piv<'py>(
     }
     .settings()
     .map_err(err)?;
+    // The arrays returned carry no uncertainty.
+    let settings = spiv_host::piv::Settings {
+        uncertainty: false,
+        ..settings
+    };
     let ia = image(a, "a")?;
     let ib = image(b, "b")?;
     let m = mask

@@ -82,6 +82,11 @@ pub fn run(a: &PivArgs) -> Result<(), CliError> {
         dense_fallback: !a.no_dense_fallback && a.dense.is_none(),
     }
     .settings()?;
+    // The CSV and netCDF written below carry no uncertainty.
+    let settings = spiv_host::piv::Settings {
+        uncertainty: false,
+        ..settings
+    };
     let ia = load_image(&a.a)?;
     let ib = load_image(&a.b)?;
     let mask = a.mask.as_deref().map(load_mask).transpose()?;
