@@ -21,27 +21,7 @@ pub fn dense(
     h: usize,
     w: usize,
 ) -> (Array2<f32>, Array2<f32>) {
-    let (first, step) = ((grid.size as f64 - 1.0) / 2.0, grid.step as f64);
-    let pos = |p: f64, n: usize| ((p - first) / step).clamp(-1.0, n as f64);
-    // Every pixel column's four taps into the extended grid row (two
-    // linearly extrapolated nodes on each side) and their weights: the same
-    // for every row, so computed once. Columns sharing taps form a segment;
-    // the weights are kept per column in four arrays, so that within a
-    // segment the loop over pixels vectorises.
-    let mut weights: [Vec<f32>; 4] = Default::default();
-    let mut segments: Vec<(usize, usize, usize)> = Vec::new(); // (k, j0, j1)
-    for j in 0..w {
-        let p = pos(j as f64, grid.nx);
-        let kf = p.floor();
-        let k = (kf as isize + 1) as usize;
-        for (wv, c) in weights.iter_mut().zip(catmull_rom(p - kf)) {
-            wv.push(c as f32);
-        }
-        match segments.last_mut() {
-            Some(seg) if seg.0 == k => seg.2 = j + 1,
-            _ => segments.push((k, j, j + 1)),
-        }
-    }
+    let d = Dense::new(grid, u, v, (h, w));
     let mut du = Array2::<f32>::zeros((h, w));
     let mut dv = Array2::<f32>::zeros((h, w));
     du.axis_iter_mut(Axis(0))
@@ -49,42 +29,108 @@ pub fn dense(
         .zip(dv.axis_iter_mut(Axis(0)))
         .enumerate()
         .for_each(|(i, (mut ru, mut rv))| {
-            // Along y for every grid column, then along x.
-            let fy = pos(i as f64, grid.ny);
-            let blend = |f: &Array2<f64>| -> Vec<f64> {
-                let row: Vec<f64> = f
-                    .columns()
-                    .into_iter()
-                    .map(|col| cubic(|k| col[k], grid.ny, fy))
-                    .collect();
-                extend(&row)
-            };
-            let (bu, bv) = (blend(u), blend(v));
-            for (out, nodes) in [(&mut ru, &bu), (&mut rv, &bv)] {
-                for &(k, j0, j1) in &segments {
-                    let a = match nodes.get(k..k + 4) {
-                        Some(&[a0, a1, a2, a3]) => [a0 as f32, a1 as f32, a2 as f32, a3 as f32],
-                        _ => continue,
-                    };
-                    let o = out.slice_mut(ndarray::s![j0..j1]);
-                    let ws = [
-                        &weights[0][j0..j1],
-                        &weights[1][j0..j1],
-                        &weights[2][j0..j1],
-                        &weights[3][j0..j1],
-                    ];
-                    ndarray::Zip::from(o)
-                        .and(ws[0])
-                        .and(ws[1])
-                        .and(ws[2])
-                        .and(ws[3])
-                        .for_each(|o, &w0, &w1, &w2, &w3| {
-                            *o = w0 * a[0] + w1 * a[1] + w2 * a[2] + w3 * a[3];
-                        });
-                }
+            if let (Some(ru), Some(rv)) = (ru.as_slice_mut(), rv.as_slice_mut()) {
+                d.row(i, ru, rv);
             }
         });
     (du, dv)
+}
+
+/// [`dense`] one row at a time, for whoever needs a row rather than the
+/// whole image (the deformation computes each row where it uses it).
+#[derive(Debug, Clone)]
+pub struct Dense {
+    grid: Grid,
+    u: Array2<f64>,
+    v: Array2<f64>,
+    /// Image height and width, px.
+    size: (usize, usize),
+    /// Every pixel column's four tap weights into the extended grid row
+    /// (the same for every row), one array per tap, so that the loop over
+    /// a segment's pixels vectorises.
+    weights: [Vec<f32>; 4],
+    /// Columns sharing their taps: (first tap, first column, end column).
+    segments: Vec<(usize, usize, usize)>,
+}
+
+impl Dense {
+    /// The interpolation of `u`, `v` on `grid` over an image of `(h, w)` px.
+    pub fn new(grid: &Grid, u: &Array2<f64>, v: &Array2<f64>, (h, w): (usize, usize)) -> Dense {
+        let mut weights: [Vec<f32>; 4] = Default::default();
+        let mut segments: Vec<(usize, usize, usize)> = Vec::new();
+        for j in 0..w {
+            let p = position(grid, j, grid.nx);
+            let kf = p.floor();
+            let k = (kf as isize + 1) as usize;
+            for (wv, c) in weights.iter_mut().zip(catmull_rom(p - kf)) {
+                wv.push(c as f32);
+            }
+            match segments.last_mut() {
+                Some(seg) if seg.0 == k => seg.2 = j + 1,
+                _ => segments.push((k, j, j + 1)),
+            }
+        }
+        Dense {
+            grid: *grid,
+            u: u.clone(),
+            v: v.clone(),
+            size: (h, w),
+            weights,
+            segments,
+        }
+    }
+
+    /// Row `i` of the field into `ru`, `rv` (`w` long).
+    pub fn row(&self, i: usize, ru: &mut [f32], rv: &mut [f32]) {
+        // Along y for every grid column, then along x.
+        let fy = position(&self.grid, i, self.grid.ny);
+        let blend = |f: &Array2<f64>| -> Vec<f64> {
+            let row: Vec<f64> = f
+                .columns()
+                .into_iter()
+                .map(|col| cubic(|k| col[k], self.grid.ny, fy))
+                .collect();
+            extend(&row)
+        };
+        let (bu, bv) = (blend(&self.u), blend(&self.v));
+        for (out, nodes) in [(ru, &bu), (rv, &bv)] {
+            for &(k, j0, j1) in &self.segments {
+                let Some(o) = out.get_mut(j0..j1) else {
+                    continue;
+                };
+                let a = match nodes.get(k..k + 4) {
+                    Some(&[a0, a1, a2, a3]) => [a0 as f32, a1 as f32, a2 as f32, a3 as f32],
+                    _ => {
+                        o.fill(0.0);
+                        continue;
+                    }
+                };
+                let ws = [
+                    &self.weights[0][j0..j1],
+                    &self.weights[1][j0..j1],
+                    &self.weights[2][j0..j1],
+                    &self.weights[3][j0..j1],
+                ];
+                for ((((o, &w0), &w1), &w2), &w3) in
+                    o.iter_mut().zip(ws[0]).zip(ws[1]).zip(ws[2]).zip(ws[3])
+                {
+                    *o = w0 * a[0] + w1 * a[1] + w2 * a[2] + w3 * a[3];
+                }
+            }
+        }
+    }
+
+    /// Image height and width, px.
+    pub fn size(&self) -> (usize, usize) {
+        self.size
+    }
+}
+
+/// Pixel `p`'s position on a grid axis of `n` nodes, in nodes, clamped
+/// one node beyond the outer centres.
+fn position(grid: &Grid, p: usize, n: usize) -> f64 {
+    let (first, step) = ((grid.size as f64 - 1.0) / 2.0, grid.step as f64);
+    ((p as f64 - first) / step).clamp(-1.0, n as f64)
 }
 
 /// `row` with two linearly extrapolated values on each side (index 2 is
@@ -147,16 +193,12 @@ fn cubic(f: impl Fn(usize) -> f64, n: usize, p: f64) -> f64 {
         + (3.0 * p1 - p0 - 3.0 * p2 + p3) * t3)
 }
 
-/// Deforms the pair by the dense field: A at x − d/2, B at x + d/2.
-/// Also returns where either sample fell outside the image (no data: the
-/// correlation leaves those pixels out).
-pub fn deform(
-    a: &Resampler,
-    b: &Resampler,
-    du: &Array2<f32>,
-    dv: &Array2<f32>,
-) -> (Array2<f32>, Array2<f32>, Array2<bool>) {
-    let (h, w) = du.dim();
+/// Deforms the pair by the field `d` (each row computed where it is
+/// used): A at x − d/2, B at x + d/2. Also returns where either sample
+/// fell outside the image (no data: the correlation leaves those pixels
+/// out).
+pub fn deform(a: &Resampler, b: &Resampler, d: &Dense) -> (Array2<f32>, Array2<f32>, Array2<bool>) {
+    let (h, w) = d.size();
     let (xmax, ymax) = ((w - 1) as f64 + 0.5, (h - 1) as f64 + 0.5);
     let mut oa = Array2::<f32>::zeros((h, w));
     let mut ob = Array2::<f32>::zeros((h, w));
@@ -167,40 +209,39 @@ pub fn deform(
         .zip(ob.axis_iter_mut(Axis(0)))
         .zip(out.axis_iter_mut(Axis(0)))
         .enumerate()
-        .for_each(|(i, ((mut ra, mut rb), mut ro))| {
-            let (ru, rv) = (du.row(i), dv.row(i));
-            let rows = (
-                ra.as_slice_mut(),
-                rb.as_slice_mut(),
-                ro.as_slice_mut(),
-                ru.as_slice(),
-                rv.as_slice(),
-            );
-            // Standard-layout arrays (all made here or by `dense`) always
-            // give slices; the per-pixel loop is the general fallback.
-            if let (Some(ra), Some(rb), Some(ro), Some(ru), Some(rv)) = rows {
-                row_pair(a, b, i, ru, rv, ra, rb);
-                // A at x − d/2 and B at x + d/2 are both inside when
-                // x − |d|/2 and x + |d|/2 are (f32 compares, vectorised).
-                let (y, xmax, ymax) = (i as f32, xmax as f32, ymax as f32);
-                for (j, ((o, &u), &v)) in ro.iter_mut().zip(ru).zip(rv).enumerate() {
-                    let (hx, hy) = ((0.5 * u).abs(), (0.5 * v).abs());
-                    let x = j as f32;
-                    let inside =
-                        x - hx >= -0.5 && x + hx <= xmax && y - hy >= -0.5 && y + hy <= ymax;
-                    *o = !inside;
+        .for_each_init(
+            || (vec![0.0f32; w], vec![0.0f32; w]),
+            |(ru, rv), (i, ((mut ra, mut rb), mut ro))| {
+                d.row(i, ru, rv);
+                let rows = (ra.as_slice_mut(), rb.as_slice_mut(), ro.as_slice_mut());
+                // Standard-layout arrays (all made here) always give
+                // slices; the per-pixel loop is the general fallback.
+                if let (Some(ra), Some(rb), Some(ro)) = rows {
+                    row_pair(a, b, i, ru, rv, ra, rb);
+                    // A at x − d/2 and B at x + d/2 are both inside when
+                    // x − |d|/2 and x + |d|/2 are (f32 compares, vectorised).
+                    let (y, xmax, ymax) = (i as f32, xmax as f32, ymax as f32);
+                    for (j, ((o, &u), &v)) in
+                        ro.iter_mut().zip(ru.iter()).zip(rv.iter()).enumerate()
+                    {
+                        let (hx, hy) = ((0.5 * u).abs(), (0.5 * v).abs());
+                        let x = j as f32;
+                        let inside =
+                            x - hx >= -0.5 && x + hx <= xmax && y - hy >= -0.5 && y + hy <= ymax;
+                        *o = !inside;
+                    }
+                } else {
+                    let y = i as f64;
+                    for j in 0..w {
+                        let (hx, hy) = (0.5 * f64::from(ru[j]), 0.5 * f64::from(rv[j]));
+                        let x = j as f64;
+                        let (xa, ya, xb, yb) = (x - hx, y - hy, x + hx, y + hy);
+                        ra[j] = a.at(xa, ya);
+                        rb[j] = b.at(xb, yb);
+                        ro[j] = !(inside(xa, ya) && inside(xb, yb));
+                    }
                 }
-            } else {
-                let y = i as f64;
-                for j in 0..w {
-                    let (hx, hy) = (0.5 * f64::from(ru[j]), 0.5 * f64::from(rv[j]));
-                    let x = j as f64;
-                    let (xa, ya, xb, yb) = (x - hx, y - hy, x + hx, y + hy);
-                    ra[j] = a.at(xa, ya);
-                    rb[j] = b.at(xb, yb);
-                    ro[j] = !(inside(xa, ya) && inside(xb, yb));
-                }
-            }
-        });
+            },
+        );
     (oa, ob, out)
 }

@@ -331,6 +331,12 @@ impl Field {
         deform::dense(&self.grid, &u, &v, h, w)
     }
 
+    /// [`Field::predictor`] row by row ([`deform::Dense`]).
+    fn predictor_rows(&self, h: usize, w: usize) -> deform::Dense {
+        let (u, v) = validate::extended(&self.u, &self.v, &self.state);
+        deform::Dense::new(&self.grid, &u, &v, (h, w))
+    }
+
     /// Whether the field is usable ([`usable`]).
     pub fn usable(&self) -> bool {
         let (valid, replaced, _) = self.counts();
@@ -750,21 +756,21 @@ impl Passes<'_> {
         let (deformed, pred, outside) = match by {
             None => (Vec::new(), None, self.base.clone()),
             Some(f) => {
-                let (du, dv) = f.predictor(h, w);
+                let d = f.predictor_rows(h, w);
                 let Some(rs) = &self.resamplers else {
                     return Err(PivError::Settings("internal: no resampler".into()));
                 };
                 let mut outside = self.base.clone();
                 let mut deformed = Vec::with_capacity(rs.len());
                 for (ra, rb) in rs {
-                    let (da, db, out) = deform::deform(ra, rb, &du, &dv);
+                    let (da, db, out) = deform::deform(ra, rb, &d);
                     match &mut outside {
                         Some(o) => o.zip_mut_with(&out, |o, &x| *o |= x),
                         None => outside = Some(out),
                     }
                     deformed.push((da, db));
                 }
-                (deformed, Some((du, dv)), outside)
+                (deformed, Some(centres(&d, &grid)), outside)
             }
         };
         let now: Vec<(&Array2<f32>, &Array2<f32>)> = if deformed.is_empty() {
@@ -925,6 +931,27 @@ const RELAXED_SWEEPS: usize = 4;
 /// The largest search area a rescue pass correlates, px.
 const MAX_SEARCH: usize = 1024;
 
+/// The predictor `d` at every window centre of `grid` (the mean of the
+/// central 2×2 pixels for even windows), px.
+fn centres(d: &deform::Dense, grid: &Grid) -> Array2<(f64, f64)> {
+    let n = grid.size;
+    let w = d.size().1;
+    let mut out = Array2::from_elem((grid.ny, grid.nx), (0.0, 0.0));
+    let (mut u1, mut v1, mut u2, mut v2) = (vec![0.0; w], vec![0.0; w], vec![0.0; w], vec![0.0; w]);
+    for r in 0..grid.ny {
+        let (_, y0) = grid.origin(r, 0);
+        d.row(y0 + (n - 1) / 2, &mut u1, &mut v1);
+        d.row(y0 + n / 2, &mut u2, &mut v2);
+        for c in 0..grid.nx {
+            let (x0, _) = grid.origin(r, c);
+            let (j1, j2) = (x0 + (n - 1) / 2, x0 + n / 2);
+            let m = |a: &[f32], b: &[f32]| 0.25 * f64::from(a[j1] + a[j2] + b[j1] + b[j2]);
+            out[[r, c]] = (m(&u1, &u2), m(&v1, &v2));
+        }
+    }
+    out
+}
+
 /// Fills `field` (a failed pass) from `from` (a field that passed, on
 /// another grid), interpolated at its centres and flagged replaced, where
 /// its windows have signal; the rest stays invalid.
@@ -965,7 +992,7 @@ fn pass(
     excluded: Option<&Array2<bool>>,
     grid: Grid,
     spec: PassSpec,
-    pred: Option<&(Array2<f32>, Array2<f32>)>,
+    pred: Option<&Array2<(f64, f64)>>,
     s: &Settings,
 ) -> (Field, f64) {
     let n = grid.size;
@@ -1013,7 +1040,7 @@ struct PassWindows<'a> {
     /// The plan of the area twice the window's side that re-checks peaks
     /// beyond the quarter rule on undeformed images.
     wide: Option<&'a Plan>,
-    pred: Option<&'a (Array2<f32>, Array2<f32>)>,
+    pred: Option<&'a Array2<(f64, f64)>>,
     spec: PassSpec,
     s: &'a Settings,
 }
@@ -1055,19 +1082,7 @@ impl PassWindows<'_> {
                 }
             }
         }
-        let (pu, pv) = match self.pred {
-            None => (0.0, 0.0),
-            Some((du, dv)) => {
-                // The predictor at the window centre (mean of the central
-                // 2×2 for even windows).
-                let (i1, j1) = (y0 + (n - 1) / 2, x0 + (n - 1) / 2);
-                let (i2, j2) = (y0 + n / 2, x0 + n / 2);
-                let m = |f: &Array2<f32>| {
-                    0.25 * f64::from(f[[i1, j1]] + f[[i1, j2]] + f[[i2, j1]] + f[[i2, j2]])
-                };
-                (m(du), m(dv))
-            }
-        };
+        let (pu, pv) = self.pred.map_or((0.0, 0.0), |p| p[[r, c]]);
         match peak {
             // After deformation the residual must be small: a correction
             // beyond a quarter window means the predictor was wrong here,

@@ -64,7 +64,16 @@ impl Resampler {
         let mut data = Vec::with_capacity(pw * ph);
         for i in 0..ph {
             let row = img.row(extend(i as isize - PAD as isize, h));
-            data.extend(cols.iter().map(|&j| row[j]));
+            match row.as_slice() {
+                // The image's own columns copied whole, the border taken
+                // column by column.
+                Some(r) if w >= PAD => {
+                    data.extend(cols[..PAD].iter().map(|&j| r[j]));
+                    data.extend_from_slice(r);
+                    data.extend(cols[PAD + w..].iter().map(|&j| r[j]));
+                }
+                _ => data.extend(cols.iter().map(|&j| row[j])),
+            }
         }
         Resampler {
             data,
@@ -447,6 +456,10 @@ pub fn bspline_coefficients(img: &Array2<f32>, poles: &[f64]) -> Array2<f32> {
     c
 }
 
+/// A row weight of the prefilter's causal initialisation below which the
+/// row is left out: 2⁻⁴⁰, far below an f32 sum's resolution.
+const NEGLIGIBLE: f64 = 1e-12;
+
 /// The B-spline prefilter (gain, then per pole a causal and an
 /// anti-causal first-order recursion with the exact mirror-boundary
 /// initialisation of Unser 1999) down every column of a row-major block `w`
@@ -474,9 +487,14 @@ fn columns_prefilter(block: &mut [f32], w: usize, poles: &[f64]) {
         }
         z2n = z2n * z2n * iz;
         for k in 1..h - 1 {
-            let wk = (zn + z2n) as f32;
-            for (s, &v) in sum.iter_mut().zip(&block[k * w..(k + 1) * w]) {
-                *s += wk * v;
+            // Rows whose weight is below 1e-12 change no f32 sum: only the
+            // weights' recursion runs through them (so the weights of the
+            // rows that count are the same numbers).
+            if zn.abs() + z2n.abs() >= NEGLIGIBLE {
+                let wk = (zn + z2n) as f32;
+                for (s, &v) in sum.iter_mut().zip(&block[k * w..(k + 1) * w]) {
+                    *s += wk * v;
+                }
             }
             zn *= z;
             z2n *= iz;
