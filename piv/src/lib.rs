@@ -510,9 +510,9 @@ pub fn piv_ensemble(
         images
             .par_iter()
             .map(|&(a, b)| {
-                (
-                    resample::Resampler::new(a, s.interp),
-                    resample::Resampler::new(b, s.interp),
+                rayon::join(
+                    || resample::Resampler::new(a, s.interp),
+                    || resample::Resampler::new(b, s.interp),
                 )
             })
             .collect()
@@ -722,9 +722,9 @@ fn prefiltered(
     pairs
         .par_iter()
         .map(|&(a, b)| {
-            (
-                filter::highpass(a, s.highpass),
-                filter::highpass(b, s.highpass),
+            rayon::join(
+                || filter::highpass(a, s.highpass),
+                || filter::highpass(b, s.highpass),
             )
         })
         .collect()
