@@ -82,15 +82,16 @@ impl Dense {
 
     /// Row `i` of the field into `ru`, `rv` (`w` long).
     pub fn row(&self, i: usize, ru: &mut [f32], rv: &mut [f32]) {
-        // Along y for every grid column, then along x.
-        let fy = position(&self.grid, i, self.grid.ny);
+        // Along y for every grid column (the position's whole part and
+        // fraction found once for the row), then along x.
+        let ny = self.grid.ny;
+        let y = Position::at(position(&self.grid, i, ny));
         let blend = |f: &Array2<f64>| -> Vec<f64> {
-            let row: Vec<f64> = f
-                .columns()
-                .into_iter()
-                .map(|col| cubic(|k| col[k], self.grid.ny, fy))
-                .collect();
-            extend(&row)
+            let mut e = Vec::with_capacity(f.ncols() + 5);
+            e.extend([0.0, 0.0]);
+            e.extend(f.columns().into_iter().map(|col| y.cubic(|k| col[k], ny)));
+            extend_in_place(&mut e);
+            e
         };
         let (bu, bv) = (blend(&self.u), blend(&self.v));
         for (out, nodes) in [(ru, &bu), (rv, &bv)] {
@@ -105,16 +106,17 @@ impl Dense {
                         continue;
                     }
                 };
-                let ws = [
-                    &self.weights[0][j0..j1],
-                    &self.weights[1][j0..j1],
-                    &self.weights[2][j0..j1],
-                    &self.weights[3][j0..j1],
-                ];
-                for ((((o, &w0), &w1), &w2), &w3) in
-                    o.iter_mut().zip(ws[0]).zip(ws[1]).zip(ws[2]).zip(ws[3])
-                {
-                    *o = w0 * a[0] + w1 * a[1] + w2 * a[2] + w3 * a[3];
+                let n = o.len();
+                let [w0, w1, w2, w3] = &self.weights;
+                let (w0, w1, w2, w3) = (
+                    &w0[j0..j0 + n],
+                    &w1[j0..j0 + n],
+                    &w2[j0..j0 + n],
+                    &w3[j0..j0 + n],
+                );
+                // Indexed over equal lengths, so that it vectorises.
+                for j in 0..n {
+                    o[j] = w0[j] * a[0] + w1[j] * a[1] + w2[j] * a[2] + w3[j] * a[3];
                 }
             }
         }
@@ -133,24 +135,71 @@ fn position(grid: &Grid, p: usize, n: usize) -> f64 {
     ((p as f64 - first) / step).clamp(-1.0, n as f64)
 }
 
-/// `row` with two linearly extrapolated values on each side (index 2 is
-/// node 0).
-fn extend(row: &[f64]) -> Vec<f64> {
-    let n = row.len();
+/// The row in `e` (after two places) with two linearly extrapolated
+/// values on each side (index 2 is node 0): the two places are filled and
+/// three values appended.
+fn extend_in_place(e: &mut Vec<f64>) {
+    let n = e.len() - 2;
+    let row = &e[2..];
     let (d0, d1) = if n >= 2 {
         (row[1] - row[0], row[n - 1] - row[n - 2])
     } else {
         (0.0, 0.0)
     };
-    let mut e = Vec::with_capacity(n + 5);
-    e.extend([row[0] - 2.0 * d0, row[0] - d0]);
-    e.extend_from_slice(row);
-    e.extend([
-        row[n - 1] + d1,
-        row[n - 1] + 2.0 * d1,
-        row[n - 1] + 3.0 * d1,
-    ]);
-    e
+    let (first, last) = (row[0], row[n - 1]);
+    e[0] = first - 2.0 * d0;
+    e[1] = first - d0;
+    e.extend([last + d1, last + 2.0 * d1, last + 3.0 * d1]);
+}
+
+/// A position on a grid axis split into its whole part and fraction, for
+/// [`Position::cubic`] along many lines at the same position.
+#[derive(Debug, Clone, Copy)]
+struct Position {
+    k: isize,
+    t: f64,
+    t2: f64,
+    t3: f64,
+}
+
+impl Position {
+    fn at(p: f64) -> Position {
+        let k0 = p.floor();
+        let t = p - k0;
+        let t2 = t * t;
+        Position {
+            k: k0 as isize,
+            t,
+            t2,
+            t3: t2 * t,
+        }
+    }
+
+    /// Catmull-Rom interpolation of the sequence `f(0..n)` at this
+    /// position (−1 ≤ p ≤ n): values beyond the ends are extended
+    /// linearly, so a linear field is reproduced everywhere, and the curve
+    /// passes through every node.
+    #[inline]
+    fn cubic(&self, f: impl Fn(usize) -> f64, n: usize) -> f64 {
+        if n == 1 {
+            return f(0);
+        }
+        let at = |k: isize| -> f64 {
+            if k < 0 {
+                f(0) + k as f64 * (f(1) - f(0))
+            } else if k as usize >= n {
+                f(n - 1) + (k as f64 - (n - 1) as f64) * (f(n - 1) - f(n - 2))
+            } else {
+                f(k as usize)
+            }
+        };
+        let (k, t, t2, t3) = (self.k, self.t, self.t2, self.t3);
+        let (p0, p1, p2, p3) = (at(k - 1), at(k), at(k + 1), at(k + 2));
+        0.5 * (2.0 * p1
+            + (p2 - p0) * t
+            + (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) * t2
+            + (3.0 * p1 - p0 - 3.0 * p2 + p3) * t3)
+    }
 }
 
 /// Catmull-Rom weights of the nodes at −1, 0, 1, 2 for fraction `t`.
@@ -163,34 +212,6 @@ fn catmull_rom(t: f64) -> [f64; 4] {
         0.5 * (t + 4.0 * t2 - 3.0 * t3),
         0.5 * (-t2 + t3),
     ]
-}
-
-/// Catmull-Rom interpolation of the sequence `f(0..n)` at position `p`
-/// (−1 ≤ p ≤ n): values beyond the ends are extended linearly, so a linear
-/// field is reproduced everywhere, and the curve passes through every node.
-fn cubic(f: impl Fn(usize) -> f64, n: usize, p: f64) -> f64 {
-    if n == 1 {
-        return f(0);
-    }
-    let at = |k: isize| -> f64 {
-        if k < 0 {
-            f(0) + k as f64 * (f(1) - f(0))
-        } else if k as usize >= n {
-            f(n - 1) + (k as f64 - (n - 1) as f64) * (f(n - 1) - f(n - 2))
-        } else {
-            f(k as usize)
-        }
-    };
-    let k0 = p.floor();
-    let t = p - k0;
-    let k = k0 as isize;
-    let (p0, p1, p2, p3) = (at(k - 1), at(k), at(k + 1), at(k + 2));
-    let t2 = t * t;
-    let t3 = t2 * t;
-    0.5 * (2.0 * p1
-        + (p2 - p0) * t
-        + (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) * t2
-        + (3.0 * p1 - p0 - 3.0 * p2 + p3) * t3)
 }
 
 /// Deforms the pair by the field `d` (each row computed where it is
