@@ -24,7 +24,7 @@ pub enum Interp {
 /// An image ready to be resampled: the gray values, or for
 /// [`Interp::Bspline`] their B-spline coefficients (computed once).
 ///
-/// The values are stored with a border of [`PAD`] px already extended as
+/// The values are stored with a border of `PAD` px already extended as
 /// the kernel extends the image (mirrored for B-splines, clamped
 /// otherwise), so samples up to `PAD − 3` px outside the image take the
 /// fast path too: at the edges of a 400×250 image the general path cost
@@ -219,7 +219,7 @@ fn weights4(k: &Kernel4, t: f32) -> f32x4 {
 }
 
 impl Resampler {
-    /// Row `i` of the image resampled at (j + s·u[j], i + s·v[j]) for every
+    /// Row `i` of the image resampled at (`j + s·u[j]`, `i + s·v[j]`) for every
     /// column j, into `out` (`u`, `v` in px), one [`Resampler::at`] per
     /// pixel: the general path of [`row_pair`] (two images of different
     /// kernels or sizes, the quintic B-spline).
@@ -231,13 +231,13 @@ impl Resampler {
 }
 
 /// Row `i` of the symmetric deformation: A resampled at (j − d/2) into
-/// `oa` and B at (j + d/2) into `ob`, d = (u[j], v[j]) px.
+/// `oa` and B at (j + d/2) into `ob`, d = (`u[j]`, `v[j]`) px.
 ///
 /// For the 4-tap kernels (when both images use the same one) one loop does
 /// both: the kernels are symmetric, so A's fraction is 1 − B's and its
 /// weights are B's reversed (tap block one pixel further left) — one set of
 /// weight polynomials per pixel instead of two. Four neighbours that share
-/// their displacement's whole part go together ([`span4`]); a tap block's
+/// their displacement's whole part go together (`PairRow::four`); a tap block's
 /// origin is tested with one unsigned compare per axis (a negative origin
 /// wraps to a huge one); a pixel whose taps leave the padded buffer takes
 /// [`Resampler::at`].
@@ -264,32 +264,77 @@ pub fn row_pair(
         b.row(i, u, v, 0.5, ob);
         return;
     }
-    let (last_x, last_y) = (pw as u64 - 4, ph as u64 - 4);
-    let origin = PAD as i64 - 1;
-    let half = f32x4::splat(0.5);
-    // B's tap block from (j + kx − 1, i + ky − 1); A's from
-    // (j − kx − 2, i − ky − 2) with the reversed weights, (kx, ky) = ⌊d/2⌋;
-    // their (column, row) in the padded buffer. (NaN or beyond ±2³¹ px
-    // truncates to i32::MIN on x86, far outside.)
-    let origins = |j: usize, kx: i32, ky: i32| {
-        let (kx, ky) = (i64::from(kx), i64::from(ky));
+    let row = PairRow {
+        a,
+        b,
+        k,
+        i,
+        pw,
+        last: (pw as u64 - 4, ph as u64 - 4),
+    };
+    let n = oa.len().min(ob.len()).min(u.len()).min(v.len());
+    let mut j = 0;
+    while j + 4 <= n {
+        match row.four(j, &u[j..j + 4], &v[j..j + 4]) {
+            Some((sa, sb)) => {
+                oa[j..j + 4].copy_from_slice(&sa);
+                ob[j..j + 4].copy_from_slice(&sb);
+            }
+            None => {
+                for l in j..j + 4 {
+                    (oa[l], ob[l]) = row.one(l, u[l], v[l]);
+                }
+            }
+        }
+        j += 4;
+    }
+    for l in j..n {
+        (oa[l], ob[l]) = row.one(l, u[l], v[l]);
+    }
+}
+
+/// Row `i` of a symmetric deformation with a 4-tap kernel `k` shared by
+/// both images (padded rows `pw` long; `last`: the last column and row a
+/// tap block may start at).
+struct PairRow<'r> {
+    a: &'r Resampler,
+    b: &'r Resampler,
+    k: &'static Kernel4,
+    i: usize,
+    pw: usize,
+    last: (u64, u64),
+}
+
+impl PairRow<'_> {
+    /// Where B's tap block starts, from (j + kx − 1, i + ky − 1), and A's,
+    /// from (j − kx − 2, i − ky − 2) with the reversed weights, (kx, ky) =
+    /// ⌊d/2⌋: (column, row) of each in the padded buffer. (NaN or beyond
+    /// ±2³¹ px truncates to i32::MIN on x86, far outside.)
+    #[inline(always)]
+    fn origins(&self, j: usize, kx: i32, ky: i32) -> (u64, u64, u64, u64) {
+        let origin = PAD as i64 - 1;
+        let (kx, ky, i) = (i64::from(kx), i64::from(ky), self.i as i64);
         (
             (j as i64 + kx + origin) as u64,
-            (i as i64 + ky + origin) as u64,
+            (i + ky + origin) as u64,
             (j as i64 - kx - 1 + origin) as u64,
-            (i as i64 - ky - 1 + origin) as u64,
+            (i - ky - 1 + origin) as u64,
         )
-    };
-    // One pixel: the 4×4 taps of each image with one horizontal sum, or
-    // `Resampler::at` where they leave the padded buffer.
-    let one = |j: usize, du: f32, dv: f32| -> (f32, f32) {
-        let d = f32x4::new([du, dv, 0.0, 0.0]) * half;
+    }
+
+    /// Pixel `j` displaced by (du, dv): the 4×4 taps of each image with one
+    /// horizontal sum, or `Resampler::at` where they leave the padded
+    /// buffer. (A's sample, B's.)
+    #[inline(always)]
+    fn one(&self, j: usize, du: f32, dv: f32) -> (f32, f32) {
+        let (pw, (last_x, last_y)) = (self.pw, self.last);
+        let d = f32x4::new([du, dv, 0.0, 0.0]) * f32x4::splat(0.5);
         let f = d.floor();
         let t = (d - f).to_array();
         let kk = f.fast_trunc_int().to_array();
-        let (xb, yb, xa, ya) = origins(j, kk[0], kk[1]);
+        let (xb, yb, xa, ya) = self.origins(j, kk[0], kk[1]);
         if xb <= last_x && yb <= last_y && xa <= last_x && ya <= last_y {
-            let (wx, wy) = (weights4(k, t[0]), weights4(k, t[1]));
+            let (wx, wy) = (weights4(self.k, t[0]), weights4(self.k, t[1]));
             let tap = |r: &Resampler, x: u64, y: u64, wx: f32x4, wy: f32x4| {
                 let base = y as usize * pw + x as usize;
                 match r.data.get(base..base + 3 * pw + 4) {
@@ -297,26 +342,32 @@ pub fn row_pair(
                     None => 0.0,
                 }
             };
-            (tap(a, xa, ya, rev(wx), rev(wy)), tap(b, xb, yb, wx, wy))
+            (
+                tap(self.a, xa, ya, rev(wx), rev(wy)),
+                tap(self.b, xb, yb, wx, wy),
+            )
         } else {
             let dd = d.to_array();
-            let (x, y) = (j as f64, i as f64);
+            let (x, y) = (j as f64, self.i as f64);
             (
-                a.at(x - f64::from(dd[0]), y - f64::from(dd[1])),
-                b.at(x + f64::from(dd[0]), y + f64::from(dd[1])),
+                self.a.at(x - f64::from(dd[0]), y - f64::from(dd[1])),
+                self.b.at(x + f64::from(dd[0]), y + f64::from(dd[1])),
             )
         }
-    };
-    let n = oa.len().min(ob.len()).min(u.len()).min(v.len());
-    let mut j = 0;
-    // Four pixels at a time where they share (kx, ky), as neighbours of a
-    // smooth field mostly do: their tap blocks then sit side by side, so
-    // each tap is one 4-lane load across the four pixels, weighted by
-    // lanes of per-pixel weights — no horizontal sums. The products are
-    // added in [`dot4`]'s order, so every sample equals the one-pixel
-    // path's.
-    while j + 4 <= n {
-        let lanes = |s: &[f32]| f32x4::new([s[j], s[j + 1], s[j + 2], s[j + 3]]);
+    }
+
+    /// Pixels `j..j + 4` displaced by (`u`, `v`) together, when they share
+    /// (kx, ky), as neighbours of a smooth field mostly do: their tap
+    /// blocks then sit side by side, so each tap is one 4-lane load across
+    /// the four pixels, weighted by lanes of per-pixel weights — no
+    /// horizontal sums. The products are added in [`dot4`]'s order, so
+    /// every sample equals [`PairRow::one`]'s. `None` when they do not
+    /// share it or their blocks leave the buffer. (A's samples, B's.)
+    #[inline(always)]
+    fn four(&self, j: usize, u: &[f32], v: &[f32]) -> Option<([f32; 4], [f32; 4])> {
+        let (pw, (last_x, last_y)) = (self.pw, self.last);
+        let lanes = |s: &[f32]| f32x4::new([s[0], s[1], s[2], s[3]]);
+        let half = f32x4::splat(0.5);
         let (dx, dy) = (lanes(u) * half, lanes(v) * half);
         let (fx, fy) = (dx.floor(), dy.floor());
         let (kx, ky) = (
@@ -324,33 +375,25 @@ pub fn row_pair(
             fy.fast_trunc_int().to_array(),
         );
         let shared = kx.iter().all(|&x| x == kx[0]) && ky.iter().all(|&y| y == ky[0]);
-        let (xb, yb, xa, ya) = origins(j, kx[0], ky[0]);
+        let (xb, yb, xa, ya) = self.origins(j, kx[0], ky[0]);
         // The four blocks span 7 columns.
         let inside = xb + 3 <= last_x && yb <= last_y && xa + 3 <= last_x && ya <= last_y;
-        if shared && inside {
-            let wx = weights_across(k, dx - fx);
-            let wy = weights_across(k, dy - fy);
-            let sb = span4(&b.data, yb as usize * pw + xb as usize, pw, wx, wy);
-            let [wx0, wx1, wx2, wx3] = wx;
-            let [wy0, wy1, wy2, wy3] = wy;
-            let sa = span4(
-                &a.data,
-                ya as usize * pw + xa as usize,
-                pw,
-                [wx3, wx2, wx1, wx0],
-                [wy3, wy2, wy1, wy0],
-            );
-            oa[j..j + 4].copy_from_slice(&sa.to_array());
-            ob[j..j + 4].copy_from_slice(&sb.to_array());
-        } else {
-            for l in j..j + 4 {
-                (oa[l], ob[l]) = one(l, u[l], v[l]);
-            }
+        if !(shared && inside) {
+            return None;
         }
-        j += 4;
-    }
-    for l in j..n {
-        (oa[l], ob[l]) = one(l, u[l], v[l]);
+        let wx = weights_across(self.k, dx - fx);
+        let wy = weights_across(self.k, dy - fy);
+        let sb = span4(&self.b.data, yb as usize * pw + xb as usize, pw, wx, wy);
+        let [wx0, wx1, wx2, wx3] = wx;
+        let [wy0, wy1, wy2, wy3] = wy;
+        let sa = span4(
+            &self.a.data,
+            ya as usize * pw + xa as usize,
+            pw,
+            [wx3, wx2, wx1, wx0],
+            [wy3, wy2, wy1, wy0],
+        );
+        Some((sa.to_array(), sb.to_array()))
     }
 }
 
@@ -445,7 +488,7 @@ fn bspline_weights(t: f64) -> [f64; 4] {
 /// mirror boundaries; Unser 1999, Thévenaz et al. 2000).
 ///
 /// Rows and columns both run as blocks with one lane per line, in f32
-/// (see [`columns_prefilter`] and `filter::for_row_blocks`): a recursion
+/// (see `columns_prefilter` and `filter::for_row_blocks`): a recursion
 /// along one line is a chain of dependent operations, 32 or more lines
 /// side by side vectorise, and no transpose of the whole image is needed.
 pub fn bspline_coefficients(img: &Array2<f32>, poles: &[f64]) -> Array2<f32> {

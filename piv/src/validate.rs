@@ -423,7 +423,7 @@ pub fn replaced_uncertainty(
 /// at zero, such a vector would pull the predictor of its measured
 /// neighbours towards zero over a whole grid step (a window beside a mask
 /// was measured 0.4–0.55 px short in a 2.3 px shift). A hole with a rim
-/// all round is then relaxed to the harmonic fill of its rim ([`relax`]):
+/// all round is then relaxed to the harmonic fill of its rim (`relax`):
 /// growing inwards from every side, the fronts meet in a seam (a 6 × 7
 /// hole in a linear shear of 1 px per node row was filled with a 4 px
 /// step across its middle). All zero when nothing was measured.
