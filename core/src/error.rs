@@ -8,7 +8,6 @@
 //! which the core does not own and passes through unchanged.
 
 use crate::method::Method;
-use crate::wire::MAX_PAYLOAD;
 
 /// Everything a core function can refuse. No function in the core panics;
 /// each refusal below is returned instead.
@@ -136,7 +135,8 @@ pub enum WireError {
     Version,
     /// Unknown kind or encoding.
     Field,
-    /// A payload above [`MAX_PAYLOAD`], or an output buffer too small.
+    /// A payload above [`crate::wire::MAX_PAYLOAD`], or an output buffer
+    /// too small.
     TooLarge,
     /// A payload that does not decode to the rows its header names.
     Payload,
@@ -185,10 +185,9 @@ impl core::fmt::Display for ConfigError {
             ConfigError::Schedule { every, dt } => {
                 write!(f, "pair every {every} ticks must be at least dt = {dt} > 0")
             }
-            ConfigError::RowTooWide(w) => write!(
-                f,
-                "a row of {w} px does not fit one {MAX_PAYLOAD}-byte payload"
-            ),
+            ConfigError::RowTooWide(w) => {
+                write!(f, "a row of {w} px does not fit one message's payload")
+            }
             ConfigError::Method(m) => write!(
                 f,
                 "the frame loop does not make {} frames (the live loop of pairs does)",

@@ -376,8 +376,10 @@ impl PairRow<'_> {
         );
         let shared = kx.iter().all(|&x| x == kx[0]) && ky.iter().all(|&y| y == ky[0]);
         let (xb, yb, xa, ya) = self.origins(j, kx[0], ky[0]);
-        // The four blocks span 7 columns.
-        let inside = xb + 3 <= last_x && yb <= last_y && xa + 3 <= last_x && ya <= last_y;
+        // The four blocks span 7 columns (a negative origin wraps to a huge
+        // one and fails; `last_x` ≥ 13 for the smallest padded row).
+        let end_x = last_x.saturating_sub(3);
+        let inside = xb <= end_x && yb <= last_y && xa <= end_x && ya <= last_y;
         if !(shared && inside) {
             return None;
         }
@@ -795,6 +797,56 @@ mod tests {
                         pb[j],
                         sb[j]
                     );
+                }
+            }
+        }
+    }
+
+    /// Four neighbours with one displacement go through the four-pixel
+    /// path: every sample equals the one-pixel path's bit for bit, and the
+    /// general path's, at the edges and with displacements that carry the
+    /// taps far outside the image (an origin left of the buffer once wrapped
+    /// into range there).
+    #[test]
+    fn four_pixels_at_once_equal_one_at_a_time() {
+        let (h, w) = (40, 53);
+        let img = Array2::from_shape_fn((h, w), |(i, j)| {
+            ((i * 7 + j * 13) % 31) as f32 + (i as f32).sin()
+        });
+        let img2 = img.mapv(|v| 2.0 * v + 1.0);
+        let shifts = [
+            (-30.3, 0.4),
+            (30.7, -20.2),
+            (2.6, 1.4),
+            (0.0, 0.0),
+            (-14.9, 14.9),
+            (-60.0, -61.5),
+        ];
+        for interp in [Interp::Bspline, Interp::Bicubic, Interp::Bilinear] {
+            let (ra, rb) = (Resampler::new(&img, interp), Resampler::new(&img2, interp));
+            let k = kernel4(interp).unwrap_or(&BSPLINE4);
+            for i in [0, 1, 17, h - 1] {
+                let row = PairRow {
+                    a: &ra,
+                    b: &rb,
+                    k,
+                    i,
+                    pw: ra.pw,
+                    last: (ra.pw as u64 - 4, (ra.h + 2 * PAD) as u64 - 4),
+                };
+                for (du, dv) in shifts {
+                    let (u, v) = (vec![du; w], vec![dv; w]);
+                    let (mut pa, mut pb) = (vec![0.0; w], vec![0.0; w]);
+                    row_pair(&ra, &rb, i, &u, &v, &mut pa, &mut pb);
+                    let (mut sa, mut sb) = (vec![0.0; w], vec![0.0; w]);
+                    ra.row(i, &u, &v, -0.5, &mut sa);
+                    rb.row(i, &u, &v, 0.5, &mut sb);
+                    for j in 0..w {
+                        let one = row.one(j, du, dv);
+                        assert_eq!((pa[j], pb[j]), one, "{interp:?} {i},{j} by {du},{dv}");
+                        assert!((pa[j] - sa[j]).abs() < 1e-3, "{interp:?} A {i},{j}");
+                        assert!((pb[j] - sb[j]).abs() < 1e-3, "{interp:?} B {i},{j}");
+                    }
                 }
             }
         }
