@@ -500,7 +500,12 @@ pub fn piv_ensemble(
 ) -> Result<Field, PivError> {
     let (h, w) = checked_size(pairs, mask, s)?;
     let raw = pairs[0];
-    let filtered = prefiltered(pairs, s);
+    // The clipped areas come from the raw images: found beside the
+    // high-pass.
+    let (filtered, base) = rayon::join(
+        || prefiltered(pairs, s),
+        || excluded_pixels(pairs, mask, s, (h, w)),
+    );
     let images: Vec<(&Array2<f32>, &Array2<f32>)> = if filtered.is_empty() {
         pairs.to_vec()
     } else {
@@ -518,7 +523,7 @@ pub fn piv_ensemble(
             .collect()
     });
     let passes = Passes {
-        base: excluded_pixels(pairs, mask, s, (h, w)),
+        base,
         images,
         resamplers,
         mask,
