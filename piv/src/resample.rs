@@ -250,20 +250,13 @@ pub fn row_pair(
     oa: &mut [f32],
     ob: &mut [f32],
 ) {
-    let k = match (kernel4(a.interp), a.interp == b.interp) {
-        (Some(k), true) => k,
-        _ => {
-            a.row(i, u, v, -0.5, oa);
-            b.row(i, u, v, 0.5, ob);
-            return;
-        }
-    };
-    let (pw, ph) = (a.pw, a.h + 2 * PAD);
-    if (b.pw, b.h) != (pw, a.h) {
+    let alike = a.interp == b.interp && (b.pw, b.h) == (a.pw, a.h);
+    let Some(k) = kernel4(a.interp).filter(|_| alike) else {
         a.row(i, u, v, -0.5, oa);
         b.row(i, u, v, 0.5, ob);
         return;
-    }
+    };
+    let (pw, ph) = (a.pw, a.h + 2 * PAD);
     let row = PairRow {
         a,
         b,
@@ -766,24 +759,44 @@ mod tests {
     /// The paired loop (A's weights mirrored from B's) gives what each
     /// image's own per-pixel samples give, inside and at the edges, for the
     /// three 4-tap kernels.
-    #[test]
-    fn paired_rows_match_single_rows() {
-        let (h, w) = (40, 53);
-        let img = Array2::from_shape_fn((h, w), |(i, j)| {
+    /// A 40×53 image and a brighter copy of it, the pair the paired-row
+    /// tests deform.
+    fn pair_images() -> (Array2<f32>, Array2<f32>) {
+        let img = Array2::from_shape_fn((40, 53), |(i, j)| {
             ((i * 7 + j * 13) % 31) as f32 + (i as f32).sin()
         });
         let img2 = img.mapv(|v| 2.0 * v + 1.0);
+        (img, img2)
+    }
+
+    /// Row `i` of the pair deformed by (`u`, `v`) through [`row_pair`],
+    /// and through each image's per-pixel samples ([`Resampler::row`]).
+    fn paired_and_single(
+        (ra, rb): (&Resampler, &Resampler),
+        i: usize,
+        u: &[f32],
+        v: &[f32],
+    ) -> [Vec<f32>; 4] {
+        let w = u.len();
+        let (mut pa, mut pb) = (vec![0.0; w], vec![0.0; w]);
+        row_pair(ra, rb, i, u, v, &mut pa, &mut pb);
+        let (mut sa, mut sb) = (vec![0.0; w], vec![0.0; w]);
+        ra.row(i, u, v, -0.5, &mut sa);
+        rb.row(i, u, v, 0.5, &mut sb);
+        [pa, pb, sa, sb]
+    }
+
+    #[test]
+    fn paired_rows_match_single_rows() {
+        let (img, img2) = pair_images();
+        let (h, w) = img.dim();
         for interp in [Interp::Bspline, Interp::Bicubic, Interp::Bilinear] {
             let (ra, rb) = (Resampler::new(&img, interp), Resampler::new(&img2, interp));
             for i in [0, 1, 17, h - 1] {
                 // Offsets from −20 to +20 px, integers included.
                 let u: Vec<f32> = (0..w).map(|j| (j as f32 - 26.0) * 0.77).collect();
                 let v: Vec<f32> = (0..w).map(|j| ((j % 9) as f32 - 4.0) * 0.5).collect();
-                let (mut pa, mut pb) = (vec![0.0; w], vec![0.0; w]);
-                row_pair(&ra, &rb, i, &u, &v, &mut pa, &mut pb);
-                let (mut sa, mut sb) = (vec![0.0; w], vec![0.0; w]);
-                ra.row(i, &u, &v, -0.5, &mut sa);
-                rb.row(i, &u, &v, 0.5, &mut sb);
+                let [pa, pb, sa, sb] = paired_and_single((&ra, &rb), i, &u, &v);
                 for j in 0..w {
                     assert!(
                         (pa[j] - sa[j]).abs() < 1e-3,
@@ -809,11 +822,8 @@ mod tests {
     /// into range there).
     #[test]
     fn four_pixels_at_once_equal_one_at_a_time() {
-        let (h, w) = (40, 53);
-        let img = Array2::from_shape_fn((h, w), |(i, j)| {
-            ((i * 7 + j * 13) % 31) as f32 + (i as f32).sin()
-        });
-        let img2 = img.mapv(|v| 2.0 * v + 1.0);
+        let (img, img2) = pair_images();
+        let (h, w) = img.dim();
         let shifts = [
             (-30.3, 0.4),
             (30.7, -20.2),
@@ -836,11 +846,7 @@ mod tests {
                 };
                 for (du, dv) in shifts {
                     let (u, v) = (vec![du; w], vec![dv; w]);
-                    let (mut pa, mut pb) = (vec![0.0; w], vec![0.0; w]);
-                    row_pair(&ra, &rb, i, &u, &v, &mut pa, &mut pb);
-                    let (mut sa, mut sb) = (vec![0.0; w], vec![0.0; w]);
-                    ra.row(i, &u, &v, -0.5, &mut sa);
-                    rb.row(i, &u, &v, 0.5, &mut sb);
+                    let [pa, pb, sa, sb] = paired_and_single((&ra, &rb), i, &u, &v);
                     for j in 0..w {
                         let one = row.one(j, du, dv);
                         assert_eq!((pa[j], pb[j]), one, "{interp:?} {i},{j} by {du},{dv}");
