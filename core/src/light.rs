@@ -102,6 +102,7 @@ pub const RELEARN_TICKS: u16 = 512;
 /// Ticks the mean rate averages over (an exponential average, 1/256 of
 /// each new tick; over the first ticks the plain mean).
 pub const RATE_TICKS: u32 = 256;
+const _: () = assert!(RATE_TICKS.is_power_of_two());
 
 /// A settled period of at least 16 ticks moves by 1/2^`SETTLED_SHIFT` of
 /// each agreeing interval's difference from it; a shorter one by a
@@ -356,6 +357,23 @@ impl<'a> Light<'a> {
         self.clock.seen = self.clock.seen.saturating_add(1);
         // The rate's average: the plain mean over the first ticks.
         let k = i64::from(self.clock.seen.min(RATE_TICKS));
+        // The average's step `d / k` rounded half away from zero; once
+        // `k` is RATE_TICKS (a power of two) a shift of `|d|` instead of
+        // a division, the same number.
+        let shift = (k == i64::from(RATE_TICKS)).then_some(RATE_TICKS.trailing_zeros());
+        let step = |d: i64| -> i64 {
+            match shift {
+                Some(sh) => {
+                    let a = ((d.unsigned_abs() + (1 << (sh - 1))) >> sh) as i64;
+                    if d < 0 {
+                        -a
+                    } else {
+                        a
+                    }
+                }
+                None => (d + d.signum() * k / 2) / k,
+            }
+        };
         let st = &mut self.state;
         for (b, &byte) in plane.bytes().iter().enumerate() {
             let base = b * 8;
@@ -368,7 +386,7 @@ impl<'a> Light<'a> {
                 let r = i64::from(st.rate[i]);
                 let d = if spike { RATE_ONE } else { 0 } - r;
                 // Rounded to nearest, so the average has no drift.
-                st.rate[i] = (r + (d + d.signum() * k / 2) / k) as u32;
+                st.rate[i] = (r + step(d)) as u32;
                 let flags = st.flags[i];
                 if !spike && flags & SPIKED == 0 {
                     continue;
