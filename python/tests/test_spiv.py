@@ -504,6 +504,7 @@ def test_ctrl_c_stops_flow_between_pairs_and_keeps_them(cli, tmp_path):
     clean KeyboardInterrupt, no panic, and the pairs done on it, each the
     same as a whole run's."""
     import _thread
+    import signal
 
     d = tmp_path / "rec"
     cli("simulate", "--scene", "uniform", "--width", "128", "--height", "96",
@@ -516,8 +517,15 @@ def test_ctrl_c_stops_flow_between_pairs_and_keeps_them(cli, tmp_path):
         if len(seen) == 1:
             _thread.interrupt_main()
 
-    with pytest.raises(KeyboardInterrupt) as e:
-        spiv.flow(d / "spikes.dat", progress=interrupt)
+    # Ctrl-C as a user's interpreter takes it: `interrupt_main` does
+    # nothing while SIGINT is ignored or left to the system, as an earlier
+    # test's library (the Dask cluster) may leave it.
+    handler = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt) as e:
+            spiv.flow(d / "spikes.dat", progress=interrupt)
+    finally:
+        signal.signal(signal.SIGINT, handler)
     part = e.value.partial
     assert part is not None and seen[0][1] == total
     got = part["u"].shape[0]
