@@ -3,7 +3,7 @@
 //! prefilter) and the padded [`Resampler`] the deformation step samples.
 
 use ndarray::{Array2, ShapeBuilder};
-use wide::{f32x4, f32x8};
+use wide::{f32x4, f32x8, f64x2};
 
 /// How a deformed image is resampled.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -138,7 +138,7 @@ impl Resampler {
                     ((self.h + 2 * PAD) as u64).saturating_sub(6),
                 );
                 if bx <= last.0 && by <= last.1 && self.pw >= 6 {
-                    let (wx, wy) = (quintic_weights(x - x0), quintic_weights(y - y0));
+                    let (wx, wy) = quintic_weights(x - x0, y - y0);
                     let base = by as usize * self.pw + bx as usize;
                     return dot6(&self.data, base, self.pw, wx, wy);
                 }
@@ -594,28 +594,33 @@ fn columns_prefilter(block: &mut [f32], w: usize, poles: &[f64]) {
 const CUBIC_POLES: [f64; 1] = [-0.267_949_192_431_122_7];
 const QUINTIC_POLES: [f64; 2] = [-0.430_575_347_099_973, -0.043_096_288_203_264_7];
 
-/// Quintic B-spline weights for the taps at −2..=3 (Thévenaz et al.).
-fn quintic_weights(t: f64) -> [f64; 6] {
-    let mut w = t;
+/// Quintic B-spline weights for the taps at −2..=3 (Thévenaz et al.), for
+/// the fractions `tx` and `ty` at once: the two axes in the lanes of one
+/// 2-lane vector (`wide`), each lane the scalar evaluation's operations in
+/// its order, so each axis's weights are the scalar ones to the bit.
+fn quintic_weights(tx: f64, ty: f64) -> ([f64; 6], [f64; 6]) {
+    let c = f64x2::splat;
+    let mut w = f64x2::new([tx, ty]);
     let mut w2 = w * w;
-    let w5 = (1.0 / 120.0) * w * w2 * w2;
+    let w5 = c(1.0 / 120.0) * w * w2 * w2;
     w2 -= w;
     let w4 = w2 * w2;
-    w -= 0.5;
-    let t3 = w2 * (w2 - 3.0);
-    let w0 = (1.0 / 24.0) * (1.0 / 5.0 + w2 + w4) - w5;
-    let t0 = (1.0 / 24.0) * (w2 * (w2 - 5.0) + 46.0 / 5.0);
-    let t1 = (-1.0 / 12.0) * w * (t3 + 4.0);
+    w -= c(0.5);
+    let t3 = w2 * (w2 - c(3.0));
+    let w0 = c(1.0 / 24.0) * (c(1.0 / 5.0) + w2 + w4) - w5;
+    let t0 = c(1.0 / 24.0) * (w2 * (w2 - c(5.0)) + c(46.0 / 5.0));
+    let t1 = c(-1.0 / 12.0) * w * (t3 + c(4.0));
     let (x2, x3) = (t0 + t1, t0 - t1);
-    let t0 = (1.0 / 16.0) * (9.0 / 5.0 - t3);
-    let t1 = (1.0 / 24.0) * w * (w4 - w2 - 5.0);
-    [w0, t0 + t1, x2, x3, t0 - t1, w5]
+    let t0 = c(1.0 / 16.0) * (c(9.0 / 5.0) - t3);
+    let t1 = c(1.0 / 24.0) * w * (w4 - w2 - c(5.0));
+    let lanes = [w0, t0 + t1, x2, x3, t0 - t1, w5].map(|v| v.to_array());
+    (lanes.map(|l| l[0]), lanes.map(|l| l[1]))
 }
 
 fn quintic_at(c: &ndarray::ArrayView2<f32>, x: f64, y: f64) -> f32 {
     let (h, w) = c.dim();
     let (x0, y0) = (x.floor(), y.floor());
-    let (wx, wy) = (quintic_weights(x - x0), quintic_weights(y - y0));
+    let (wx, wy) = quintic_weights(x - x0, y - y0);
     let (xi, yi) = (x0 as isize, y0 as isize);
     let cols = [0, 1, 2, 3, 4, 5].map(|k| mirror(xi + k - 2, w));
     let mut acc = 0.0f64;
