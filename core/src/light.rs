@@ -375,8 +375,35 @@ impl<'a> Light<'a> {
             }
         };
         let st = &mut self.state;
-        for (b, &byte) in plane.bytes().iter().enumerate() {
+        let bytes = plane.bytes();
+        // Bytes whose eight pixels are all on the sensor.
+        let whole = (px / 8).min(bytes.len());
+        for (b, &byte) in bytes.iter().enumerate() {
             let base = b * 8;
+            if byte == 0 && b < whole {
+                // Eight silent pixels (most bytes of most planes): every
+                // rate steps towards 0 (`step(−r)`, as one loop the
+                // compiler can vectorise once it is a shift), and a
+                // periodic pixel whose spike is overdue settles its −1.
+                let rates = &mut st.rate[base..base + 8];
+                match shift {
+                    Some(sh) => {
+                        for r in rates {
+                            *r -= (*r + (1 << (sh - 1))) >> sh;
+                        }
+                    }
+                    None => {
+                        for r in rates {
+                            let ri = i64::from(*r);
+                            *r = (ri + step(-ri)) as u32;
+                        }
+                    }
+                }
+                for i in base..base + 8 {
+                    overdue(st, i, t, &mut sink);
+                }
+                continue;
+            }
             for bit in 0..8 {
                 let i = base + bit;
                 if i >= px {
@@ -387,45 +414,36 @@ impl<'a> Light<'a> {
                 let d = if spike { RATE_ONE } else { 0 } - r;
                 // Rounded to nearest, so the average has no drift.
                 st.rate[i] = (r + step(d)) as u32;
-                let flags = st.flags[i];
-                if !spike && flags & SPIKED == 0 {
+                if !spike {
+                    overdue(st, i, t, &mut sink);
                     continue;
                 }
+                let flags = st.flags[i];
                 let since = t16.wrapping_sub(st.last[i]);
                 let p = (st.period[i] >> 4).max(1);
                 let late = tolerance(p);
                 let periodic = flags & SPIKED != 0 && flags & COUNT >= CONFIDENT;
-                if spike {
-                    let early = early_tolerance(p);
-                    let in_window = periodic
-                        && since.saturating_add(early) >= p
-                        && since <= p.saturating_add(late);
-                    let (extra, lead) = match (in_window, p < LEAD_PERIOD) {
-                        (true, true) => ahead(st.lead[i], since, st.period[i], early),
-                        (true, false) => (false, 0),
-                        (false, _) => (true, 0),
-                    };
-                    st.lead[i] = lead;
-                    if extra {
-                        sink(Event {
-                            index: i as u32,
-                            tick: t,
-                            sign: 1,
-                        });
-                    }
-                    if flags & SPIKED != 0 {
-                        learn(st, i, since, t16);
-                    }
-                    st.last[i] = t16;
-                    st.flags[i] |= SPIKED;
-                } else if periodic && since == p.saturating_add(late) {
+                let early = early_tolerance(p);
+                let in_window =
+                    periodic && since.saturating_add(early) >= p && since <= p.saturating_add(late);
+                let (extra, lead) = match (in_window, p < LEAD_PERIOD) {
+                    (true, true) => ahead(st.lead[i], since, st.period[i], early),
+                    (true, false) => (false, 0),
+                    (false, _) => (true, 0),
+                };
+                st.lead[i] = lead;
+                if extra {
                     sink(Event {
                         index: i as u32,
-                        tick: t.wrapping_sub(u32::from(late)),
-                        sign: -1,
+                        tick: t,
+                        sign: 1,
                     });
-                    st.flags[i] = (flags & !COUNT) | ((flags & COUNT) - 1);
                 }
+                if flags & SPIKED != 0 {
+                    learn(st, i, since, t16);
+                }
+                st.last[i] = t16;
+                st.flags[i] |= SPIKED;
             }
         }
         Ok(())
@@ -449,6 +467,27 @@ impl<'a> Light<'a> {
         }
         let r = self.state.rate.get(i).copied().unwrap_or(0);
         ((r + 128) >> 8).min(u32::from(u16::MAX)) as u16
+    }
+}
+
+/// Pixel `i` did not fire at tick `t`: a periodic pixel whose predicted
+/// spike is now [`tolerance`] ticks overdue settles a `−1` event at the
+/// predicted tick and loses one agreement.
+#[inline(always)]
+fn overdue(st: &mut LightState<'_>, i: usize, t: u32, sink: &mut impl FnMut(Event)) {
+    let flags = st.flags[i];
+    if flags & SPIKED == 0 || flags & COUNT < CONFIDENT {
+        return;
+    }
+    let p = (st.period[i] >> 4).max(1);
+    let late = tolerance(p);
+    if (t as u16).wrapping_sub(st.last[i]) == p.saturating_add(late) {
+        sink(Event {
+            index: i as u32,
+            tick: t.wrapping_sub(u32::from(late)),
+            sign: -1,
+        });
+        st.flags[i] = (flags & !COUNT) | ((flags & COUNT) - 1);
     }
 }
 
