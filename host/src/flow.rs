@@ -1186,24 +1186,38 @@ fn ladder_loop(
     let mut link = AskLink::new(opts.delivery, cfg, (sw, h), rec.flip);
     let mut out = Chain::default();
     let mut read = first_read;
+    // The core takes the recording's planes in order, up to `build`.
+    let feed = |maker: &mut PairMaker, read: &mut u64, build: u64| -> Result<(), Error> {
+        while *read < build {
+            let n = READ_PLANES.min(build - *read);
+            let planes = rec.stretch(*read, n)?;
+            for plane in planes.data.chunks_exact(pb) {
+                maker.push(plane)?;
+            }
+            *read += n;
+        }
+        Ok(())
+    };
+    let build = |mid: u64| (mid + ahead).min(end);
     for (i, &(mid, reported)) in all.iter().enumerate() {
         if stop.load(Ordering::Relaxed) {
             break;
         }
-        let build = (mid + ahead).min(end);
-        while read < build {
-            let n = READ_PLANES.min(build - read);
-            let planes = rec.stretch(read, n)?;
-            for plane in planes.data.chunks_exact(pb) {
-                maker.push(plane)?;
-            }
-            read += n;
-        }
+        feed(&mut maker, &mut read, build(mid))?;
         let heard = link.ask_for(i);
         let (core, bytes) = make_pair(&mut maker, wire.as_mut(), (i, mid, opts.dt), heard, cfg)?;
         let bytes = bytes.filter(|_| reported);
         let input = pair_input(&core, w, rec.flip, heard.start.as_ref());
-        let mut m = ladder::measure(&input, mid, Ticks(dt as f64), cfg, (w, hu), reported)?;
+        // The pair is made (what it needs is copied out of the core), so
+        // the next pair's planes go into the core while it is measured,
+        // on another core when there is one: the same state either way.
+        let next = all.get(i + 1).map(|&(m, _)| build(m));
+        let (m, fed) = rayon::join(
+            || ladder::measure(&input, mid, Ticks(dt as f64), cfg, (w, hu), reported),
+            || next.map_or(Ok(()), |b| feed(&mut maker, &mut read, b)),
+        );
+        let mut m = m?;
+        fed?;
         if let Some(mask) = &opts.mask {
             masked_out(&mut m.field, mask);
         }
