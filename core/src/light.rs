@@ -389,7 +389,9 @@ impl<'a> Light<'a> {
                 match shift {
                     Some(sh) => {
                         for r in rates {
-                            *r -= (*r + (1 << (sh - 1))) >> sh;
+                            // In u64: any stored rate, however large.
+                            let v = u64::from(*r);
+                            *r = (v - ((v + (1 << (sh - 1))) >> sh)) as u32;
                         }
                     }
                     None => {
