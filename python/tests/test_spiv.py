@@ -518,8 +518,8 @@ def test_ctrl_c_stops_flow_between_pairs_and_keeps_them(cli, tmp_path):
             _thread.interrupt_main()
 
     # Ctrl-C as a user's interpreter takes it: `interrupt_main` does
-    # nothing while SIGINT is ignored or left to the system, as an earlier
-    # test's library (the Dask cluster) may leave it.
+    # nothing while SIGINT is ignored or left to the system, as another
+    # library in the process may leave it.
     handler = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         with pytest.raises(KeyboardInterrupt) as e:
