@@ -382,24 +382,11 @@ impl<'a> Light<'a> {
             let base = b * 8;
             if byte == 0 && b < whole {
                 // Eight silent pixels (most bytes of most planes): every
-                // rate steps towards 0 (`step(−r)`, as one loop the
-                // compiler can vectorise once it is a shift), and a
-                // periodic pixel whose spike is overdue settles its −1.
-                let rates = &mut st.rate[base..base + 8];
-                match shift {
-                    Some(sh) => {
-                        for r in rates {
-                            // In u64: any stored rate, however large.
-                            let v = u64::from(*r);
-                            *r = (v - ((v + (1 << (sh - 1))) >> sh)) as u32;
-                        }
-                    }
-                    None => {
-                        for r in rates {
-                            let ri = i64::from(*r);
-                            *r = (ri + step(-ri)) as u32;
-                        }
-                    }
+                // rate steps towards 0, and a periodic pixel whose spike
+                // is overdue settles its −1.
+                for r in &mut st.rate[base..base + 8] {
+                    let ri = i64::from(*r);
+                    *r = (ri + step(-ri)) as u32;
                 }
                 for i in base..base + 8 {
                     overdue(st, i, t, &mut sink);

@@ -133,11 +133,9 @@ impl Resampler {
                     xi.wrapping_add(PAD as i64 - 2) as u64,
                     yi.wrapping_add(PAD as i64 - 2) as u64,
                 );
-                let last = (
-                    (self.pw as u64).saturating_sub(6),
-                    ((self.h + 2 * PAD) as u64).saturating_sub(6),
-                );
-                if bx <= last.0 && by <= last.1 && self.pw >= 6 {
+                // (The padded buffer is at least 2·PAD = 16 px each way.)
+                let last = (self.pw as u64 - 6, (self.h + 2 * PAD) as u64 - 6);
+                if bx <= last.0 && by <= last.1 {
                     let (wx, wy) = quintic_weights(x - x0, y - y0);
                     let base = by as usize * self.pw + bx as usize;
                     return dot6(&self.data, base, self.pw, wx, wy);
@@ -283,15 +281,7 @@ pub fn row_pair(
         b.row(i, u, v, 0.5, ob);
         return;
     };
-    let (pw, ph) = (a.pw, a.h + 2 * PAD);
-    let row = PairRow {
-        a,
-        b,
-        k,
-        i,
-        pw,
-        last: (pw as u64 - 4, ph as u64 - 4),
-    };
+    let row = PairRow::new(a, b, k, i);
     let n = oa.len().min(ob.len()).min(u.len()).min(v.len());
     let mut j = 0;
     while j + 4 <= n {
@@ -325,7 +315,20 @@ struct PairRow<'r> {
     last: (u64, u64),
 }
 
-impl PairRow<'_> {
+impl<'r> PairRow<'r> {
+    /// Row `i` of `a` and `b` (the same padded size) with kernel `k`.
+    fn new(a: &'r Resampler, b: &'r Resampler, k: &'static Kernel4, i: usize) -> PairRow<'r> {
+        let (pw, ph) = (a.pw, a.h + 2 * PAD);
+        PairRow {
+            a,
+            b,
+            k,
+            i,
+            pw,
+            last: (pw as u64 - 4, ph as u64 - 4),
+        }
+    }
+
     /// Where B's tap block starts, from (j + kx − 1, i + ky − 1), and A's,
     /// from (j − kx − 2, i − ky − 2) with the reversed weights, (kx, ky) =
     /// ⌊d/2⌋: (column, row) of each in the padded buffer. (NaN or beyond
@@ -812,9 +815,6 @@ mod tests {
         }
     }
 
-    /// The paired loop (A's weights mirrored from B's) gives what each
-    /// image's own per-pixel samples give, inside and at the edges, for the
-    /// three 4-tap kernels.
     /// A 40×53 image and a brighter copy of it, the pair the paired-row
     /// tests deform.
     fn pair_images() -> (Array2<f32>, Array2<f32>) {
@@ -842,6 +842,9 @@ mod tests {
         [pa, pb, sa, sb]
     }
 
+    /// The paired loop (A's weights mirrored from B's) gives what each
+    /// image's own per-pixel samples give, inside and at the edges, for the
+    /// three 4-tap kernels.
     #[test]
     fn paired_rows_match_single_rows() {
         let (img, img2) = pair_images();
@@ -874,8 +877,8 @@ mod tests {
     /// Four neighbours with one displacement go through the four-pixel
     /// path: every sample equals the one-pixel path's bit for bit, and the
     /// general path's, at the edges and with displacements that carry the
-    /// taps far outside the image (an origin left of the buffer once wrapped
-    /// into range there).
+    /// taps far outside the image (where an origin left of the buffer must
+    /// not wrap into range).
     #[test]
     fn four_pixels_at_once_equal_one_at_a_time() {
         let (img, img2) = pair_images();
@@ -892,14 +895,7 @@ mod tests {
             let (ra, rb) = (Resampler::new(&img, interp), Resampler::new(&img2, interp));
             let k = kernel4(interp).unwrap_or(&BSPLINE4);
             for i in [0, 1, 17, h - 1] {
-                let row = PairRow {
-                    a: &ra,
-                    b: &rb,
-                    k,
-                    i,
-                    pw: ra.pw,
-                    last: (ra.pw as u64 - 4, (ra.h + 2 * PAD) as u64 - 4),
-                };
+                let row = PairRow::new(&ra, &rb, k, i);
                 for (du, dv) in shifts {
                     let (u, v) = (vec![du; w], vec![dv; w]);
                     let [pa, pb, sa, sb] = paired_and_single((&ra, &rb), i, &u, &v);
