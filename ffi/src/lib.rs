@@ -1334,6 +1334,292 @@ pub unsafe extern "C" fn spiv_light_push(
     })())
 }
 
+/// An event ring over the caller's arrays ([`spiv_core::rungs::EventRing`]):
+/// `entries` (`capacity` ≥ 1 events, 4 bytes each) and `starts` (`depth + 1`
+/// entries, `depth` ≥ 1 ticks), and where it stands.
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+pub struct SpivRing {
+    /// The events, a circular buffer.
+    pub entries: *mut u32,
+    /// Events `entries` holds.
+    pub capacity: usize,
+    /// The running count of events before each tick held.
+    pub starts: *mut u32,
+    /// Ticks the ring holds at most (`starts` holds one more entry).
+    pub depth: usize,
+    /// Oldest tick held.
+    pub first: u32,
+    /// The next tick.
+    pub next: u32,
+    /// Events stored so far.
+    pub stored: u32,
+    /// Events that did not fit.
+    pub lost: u32,
+    /// Ticks dropped to make room.
+    pub evicted: u32,
+}
+
+/// A steady flow on a grid of nodes ([`spiv_core::warp::Flow`]): `nx × ny`
+/// nodes (0 across or down: no motion), node `(r, c)` at `(x0 + c·pitch,
+/// y0 + r·pitch)` in 1/16 px, velocities in 1/4096 px per tick and
+/// accelerations in 1/65536 px per tick², each array `nx·ny` entries,
+/// row-major.
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+pub struct SpivFlow {
+    /// Nodes across.
+    pub nx: u16,
+    /// Nodes down.
+    pub ny: u16,
+    /// x of column 0, 1/16 px.
+    pub x0: i32,
+    /// y of row 0, 1/16 px.
+    pub y0: i32,
+    /// Node spacing, 1/16 px (16..=4096).
+    pub pitch: u16,
+    /// x velocity, Q12 px per tick.
+    pub vx: *const i16,
+    /// y velocity, Q12 px per tick.
+    pub vy: *const i16,
+    /// x acceleration along the path, Q16 px per tick².
+    pub ax: *const i16,
+    /// y acceleration along the path, Q16 px per tick².
+    pub ay: *const i16,
+}
+
+/// The ring `r` over its arrays.
+///
+/// # Safety
+/// `r`'s arrays hold `capacity` and `depth + 1` writable entries that
+/// nothing else uses during the call.
+unsafe fn ring_arrays<'s>(r: &SpivRing) -> Result<(&'s mut [u32], &'s mut [u32]), SpivStatus> {
+    if r.entries.is_null() || r.starts.is_null() {
+        return Err(SpivStatus::SpivErrNull);
+    }
+    let depth = r.depth.checked_add(1).ok_or(SpivStatus::SpivErrConfig)?;
+    // SAFETY: the function's contract.
+    unsafe {
+        Ok((
+            core::slice::from_raw_parts_mut(r.entries, r.capacity),
+            core::slice::from_raw_parts_mut(r.starts, depth),
+        ))
+    }
+}
+
+fn cursor(r: &SpivRing) -> spiv_core::rungs::RingCursor {
+    spiv_core::rungs::RingCursor {
+        first: r.first,
+        next: r.next,
+        stored: r.stored,
+        lost: r.lost,
+        evicted: r.evicted,
+    }
+}
+
+/// Starts an empty ring in `r`'s arrays, its first tick `first` (the light
+/// model's next tick).
+///
+/// # Safety
+/// `r` is writable and its arrays hold `capacity` and `depth + 1`
+/// writable entries.
+#[no_mangle]
+pub unsafe extern "C" fn spiv_ring_init(r: *mut SpivRing, first: u32) -> SpivStatus {
+    status((|| {
+        // SAFETY: writable or null.
+        let r = unsafe { r.as_mut() }.ok_or(SpivStatus::SpivErrNull)?;
+        // SAFETY: the caller's promise.
+        let (entries, starts) = unsafe { ring_arrays(r)? };
+        let c = spiv_core::rungs::EventRing::new(entries, starts, first)
+            .map_err(core_status)?
+            .cursor();
+        (r.first, r.next, r.stored, r.lost, r.evicted) =
+            (c.first, c.next, c.stored, c.lost, c.evicted);
+        Ok(())
+    })())
+}
+
+/// Takes the next spike plane (`len` = `width·height/8` bytes) through the
+/// light model `l` into the ring `r` (`EventRing::push`): the ring keeps
+/// the events the plane settles, dropping its oldest ticks when full.
+///
+/// # Safety
+/// `r` as for [`spiv_ring_init`], `l` as for [`spiv_light_init`];
+/// `plane` holds `len` readable bytes.
+#[no_mangle]
+pub unsafe extern "C" fn spiv_ring_push(
+    r: *mut SpivRing,
+    l: *mut SpivLight,
+    width: u16,
+    height: u16,
+    plane: *const u8,
+    len: usize,
+) -> SpivStatus {
+    status((|| {
+        // SAFETY: writable or null.
+        let (r, l) = match unsafe { (r.as_mut(), l.as_mut()) } {
+            (Some(r), Some(l)) => (r, l),
+            _ => return Err(SpivStatus::SpivErrNull),
+        };
+        // SAFETY: the caller's promise.
+        let plane = unsafe { bytes(plane, len)? };
+        let view = spiv_core::PlaneView::new(plane, width, height).map_err(core_status)?;
+        // SAFETY: the caller's promise on the arrays.
+        let (entries, starts) = unsafe { ring_arrays(r)? };
+        let mut ring =
+            spiv_core::rungs::EventRing::resume(entries, starts, cursor(r)).map_err(core_status)?;
+        // SAFETY: the caller's promise on the arrays.
+        let state = unsafe { light_state(l)? };
+        let clock = spiv_core::light::LightClock {
+            next: l.next,
+            seen: l.seen,
+        };
+        let mut light =
+            spiv_core::light::Light::resume(width, height, clock, state).map_err(core_status)?;
+        ring.push(&mut light, &view).map_err(core_status)?;
+        let c = ring.cursor();
+        (r.first, r.next, r.stored, r.lost, r.evicted) =
+            (c.first, c.next, c.stored, c.lost, c.evicted);
+        let lc = light.clock();
+        l.next = lc.next;
+        l.seen = lc.seen;
+        Ok(())
+    })())
+}
+
+/// Writes the events of ticks `a..b` that the ring `r` holds to `events`
+/// (room for `cap`), in the order the ring stores them — the order
+/// [`spiv_rung_frames`] adds them in — and their number to `n`. Refused
+/// (`SPIV_ERR_BUFFER`, `n` the number needed) when `cap` is short.
+///
+/// # Safety
+/// `r` as for [`spiv_ring_init`]; `events` holds `cap` writable entries;
+/// `n` is writable.
+#[no_mangle]
+pub unsafe extern "C" fn spiv_ring_events(
+    r: *mut SpivRing,
+    a: u32,
+    b: u32,
+    events: *mut SpivEvent,
+    cap: usize,
+    n: *mut usize,
+) -> SpivStatus {
+    status((|| {
+        // SAFETY: writable or null.
+        let (r, n) = match unsafe { (r.as_mut(), n.as_mut()) } {
+            (Some(r), Some(n)) => (r, n),
+            _ => return Err(SpivStatus::SpivErrNull),
+        };
+        if events.is_null() && cap > 0 {
+            return Err(SpivStatus::SpivErrNull);
+        }
+        let out: &mut [SpivEvent] = if cap == 0 {
+            &mut []
+        } else {
+            // SAFETY: `cap` writable entries (the caller's promise).
+            unsafe { core::slice::from_raw_parts_mut(events, cap) }
+        };
+        // SAFETY: the caller's promise on the arrays.
+        let (entries, starts) = unsafe { ring_arrays(r)? };
+        let ring =
+            spiv_core::rungs::EventRing::resume(entries, starts, cursor(r)).map_err(core_status)?;
+        let mut k = 0usize;
+        ring.each(a, b, |e| {
+            if let Some(slot) = out.get_mut(k) {
+                *slot = SpivEvent {
+                    index: e.index,
+                    tick: e.tick,
+                    sign: e.sign,
+                };
+            }
+            k += 1;
+        });
+        *n = k;
+        if k > cap {
+            return Err(SpivStatus::SpivErrBuffer);
+        }
+        Ok(())
+    })())
+}
+
+/// Makes the rung frames of the pair whose midpoint is tick `mid` from the
+/// ring `r` and the light model `l` as they stand, warped along `flow`
+/// ([`spiv_core::rungs::rung_frames`]): for the `i`-th of the `count`
+/// separations in `separations` (2..=255 ticks, at most 8), frame A
+/// (`frames[2i·width·height..]`) and frame B (the next `width·height`
+/// samples), in 1/64 spike, whole spikes, 0 below the rung's floor.
+/// `len` is the room in `frames` (at least `2·count·width·height`).
+///
+/// # Safety
+/// `r` as for [`spiv_ring_init`], `l` as for [`spiv_light_init`]; `flow`
+/// readable, its arrays `nx·ny` readable entries each; `separations`
+/// `count` readable entries; `frames` `len` writable entries.
+#[no_mangle]
+pub unsafe extern "C" fn spiv_rung_frames(
+    r: *mut SpivRing,
+    l: *mut SpivLight,
+    width: u16,
+    height: u16,
+    flow: *const SpivFlow,
+    mid: u32,
+    separations: *const u16,
+    count: usize,
+    frames: *mut i16,
+    len: usize,
+) -> SpivStatus {
+    status((|| {
+        // SAFETY: each writable/readable or null.
+        let (r, l, f) = match unsafe { (r.as_mut(), l.as_mut(), flow.as_ref()) } {
+            (Some(r), Some(l), Some(f)) => (r, l, f),
+            _ => return Err(SpivStatus::SpivErrNull),
+        };
+        if count > spiv_core::rungs::MAX_RUNGS {
+            return Err(SpivStatus::SpivErrConfig);
+        }
+        let seps = nonnull(separations, count)?;
+        let mut rungs = spiv_core::rungs::Rungs::events(0);
+        // SAFETY: `count` readable entries (the caller's promise).
+        let given = unsafe { core::slice::from_raw_parts(seps, count) };
+        rungs.separations[..count].copy_from_slice(given);
+        rungs.count = count as u8;
+        let nodes = usize::from(f.nx) * usize::from(f.ny);
+        let arr = |p: *const i16| -> Result<&[i16], SpivStatus> {
+            let p = nonnull(p, nodes)?;
+            // SAFETY: `nx·ny` readable entries (the caller's promise).
+            Ok(unsafe { core::slice::from_raw_parts(p, nodes) })
+        };
+        let flow = spiv_core::warp::Flow {
+            nx: f.nx,
+            ny: f.ny,
+            x0: f.x0,
+            y0: f.y0,
+            pitch: f.pitch,
+            vx: arr(f.vx)?,
+            vy: arr(f.vy)?,
+            ax: arr(f.ax)?,
+            ay: arr(f.ay)?,
+        };
+        if frames.is_null() {
+            return Err(SpivStatus::SpivErrNull);
+        }
+        // SAFETY: `len` writable entries (the caller's promise).
+        let out = unsafe { core::slice::from_raw_parts_mut(frames, len) };
+        // SAFETY: the caller's promise on the arrays.
+        let (entries, starts) = unsafe { ring_arrays(r)? };
+        let ring =
+            spiv_core::rungs::EventRing::resume(entries, starts, cursor(r)).map_err(core_status)?;
+        // SAFETY: the caller's promise on the arrays.
+        let state = unsafe { light_state(l)? };
+        let clock = spiv_core::light::LightClock {
+            next: l.next,
+            seen: l.seen,
+        };
+        let light =
+            spiv_core::light::Light::resume(width, height, clock, state).map_err(core_status)?;
+        spiv_core::rungs::rung_frames(&ring, &light, &flow, mid, &rungs, out).map_err(core_status)
+    })())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -712,3 +712,182 @@ fn light_model_through_the_abi() {
         SpivStatus::SpivErrNull
     );
 }
+
+/// The event ring and the rung frames through the C ABI: the ring keeps
+/// and gives back the events the core's ring keeps (in its order), and the
+/// frames are the core's `rung_frames` on the same state, along a flow; a
+/// short buffer, too many separations, a pair past the ring's ticks and a
+/// null flow are refused.
+#[test]
+fn rung_frames_through_the_abi() {
+    use spiv_core::light::{Light, LightState};
+    use spiv_core::rungs::{rung_frames, EventRing, Rungs};
+    let px = usize::from(W) * usize::from(H);
+    let depth = 160usize;
+    let first = 70_000u32;
+    let mut c = LightArrays::new(px);
+    let mut l = c.handle();
+    let (mut entries, mut starts) = (vec![0u32; px * 40], vec![0u32; depth + 1]);
+    let mut ring = SpivRing {
+        entries: entries.as_mut_ptr(),
+        capacity: entries.len(),
+        starts: starts.as_mut_ptr(),
+        depth,
+        first: 0,
+        next: 0,
+        stored: 0,
+        lost: 0,
+        evicted: 0,
+    };
+    // SAFETY: the arrays above, as long as said.
+    unsafe {
+        assert_eq!(spiv_light_init(&mut l, W, H, first), SpivStatus::SpivOk);
+        assert_eq!(spiv_ring_init(&mut ring, first), SpivStatus::SpivOk);
+    }
+    let mut r = LightArrays::new(px);
+    let state = LightState {
+        last: &mut r.last,
+        period: &mut r.period,
+        rate: &mut r.rate,
+        short: &mut r.short_run,
+        lead: &mut r.lead,
+        flags: &mut r.flags,
+    };
+    let mut light = Light::new(W, H, first, state).expect("model");
+    let (mut e2, mut s2) = (vec![0u32; px * 40], vec![0u32; depth + 1]);
+    let mut core_ring = EventRing::new(&mut e2, &mut s2, first).expect("ring");
+    for plane in strip().chunks_exact(PLANE) {
+        // SAFETY: a whole plane; the arrays above.
+        let s = unsafe { spiv_ring_push(&mut ring, &mut l, W, H, plane.as_ptr(), plane.len()) };
+        assert_eq!(s, SpivStatus::SpivOk);
+        let view = spiv_core::PlaneView::new(plane, W, H).expect("plane");
+        core_ring.push(&mut light, &view).expect("push");
+    }
+    assert_eq!(
+        (ring.first, ring.next),
+        (core_ring.ticks().start, core_ring.ticks().end)
+    );
+    assert_eq!((ring.lost, ring.evicted), (0, 0));
+
+    // The events of 60 ticks, in the ring's order.
+    let (a, b) = (ring.next - 80, ring.next - 20);
+    let mut want = Vec::new();
+    core_ring.each(a, b, |e| want.push((e.index, e.tick, e.sign)));
+    assert!(want.len() > 1000, "{} events", want.len());
+    let mut events = vec![SpivEvent::default(); want.len()];
+    let mut n = 0usize;
+    // SAFETY: `events.len()` writable entries.
+    let s = unsafe {
+        spiv_ring_events(
+            &mut ring,
+            a,
+            b,
+            events.as_mut_ptr(),
+            events.len() - 1,
+            &mut n,
+        )
+    };
+    assert_eq!((s, n), (SpivStatus::SpivErrBuffer, want.len()));
+    // SAFETY: as above.
+    let s = unsafe { spiv_ring_events(&mut ring, a, b, events.as_mut_ptr(), events.len(), &mut n) };
+    assert_eq!((s, n), (SpivStatus::SpivOk, want.len()));
+    let got: Vec<_> = events.iter().map(|e| (e.index, e.tick, e.sign)).collect();
+    assert_eq!(got, want);
+
+    // Rung frames of 8 and 32 ticks along a shear on 16-px nodes.
+    let (nx, ny) = (8usize, 4usize);
+    let vx: Vec<i16> = (0..nx * ny).map(|k| (k / nx) as i16 * 600 - 900).collect();
+    let vy: Vec<i16> = (0..nx * ny).map(|k| (k % nx) as i16 * -150).collect();
+    let ax: Vec<i16> = (0..nx * ny).map(|k| (k as i16 % 5) * 40).collect();
+    let ay = vec![-30i16; nx * ny];
+    let flow = SpivFlow {
+        nx: nx as u16,
+        ny: ny as u16,
+        x0: 128,
+        y0: 128,
+        pitch: 256,
+        vx: vx.as_ptr(),
+        vy: vy.as_ptr(),
+        ax: ax.as_ptr(),
+        ay: ay.as_ptr(),
+    };
+    let seps = [8u16, 32];
+    let mid = ring.next - 32 - 16;
+    let mut got = vec![0i16; 4 * px];
+    // SAFETY: the flow's arrays hold nx·ny entries; `got` 4·px.
+    let s = unsafe {
+        spiv_rung_frames(
+            &mut ring,
+            &mut l,
+            W,
+            H,
+            &flow,
+            mid,
+            seps.as_ptr(),
+            2,
+            got.as_mut_ptr(),
+            got.len(),
+        )
+    };
+    assert_eq!(s, SpivStatus::SpivOk);
+    let mut rungs = Rungs::events(0);
+    rungs.separations[..2].copy_from_slice(&seps);
+    rungs.count = 2;
+    let core_flow = spiv_core::warp::Flow {
+        nx: nx as u16,
+        ny: ny as u16,
+        x0: 128,
+        y0: 128,
+        pitch: 256,
+        vx: &vx,
+        vy: &vy,
+        ax: &ax,
+        ay: &ay,
+    };
+    let mut want = vec![0i16; 4 * px];
+    rung_frames(&core_ring, &light, &core_flow, mid, &rungs, &mut want).expect("frames");
+    assert_eq!(got, want);
+    assert!(want.iter().filter(|&&v| v != 0).count() > 1000);
+
+    // Refused: a frame buffer one sample short, nine separations, a pair
+    // whose B frames reach past the ring, a null flow.
+    let call = |flow: *const SpivFlow,
+                mid: u32,
+                seps: &[u16],
+                len: usize,
+                ring: &mut SpivRing,
+                l: &mut SpivLight| {
+        let mut out = vec![0i16; len];
+        // SAFETY: `len` writable samples; the flow's arrays as above.
+        unsafe {
+            spiv_rung_frames(
+                ring,
+                l,
+                W,
+                H,
+                flow,
+                mid,
+                seps.as_ptr(),
+                seps.len(),
+                out.as_mut_ptr(),
+                len,
+            )
+        }
+    };
+    assert_eq!(
+        call(&flow, mid, &seps, 4 * px - 1, &mut ring, &mut l),
+        SpivStatus::SpivErrBuffer
+    );
+    assert_eq!(
+        call(&flow, mid, &[4; 9], 18 * px, &mut ring, &mut l),
+        SpivStatus::SpivErrConfig
+    );
+    assert_eq!(
+        call(&flow, mid + 1, &seps, 4 * px, &mut ring, &mut l),
+        SpivStatus::SpivErrTick
+    );
+    assert_eq!(
+        call(ptr::null(), mid, &seps, 4 * px, &mut ring, &mut l),
+        SpivStatus::SpivErrNull
+    );
+}

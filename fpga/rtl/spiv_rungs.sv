@@ -1,0 +1,587 @@
+// spiv's rung frames at sensor rate: the live mode's frames, made by
+// scattering innovation events along the host's flow. Bit-exact with
+// spiv-core's `rungs::rung_frames` (fpga/tb/tb_rungs.cpp holds every
+// sample of every frame to `spiv_rung_frames` through the C ABI).
+//
+// For a pair with midpoint `mid` and separations s_k (k < nsep), frame A
+// of rung k holds the events of ticks mid - s_k .. mid - 1 and frame B
+// those of mid .. mid + s_k - 1, each event added (+-64, 1/64 spike,
+// saturating) at the pixel the flow carries it to at its frame's centre;
+// then every pixel's static rate over each 8-tick block of the window is
+// taken off where the flow carries the pixel at the block's middle; then
+// every sample is rounded to whole spikes and zeroed below the rung's
+// floor. One lane per rung, each with its own frame RAM (A and B), so an
+// event goes into every frame that holds it in one clock.
+//
+// The displacement of pixel (x, y) over d2 half ticks is the core's:
+// bilinear node sums Sv, Sa (weights in 1/16 px), then
+// floor((d2 * Sv * 64 + d2^2 * Sa + 2^(2p+18)) / 2^(2p+19)) clamped to
+// i16, where pitch = 2^p (1/16 px). The core divides by pitch^2 * 2^19 for
+// any pitch; this design takes the power-of-two pitches the host's grids
+// use (16..4096 in 1/16 px: 1..256 px) and refuses others (`error`), so
+// the division is a shift. The node sums are separable (along x, then
+// y): the same integers as the core's sum over the four products.
+//
+// Sequence: write the flow's nodes (node_we, while idle), pulse `start`
+// with the pair's configuration held steady until `done`; feed the
+// events of the ring in its order (ev_valid while ev_ready; the ring's
+// events of other ticks are ignored), then pulse `ev_end`; the design
+// reads every pixel's light state (rate_addr; rate_q24 and rate_flags the
+// next clock, as from a block RAM) and takes off the static rates; then
+// it streams frame A of every lane (out_half 0), pixel by pixel, and then
+// frame B, out_valid high, clearing its RAM as it goes; then `done`
+// (with `error` when the configuration was refused and nothing was made).
+
+module spiv_rungs #(
+    parameter integer W = 128,
+    parameter integer H = 64,
+    parameter integer NR = 8,     // lanes: most rungs per pair (<= 8)
+    parameter integer NXB = 6,    // node grid up to 2^NXB across
+    parameter integer NYB = 6,    // and 2^NYB down
+    localparam integer AW = $clog2(W * H)
+) (
+    input  logic                 clk,
+    input  logic                 rst,
+    // flow nodes, written while idle
+    input  logic                 node_we,
+    input  logic [NYB-1:0]       node_r,
+    input  logic [NXB-1:0]       node_c,
+    input  logic signed [15:0]   node_vx,  // Q12 px per tick
+    input  logic signed [15:0]   node_vy,
+    input  logic signed [15:0]   node_ax,  // Q16 px per tick^2
+    input  logic signed [15:0]   node_ay,
+    // the pair, held from start to done
+    input  logic                 start,
+    input  logic [31:0]          mid,
+    input  logic [3:0]           nsep,
+    input  logic [8*NR-1:0]      seps,     // ticks, lane k in [8k+7:8k]
+    input  logic [15:0]          nx,       // nodes across (0: no motion)
+    input  logic [15:0]          ny,
+    input  logic signed [31:0]   x0,       // 1/16 px
+    input  logic signed [31:0]   y0,
+    input  logic [12:0]          pitch,    // 1/16 px, a power of two
+    // events, in the ring's order
+    output logic                 ev_ready,
+    input  logic                 ev_valid,
+    input  logic [31:0]          ev_index, // stored pixel
+    input  logic [31:0]          ev_tick,
+    input  logic                 ev_neg,   // -1 event
+    input  logic                 ev_end,
+    // the light model's state, one pixel per read
+    output logic [AW-1:0]        rate_addr,
+    input  logic [31:0]          rate_q24, // mean rate, 2^-24 spike per tick
+    input  logic [7:0]           rate_flags,
+    // frames out
+    output logic                 out_valid,
+    output logic                 out_half, // 0: frame A, 1: frame B
+    output logic [AW-1:0]        out_index,
+    output logic [16*NR-1:0]     out_samples,
+    output logic                 busy,
+    output logic                 done,
+    output logic                 error
+);
+    localparam integer PX = W * H;
+    localparam integer NA = NYB - 1 + NXB - 1;   // node bank address bits
+    localparam integer DEPTH = 10;               // op pipeline stages and margin
+    // index -> row: floor(i * RW / 2^40) = floor(i / W) for i < 2^40 / W.
+    localparam logic [63:0] RW = ((64'd1 << 40) + 64'(W) - 64'd1) / 64'(W);
+
+    initial begin
+        if (NR < 1 || NR > 8 || PX < 2 || W > 65535 || H > 65535 || 64'(PX) * 64'(W) >= (64'd1 << 40))
+            $fatal(1, "spiv_rungs: 1..8 lanes and a frame of fewer than 2^40 / W pixels");
+    end
+
+    // ---- the pair's configuration, checked at start -----------------------
+    typedef enum logic [2:0] {IDLE, EVENTS, RISSUE, RTAKE, ROPS, DRAIN, OUT} phase_t;
+    phase_t phase;
+    logic [7:0]  sep [NR];
+    logic [NR-1:0] act;
+    logic [5:0]  blocks [NR];   // ceil(s / 8), at most 32
+    logic [5:0]  most_blocks;
+    logic [2:0]  floor_spikes [NR];
+    logic        still;
+    logic [3:0]  ps;             // pitch = 2^ps
+    logic [15:0] cnx, cny;
+    logic signed [31:0] cx0, cy0;
+    logic [31:0] cmid;
+
+    // Whether `pitch` is 2^p, 4 <= p <= 12; p.
+    function automatic logic [4:0] log2_pitch(input logic [12:0] v);
+        log2_pitch = 5'd31;
+        for (int i = 4; i <= 12; i++)
+            if (v == 13'(1 << i)) log2_pitch = 5'(i);
+    endfunction
+
+    // ---- node RAM: four banks by (row, column) parity ----------------------
+    logic [63:0] nodes [4][1 << NA];
+    always_ff @(posedge clk) begin
+        if (node_we && phase == IDLE)
+            nodes[{node_r[0], node_c[0]}][{node_r[NYB-1:1], node_c[NXB-1:1]}] <=
+                {node_ay, node_ax, node_vy, node_vx};
+    end
+
+    // ---- op issue: one event, or one rate block of one pixel --------------
+    logic               op_v;
+    logic [15:0]        op_x, op_y;
+    logic [NR-1:0]      op_en, op_b;
+    logic signed [9:0]  op_d2 [NR];
+    logic signed [15:0] op_delta [NR];
+
+    // the event's pixel
+    wire [63:0] ev_row = (64'(ev_index) * RW) >> 40;
+    wire [31:0] ev_col = ev_index - 32'(ev_row[31:0] * 32'(W));
+    wire signed [33:0] ev_da = $signed({2'b0, cmid}) - $signed({2'b0, ev_tick});
+
+    // rates: the pixel walked, its rate, the block walked
+    logic [AW-1:0] pix;
+    logic [15:0]   px_x, px_y;
+    logic [15:0]   r16;
+    logic [6:0]    step;         // block b of frame A, then of frame B
+    wire  [5:0]    blk = (step >= 7'(most_blocks)) ? 6'(step - 7'(most_blocks)) : step[5:0];
+    wire           blk_b = step >= 7'(most_blocks);
+    wire  [31:0]   rate_rounded = (rate_q24 + 32'd128) >> 8;
+    wire           periodic = rate_flags[7] && rate_flags[3:0] >= 4'd2;
+    wire  [15:0]   rate_now = periodic ? 16'd0
+                            : (rate_rounded > 32'hFFFF) ? 16'hFFFF : rate_rounded[15:0];
+
+    // per lane: the event's frame and d2; a rate block's d2 and samples
+    logic               ln_in_a [NR], ln_in_b [NR], ln_blk_on [NR];
+    logic signed [9:0]  ln_ev_d2 [NR], ln_rate_d2 [NR];
+    logic signed [15:0] ln_rate_sub [NR];
+    for (genvar k = 0; k < NR; k++) begin : lane_op
+        wire signed [11:0] s12 = $signed({4'b0, sep[k]});
+        wire signed [11:0] da = $signed(ev_da[11:0]);
+        // A: mid - s <= t < mid (1 <= da <= s); B: mid <= t < mid + s.
+        assign ln_in_a[k] = act[k] && ev_da >= 34'sd1 && ev_da <= $signed({26'b0, sep[k]});
+        assign ln_in_b[k] = act[k] && ev_da <= 34'sd0 && -ev_da < $signed({26'b0, sep[k]});
+        // d2 = centre2 - (2t + 1): 2 da - s - 1 (A), 2 da + s - 1 (B).
+        wire signed [11:0] d2a = 12'sd2 * da - s12 - 12'sd1;
+        wire signed [11:0] d2b = 12'sd2 * da + s12 - 12'sd1;
+        assign ln_ev_d2[k] = ln_in_b[k] ? d2b[9:0] : d2a[9:0];
+        // A rate block: a = 8 blk ticks in, n = min(8, s - a); d2 = s - 2a - n.
+        wire [8:0] ra = 9'({blk, 3'b0});
+        wire [8:0] left = 9'(sep[k]) - ra;
+        wire [8:0] rn = (left >= 9'd8) ? 9'd8 : left;
+        wire signed [11:0] rd2 = s12 - $signed({2'b0, ra, 1'b0}) - $signed({3'b0, rn});
+        assign ln_rate_d2[k] = rd2[9:0];
+        assign ln_blk_on[k] = act[k] && 6'(blk) < blocks[k];
+        // rate_samples: (r * n * 64 + 2^15) >> 16, at most 512.
+        wire [31:0] sub = (32'(r16) * 32'(rn) * 32'd64 + 32'd32768) >> 16;
+        assign ln_rate_sub[k] = -$signed(sub[15:0]);
+    end
+
+    always_comb begin
+        op_v = 1'b0;
+        op_x = '0;
+        op_y = '0;
+        op_en = '0;
+        op_b = '0;
+        for (int k = 0; k < NR; k++) begin
+            op_d2[k] = '0;
+            op_delta[k] = '0;
+        end
+        if (phase == EVENTS && ev_valid) begin
+            op_v = 1'b1;
+            op_x = ev_col[15:0];
+            op_y = ev_row[15:0];
+            for (int k = 0; k < NR; k++) begin
+                op_en[k] = ln_in_a[k] || ln_in_b[k];
+                op_b[k] = ln_in_b[k];
+                op_d2[k] = ln_ev_d2[k];
+                op_delta[k] = ev_neg ? -16'sd64 : 16'sd64;
+            end
+        end else if (phase == ROPS) begin
+            op_v = 1'b1;
+            op_x = px_x;
+            op_y = px_y;
+            for (int k = 0; k < NR; k++) begin
+                op_en[k] = ln_blk_on[k];
+                op_b[k] = blk_b;
+                op_d2[k] = ln_rate_d2[k];
+                op_delta[k] = ln_rate_sub[k];
+            end
+        end
+    end
+
+    // ---- stage 1: the pixel's place between nodes ---------------------------
+    // axis(p): q = clamp(16 p - first, -pitch, n pitch); i = clamp(q >> p, 0,
+    // n - 2); f = q - i pitch; weights (pitch - f, f); one node: (pitch, 0).
+    function automatic logic [47:0] axis(input logic [15:0] p, input logic signed [31:0] first,
+                                             input logic [15:0] n, input logic [3:0] sh);
+        logic signed [35:0] q, lo, hi, i;
+        logic signed [15:0] f, w0, w1;
+        lo = -(36'sd1 <<< sh);
+        hi = $signed({20'b0, n}) <<< sh;
+        q = $signed({16'b0, p, 4'b0}) - 36'(first);
+        if (q < lo) q = lo;
+        if (q > hi) q = hi;
+        i = q >>> sh;
+        if (i > $signed({20'b0, n}) - 36'sd2) i = $signed({20'b0, n}) - 36'sd2;
+        if (i < 36'sd0) i = 36'sd0;
+        f = 16'(q - (i <<< sh));
+        if (n < 16'd2) begin
+            i = 36'sd0;
+            w0 = 16'sd1 <<< sh;
+            w1 = 16'sd0;
+        end else begin
+            w0 = (16'sd1 <<< sh) - f;
+            w1 = f;
+        end
+        axis = {i[15:0], w0, w1};
+    endfunction
+
+    logic               s1_v;
+    logic [15:0]        s1_x, s1_y;
+    logic [NXB-1:0]     s1_c0;
+    logic [NYB-1:0]     s1_r0;
+    logic signed [15:0] s1_wx0, s1_wx1, s1_wy0, s1_wy1;
+    logic [NR-1:0]      s1_en, s1_b;
+    logic signed [9:0]  s1_d2 [NR];
+    logic signed [15:0] s1_delta [NR];
+    always_ff @(posedge clk) begin
+        logic [47:0] ax;
+        logic [47:0] ay;
+        ax = axis(op_x, cx0, cnx, ps);
+        ay = axis(op_y, cy0, cny, ps);
+        s1_v <= op_v;
+        s1_x <= op_x;
+        s1_y <= op_y;
+        s1_c0 <= NXB'(ax[47:32]);
+        s1_wx0 <= ax[31:16];
+        s1_wx1 <= ax[15:0];
+        s1_r0 <= NYB'(ay[47:32]);
+        s1_wy0 <= ay[31:16];
+        s1_wy1 <= ay[15:0];
+        s1_en <= op_v ? op_en : '0;
+        s1_b <= op_b;
+        s1_d2 <= op_d2;
+        s1_delta <= op_delta;
+    end
+
+    // ---- stage 2: the four nodes read, one per bank --------------------------
+    logic               s2_v;
+    logic [15:0]        s2_x, s2_y;
+    logic               s2_rp, s2_cp;   // parity of r0 and c0
+    logic [63:0]        s2_q [4];
+    logic signed [15:0] s2_wx0, s2_wx1, s2_wy0, s2_wy1;
+    logic [NR-1:0]      s2_en, s2_b;
+    logic signed [9:0]  s2_d2 [NR];
+    logic signed [15:0] s2_delta [NR];
+    wire [NYB-1:0] s1_r1 = s1_r0 + 1'b1;
+    wire [NXB-1:0] s1_c1 = s1_c0 + 1'b1;
+    always_ff @(posedge clk) begin
+        for (int bk = 0; bk < 4; bk++) begin
+            logic [NYB-1:0] r;
+            logic [NXB-1:0] c;
+            r = (s1_r0[0] == bk[1]) ? s1_r0 : s1_r1;
+            c = (s1_c0[0] == bk[0]) ? s1_c0 : s1_c1;
+            s2_q[bk] <= nodes[bk][{r[NYB-1:1], c[NXB-1:1]}];
+        end
+        s2_v <= s1_v;
+        s2_x <= s1_x;
+        s2_y <= s1_y;
+        s2_rp <= s1_r0[0];
+        s2_cp <= s1_c0[0];
+        {s2_wx0, s2_wx1, s2_wy0, s2_wy1} <= {s1_wx0, s1_wx1, s1_wy0, s1_wy1};
+        s2_en <= s1_en;
+        s2_b <= s1_b;
+        s2_d2 <= s1_d2;
+        s2_delta <= s1_delta;
+    end
+
+    // ---- stage 3: along x, per node row; stage 4: along y ---------------------
+    // tap (r0 + dr, c0 + dc) is bank {r0[0] ^ dr, c0[0] ^ dc}
+    logic [63:0] t00, t01, t10, t11;
+    always_comb begin
+        t00 = s2_q[{s2_rp, s2_cp}];
+        t01 = s2_q[{s2_rp, ~s2_cp}];
+        t10 = s2_q[{~s2_rp, s2_cp}];
+        t11 = s2_q[{~s2_rp, ~s2_cp}];
+    end
+    logic               s3_v;
+    logic [15:0]        s3_x, s3_y;
+    logic signed [31:0] s3_g0 [4], s3_g1 [4];  // per field: rows r0, r1
+    logic signed [15:0] s3_wy0, s3_wy1;
+    logic [NR-1:0]      s3_en, s3_b;
+    logic signed [9:0]  s3_d2 [NR];
+    logic signed [15:0] s3_delta [NR];
+    always_ff @(posedge clk) begin
+        for (int fd = 0; fd < 4; fd++) begin
+            s3_g0[fd] <= 32'($signed(t00[16*fd +: 16])) * 32'(s2_wx0)
+                       + 32'($signed(t01[16*fd +: 16])) * 32'(s2_wx1);
+            s3_g1[fd] <= 32'($signed(t10[16*fd +: 16])) * 32'(s2_wx0)
+                       + 32'($signed(t11[16*fd +: 16])) * 32'(s2_wx1);
+        end
+        s3_v <= s2_v;
+        s3_x <= s2_x;
+        s3_y <= s2_y;
+        {s3_wy0, s3_wy1} <= {s2_wy0, s2_wy1};
+        s3_en <= s2_en;
+        s3_b <= s2_b;
+        s3_d2 <= s2_d2;
+        s3_delta <= s2_delta;
+    end
+
+    logic               s4_v;
+    logic [15:0]        s4_x, s4_y;
+    logic signed [47:0] s4_s [4];   // vx, vy, ax, ay sums (weight pitch^2)
+    logic [NR-1:0]      s4_en, s4_b;
+    logic signed [9:0]  s4_d2 [NR];
+    logic signed [15:0] s4_delta [NR];
+    always_ff @(posedge clk) begin
+        for (int fd = 0; fd < 4; fd++)
+            s4_s[fd] <= (still ? 48'sd0 : 48'(s3_g0[fd]) * 48'(s3_wy0) + 48'(s3_g1[fd]) * 48'(s3_wy1));
+        s4_v <= s3_v;
+        s4_x <= s3_x;
+        s4_y <= s3_y;
+        s4_en <= s3_en;
+        s4_b <= s3_b;
+        s4_d2 <= s3_d2;
+        s4_delta <= s3_delta;
+    end
+
+    // ---- per lane: stage 5 the products, stage 6 the target, stage 7 the
+    // ---- sample read, then the saturating add written back --------------------
+    // stage 5: d2^2 and the node sums' products: d2 Sv (58 bits), d2^2 Sa
+    // (66); stage 6: num = 64 d2 Sv + d2^2 Sa, shifted and clamped.
+    logic               s5_v;
+    logic [15:0]        s5_x, s5_y;
+    logic [NR-1:0]      s5_en, s5_b;
+    logic signed [15:0] s5_delta [NR];
+    logic signed [57:0] s5_vx [NR], s5_vy [NR];
+    logic signed [65:0] s5_ax [NR], s5_ay [NR];
+    always_ff @(posedge clk) begin
+        for (int k = 0; k < NR; k++) begin
+            logic signed [17:0] dd;
+            dd = 18'(s4_d2[k] * s4_d2[k]);
+            s5_vx[k] <= s4_d2[k] * s4_s[0];
+            s5_vy[k] <= s4_d2[k] * s4_s[1];
+            s5_ax[k] <= dd * s4_s[2];
+            s5_ay[k] <= dd * s4_s[3];
+        end
+        s5_v <= s4_v;
+        s5_x <= s4_x;
+        s5_y <= s4_y;
+        s5_en <= s4_en;
+        s5_b <= s4_b;
+        s5_delta <= s4_delta;
+    end
+
+    // floor((num + 2^(s-1)) / 2^s), s = 2p + 19, clamped to i16
+    function automatic logic signed [15:0] shifted(input logic signed [65:0] num, input logic [3:0] sh);
+        logic signed [65:0] q;
+        logic [5:0] s;
+        s = 6'({sh, 1'b0}) + 6'd19;
+        q = (num + (66'sd1 <<< (s - 6'd1))) >>> s;
+        if (q > 66'sd32767) q = 66'sd32767;
+        if (q < -66'sd32768) q = -66'sd32768;
+        shifted = q[15:0];
+    endfunction
+
+    logic               s6_v;
+    logic [15:0]        s6_x, s6_y;
+    logic [NR-1:0]      s6_on, s6_b;
+    logic signed [15:0] s6_dx [NR], s6_dy [NR];
+    logic signed [15:0] s6_dl [NR];
+    always_ff @(posedge clk) begin
+        for (int k = 0; k < NR; k++) begin
+            s6_dx[k] <= shifted(66'(s5_vx[k]) * 66'sd64 + s5_ax[k], ps);
+            s6_dy[k] <= shifted(66'(s5_vy[k]) * 66'sd64 + s5_ay[k], ps);
+        end
+        s6_v <= s5_v;
+        s6_x <= s5_x;
+        s6_y <= s5_y;
+        s6_on <= s5_en;
+        s6_b <= s5_b;
+        s6_dl <= s5_delta;
+    end
+
+    // stage 7: the target pixel, if in the image
+    logic [NR-1:0]      s6_en;
+    logic [AW:0]        s6_addr [NR];   // {half, pixel}
+    logic signed [15:0] s6_delta [NR];
+    always_ff @(posedge clk) begin
+        for (int k = 0; k < NR; k++) begin
+            logic signed [17:0] tx, ty;
+            tx = $signed({2'b0, s6_x}) + 18'(s6_dx[k]);
+            ty = $signed({2'b0, s6_y}) + 18'(s6_dy[k]);
+            s6_en[k] <= s6_v && s6_on[k] && tx >= 0 && ty >= 0
+                        && tx < $signed(18'(W)) && ty < $signed(18'(H));
+            s6_addr[k] <= {s6_b[k], AW'(32'(ty[15:0]) * 32'(W) + 32'(tx[15:0]))};
+        end
+        s6_delta <= s6_dl;
+    end
+
+    // out phase: the sample read, A then B
+    logic          o_run, o_half;
+    logic [AW-1:0] o_pix;
+    logic          o1_v, o1_half;
+    logic [AW-1:0] o1_pix;
+
+    logic [NR-1:0]      s7_en;
+    logic [AW:0]        s7_addr [NR];
+    logic signed [15:0] s7_delta [NR], s7_q [NR];
+    logic [NR-1:0]      fw_v;
+    logic [AW:0]        fw_addr [NR];
+    logic signed [15:0] fw_val [NR];
+
+    function automatic logic signed [15:0] sat16(input logic signed [15:0] a, input logic signed [15:0] b);
+        logic signed [16:0] s;
+        s = 17'(a) + 17'(b);
+        if (s > 17'sd32767) s = 17'sd32767;
+        if (s < -17'sd32768) s = -17'sd32768;
+        sat16 = s[15:0];
+    endfunction
+
+    for (genvar k = 0; k < NR; k++) begin : lane
+        logic signed [15:0] mem [2 * PX];
+        initial for (int i = 0; i < 2 * PX; i++) mem[i] = '0;
+        wire [AW:0] rd = o_run ? {o_half, o_pix} : s6_addr[k];
+        wire signed [15:0] q_eff = (fw_v[k] && fw_addr[k] == s7_addr[k]) ? fw_val[k] : s7_q[k];
+        wire signed [15:0] nv = sat16(q_eff, s7_delta[k]);
+        always_ff @(posedge clk) begin
+            s7_q[k] <= mem[rd];
+            s7_en[k] <= s6_en[k] && !o_run;
+            s7_addr[k] <= rd;
+            s7_delta[k] <= s6_delta[k];
+            if (o1_v) begin
+                mem[{o1_half, o1_pix}] <= '0;
+            end else if (s7_en[k]) begin
+                mem[s7_addr[k]] <= nv;
+            end
+            fw_v[k] <= s7_en[k] && !o1_v;
+            fw_addr[k] <= s7_addr[k];
+            fw_val[k] <= nv;
+        end
+        // rounded to whole spikes (half up), 0 below the floor
+        wire signed [16:0] up = 17'(s7_q[k]) + 17'sd32;
+        wire signed [16:0] whole = (up & ~17'sd63) > 17'sd32704 ? 17'sd32704 : (up & ~17'sd63);
+        assign out_samples[16*k +: 16] =
+            (k < 32'(nsep) && whole >= $signed({8'b0, floor_spikes[k], 6'b0})) ? whole[15:0] : 16'sd0;
+    end
+    assign out_valid = o1_v;
+    assign out_half = o1_half;
+    assign out_index = o1_pix;
+
+    // ---- the sequence ---------------------------------------------------------
+    logic [3:0] drain;
+    assign ev_ready = phase == EVENTS;
+    assign busy = phase != IDLE;
+    always_ff @(posedge clk) begin
+        done <= 1'b0;
+        o1_v <= o_run;
+        o1_half <= o_half;
+        o1_pix <= o_pix;
+        if (rst) begin
+            phase <= IDLE;
+            error <= 1'b0;
+            o_run <= 1'b0;
+            o1_v <= 1'b0;
+        end else case (phase)
+            IDLE: if (start) begin
+                logic [4:0] p;
+                logic [7:0] longest;
+                logic bad;
+                logic [5:0] mb;
+                p = log2_pitch(pitch);
+                longest = '0;
+                mb = '0;
+                bad = nsep > 4'(NR);
+                for (int k = 0; k < NR; k++) begin
+                    logic [7:0] s;
+                    s = seps[8*k +: 8];
+                    sep[k] <= s;
+                    act[k] <= k < 32'(nsep);
+                    blocks[k] <= 6'((9'(s) + 9'd7) >> 3);
+                    floor_spikes[k] <= 3'd1 + 3'(s >= 8'd36) + 3'(s >= 8'd100) + 3'(s >= 8'd196);
+                    if (k < 32'(nsep)) begin
+                        if (s < 8'd2) bad = 1'b1;
+                        if (s > longest) longest = s;
+                        if (6'((9'(s) + 9'd7) >> 3) > mb) mb = 6'((9'(s) + 9'd7) >> 3);
+                    end
+                end
+                most_blocks <= mb;
+                if (mid < 32'(longest) || 33'(mid) + 33'(longest) > 33'h0_FFFF_FFFF) bad = 1'b1;
+                still <= nx == 16'd0 || ny == 16'd0;
+                if (nx != 16'd0 && ny != 16'd0) begin
+                    if (p == 5'd31 || 32'(nx) > (32'd1 << NXB) || 32'(ny) > (32'd1 << NYB)
+                        || x0 >= 32'sh0100_0000 || x0 <= -32'sh0100_0000
+                        || y0 >= 32'sh0100_0000 || y0 <= -32'sh0100_0000)
+                        bad = 1'b1;
+                end
+                ps <= (p == 5'd31) ? 4'd4 : p[3:0];
+                {cnx, cny, cx0, cy0, cmid} <= {nx, ny, x0, y0, mid};
+                error <= bad;
+                if (bad) begin
+                    done <= 1'b1;
+                end else begin
+                    phase <= EVENTS;
+                end
+            end
+            EVENTS: if (ev_end) begin
+                phase <= RISSUE;
+                pix <= '0;
+                px_x <= '0;
+                px_y <= '0;
+            end
+            RISSUE: begin
+                rate_addr <= pix;
+                phase <= RTAKE;
+            end
+            RTAKE: begin
+                r16 <= rate_now;
+                step <= '0;
+                if (rate_now != 16'd0 && most_blocks != 6'd0) begin
+                    phase <= ROPS;
+                end else begin
+                    phase <= (pix == AW'(PX - 1)) ? DRAIN : RISSUE;
+                    pix <= pix + 1'b1;
+                    if (px_x == 16'(W - 1)) begin
+                        px_x <= '0;
+                        px_y <= px_y + 1'b1;
+                    end else begin
+                        px_x <= px_x + 1'b1;
+                    end
+                    drain <= '0;
+                end
+            end
+            ROPS: begin
+                if (step == 7'({most_blocks, 1'b0}) - 7'd1) begin
+                    phase <= (pix == AW'(PX - 1)) ? DRAIN : RISSUE;
+                    pix <= pix + 1'b1;
+                    if (px_x == 16'(W - 1)) begin
+                        px_x <= '0;
+                        px_y <= px_y + 1'b1;
+                    end else begin
+                        px_x <= px_x + 1'b1;
+                    end
+                    drain <= '0;
+                end
+                step <= step + 1'b1;
+            end
+            DRAIN: begin
+                drain <= drain + 1'b1;
+                if (drain == 4'(DEPTH)) begin
+                    phase <= OUT;
+                    o_run <= 1'b1;
+                    o_half <= 1'b0;
+                    o_pix <= '0;
+                end
+            end
+            OUT: begin
+                if (o_pix == AW'(PX - 1)) begin
+                    o_pix <= '0;
+                    if (o_half) begin
+                        o_run <= 1'b0;
+                        phase <= IDLE;
+                        done <= 1'b1;
+                    end
+                    o_half <= 1'b1;
+                end else begin
+                    o_pix <= o_pix + 1'b1;
+                end
+            end
+            default: phase <= IDLE;
+        endcase
+    end
+endmodule
