@@ -10,8 +10,10 @@
 // then every pixel's static rate over each 8-tick block of the window is
 // taken off where the flow carries the pixel at the block's middle; then
 // every sample is rounded to whole spikes and zeroed below the rung's
-// floor. One lane per rung, each with its own frame RAM (A and B), so an
-// event goes into every frame that holds it in one clock.
+// floor. One lane per rung, each with its own frame RAMs (A and B), so an
+// event goes into every frame that holds it in one clock; a rate block's
+// path is the same in A and B (d2 = s - 2a - n in both), so one
+// displacement serves both.
 //
 // The displacement of pixel (x, y) over d2 half ticks is the core's:
 // bilinear node sums Sv, Sa (weights in 1/16 px), then
@@ -26,11 +28,12 @@
 // with the pair's configuration held steady until `done`; feed the
 // events of the ring in its order (ev_valid while ev_ready; the ring's
 // events of other ticks are ignored), then pulse `ev_end`; the design
-// reads every pixel's light state (rate_addr; rate_q24 and rate_flags the
-// next clock, as from a block RAM) and takes off the static rates; then
-// it streams frame A of every lane (out_half 0), pixel by pixel, and then
-// frame B, out_valid high, clearing its RAM as it goes; then `done`
-// (with `error` when the configuration was refused and nothing was made).
+// reads every pixel's light state, one pixel per clock (rate_addr;
+// rate_q24 and rate_flags the next clock, as from a block RAM), and takes
+// off the static rates of the pixels that have one, one block per clock;
+// then it streams frames A and B of every lane side by side, pixel by
+// pixel, out_valid high, clearing its RAMs as it goes; then `done` (with
+// `error` when the configuration was refused and nothing was made).
 
 module spiv_rungs #(
     parameter integer W = 128,
@@ -73,9 +76,9 @@ module spiv_rungs #(
     input  logic [7:0]           rate_flags,
     // frames out
     output logic                 out_valid,
-    output logic                 out_half, // 0: frame A, 1: frame B
     output logic [AW-1:0]        out_index,
-    output logic [16*NR-1:0]     out_samples,
+    output logic [16*NR-1:0]     out_a,    // lane k's frame A in [16k+15:16k]
+    output logic [16*NR-1:0]     out_b,
     output logic                 busy,
     output logic                 done,
     output logic                 error
@@ -92,7 +95,7 @@ module spiv_rungs #(
     end
 
     // ---- the pair's configuration, checked at start -----------------------
-    typedef enum logic [2:0] {IDLE, EVENTS, RISSUE, RTAKE, ROPS, DRAIN, OUT} phase_t;
+    typedef enum logic [2:0] {IDLE, EVENTS, RSCAN, ROPS, DRAIN, OUT} phase_t;
     phase_t phase;
     logic [7:0]  sep [NR];
     logic [NR-1:0] act;
@@ -123,7 +126,7 @@ module spiv_rungs #(
     // ---- op issue: one event, or one rate block of one pixel --------------
     logic               op_v;
     logic [15:0]        op_x, op_y;
-    logic [NR-1:0]      op_en, op_b;
+    logic [NR-1:0]      op_ea, op_eb;   // into frame A, frame B
     logic signed [9:0]  op_d2 [NR];
     logic signed [15:0] op_delta [NR];
 
@@ -132,13 +135,16 @@ module spiv_rungs #(
     wire [31:0] ev_col = ev_index - 32'(ev_row[31:0] * 32'(W));
     wire signed [33:0] ev_da = $signed({2'b0, cmid}) - $signed({2'b0, ev_tick});
 
-    // rates: the pixel walked, its rate, the block walked
-    logic [AW-1:0] pix;
+    // rates: the next pixel to read, the pixel whose state arrives, the
+    // pixel whose blocks go out, its rate, the block
+    logic [31:0]   pix;
     logic [15:0]   px_x, px_y;
+    logic          rq_v;
+    logic [31:0]   rq_pix;
+    logic [15:0]   rq_x, rq_y;
+    logic [15:0]   cur_x, cur_y;
     logic [15:0]   r16;
-    logic [6:0]    step;         // block b of frame A, then of frame B
-    wire  [5:0]    blk = (step >= 7'(most_blocks)) ? 6'(step - 7'(most_blocks)) : step[5:0];
-    wire           blk_b = step >= 7'(most_blocks);
+    logic [5:0]    blk;
     wire  [31:0]   rate_rounded = (rate_q24 + 32'd128) >> 8;
     wire           periodic = rate_flags[7] && rate_flags[3:0] >= 4'd2;
     wire  [15:0]   rate_now = periodic ? 16'd0
@@ -174,8 +180,8 @@ module spiv_rungs #(
         op_v = 1'b0;
         op_x = '0;
         op_y = '0;
-        op_en = '0;
-        op_b = '0;
+        op_ea = '0;
+        op_eb = '0;
         for (int k = 0; k < NR; k++) begin
             op_d2[k] = '0;
             op_delta[k] = '0;
@@ -185,18 +191,18 @@ module spiv_rungs #(
             op_x = ev_col[15:0];
             op_y = ev_row[15:0];
             for (int k = 0; k < NR; k++) begin
-                op_en[k] = ln_in_a[k] || ln_in_b[k];
-                op_b[k] = ln_in_b[k];
+                op_ea[k] = ln_in_a[k];
+                op_eb[k] = ln_in_b[k];
                 op_d2[k] = ln_ev_d2[k];
                 op_delta[k] = ev_neg ? -16'sd64 : 16'sd64;
             end
         end else if (phase == ROPS) begin
             op_v = 1'b1;
-            op_x = px_x;
-            op_y = px_y;
+            op_x = cur_x;
+            op_y = cur_y;
             for (int k = 0; k < NR; k++) begin
-                op_en[k] = ln_blk_on[k];
-                op_b[k] = blk_b;
+                op_ea[k] = ln_blk_on[k];
+                op_eb[k] = ln_blk_on[k];
                 op_d2[k] = ln_rate_d2[k];
                 op_delta[k] = ln_rate_sub[k];
             end
@@ -235,7 +241,7 @@ module spiv_rungs #(
     logic [NXB-1:0]     s1_c0;
     logic [NYB-1:0]     s1_r0;
     logic signed [15:0] s1_wx0, s1_wx1, s1_wy0, s1_wy1;
-    logic [NR-1:0]      s1_en, s1_b;
+    logic [NR-1:0]      s1_ea, s1_eb;
     logic signed [9:0]  s1_d2 [NR];
     logic signed [15:0] s1_delta [NR];
     always_ff @(posedge clk) begin
@@ -252,8 +258,8 @@ module spiv_rungs #(
         s1_r0 <= NYB'(ay[47:32]);
         s1_wy0 <= ay[31:16];
         s1_wy1 <= ay[15:0];
-        s1_en <= op_v ? op_en : '0;
-        s1_b <= op_b;
+        s1_ea <= op_v ? op_ea : '0;
+        s1_eb <= op_v ? op_eb : '0;
         s1_d2 <= op_d2;
         s1_delta <= op_delta;
     end
@@ -264,7 +270,7 @@ module spiv_rungs #(
     logic               s2_rp, s2_cp;   // parity of r0 and c0
     logic [63:0]        s2_q [4];
     logic signed [15:0] s2_wx0, s2_wx1, s2_wy0, s2_wy1;
-    logic [NR-1:0]      s2_en, s2_b;
+    logic [NR-1:0]      s2_ea, s2_eb;
     logic signed [9:0]  s2_d2 [NR];
     logic signed [15:0] s2_delta [NR];
     wire [NYB-1:0] s1_r1 = s1_r0 + 1'b1;
@@ -283,8 +289,8 @@ module spiv_rungs #(
         s2_rp <= s1_r0[0];
         s2_cp <= s1_c0[0];
         {s2_wx0, s2_wx1, s2_wy0, s2_wy1} <= {s1_wx0, s1_wx1, s1_wy0, s1_wy1};
-        s2_en <= s1_en;
-        s2_b <= s1_b;
+        s2_ea <= s1_ea;
+        s2_eb <= s1_eb;
         s2_d2 <= s1_d2;
         s2_delta <= s1_delta;
     end
@@ -302,7 +308,7 @@ module spiv_rungs #(
     logic [15:0]        s3_x, s3_y;
     logic signed [31:0] s3_g0 [4], s3_g1 [4];  // per field: rows r0, r1
     logic signed [15:0] s3_wy0, s3_wy1;
-    logic [NR-1:0]      s3_en, s3_b;
+    logic [NR-1:0]      s3_ea, s3_eb;
     logic signed [9:0]  s3_d2 [NR];
     logic signed [15:0] s3_delta [NR];
     always_ff @(posedge clk) begin
@@ -316,8 +322,8 @@ module spiv_rungs #(
         s3_x <= s2_x;
         s3_y <= s2_y;
         {s3_wy0, s3_wy1} <= {s2_wy0, s2_wy1};
-        s3_en <= s2_en;
-        s3_b <= s2_b;
+        s3_ea <= s2_ea;
+        s3_eb <= s2_eb;
         s3_d2 <= s2_d2;
         s3_delta <= s2_delta;
     end
@@ -325,7 +331,7 @@ module spiv_rungs #(
     logic               s4_v;
     logic [15:0]        s4_x, s4_y;
     logic signed [47:0] s4_s [4];   // vx, vy, ax, ay sums (weight pitch^2)
-    logic [NR-1:0]      s4_en, s4_b;
+    logic [NR-1:0]      s4_ea, s4_eb;
     logic signed [9:0]  s4_d2 [NR];
     logic signed [15:0] s4_delta [NR];
     always_ff @(posedge clk) begin
@@ -334,8 +340,8 @@ module spiv_rungs #(
         s4_v <= s3_v;
         s4_x <= s3_x;
         s4_y <= s3_y;
-        s4_en <= s3_en;
-        s4_b <= s3_b;
+        s4_ea <= s3_ea;
+        s4_eb <= s3_eb;
         s4_d2 <= s3_d2;
         s4_delta <= s3_delta;
     end
@@ -346,7 +352,7 @@ module spiv_rungs #(
     // (66); stage 6: num = 64 d2 Sv + d2^2 Sa, shifted and clamped.
     logic               s5_v;
     logic [15:0]        s5_x, s5_y;
-    logic [NR-1:0]      s5_en, s5_b;
+    logic [NR-1:0]      s5_ea, s5_eb;
     logic signed [15:0] s5_delta [NR];
     logic signed [57:0] s5_vx [NR], s5_vy [NR];
     logic signed [65:0] s5_ax [NR], s5_ay [NR];
@@ -362,8 +368,8 @@ module spiv_rungs #(
         s5_v <= s4_v;
         s5_x <= s4_x;
         s5_y <= s4_y;
-        s5_en <= s4_en;
-        s5_b <= s4_b;
+        s5_ea <= s4_ea;
+        s5_eb <= s4_eb;
         s5_delta <= s4_delta;
     end
 
@@ -380,7 +386,7 @@ module spiv_rungs #(
 
     logic               s6_v;
     logic [15:0]        s6_x, s6_y;
-    logic [NR-1:0]      s6_on, s6_b;
+    logic [NR-1:0]      s6_oa, s6_ob;
     logic signed [15:0] s6_dx [NR], s6_dy [NR];
     logic signed [15:0] s6_dl [NR];
     always_ff @(posedge clk) begin
@@ -391,39 +397,34 @@ module spiv_rungs #(
         s6_v <= s5_v;
         s6_x <= s5_x;
         s6_y <= s5_y;
-        s6_on <= s5_en;
-        s6_b <= s5_b;
+        s6_oa <= s5_ea;
+        s6_ob <= s5_eb;
         s6_dl <= s5_delta;
     end
 
     // stage 7: the target pixel, if in the image
-    logic [NR-1:0]      s6_en;
-    logic [AW:0]        s6_addr [NR];   // {half, pixel}
+    logic [NR-1:0]      s6_ea, s6_eb;
+    logic [AW-1:0]      s6_addr [NR];
     logic signed [15:0] s6_delta [NR];
     always_ff @(posedge clk) begin
         for (int k = 0; k < NR; k++) begin
             logic signed [17:0] tx, ty;
+            logic in_image;
             tx = $signed({2'b0, s6_x}) + 18'(s6_dx[k]);
             ty = $signed({2'b0, s6_y}) + 18'(s6_dy[k]);
-            s6_en[k] <= s6_v && s6_on[k] && tx >= 0 && ty >= 0
-                        && tx < $signed(18'(W)) && ty < $signed(18'(H));
-            s6_addr[k] <= {s6_b[k], AW'(32'(ty[15:0]) * 32'(W) + 32'(tx[15:0]))};
+            in_image = s6_v && tx >= 0 && ty >= 0 && tx < $signed(18'(W)) && ty < $signed(18'(H));
+            s6_ea[k] <= in_image && s6_oa[k];
+            s6_eb[k] <= in_image && s6_ob[k];
+            s6_addr[k] <= AW'(32'(ty[15:0]) * 32'(W) + 32'(tx[15:0]));
         end
         s6_delta <= s6_dl;
     end
 
-    // out phase: the sample read, A then B
-    logic          o_run, o_half;
+    // out phase: the samples read, A and B side by side
+    logic          o_run;
     logic [AW-1:0] o_pix;
-    logic          o1_v, o1_half;
+    logic          o1_v;
     logic [AW-1:0] o1_pix;
-
-    logic [NR-1:0]      s7_en;
-    logic [AW:0]        s7_addr [NR];
-    logic signed [15:0] s7_delta [NR], s7_q [NR];
-    logic [NR-1:0]      fw_v;
-    logic [AW:0]        fw_addr [NR];
-    logic signed [15:0] fw_val [NR];
 
     function automatic logic signed [15:0] sat16(input logic signed [15:0] a, input logic signed [15:0] b);
         logic signed [16:0] s;
@@ -433,34 +434,55 @@ module spiv_rungs #(
         sat16 = s[15:0];
     endfunction
 
+    // Rounded to whole spikes (half up), 0 below the floor (1/64 spike).
+    function automatic logic signed [15:0] floored(input logic signed [15:0] v, input logic [2:0] fl);
+        logic signed [16:0] up, whole;
+        up = 17'(v) + 17'sd32;
+        whole = up & ~17'sd63;
+        if (whole > 17'sd32704) whole = 17'sd32704;
+        floored = (whole >= $signed({8'b0, fl, 6'b0})) ? whole[15:0] : 16'sd0;
+    endfunction
+
+    // One frame RAM of a lane: the sample read at stage 7, the saturating
+    // sum written back the next clock (the previous write forwarded when
+    // it was to the same pixel), cleared as the out phase reads it.
     for (genvar k = 0; k < NR; k++) begin : lane
-        logic signed [15:0] mem [2 * PX];
-        initial for (int i = 0; i < 2 * PX; i++) mem[i] = '0;
-        wire [AW:0] rd = o_run ? {o_half, o_pix} : s6_addr[k];
-        wire signed [15:0] q_eff = (fw_v[k] && fw_addr[k] == s7_addr[k]) ? fw_val[k] : s7_q[k];
-        wire signed [15:0] nv = sat16(q_eff, s7_delta[k]);
-        always_ff @(posedge clk) begin
-            s7_q[k] <= mem[rd];
-            s7_en[k] <= s6_en[k] && !o_run;
-            s7_addr[k] <= rd;
-            s7_delta[k] <= s6_delta[k];
-            if (o1_v) begin
-                mem[{o1_half, o1_pix}] <= '0;
-            end else if (s7_en[k]) begin
-                mem[s7_addr[k]] <= nv;
+        for (genvar h = 0; h < 2; h++) begin : frame
+            logic signed [15:0] mem [PX];
+`ifndef SYNTHESIS
+            // Block RAM comes up zeroed from the bitstream; the simulator's
+            // is cleared here.
+            initial for (int i = 0; i < PX; i++) mem[i] = '0;
+`endif
+            logic               en, fw_v;
+            logic [AW-1:0]      addr, fw_addr;
+            logic signed [15:0] delta, q, fw_val;
+            wire [AW-1:0] rd = o_run ? o_pix : s6_addr[k];
+            wire signed [15:0] q_eff = (fw_v && fw_addr == addr) ? fw_val : q;
+            wire signed [15:0] nv = sat16(q_eff, delta);
+            always_ff @(posedge clk) begin
+                q <= mem[rd];
+                en <= (h == 0 ? s6_ea[k] : s6_eb[k]) && !o_run;
+                addr <= rd;
+                delta <= s6_delta[k];
+                if (o1_v) begin
+                    mem[o1_pix] <= '0;
+                end else if (en) begin
+                    mem[addr] <= nv;
+                end
+                fw_v <= en && !o1_v;
+                fw_addr <= addr;
+                fw_val <= nv;
             end
-            fw_v[k] <= s7_en[k] && !o1_v;
-            fw_addr[k] <= s7_addr[k];
-            fw_val[k] <= nv;
+            wire signed [15:0] out = (k < 32'(nsep)) ? floored(q, floor_spikes[k]) : 16'sd0;
+            if (h == 0) begin : a
+                assign out_a[16*k +: 16] = out;
+            end else begin : b
+                assign out_b[16*k +: 16] = out;
+            end
         end
-        // rounded to whole spikes (half up), 0 below the floor
-        wire signed [16:0] up = 17'(s7_q[k]) + 17'sd32;
-        wire signed [16:0] whole = (up & ~17'sd63) > 17'sd32704 ? 17'sd32704 : (up & ~17'sd63);
-        assign out_samples[16*k +: 16] =
-            (k < 32'(nsep) && whole >= $signed({8'b0, floor_spikes[k], 6'b0})) ? whole[15:0] : 16'sd0;
     end
     assign out_valid = o1_v;
-    assign out_half = o1_half;
     assign out_index = o1_pix;
 
     // ---- the sequence ---------------------------------------------------------
@@ -470,7 +492,6 @@ module spiv_rungs #(
     always_ff @(posedge clk) begin
         done <= 1'b0;
         o1_v <= o_run;
-        o1_half <= o_half;
         o1_pix <= o_pix;
         if (rst) begin
             phase <= IDLE;
@@ -519,64 +540,66 @@ module spiv_rungs #(
                 end
             end
             EVENTS: if (ev_end) begin
-                phase <= RISSUE;
+                phase <= RSCAN;
                 pix <= '0;
                 px_x <= '0;
                 px_y <= '0;
+                rq_v <= 1'b0;
             end
-            RISSUE: begin
-                rate_addr <= pix;
-                phase <= RTAKE;
-            end
-            RTAKE: begin
-                r16 <= rate_now;
-                step <= '0;
-                if (rate_now != 16'd0 && most_blocks != 6'd0) begin
+            RSCAN: begin
+                // The state of rq_pix arrives; a pixel with a static rate
+                // sends its blocks (ROPS), and the reads go on after it.
+                if (rq_v && rate_now != 16'd0 && most_blocks != 6'd0) begin
+                    r16 <= rate_now;
+                    cur_x <= rq_x;
+                    cur_y <= rq_y;
+                    blk <= '0;
+                    rq_v <= 1'b0;
                     phase <= ROPS;
-                end else begin
-                    phase <= (pix == AW'(PX - 1)) ? DRAIN : RISSUE;
-                    pix <= pix + 1'b1;
+                    pix <= rq_pix + 32'd1;
+                    if (rq_x == 16'(W - 1)) begin
+                        px_x <= '0;
+                        px_y <= rq_y + 1'b1;
+                    end else begin
+                        px_x <= rq_x + 1'b1;
+                        px_y <= rq_y;
+                    end
+                end else if (pix != 32'(PX)) begin
+                    rate_addr <= AW'(pix);
+                    rq_v <= 1'b1;
+                    rq_pix <= pix;
+                    rq_x <= px_x;
+                    rq_y <= px_y;
+                    pix <= pix + 32'd1;
                     if (px_x == 16'(W - 1)) begin
                         px_x <= '0;
                         px_y <= px_y + 1'b1;
                     end else begin
                         px_x <= px_x + 1'b1;
                     end
+                end else begin
+                    rq_v <= 1'b0;
+                    phase <= DRAIN;
                     drain <= '0;
                 end
             end
             ROPS: begin
-                if (step == 7'({most_blocks, 1'b0}) - 7'd1) begin
-                    phase <= (pix == AW'(PX - 1)) ? DRAIN : RISSUE;
-                    pix <= pix + 1'b1;
-                    if (px_x == 16'(W - 1)) begin
-                        px_x <= '0;
-                        px_y <= px_y + 1'b1;
-                    end else begin
-                        px_x <= px_x + 1'b1;
-                    end
-                    drain <= '0;
-                end
-                step <= step + 1'b1;
+                if (blk == most_blocks - 6'd1) phase <= RSCAN;
+                blk <= blk + 1'b1;
             end
             DRAIN: begin
                 drain <= drain + 1'b1;
                 if (drain == 4'(DEPTH)) begin
                     phase <= OUT;
                     o_run <= 1'b1;
-                    o_half <= 1'b0;
                     o_pix <= '0;
                 end
             end
             OUT: begin
                 if (o_pix == AW'(PX - 1)) begin
-                    o_pix <= '0;
-                    if (o_half) begin
-                        o_run <= 1'b0;
-                        phase <= IDLE;
-                        done <= 1'b1;
-                    end
-                    o_half <= 1'b1;
+                    o_run <= 1'b0;
+                    phase <= IDLE;
+                    done <= 1'b1;
                 end else begin
                     o_pix <= o_pix + 1'b1;
                 end

@@ -11,14 +11,16 @@
 // The pairs: no motion; a uniform flow; a smooth field of rotation and
 // shear with accelerations, on a grid smaller than the image (the flow
 // extrapolated past its outer nodes); one node across and one down;
-// full-range node values (displacements clamped, events carried out of the
-// image); a flow that gathers the image onto its centre (samples that
-// saturate while the events are added: a wrapping add fails it); at several sets of separations up to the longest the
-// recording holds, eight rungs at once among them. A pitch that is not a
-// power of two is refused by the RTL (and made by the core): the design
-// takes the host's power-of-two grids only, and the testbench checks it
-// refuses. Prints `pairs=N refused=R events=E samples=S nonzero=Z
-// clocks=C equal` and exits 0, or names the first difference and exits 1.
+// full-range node values (displacements clamped, events carried out of
+// the image); a flow that gathers the image onto its centre (samples that
+// saturate while the events are added: a wrapping add fails it); at
+// several sets of separations up to the longest the recording holds,
+// eight rungs at once among them, 255 ticks, and the live loop's six (4
+// to 128 ticks). A pitch that is not a power of two is refused by the RTL
+// (and made by the core): the design takes the host's power-of-two grids
+// only, and the testbench checks it refuses. Prints `pairs=N refused=R
+// events=E samples=S nonzero=Z clocks=C equal` and exits 0, or names the
+// first difference and exits 1; TB_VERBOSE=1 prints each pair's clocks.
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -178,6 +180,13 @@ static std::vector<Case> cases(uint64_t seed) {
         out.push_back({"longest", {130, 200, 255}, f, false});
     }
     {
+        // The live loop's rungs (4 to 128 ticks) along the uniform flow.
+        Case u = out[1];
+        u.name = "live rungs";
+        u.seps = {4, 8, 16, 32, 64, 128};
+        out.push_back(u);
+    }
+    {
         Flow f;
         f.size(3, 3);
         f.pitch = 192;  // 12 px: not a power of two
@@ -286,7 +295,7 @@ int main(int argc, char** argv) {
         }
         // The ring's events from before the longest rung's A (the RTL
         // leaves those out) to the last tick held.
-        const uint32_t a = std::max(ring.first, mid - longest - 40);
+        const uint32_t a = std::max(ring.first, mid - longest - 8);
         size_t nev = 0;
         spiv_ring_events(&ring, a, ring.next, nullptr, 0, &nev);
         std::vector<SpivEvent> ev(nev);
@@ -357,9 +366,11 @@ int main(int argc, char** argv) {
             b.clock();
             if (b.m.out_valid) {
                 const uint32_t i = b.m.out_index;
-                for (int k = 0; k < NR; ++k)
-                    got[(2 * (size_t)k + b.m.out_half) * PX + i] =
-                        (int16_t)((b.m.out_samples[k / 2] >> (16 * (k % 2))) & 0xffff);
+                for (int k = 0; k < NR; ++k) {
+                    got[(2 * (size_t)k) * PX + i] = (int16_t)((b.m.out_a[k / 2] >> (16 * (k % 2))) & 0xffff);
+                    got[(2 * (size_t)k + 1) * PX + i] =
+                        (int16_t)((b.m.out_b[k / 2] >> (16 * (k % 2))) & 0xffff);
+                }
                 ++outs;
             }
             if (b.m.done) break;
@@ -368,8 +379,8 @@ int main(int argc, char** argv) {
                 return 1;
             }
         }
-        if (b.m.error || outs != 2 * (size_t)PX) {
-            std::fprintf(stderr, "%s: %zu samples out, %d asked\n", c.name, outs, 2 * PX);
+        if (b.m.error || outs != (size_t)PX) {
+            std::fprintf(stderr, "%s: %zu samples out, %d asked\n", c.name, outs, PX);
             return 1;
         }
         for (int k = 0; k < n; ++k)
