@@ -22,10 +22,13 @@
 // any pitch; this design takes the power-of-two pitches the host's grids
 // use (16..4096 in 1/16 px: 1..256 px) and refuses others (`error`), so
 // the division is a shift. The node sums are separable (along x, then
-// y): the same integers as the core's sum over the four products.
+// y): the same integers as the core's sum over the four products. Each
+// column's and row's place between nodes is worked out once per pair
+// into two small tables (W + H clocks after `start`).
 //
 // Sequence: write the flow's nodes (node_we, while idle), pulse `start`
-// with the pair's configuration held steady until `done`; feed the
+// with the pair's configuration held steady until `done`; once ev_ready
+// rises, feed the
 // events of the ring in its order (ev_valid while ev_ready; the ring's
 // events of other ticks are ignored), then pulse `ev_end`; the design
 // reads every pixel's light state, one pixel per clock (rate_addr;
@@ -85,17 +88,24 @@ module spiv_rungs #(
 );
     localparam integer PX = W * H;
     localparam integer NA = NYB - 1 + NXB - 1;   // node bank address bits
-    localparam integer DEPTH = 10;               // op pipeline stages and margin
-    // index -> row: floor(i * RW / 2^40) = floor(i / W) for i < 2^40 / W.
-    localparam logic [63:0] RW = ((64'd1 << 40) + 64'(W) - 64'd1) / 64'(W);
+    localparam integer DEPTH = 24;               // clocks an op takes, and more
+    localparam integer TN = (W > H) ? W : H;     // table entries to build
+    // index -> row: floor(i * RW / 2^K) = floor(i / W) for every i < 2^AW
+    // (exact when 2^AW * W < 2^K).
+    localparam integer WB = $clog2(W + 1);
+    localparam integer K = AW + WB + 1;
+    localparam logic [63:0] RW = ((64'd1 << K) + 64'(W) - 64'd1) / 64'(W);
+    localparam integer RB = AW + 3;              // bits of RW (< 2^(AW+2) + 1)
+    localparam integer XB = (W > 2) ? $clog2(W) : 1;
+    localparam integer YB = (H > 2) ? $clog2(H) : 1;
 
     initial begin
-        if (NR < 1 || NR > 8 || PX < 2 || W > 65535 || H > 65535 || 64'(PX) * 64'(W) >= (64'd1 << 40))
-            $fatal(1, "spiv_rungs: 1..8 lanes and a frame of fewer than 2^40 / W pixels");
+        if (NR < 1 || NR > 8 || PX < 2 || W > 65535 || H > 65535 || K > 60 || NXB > 15 || NYB > 15)
+            $fatal(1, "spiv_rungs: 1..8 lanes, a frame of at most 2^(60 - log2 W) pixels");
     end
 
     // ---- the pair's configuration, checked at start -----------------------
-    typedef enum logic [2:0] {IDLE, EVENTS, RSCAN, ROPS, DRAIN, OUT} phase_t;
+    typedef enum logic [2:0] {IDLE, TABLES, EVENTS, RSCAN, ROPS, DRAIN, OUT} phase_t;
     phase_t phase;
     logic [7:0]  sep [NR];
     logic [NR-1:0] act;
@@ -123,17 +133,88 @@ module spiv_rungs #(
                 {node_ay, node_ax, node_vy, node_vx};
     end
 
+    // ---- the axis tables: column x -> (c0, wx0, wx1), row y likewise -------
+    // axis(p): q = clamp(16 p - first, -pitch, n pitch); i = clamp(q >> p,
+    // 0, n - 2); f = q - i pitch; weights (pitch - f, f); one node: (0,
+    // pitch, 0). Three stages per entry, one entry of each table per clock.
+    logic [15:0]        col_i [W], row_i [H];
+    logic signed [15:0] col_w0 [W], col_w1 [W], row_w0 [H], row_w1 [H];
+    logic [15:0]        tb_at;                       // entry being started
+    logic               t1_v, t2_v, t3_v;
+    logic [15:0]        t1_at, t2_at;
+    logic signed [35:0] t1_qx, t1_qy, t2_qx, t2_qy;
+    logic signed [35:0] t2_ix, t2_iy;
+    always_ff @(posedge clk) begin
+        logic signed [35:0] lo, hix, hiy, qx, qy, ix, iy;
+        lo = -(36'sd1 <<< ps);
+        hix = $signed({20'b0, cnx}) <<< ps;
+        hiy = $signed({20'b0, cny}) <<< ps;
+        // t1: the clamped coordinate
+        qx = $signed({16'b0, tb_at, 4'b0}) - 36'(cx0);
+        qy = $signed({16'b0, tb_at, 4'b0}) - 36'(cy0);
+        t1_qx <= (qx < lo) ? lo : (qx > hix) ? hix : qx;
+        t1_qy <= (qy < lo) ? lo : (qy > hiy) ? hiy : qy;
+        t1_v <= phase == TABLES && 32'(tb_at) < TN;
+        t1_at <= tb_at;
+        // t2: the node below it
+        ix = t1_qx >>> ps;
+        iy = t1_qy >>> ps;
+        if (ix > $signed({20'b0, cnx}) - 36'sd2) ix = $signed({20'b0, cnx}) - 36'sd2;
+        if (ix < 36'sd0) ix = 36'sd0;
+        if (iy > $signed({20'b0, cny}) - 36'sd2) iy = $signed({20'b0, cny}) - 36'sd2;
+        if (iy < 36'sd0) iy = 36'sd0;
+        t2_ix <= ix;
+        t2_iy <= iy;
+        t2_qx <= t1_qx;
+        t2_qy <= t1_qy;
+        t2_v <= t1_v;
+        t2_at <= t1_at;
+        // t3: the weights, written
+        if (t2_v && 32'(t2_at) < W) begin
+            logic signed [15:0] f;
+            f = 16'(t2_qx - (t2_ix <<< ps));
+            col_i[XB'(t2_at)] <= (cnx < 16'd2) ? 16'd0 : t2_ix[15:0];
+            col_w0[XB'(t2_at)] <= (cnx < 16'd2) ? (16'sd1 <<< ps) : (16'sd1 <<< ps) - f;
+            col_w1[XB'(t2_at)] <= (cnx < 16'd2) ? 16'sd0 : f;
+        end
+        if (t2_v && 32'(t2_at) < H) begin
+            logic signed [15:0] f;
+            f = 16'(t2_qy - (t2_iy <<< ps));
+            row_i[YB'(t2_at)] <= (cny < 16'd2) ? 16'd0 : t2_iy[15:0];
+            row_w0[YB'(t2_at)] <= (cny < 16'd2) ? (16'sd1 <<< ps) : (16'sd1 <<< ps) - f;
+            row_w1[YB'(t2_at)] <= (cny < 16'd2) ? 16'sd0 : f;
+        end
+        t3_v <= t2_v;
+    end
+
+    // ---- events in: two stages to the pixel's row and column ---------------
+    logic               e1_v, e2_v;
+    logic [AW-1:0]      e1_idx;
+    logic [31:0]        e1_tick, e2_tick;
+    logic               e1_neg, e2_neg;
+    logic [AW+RB-1:0]   e1_prod;
+    logic [15:0]        e2_x, e2_y;
+    wire  [AW+RB-1:0]   e1_row = e1_prod >> K;
+    always_ff @(posedge clk) begin
+        e1_v <= phase == EVENTS && ev_valid;
+        e1_idx <= AW'(ev_index);
+        e1_tick <= ev_tick;
+        e1_neg <= ev_neg;
+        e1_prod <= (AW+RB)'(AW'(ev_index)) * (AW+RB)'(RW);
+        e2_v <= e1_v;
+        e2_y <= 16'(e1_row);
+        e2_x <= 16'(32'(e1_idx) - 32'(e1_row) * 32'(W));
+        e2_tick <= e1_tick;
+        e2_neg <= e1_neg;
+    end
+    wire signed [33:0] ev_da = $signed({2'b0, cmid}) - $signed({2'b0, e2_tick});
+
     // ---- op issue: one event, or one rate block of one pixel --------------
     logic               op_v;
     logic [15:0]        op_x, op_y;
     logic [NR-1:0]      op_ea, op_eb;   // into frame A, frame B
     logic signed [9:0]  op_d2 [NR];
     logic signed [15:0] op_delta [NR];
-
-    // the event's pixel
-    wire [63:0] ev_row = (64'(ev_index) * RW) >> 40;
-    wire [31:0] ev_col = ev_index - 32'(ev_row[31:0] * 32'(W));
-    wire signed [33:0] ev_da = $signed({2'b0, cmid}) - $signed({2'b0, ev_tick});
 
     // rates: the next pixel to read, the pixel whose state arrives, the
     // pixel whose blocks go out, its rate, the block
@@ -186,15 +267,15 @@ module spiv_rungs #(
             op_d2[k] = '0;
             op_delta[k] = '0;
         end
-        if (phase == EVENTS && ev_valid) begin
+        if (e2_v) begin
             op_v = 1'b1;
-            op_x = ev_col[15:0];
-            op_y = ev_row[15:0];
+            op_x = e2_x;
+            op_y = e2_y;
             for (int k = 0; k < NR; k++) begin
                 op_ea[k] = ln_in_a[k];
                 op_eb[k] = ln_in_b[k];
                 op_d2[k] = ln_ev_d2[k];
-                op_delta[k] = ev_neg ? -16'sd64 : 16'sd64;
+                op_delta[k] = e2_neg ? -16'sd64 : 16'sd64;
             end
         end else if (phase == ROPS) begin
             op_v = 1'b1;
@@ -209,70 +290,49 @@ module spiv_rungs #(
         end
     end
 
-    // ---- stage 1: the pixel's place between nodes ---------------------------
-    // axis(p): q = clamp(16 p - first, -pitch, n pitch); i = clamp(q >> p, 0,
-    // n - 2); f = q - i pitch; weights (pitch - f, f); one node: (pitch, 0).
-    function automatic logic [47:0] axis(input logic [15:0] p, input logic signed [31:0] first,
-                                             input logic [15:0] n, input logic [3:0] sh);
-        logic signed [35:0] q, lo, hi, i;
-        logic signed [15:0] f, w0, w1;
-        lo = -(36'sd1 <<< sh);
-        hi = $signed({20'b0, n}) <<< sh;
-        q = $signed({16'b0, p, 4'b0}) - 36'(first);
-        if (q < lo) q = lo;
-        if (q > hi) q = hi;
-        i = q >>> sh;
-        if (i > $signed({20'b0, n}) - 36'sd2) i = $signed({20'b0, n}) - 36'sd2;
-        if (i < 36'sd0) i = 36'sd0;
-        f = 16'(q - (i <<< sh));
-        if (n < 16'd2) begin
-            i = 36'sd0;
-            w0 = 16'sd1 <<< sh;
-            w1 = 16'sd0;
-        end else begin
-            w0 = (16'sd1 <<< sh) - f;
-            w1 = f;
+    // The op's lane part travels with it: frames, d2, delta.
+    typedef struct packed {
+        logic [NR-1:0]        ea, eb;
+        logic [NR*10-1:0]     d2;
+        logic [NR*16-1:0]     delta;
+    } lanes_t;
+    lanes_t op_l;
+    always_comb begin
+        op_l.ea = op_v ? op_ea : '0;
+        op_l.eb = op_v ? op_eb : '0;
+        for (int k = 0; k < NR; k++) begin
+            op_l.d2[10*k +: 10] = op_d2[k];
+            op_l.delta[16*k +: 16] = op_delta[k];
         end
-        axis = {i[15:0], w0, w1};
-    endfunction
+    end
 
+    // ---- s1: the pixel's column and row entries ------------------------------
     logic               s1_v;
     logic [15:0]        s1_x, s1_y;
     logic [NXB-1:0]     s1_c0;
     logic [NYB-1:0]     s1_r0;
     logic signed [15:0] s1_wx0, s1_wx1, s1_wy0, s1_wy1;
-    logic [NR-1:0]      s1_ea, s1_eb;
-    logic signed [9:0]  s1_d2 [NR];
-    logic signed [15:0] s1_delta [NR];
+    lanes_t             s1_l;
     always_ff @(posedge clk) begin
-        logic [47:0] ax;
-        logic [47:0] ay;
-        ax = axis(op_x, cx0, cnx, ps);
-        ay = axis(op_y, cy0, cny, ps);
+        s1_c0 <= NXB'(col_i[XB'(op_x)]);
+        s1_wx0 <= col_w0[XB'(op_x)];
+        s1_wx1 <= col_w1[XB'(op_x)];
+        s1_r0 <= NYB'(row_i[YB'(op_y)]);
+        s1_wy0 <= row_w0[YB'(op_y)];
+        s1_wy1 <= row_w1[YB'(op_y)];
         s1_v <= op_v;
         s1_x <= op_x;
         s1_y <= op_y;
-        s1_c0 <= NXB'(ax[47:32]);
-        s1_wx0 <= ax[31:16];
-        s1_wx1 <= ax[15:0];
-        s1_r0 <= NYB'(ay[47:32]);
-        s1_wy0 <= ay[31:16];
-        s1_wy1 <= ay[15:0];
-        s1_ea <= op_v ? op_ea : '0;
-        s1_eb <= op_v ? op_eb : '0;
-        s1_d2 <= op_d2;
-        s1_delta <= op_delta;
+        s1_l <= op_l;
     end
 
-    // ---- stage 2: the four nodes read, one per bank --------------------------
+    // ---- s2: the four nodes read, one per bank --------------------------------
     logic               s2_v;
     logic [15:0]        s2_x, s2_y;
     logic               s2_rp, s2_cp;   // parity of r0 and c0
     logic [63:0]        s2_q [4];
     logic signed [15:0] s2_wx0, s2_wx1, s2_wy0, s2_wy1;
-    logic [NR-1:0]      s2_ea, s2_eb;
-    logic signed [9:0]  s2_d2 [NR];
-    logic signed [15:0] s2_delta [NR];
+    lanes_t             s2_l;
     wire [NYB-1:0] s1_r1 = s1_r0 + 1'b1;
     wire [NXB-1:0] s1_c1 = s1_c0 + 1'b1;
     always_ff @(posedge clk) begin
@@ -289,13 +349,11 @@ module spiv_rungs #(
         s2_rp <= s1_r0[0];
         s2_cp <= s1_c0[0];
         {s2_wx0, s2_wx1, s2_wy0, s2_wy1} <= {s1_wx0, s1_wx1, s1_wy0, s1_wy1};
-        s2_ea <= s1_ea;
-        s2_eb <= s1_eb;
-        s2_d2 <= s1_d2;
-        s2_delta <= s1_delta;
+        s2_l <= s1_l;
     end
 
-    // ---- stage 3: along x, per node row; stage 4: along y ---------------------
+    // ---- s3: products along x; s4: per node row; s5: products along y; s6:
+    // ---- the node sums Sv, Sa (weight pitch^2) --------------------------------
     // tap (r0 + dr, c0 + dc) is bank {r0[0] ^ dr, c0[0] ^ dc}
     logic [63:0] t00, t01, t10, t11;
     always_comb begin
@@ -306,118 +364,127 @@ module spiv_rungs #(
     end
     logic               s3_v;
     logic [15:0]        s3_x, s3_y;
-    logic signed [31:0] s3_g0 [4], s3_g1 [4];  // per field: rows r0, r1
+    logic signed [31:0] s3_p [4][4];    // field, tap
     logic signed [15:0] s3_wy0, s3_wy1;
-    logic [NR-1:0]      s3_ea, s3_eb;
-    logic signed [9:0]  s3_d2 [NR];
-    logic signed [15:0] s3_delta [NR];
+    lanes_t             s3_l;
     always_ff @(posedge clk) begin
         for (int fd = 0; fd < 4; fd++) begin
-            s3_g0[fd] <= 32'($signed(t00[16*fd +: 16])) * 32'(s2_wx0)
-                       + 32'($signed(t01[16*fd +: 16])) * 32'(s2_wx1);
-            s3_g1[fd] <= 32'($signed(t10[16*fd +: 16])) * 32'(s2_wx0)
-                       + 32'($signed(t11[16*fd +: 16])) * 32'(s2_wx1);
+            s3_p[fd][0] <= $signed(t00[16*fd +: 16]) * s2_wx0;
+            s3_p[fd][1] <= $signed(t01[16*fd +: 16]) * s2_wx1;
+            s3_p[fd][2] <= $signed(t10[16*fd +: 16]) * s2_wx0;
+            s3_p[fd][3] <= $signed(t11[16*fd +: 16]) * s2_wx1;
         end
         s3_v <= s2_v;
         s3_x <= s2_x;
         s3_y <= s2_y;
         {s3_wy0, s3_wy1} <= {s2_wy0, s2_wy1};
-        s3_ea <= s2_ea;
-        s3_eb <= s2_eb;
-        s3_d2 <= s2_d2;
-        s3_delta <= s2_delta;
+        s3_l <= s2_l;
     end
 
     logic               s4_v;
     logic [15:0]        s4_x, s4_y;
-    logic signed [47:0] s4_s [4];   // vx, vy, ax, ay sums (weight pitch^2)
-    logic [NR-1:0]      s4_ea, s4_eb;
-    logic signed [9:0]  s4_d2 [NR];
-    logic signed [15:0] s4_delta [NR];
+    logic signed [31:0] s4_g0 [4], s4_g1 [4];  // per field: rows r0, r1
+    logic signed [15:0] s4_wy0, s4_wy1;
+    lanes_t             s4_l;
     always_ff @(posedge clk) begin
-        for (int fd = 0; fd < 4; fd++)
-            s4_s[fd] <= (still ? 48'sd0 : 48'(s3_g0[fd]) * 48'(s3_wy0) + 48'(s3_g1[fd]) * 48'(s3_wy1));
+        for (int fd = 0; fd < 4; fd++) begin
+            s4_g0[fd] <= s3_p[fd][0] + s3_p[fd][1];
+            s4_g1[fd] <= s3_p[fd][2] + s3_p[fd][3];
+        end
         s4_v <= s3_v;
         s4_x <= s3_x;
         s4_y <= s3_y;
-        s4_ea <= s3_ea;
-        s4_eb <= s3_eb;
-        s4_d2 <= s3_d2;
-        s4_delta <= s3_delta;
+        {s4_wy0, s4_wy1} <= {s3_wy0, s3_wy1};
+        s4_l <= s3_l;
     end
 
-    // ---- per lane: stage 5 the products, stage 6 the target, stage 7 the
-    // ---- sample read, then the saturating add written back --------------------
-    // stage 5: d2^2 and the node sums' products: d2 Sv (58 bits), d2^2 Sa
-    // (66); stage 6: num = 64 d2 Sv + d2^2 Sa, shifted and clamped.
     logic               s5_v;
     logic [15:0]        s5_x, s5_y;
-    logic [NR-1:0]      s5_ea, s5_eb;
-    logic signed [15:0] s5_delta [NR];
-    logic signed [57:0] s5_vx [NR], s5_vy [NR];
-    logic signed [65:0] s5_ax [NR], s5_ay [NR];
+    logic signed [47:0] s5_p0 [4], s5_p1 [4];
+    lanes_t             s5_l;
     always_ff @(posedge clk) begin
-        for (int k = 0; k < NR; k++) begin
-            logic signed [17:0] dd;
-            dd = 18'(s4_d2[k] * s4_d2[k]);
-            s5_vx[k] <= s4_d2[k] * s4_s[0];
-            s5_vy[k] <= s4_d2[k] * s4_s[1];
-            s5_ax[k] <= dd * s4_s[2];
-            s5_ay[k] <= dd * s4_s[3];
+        for (int fd = 0; fd < 4; fd++) begin
+            s5_p0[fd] <= 48'(s4_g0[fd]) * 48'(s4_wy0);
+            s5_p1[fd] <= 48'(s4_g1[fd]) * 48'(s4_wy1);
         end
         s5_v <= s4_v;
         s5_x <= s4_x;
         s5_y <= s4_y;
-        s5_ea <= s4_ea;
-        s5_eb <= s4_eb;
-        s5_delta <= s4_delta;
+        s5_l <= s4_l;
     end
-
-    // floor((num + 2^(s-1)) / 2^s), s = 2p + 19, clamped to i16
-    function automatic logic signed [15:0] shifted(input logic signed [65:0] num, input logic [3:0] sh);
-        logic signed [65:0] q;
-        logic [5:0] s;
-        s = 6'({sh, 1'b0}) + 6'd19;
-        q = (num + (66'sd1 <<< (s - 6'd1))) >>> s;
-        if (q > 66'sd32767) q = 66'sd32767;
-        if (q < -66'sd32768) q = -66'sd32768;
-        shifted = q[15:0];
-    endfunction
 
     logic               s6_v;
     logic [15:0]        s6_x, s6_y;
-    logic [NR-1:0]      s6_oa, s6_ob;
-    logic signed [15:0] s6_dx [NR], s6_dy [NR];
-    logic signed [15:0] s6_dl [NR];
+    logic signed [47:0] s6_s [4];       // vx, vy, ax, ay
+    lanes_t             s6_l;
     always_ff @(posedge clk) begin
-        for (int k = 0; k < NR; k++) begin
-            s6_dx[k] <= shifted(66'(s5_vx[k]) * 66'sd64 + s5_ax[k], ps);
-            s6_dy[k] <= shifted(66'(s5_vy[k]) * 66'sd64 + s5_ay[k], ps);
-        end
+        for (int fd = 0; fd < 4; fd++)
+            s6_s[fd] <= still ? 48'sd0 : s5_p0[fd] + s5_p1[fd];
         s6_v <= s5_v;
         s6_x <= s5_x;
         s6_y <= s5_y;
-        s6_oa <= s5_ea;
-        s6_ob <= s5_eb;
-        s6_dl <= s5_delta;
+        s6_l <= s5_l;
     end
 
-    // stage 7: the target pixel, if in the image
-    logic [NR-1:0]      s6_ea, s6_eb;
-    logic [AW-1:0]      s6_addr [NR];
-    logic signed [15:0] s6_delta [NR];
+    // ---- per lane: s7 d2 times the sums' halves (S = Shi 2^24 + Slo), s8
+    // ---- the products, s9 num = 64 d2 Sv + d2^2 Sa + 2^(s-1), s10 num >> s
+    // ---- clamped (s = 2p + 19), s11 the target pixel, if in the image --------
+    logic               s7_v, s8_v, s9_v, s10_v;
+    logic [15:0]        s7_x, s7_y, s8_x, s8_y, s9_x, s9_y, s10_x, s10_y;
+    lanes_t             s7_l, s8_l, s9_l, s10_l;
+    logic signed [35:0] s7_vl [NR][2], s7_vh [NR][2];   // d2 x Slo, d2 x Shi, for vx, vy
+    logic signed [43:0] s7_al [NR][2], s7_ah [NR][2];   // d2^2 x Slo, d2^2 x Shi, for ax, ay
+    logic signed [65:0] s8_v2 [NR][2], s8_a2 [NR][2];
+    logic signed [65:0] s9_num [NR][2];
+    logic signed [15:0] s10_d [NR][2];
+    always_ff @(posedge clk) begin
+        for (int k = 0; k < NR; k++) begin
+            logic signed [9:0] d;
+            logic signed [18:0] dd;
+            d = s6_l.d2[10*k +: 10];
+            dd = 19'(d * d);
+            for (int a = 0; a < 2; a++) begin
+                s7_vl[k][a] <= d * $signed({1'b0, s6_s[a][23:0]});
+                s7_vh[k][a] <= d * $signed(s6_s[a][47:24]);
+                s7_al[k][a] <= dd * $signed({1'b0, s6_s[2 + a][23:0]});
+                s7_ah[k][a] <= dd * $signed(s6_s[2 + a][47:24]);
+            end
+        end
+        {s7_v, s7_x, s7_y, s7_l} <= {s6_v, s6_x, s6_y, s6_l};
+        for (int k = 0; k < NR; k++)
+            for (int a = 0; a < 2; a++) begin
+                s8_v2[k][a] <= (66'(s7_vh[k][a]) <<< 30) + (66'(s7_vl[k][a]) <<< 6);
+                s8_a2[k][a] <= (66'(s7_ah[k][a]) <<< 24) + 66'(s7_al[k][a]);
+            end
+        {s8_v, s8_x, s8_y, s8_l} <= {s7_v, s7_x, s7_y, s7_l};
+        for (int k = 0; k < NR; k++)
+            for (int a = 0; a < 2; a++)
+                s9_num[k][a] <= s8_v2[k][a] + s8_a2[k][a] + (66'sd1 <<< (6'({ps, 1'b0}) + 6'd18));
+        {s9_v, s9_x, s9_y, s9_l} <= {s8_v, s8_x, s8_y, s8_l};
+        for (int k = 0; k < NR; k++)
+            for (int a = 0; a < 2; a++) begin
+                logic signed [65:0] q;
+                q = s9_num[k][a] >>> (6'({ps, 1'b0}) + 6'd19);
+                s10_d[k][a] <= (q > 66'sd32767) ? 16'sd32767 : (q < -66'sd32768) ? -16'sd32768 : q[15:0];
+            end
+        {s10_v, s10_x, s10_y, s10_l} <= {s9_v, s9_x, s9_y, s9_l};
+    end
+
+    logic [NR-1:0]      s11_ea, s11_eb;
+    logic [AW-1:0]      s11_addr [NR];
+    logic signed [15:0] s11_delta [NR];
     always_ff @(posedge clk) begin
         for (int k = 0; k < NR; k++) begin
             logic signed [17:0] tx, ty;
             logic in_image;
-            tx = $signed({2'b0, s6_x}) + 18'(s6_dx[k]);
-            ty = $signed({2'b0, s6_y}) + 18'(s6_dy[k]);
-            in_image = s6_v && tx >= 0 && ty >= 0 && tx < $signed(18'(W)) && ty < $signed(18'(H));
-            s6_ea[k] <= in_image && s6_oa[k];
-            s6_eb[k] <= in_image && s6_ob[k];
-            s6_addr[k] <= AW'(32'(ty[15:0]) * 32'(W) + 32'(tx[15:0]));
+            tx = $signed({2'b0, s10_x}) + 18'(s10_d[k][0]);
+            ty = $signed({2'b0, s10_y}) + 18'(s10_d[k][1]);
+            in_image = s10_v && tx >= 0 && ty >= 0 && tx < $signed(18'(W)) && ty < $signed(18'(H));
+            s11_ea[k] <= in_image && s10_l.ea[k];
+            s11_eb[k] <= in_image && s10_l.eb[k];
+            s11_addr[k] <= AW'(32'(ty[15:0]) * 32'(W) + 32'(tx[15:0]));
+            s11_delta[k] <= s10_l.delta[16*k +: 16];
         end
-        s6_delta <= s6_dl;
     end
 
     // out phase: the samples read, A and B side by side
@@ -443,7 +510,7 @@ module spiv_rungs #(
         floored = (whole >= $signed({8'b0, fl, 6'b0})) ? whole[15:0] : 16'sd0;
     endfunction
 
-    // One frame RAM of a lane: the sample read at stage 7, the saturating
+    // One frame RAM of a lane: the sample read at s12, the saturating
     // sum written back the next clock (the previous write forwarded when
     // it was to the same pixel), cleared as the out phase reads it.
     for (genvar k = 0; k < NR; k++) begin : lane
@@ -457,14 +524,14 @@ module spiv_rungs #(
             logic               en, fw_v;
             logic [AW-1:0]      addr, fw_addr;
             logic signed [15:0] delta, q, fw_val;
-            wire [AW-1:0] rd = o_run ? o_pix : s6_addr[k];
+            wire [AW-1:0] rd = o_run ? o_pix : s11_addr[k];
             wire signed [15:0] q_eff = (fw_v && fw_addr == addr) ? fw_val : q;
             wire signed [15:0] nv = sat16(q_eff, delta);
             always_ff @(posedge clk) begin
                 q <= mem[rd];
-                en <= (h == 0 ? s6_ea[k] : s6_eb[k]) && !o_run;
+                en <= (h == 0 ? s11_ea[k] : s11_eb[k]) && !o_run;
                 addr <= rd;
-                delta <= s6_delta[k];
+                delta <= s11_delta[k];
                 if (o1_v) begin
                     mem[o1_pix] <= '0;
                 end else if (en) begin
@@ -486,7 +553,7 @@ module spiv_rungs #(
     assign out_index = o1_pix;
 
     // ---- the sequence ---------------------------------------------------------
-    logic [3:0] drain;
+    logic [4:0] drain;
     assign ev_ready = phase == EVENTS;
     assign busy = phase != IDLE;
     always_ff @(posedge clk) begin
@@ -533,13 +600,22 @@ module spiv_rungs #(
                 ps <= (p == 5'd31) ? 4'd4 : p[3:0];
                 {cnx, cny, cx0, cy0, cmid} <= {nx, ny, x0, y0, mid};
                 error <= bad;
+                tb_at <= '0;
                 if (bad) begin
                     done <= 1'b1;
                 end else begin
-                    phase <= EVENTS;
+                    phase <= TABLES;
                 end
             end
+            TABLES: begin
+                // One entry of each table per clock; the last written
+                // three clocks after it started.
+                tb_at <= tb_at + 1'b1;
+                if (32'(tb_at) == TN + 3) phase <= EVENTS;
+            end
             EVENTS: if (ev_end) begin
+                // The last events are in e1 and e2: the first rate block
+                // goes out three clocks from now at the soonest, after them.
                 phase <= RSCAN;
                 pix <= '0;
                 px_x <= '0;
@@ -589,7 +665,7 @@ module spiv_rungs #(
             end
             DRAIN: begin
                 drain <= drain + 1'b1;
-                if (drain == 4'(DEPTH)) begin
+                if (drain == 5'(DEPTH)) begin
                     phase <= OUT;
                     o_run <= 1'b1;
                     o_pix <= '0;

@@ -336,6 +336,8 @@ int main(int argc, char** argv) {
             ++refused;
             continue;
         }
+        // The tables take W + H clocks at most.
+        for (int k = 0; k < W + H + 8 && !b.m.ev_ready && !b.m.done; ++k) b.clock();
         if (b.m.error || !b.m.ev_ready) {
             std::fprintf(stderr, "%s: the RTL refused the pair\n", c.name);
             return 1;
