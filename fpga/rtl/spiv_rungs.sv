@@ -290,16 +290,19 @@ module spiv_rungs #(
         end
     end
 
-    // The op's lane part travels with it: frames, d2, delta.
+    // The op's lane part travels with it: frames, d2, d2^2 (from s2 on),
+    // delta.
     typedef struct packed {
         logic [NR-1:0]        ea, eb;
         logic [NR*10-1:0]     d2;
+        logic [NR*19-1:0]     dd;
         logic [NR*16-1:0]     delta;
     } lanes_t;
     lanes_t op_l;
     always_comb begin
         op_l.ea = op_v ? op_ea : '0;
         op_l.eb = op_v ? op_eb : '0;
+        op_l.dd = '0;
         for (int k = 0; k < NR; k++) begin
             op_l.d2[10*k +: 10] = op_d2[k];
             op_l.delta[16*k +: 16] = op_delta[k];
@@ -350,6 +353,11 @@ module spiv_rungs #(
         s2_cp <= s1_c0[0];
         {s2_wx0, s2_wx1, s2_wy0, s2_wy1} <= {s1_wx0, s1_wx1, s1_wy0, s1_wy1};
         s2_l <= s1_l;
+        for (int k = 0; k < NR; k++) begin
+            logic signed [9:0] d;
+            d = s1_l.d2[10*k +: 10];
+            s2_l.dd[19*k +: 19] <= 19'(d * d);
+        end
     end
 
     // ---- s3: products along x; s4: per node row; s5: products along y; s6:
@@ -442,7 +450,7 @@ module spiv_rungs #(
             logic signed [9:0] d;
             logic signed [18:0] dd;
             d = s6_l.d2[10*k +: 10];
-            dd = 19'(d * d);
+            dd = s6_l.dd[19*k +: 19];
             for (int a = 0; a < 2; a++) begin
                 s7_vl[k][a] <= d * $signed({1'b0, s6_s[a][23:0]});
                 s7_vh[k][a] <= d * $signed(s6_s[a][47:24]);
