@@ -105,11 +105,12 @@ module spiv_rungs #(
     end
 
     // ---- the pair's configuration, checked at start -----------------------
-    typedef enum logic [2:0] {IDLE, TABLES, EVENTS, RSCAN, ROPS, DRAIN, OUT} phase_t;
+    typedef enum logic [3:0] {IDLE, TABLES, EVENTS, RSCAN, RPREP, ROPS, DRAIN, OUT} phase_t;
     phase_t phase;
     logic [7:0]  sep [NR];
     logic [NR-1:0] act;
     logic [5:0]  blocks [NR];   // ceil(s / 8), at most 32
+    logic [3:0]  n_last [NR];   // ticks of the last block, 1..8
     logic [5:0]  most_blocks;
     logic [2:0]  floor_spikes [NR];
     logic        still;
@@ -190,7 +191,8 @@ module spiv_rungs #(
     // ---- events in: two stages to the pixel's row and column ---------------
     logic               e1_v, e2_v;
     logic [AW-1:0]      e1_idx;
-    logic [31:0]        e1_tick, e2_tick;
+    logic [31:0]        e1_tick;
+    logic signed [33:0] e2_da;          // mid - tick
     logic               e1_neg, e2_neg;
     logic [AW+RB-1:0]   e1_prod;
     logic [15:0]        e2_x, e2_y;
@@ -204,10 +206,10 @@ module spiv_rungs #(
         e2_v <= e1_v;
         e2_y <= 16'(e1_row);
         e2_x <= 16'(32'(e1_idx) - 32'(e1_row) * 32'(W));
-        e2_tick <= e1_tick;
+        e2_da <= $signed({2'b0, cmid}) - $signed({2'b0, e1_tick});
         e2_neg <= e1_neg;
     end
-    wire signed [33:0] ev_da = $signed({2'b0, cmid}) - $signed({2'b0, e2_tick});
+    wire signed [33:0] ev_da = e2_da;
 
     // ---- op issue: one event, or one rate block of one pixel --------------
     logic               op_v;
@@ -226,6 +228,9 @@ module spiv_rungs #(
     logic [15:0]   cur_x, cur_y;
     logic [15:0]   r16;
     logic [5:0]    blk;
+    // rate_samples(r, n) = (r * n * 64 + 2^15) >> 16 (at most 512): of a
+    // whole block, and of each lane's last
+    logic signed [15:0] sub8, sub_last [NR];
     wire  [31:0]   rate_rounded = (rate_q24 + 32'd128) >> 8;
     wire           periodic = rate_flags[7] && rate_flags[3:0] >= 4'd2;
     wire  [15:0]   rate_now = periodic ? 16'd0
@@ -245,16 +250,15 @@ module spiv_rungs #(
         wire signed [11:0] d2a = 12'sd2 * da - s12 - 12'sd1;
         wire signed [11:0] d2b = 12'sd2 * da + s12 - 12'sd1;
         assign ln_ev_d2[k] = ln_in_b[k] ? d2b[9:0] : d2a[9:0];
-        // A rate block: a = 8 blk ticks in, n = min(8, s - a); d2 = s - 2a - n.
-        wire [8:0] ra = 9'({blk, 3'b0});
-        wire [8:0] left = 9'(sep[k]) - ra;
-        wire [8:0] rn = (left >= 9'd8) ? 9'd8 : left;
-        wire signed [11:0] rd2 = s12 - $signed({2'b0, ra, 1'b0}) - $signed({3'b0, rn});
+        // A rate block: a = 8 blk ticks in, n = min(8, s - a) (8 but in
+        // the last block); d2 = s - 2a - n. Its samples, rate_samples(r,
+        // n), were worked out for the pixel (RPREP).
+        wire last = blk == blocks[k] - 6'd1;
+        wire [8:0] rn = last ? 9'(n_last[k]) : 9'd8;
+        wire signed [11:0] rd2 = s12 - $signed({1'b0, blk, 4'b0}) - $signed({3'b0, rn});
         assign ln_rate_d2[k] = rd2[9:0];
         assign ln_blk_on[k] = act[k] && 6'(blk) < blocks[k];
-        // rate_samples: (r * n * 64 + 2^15) >> 16, at most 512.
-        wire [31:0] sub = (32'(r16) * 32'(rn) * 32'd64 + 32'd32768) >> 16;
-        assign ln_rate_sub[k] = -$signed(sub[15:0]);
+        assign ln_rate_sub[k] = -(last ? sub_last[k] : sub8);
     end
 
     always_comb begin
@@ -589,6 +593,7 @@ module spiv_rungs #(
                     sep[k] <= s;
                     act[k] <= k < 32'(nsep);
                     blocks[k] <= 6'((9'(s) + 9'd7) >> 3);
+                    n_last[k] <= 4'(9'(s) - 9'({6'((9'(s) + 9'd7) >> 3) - 6'd1, 3'b0}));
                     floor_spikes[k] <= 3'd1 + 3'(s >= 8'd36) + 3'(s >= 8'd100) + 3'(s >= 8'd196);
                     if (k < 32'(nsep)) begin
                         if (s < 8'd2) bad = 1'b1;
@@ -639,7 +644,7 @@ module spiv_rungs #(
                     cur_y <= rq_y;
                     blk <= '0;
                     rq_v <= 1'b0;
-                    phase <= ROPS;
+                    phase <= RPREP;
                     pix <= rq_pix + 32'd1;
                     if (rq_x == 16'(W - 1)) begin
                         px_x <= '0;
@@ -666,6 +671,12 @@ module spiv_rungs #(
                     phase <= DRAIN;
                     drain <= '0;
                 end
+            end
+            RPREP: begin
+                sub8 <= 16'((32'(r16) * 32'd512 + 32'd32768) >> 16);
+                for (int k = 0; k < NR; k++)
+                    sub_last[k] <= 16'((32'(r16) * 32'(n_last[k]) * 32'd64 + 32'd32768) >> 16);
+                phase <= ROPS;
             end
             ROPS: begin
                 if (blk == most_blocks - 6'd1) phase <= RSCAN;
