@@ -366,13 +366,20 @@ module spiv_rungs #(
 
     // ---- s3: products along x; s4: per node row; s5: products along y; s6:
     // ---- the node sums Sv, Sa (weight pitch^2) --------------------------------
-    // tap (r0 + dr, c0 + dc) is bank {r0[0] ^ dr, c0[0] ^ dc}
-    logic [63:0] t00, t01, t10, t11;
-    always_comb begin
-        t00 = s2_q[{s2_rp, s2_cp}];
-        t01 = s2_q[{s2_rp, ~s2_cp}];
-        t10 = s2_q[{~s2_rp, s2_cp}];
-        t11 = s2_q[{~s2_rp, ~s2_cp}];
+    // s2t: the taps from the banks: tap (r0 + dr, c0 + dc) is bank
+    // {r0[0] ^ dr, c0[0] ^ dc}
+    logic [63:0]        t00, t01, t10, t11;
+    logic               st_v;
+    logic [15:0]        st_x, st_y;
+    logic signed [15:0] st_wx0, st_wx1, st_wy0, st_wy1;
+    lanes_t             st_l;
+    always_ff @(posedge clk) begin
+        t00 <= s2_q[{s2_rp, s2_cp}];
+        t01 <= s2_q[{s2_rp, ~s2_cp}];
+        t10 <= s2_q[{~s2_rp, s2_cp}];
+        t11 <= s2_q[{~s2_rp, ~s2_cp}];
+        {st_v, st_x, st_y, st_l} <= {s2_v, s2_x, s2_y, s2_l};
+        {st_wx0, st_wx1, st_wy0, st_wy1} <= {s2_wx0, s2_wx1, s2_wy0, s2_wy1};
     end
     logic               s3_v;
     logic [15:0]        s3_x, s3_y;
@@ -381,16 +388,16 @@ module spiv_rungs #(
     lanes_t             s3_l;
     always_ff @(posedge clk) begin
         for (int fd = 0; fd < 4; fd++) begin
-            s3_p[fd][0] <= $signed(t00[16*fd +: 16]) * s2_wx0;
-            s3_p[fd][1] <= $signed(t01[16*fd +: 16]) * s2_wx1;
-            s3_p[fd][2] <= $signed(t10[16*fd +: 16]) * s2_wx0;
-            s3_p[fd][3] <= $signed(t11[16*fd +: 16]) * s2_wx1;
+            s3_p[fd][0] <= $signed(t00[16*fd +: 16]) * st_wx0;
+            s3_p[fd][1] <= $signed(t01[16*fd +: 16]) * st_wx1;
+            s3_p[fd][2] <= $signed(t10[16*fd +: 16]) * st_wx0;
+            s3_p[fd][3] <= $signed(t11[16*fd +: 16]) * st_wx1;
         end
-        s3_v <= s2_v;
-        s3_x <= s2_x;
-        s3_y <= s2_y;
-        {s3_wy0, s3_wy1} <= {s2_wy0, s2_wy1};
-        s3_l <= s2_l;
+        s3_v <= st_v;
+        s3_x <= st_x;
+        s3_y <= st_y;
+        {s3_wy0, s3_wy1} <= {st_wy0, st_wy1};
+        s3_l <= st_l;
     end
 
     logic               s4_v;
