@@ -24,7 +24,7 @@
 // the division is a shift. The node sums are separable (along x, then
 // y): the same integers as the core's sum over the four products. Each
 // column's and row's place between nodes is worked out once per pair
-// into two small tables (W + H clocks after `start`).
+// into two small tables (max(W, H) + 4 clocks after `start`).
 //
 // Sequence: write the flow's nodes (node_we, while idle), pulse `start`
 // with the pair's configuration held steady until `done`; once ev_ready
@@ -141,7 +141,7 @@ module spiv_rungs #(
     logic [15:0]        col_i [W], row_i [H];
     logic signed [15:0] col_w0 [W], col_w1 [W], row_w0 [H], row_w1 [H];
     logic [15:0]        tb_at;                       // entry being started
-    logic               t1_v, t2_v, t3_v;
+    logic               t1_v, t2_v;
     logic [15:0]        t1_at, t2_at;
     logic signed [35:0] t1_qx, t1_qy, t2_qx, t2_qy;
     logic signed [35:0] t2_ix, t2_iy;
@@ -185,7 +185,6 @@ module spiv_rungs #(
             row_w0[YB'(t2_at)] <= (cny < 16'd2) ? (16'sd1 <<< ps) : (16'sd1 <<< ps) - f;
             row_w1[YB'(t2_at)] <= (cny < 16'd2) ? 16'sd0 : f;
         end
-        t3_v <= t2_v;
     end
 
     // ---- events in: two stages to the pixel's row and column ---------------
