@@ -45,15 +45,20 @@ for LP in 8 32; do
   }
 done
 
-# The rung frames: eight lanes (a pair's most rungs).
-verilator --cc --exe --build -O2 -j 2 -Wall -Wno-DECLFILENAME -Wno-UNUSEDSIGNAL \
-  --Mdir "$work/rungs" -GW=$W -GH=$H -GNR=8 \
-  -CFLAGS "-DTB_W=$W -DTB_H=$H -DTB_NR=8 -I$root/ffi/include" \
-  -LDFLAGS "$target/debug/libspiv_ffi.a -lpthread -ldl -lm" \
-  "$root/fpga/rtl/spiv_rungs.sv" "$root/fpga/tb/tb_rungs.cpp" >"$work/verilator-rungs.log" 2>&1 || {
-  tail -30 "$work/verilator-rungs.log"
-  exit 1
-}
+# The rung frames: eight lanes (a pair's most rungs), on the model's
+# size and on the sensor's 400x250 (a frame that is no power of two, node
+# grids up to 128 across).
+for size in "$W $H 6" "400 250 7"; do
+  read -r RW RH RN <<<"$size"
+  verilator --cc --exe --build -O2 -j 2 -Wall -Wno-DECLFILENAME -Wno-UNUSEDSIGNAL \
+    --Mdir "$work/rungs$RW" -GW=$RW -GH=$RH -GNR=8 -GNXB=$RN -GNYB=$RN \
+    -CFLAGS "-DTB_W=$RW -DTB_H=$RH -DTB_NR=8 -I$root/ffi/include" \
+    -LDFLAGS "$target/debug/libspiv_ffi.a -lpthread -ldl -lm" \
+    "$root/fpga/rtl/spiv_rungs.sv" "$root/fpga/tb/tb_rungs.cpp" >"$work/verilator-rungs.log" 2>&1 || {
+    tail -30 "$work/verilator-rungs.log"
+    exit 1
+  }
+done
 
 for scene in paper-linear vortex-array; do
   "$spiv" simulate --scene "$scene" --seed 7 --width $W --height $H --ticks 300 \
@@ -62,6 +67,8 @@ done
 # Long enough for a pair of 255-tick rungs.
 "$spiv" simulate --scene paper-linear --seed 9 --width $W --height $H --ticks 560 \
   --out "$work/paper-linear-long" >/dev/null
+# The sensor's size, long enough for the live loop's rungs.
+"$spiv" simulate --scene paper-linear --seed 101 --ticks 560 --out "$work/paper-linear-400" >/dev/null
 
 # The worst case: every pixel spiking on every tick (every count at the
 # window's length, every gray level at full scale).
@@ -116,6 +123,8 @@ done
 # spiking at random, half of them each tick (most events).
 for r in firmware-sim/cortex-m4/data/strip.dat "$work/paper-linear/spikes.dat" \
   "$work/vortex-array/spikes.dat" "$work/paper-linear-long/spikes.dat" "$work/all.dat" noise:200; do
-  got=$("$work/rungs/Vspiv_rungs" "$r")
+  got=$("$work/rungs$W/Vspiv_rungs" "$r")
   printf 'rungs    %-31s %s\n' "$(basename "$(dirname "$r")")/$(basename "$r")" "$got"
 done
+got=$("$work/rungs400/Vspiv_rungs" "$work/paper-linear-400/spikes.dat")
+printf 'rungs    %-31s %s\n' "400x250 paper-linear/spikes.dat" "$got"
