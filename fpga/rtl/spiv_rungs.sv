@@ -444,12 +444,16 @@ module spiv_rungs #(
         s6_l <= s5_l;
     end
 
-    // ---- per lane: s7 d2 times the sums' halves (S = Shi 2^24 + Slo), s8
-    // ---- the products, s9 num = 64 d2 Sv + d2^2 Sa + 2^(s-1), s10 num >> s
-    // ---- clamped (s = 2p + 19), s11 the target pixel, if in the image --------
-    logic               s7_v, s8_v, s9_v, s10_v;
-    logic [15:0]        s7_x, s7_y, s8_x, s8_y, s9_x, s9_y, s10_x, s10_y;
-    lanes_t             s7_l, s8_l, s9_l, s10_l;
+    // ---- per lane: s7 d2 and d2^2 times the sums' 12-bit pieces (S = P3
+    // ---- 2^36 + P2 2^24 + P1 2^12 + P0: one 18x18 multiplier each), s7b
+    // ---- the halves (S = Shi 2^24 + Slo), s8 the products, s9 num = 64 d2 Sv
+    // ---- + d2^2 Sa + 2^(s-1), s10 num >> s clamped (s = 2p + 19), s11 the
+    // ---- target pixel, if in the image -----------------------------------------
+    logic               s7_v, s7b_v, s8_v, s9_v, s10_v;
+    logic [15:0]        s7_x, s7_y, s7b_x, s7b_y, s8_x, s8_y, s9_x, s9_y, s10_x, s10_y;
+    lanes_t             s7_l, s7b_l, s8_l, s9_l, s10_l;
+    logic signed [22:0] s7_vp [NR][2][4];                 // d2 x Pi, for vx, vy
+    logic signed [30:0] s7_ap [NR][2][4];                 // d2^2 x Pi, for ax, ay
     logic signed [35:0] s7_vl [NR][2], s7_vh [NR][2];   // d2 x Slo, d2 x Shi, for vx, vy
     logic signed [43:0] s7_al [NR][2], s7_ah [NR][2];   // d2^2 x Slo, d2^2 x Shi, for ax, ay
     logic signed [65:0] s8_v2 [NR][2], s8_a2 [NR][2];
@@ -458,23 +462,33 @@ module spiv_rungs #(
     always_ff @(posedge clk) begin
         for (int k = 0; k < NR; k++) begin
             logic signed [9:0] d;
-            logic signed [18:0] dd;
+            logic signed [17:0] dd;     // at most 254^2 < 2^17
             d = s6_l.d2[10*k +: 10];
-            dd = s6_l.dd[19*k +: 19];
+            dd = $signed(s6_l.dd[19*k +: 18]);
             for (int a = 0; a < 2; a++) begin
-                s7_vl[k][a] <= d * $signed({1'b0, s6_s[a][23:0]});
-                s7_vh[k][a] <= d * $signed(s6_s[a][47:24]);
-                s7_al[k][a] <= dd * $signed({1'b0, s6_s[2 + a][23:0]});
-                s7_ah[k][a] <= dd * $signed(s6_s[2 + a][47:24]);
+                for (int i = 0; i < 3; i++) begin
+                    s7_vp[k][a][i] <= d * $signed({1'b0, s6_s[a][12*i +: 12]});
+                    s7_ap[k][a][i] <= dd * $signed({1'b0, s6_s[2 + a][12*i +: 12]});
+                end
+                s7_vp[k][a][3] <= d * $signed(s6_s[a][47:36]);
+                s7_ap[k][a][3] <= dd * $signed(s6_s[2 + a][47:36]);
             end
         end
         {s7_v, s7_x, s7_y, s7_l} <= {s6_v, s6_x, s6_y, s6_l};
         for (int k = 0; k < NR; k++)
             for (int a = 0; a < 2; a++) begin
+                s7_vl[k][a] <= 36'(s7_vp[k][a][0]) + (36'(s7_vp[k][a][1]) <<< 12);
+                s7_vh[k][a] <= 36'(s7_vp[k][a][2]) + (36'(s7_vp[k][a][3]) <<< 12);
+                s7_al[k][a] <= 44'(s7_ap[k][a][0]) + (44'(s7_ap[k][a][1]) <<< 12);
+                s7_ah[k][a] <= 44'(s7_ap[k][a][2]) + (44'(s7_ap[k][a][3]) <<< 12);
+            end
+        {s7b_v, s7b_x, s7b_y, s7b_l} <= {s7_v, s7_x, s7_y, s7_l};
+        for (int k = 0; k < NR; k++)
+            for (int a = 0; a < 2; a++) begin
                 s8_v2[k][a] <= (66'(s7_vh[k][a]) <<< 30) + (66'(s7_vl[k][a]) <<< 6);
                 s8_a2[k][a] <= (66'(s7_ah[k][a]) <<< 24) + 66'(s7_al[k][a]);
             end
-        {s8_v, s8_x, s8_y, s8_l} <= {s7_v, s7_x, s7_y, s7_l};
+        {s8_v, s8_x, s8_y, s8_l} <= {s7b_v, s7b_x, s7b_y, s7b_l};
         for (int k = 0; k < NR; k++)
             for (int a = 0; a < 2; a++)
                 s9_num[k][a] <= s8_v2[k][a] + s8_a2[k][a] + (66'sd1 <<< (6'({ps, 1'b0}) + 6'd18));
