@@ -120,9 +120,12 @@ done
 # FILE: pairs of rung frames along still, uniform, rotating, one-node,
 # full-range and gathering flows, at separations up to what the recording
 # holds (255 ticks on the long one); noise:N is N planes of pixels
-# spiking at random, half of them each tick (most events).
+# spiking at random, half of them each tick (most events); dim:N pixels
+# spiking at random at their own rates, 1 in 500 to 1 in 10 ticks (every
+# static rate, and the rounding of its blocks).
 for r in firmware-sim/cortex-m4/data/strip.dat "$work/paper-linear/spikes.dat" \
-  "$work/vortex-array/spikes.dat" "$work/paper-linear-long/spikes.dat" "$work/all.dat" noise:200; do
+  "$work/vortex-array/spikes.dat" "$work/paper-linear-long/spikes.dat" "$work/all.dat" noise:200 \
+  dim:560; do
   got=$("$work/rungs$W/Vspiv_rungs" "$r")
   printf 'rungs    %-31s %s\n' "$(basename "$(dirname "$r")")/$(basename "$r")" "$got"
 done

@@ -7,6 +7,8 @@
 //
 //   tb_rungs FILE.dat
 //   tb_rungs noise:N      N planes, each pixel spiking with probability 1/2
+//   tb_rungs dim:N        N planes, each pixel spiking at random at its own
+//                         rate, 1 in 500 to 1 in 10 ticks
 //
 // The pairs: no motion; a uniform flow; a smooth field of rotation and
 // shear with accelerations, on a grid smaller than the image (the flow
@@ -211,11 +213,29 @@ struct Bench {
 int main(int argc, char** argv) {
     Verilated::commandArgs(argc, argv);
     if (argc < 2) {
-        std::fprintf(stderr, "usage: tb_rungs FILE.dat | noise:N\n");
+        std::fprintf(stderr, "usage: tb_rungs FILE.dat | noise:N | dim:N\n");
         return 2;
     }
     std::vector<uint8_t> dat;
-    if (std::strncmp(argv[1], "noise:", 6) == 0) {
+    if (std::strncmp(argv[1], "dim:", 4) == 0) {
+        // Each pixel spiking at random at its own rate, 1 in 500 to 1 in 10
+        // ticks (log-uniform): pixels the light model predicts by their
+        // rate, at every rate.
+        const size_t n = std::strtoul(argv[1] + 4, nullptr, 10);
+        uint64_t x = 0x9E3779B97F4A7C15ull;
+        auto next = [&x]() {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            return (double)(x >> 11) / 9007199254740992.0;
+        };
+        std::vector<double> q(PX);
+        for (auto& v : q) v = 0.002 * std::pow(50.0, next());
+        dat.assign(n * PLANE_BYTES, 0);
+        for (size_t t = 0; t < n; ++t)
+            for (int p = 0; p < PX; ++p)
+                if (next() < q[p]) dat[t * PLANE_BYTES + p / 8] |= (uint8_t)(1u << (p % 8));
+    } else if (std::strncmp(argv[1], "noise:", 6) == 0) {
         const size_t n = std::strtoul(argv[1] + 6, nullptr, 10);
         uint64_t x = 0x2545F4914F6CDD1Dull;
         dat.resize(n * PLANE_BYTES);
