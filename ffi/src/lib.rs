@@ -1241,6 +1241,40 @@ unsafe fn light_state<'s>(l: &SpivLight) -> Result<spiv_core::light::LightState<
     }
 }
 
+/// The light model in `l`'s arrays, where `l` says it stands.
+///
+/// # Safety
+/// As for [`light_state`].
+unsafe fn resumed_light<'s>(
+    l: &SpivLight,
+    width: u16,
+    height: u16,
+) -> Result<spiv_core::light::Light<'s>, SpivStatus> {
+    // SAFETY: the function's contract.
+    let state = unsafe { light_state(l)? };
+    let clock = spiv_core::light::LightClock {
+        next: l.next,
+        seen: l.seen,
+    };
+    spiv_core::light::Light::resume(width, height, clock, state).map_err(core_status)
+}
+
+/// Records in `l` where the model now stands.
+fn keep_clock(l: &mut SpivLight, c: spiv_core::light::LightClock) {
+    l.next = c.next;
+    l.seen = c.seen;
+}
+
+impl From<spiv_core::light::Event> for SpivEvent {
+    fn from(e: spiv_core::light::Event) -> SpivEvent {
+        SpivEvent {
+            index: e.index,
+            tick: e.tick,
+            sign: e.sign,
+        }
+    }
+}
+
 /// Starts the static-light model of a `width × height` sensor in `l`'s
 /// arrays (cleared), the first plane pushed getting tick `first`.
 ///
@@ -1260,9 +1294,7 @@ pub unsafe extern "C" fn spiv_light_init(
         let state = unsafe { light_state(l)? };
         let light =
             spiv_core::light::Light::new(width, height, first, state).map_err(core_status)?;
-        let c = light.clock();
-        l.next = c.next;
-        l.seen = c.seen;
+        keep_clock(l, light.clock());
         Ok(())
     })())
 }
@@ -1306,29 +1338,17 @@ pub unsafe extern "C" fn spiv_light_push(
         // SAFETY: `cap` writable entries (the caller's promise).
         let out = unsafe { core::slice::from_raw_parts_mut(events, cap) };
         // SAFETY: the caller's promise on the arrays.
-        let state = unsafe { light_state(l)? };
-        let clock = spiv_core::light::LightClock {
-            next: l.next,
-            seen: l.seen,
-        };
-        let mut light =
-            spiv_core::light::Light::resume(width, height, clock, state).map_err(core_status)?;
+        let mut light = unsafe { resumed_light(l, width, height)? };
         let mut k = 0usize;
         light
             .push(&view, |e| {
                 if let Some(slot) = out.get_mut(k) {
-                    *slot = SpivEvent {
-                        index: e.index,
-                        tick: e.tick,
-                        sign: e.sign,
-                    };
+                    *slot = e.into();
                 }
                 k += 1;
             })
             .map_err(core_status)?;
-        let c = light.clock();
-        l.next = c.next;
-        l.seen = c.seen;
+        keep_clock(l, light.clock());
         *n = k.min(cap);
         Ok(())
     })())
@@ -1407,14 +1427,26 @@ unsafe fn ring_arrays<'s>(r: &SpivRing) -> Result<(&'s mut [u32], &'s mut [u32])
     }
 }
 
-fn cursor(r: &SpivRing) -> spiv_core::rungs::RingCursor {
-    spiv_core::rungs::RingCursor {
+/// The ring in `r`'s arrays, where `r` says it stands.
+///
+/// # Safety
+/// As for [`ring_arrays`].
+unsafe fn resumed_ring<'s>(r: &SpivRing) -> Result<spiv_core::rungs::EventRing<'s>, SpivStatus> {
+    // SAFETY: the function's contract.
+    let (entries, starts) = unsafe { ring_arrays(r)? };
+    let at = spiv_core::rungs::RingCursor {
         first: r.first,
         next: r.next,
         stored: r.stored,
         lost: r.lost,
         evicted: r.evicted,
-    }
+    };
+    spiv_core::rungs::EventRing::resume(entries, starts, at).map_err(core_status)
+}
+
+/// Records in `r` where the ring now stands.
+fn keep_cursor(r: &mut SpivRing, c: spiv_core::rungs::RingCursor) {
+    (r.first, r.next, r.stored, r.lost, r.evicted) = (c.first, c.next, c.stored, c.lost, c.evicted);
 }
 
 /// Starts an empty ring in `r`'s arrays, its first tick `first` (the light
@@ -1433,8 +1465,7 @@ pub unsafe extern "C" fn spiv_ring_init(r: *mut SpivRing, first: u32) -> SpivSta
         let c = spiv_core::rungs::EventRing::new(entries, starts, first)
             .map_err(core_status)?
             .cursor();
-        (r.first, r.next, r.stored, r.lost, r.evicted) =
-            (c.first, c.next, c.stored, c.lost, c.evicted);
+        keep_cursor(r, c);
         Ok(())
     })())
 }
@@ -1465,24 +1496,12 @@ pub unsafe extern "C" fn spiv_ring_push(
         let plane = unsafe { bytes(plane, len)? };
         let view = spiv_core::PlaneView::new(plane, width, height).map_err(core_status)?;
         // SAFETY: the caller's promise on the arrays.
-        let (entries, starts) = unsafe { ring_arrays(r)? };
-        let mut ring =
-            spiv_core::rungs::EventRing::resume(entries, starts, cursor(r)).map_err(core_status)?;
+        let mut ring = unsafe { resumed_ring(r)? };
         // SAFETY: the caller's promise on the arrays.
-        let state = unsafe { light_state(l)? };
-        let clock = spiv_core::light::LightClock {
-            next: l.next,
-            seen: l.seen,
-        };
-        let mut light =
-            spiv_core::light::Light::resume(width, height, clock, state).map_err(core_status)?;
+        let mut light = unsafe { resumed_light(l, width, height)? };
         ring.push(&mut light, &view).map_err(core_status)?;
-        let c = ring.cursor();
-        (r.first, r.next, r.stored, r.lost, r.evicted) =
-            (c.first, c.next, c.stored, c.lost, c.evicted);
-        let lc = light.clock();
-        l.next = lc.next;
-        l.seen = lc.seen;
+        keep_cursor(r, ring.cursor());
+        keep_clock(l, light.clock());
         Ok(())
     })())
 }
@@ -1506,7 +1525,7 @@ pub unsafe extern "C" fn spiv_ring_events(
 ) -> SpivStatus {
     status((|| {
         // SAFETY: writable or null.
-        let (r, n) = match unsafe { (r.as_mut(), n.as_mut()) } {
+        let (r, n) = match unsafe { (r.as_ref(), n.as_mut()) } {
             (Some(r), Some(n)) => (r, n),
             _ => return Err(SpivStatus::SpivErrNull),
         };
@@ -1520,17 +1539,11 @@ pub unsafe extern "C" fn spiv_ring_events(
             unsafe { core::slice::from_raw_parts_mut(events, cap) }
         };
         // SAFETY: the caller's promise on the arrays.
-        let (entries, starts) = unsafe { ring_arrays(r)? };
-        let ring =
-            spiv_core::rungs::EventRing::resume(entries, starts, cursor(r)).map_err(core_status)?;
+        let ring = unsafe { resumed_ring(r)? };
         let mut k = 0usize;
         ring.each(a, b, |e| {
             if let Some(slot) = out.get_mut(k) {
-                *slot = SpivEvent {
-                    index: e.index,
-                    tick: e.tick,
-                    sign: e.sign,
-                };
+                *slot = e.into();
             }
             k += 1;
         });
@@ -1568,8 +1581,8 @@ pub unsafe extern "C" fn spiv_rung_frames(
     len: usize,
 ) -> SpivStatus {
     status((|| {
-        // SAFETY: each writable/readable or null.
-        let (r, l, f) = match unsafe { (r.as_mut(), l.as_mut(), flow.as_ref()) } {
+        // SAFETY: each readable or null.
+        let (r, l, f) = match unsafe { (r.as_ref(), l.as_ref(), flow.as_ref()) } {
             (Some(r), Some(l), Some(f)) => (r, l, f),
             _ => return Err(SpivStatus::SpivErrNull),
         };
@@ -1605,17 +1618,9 @@ pub unsafe extern "C" fn spiv_rung_frames(
         // SAFETY: `len` writable entries (the caller's promise).
         let out = unsafe { core::slice::from_raw_parts_mut(frames, len) };
         // SAFETY: the caller's promise on the arrays.
-        let (entries, starts) = unsafe { ring_arrays(r)? };
-        let ring =
-            spiv_core::rungs::EventRing::resume(entries, starts, cursor(r)).map_err(core_status)?;
+        let ring = unsafe { resumed_ring(r)? };
         // SAFETY: the caller's promise on the arrays.
-        let state = unsafe { light_state(l)? };
-        let clock = spiv_core::light::LightClock {
-            next: l.next,
-            seen: l.seen,
-        };
-        let light =
-            spiv_core::light::Light::resume(width, height, clock, state).map_err(core_status)?;
+        let light = unsafe { resumed_light(l, width, height)? };
         spiv_core::rungs::rung_frames(&ring, &light, &flow, mid, &rungs, out).map_err(core_status)
     })())
 }

@@ -595,6 +595,18 @@ impl LightArrays {
         }
     }
 
+    /// The core's view of the arrays.
+    fn state(&mut self) -> spiv_core::light::LightState<'_> {
+        spiv_core::light::LightState {
+            last: &mut self.last,
+            period: &mut self.period,
+            rate: &mut self.rate,
+            short: &mut self.short_run,
+            lead: &mut self.lead,
+            flags: &mut self.flags,
+        }
+    }
+
     fn handle(&mut self) -> SpivLight {
         SpivLight {
             last: self.last.as_mut_ptr(),
@@ -645,7 +657,7 @@ fn light_push(
 /// before anything changes.
 #[test]
 fn light_model_through_the_abi() {
-    use spiv_core::light::{Light, LightState};
+    use spiv_core::light::Light;
     let px = usize::from(W) * usize::from(H);
     let mut c = LightArrays::new(px);
     let mut l = c.handle();
@@ -655,14 +667,7 @@ fn light_model_through_the_abi() {
         SpivStatus::SpivOk
     );
     let mut r = LightArrays::new(px);
-    let state = LightState {
-        last: &mut r.last,
-        period: &mut r.period,
-        rate: &mut r.rate,
-        short: &mut r.short_run,
-        lead: &mut r.lead,
-        flags: &mut r.flags,
-    };
+    let state = r.state();
     let mut core = Light::new(W, H, 65_500, state).expect("model");
     let data = strip();
     let mut events = vec![SpivEvent::default(); px];
@@ -720,7 +725,7 @@ fn light_model_through_the_abi() {
 /// null flow are refused.
 #[test]
 fn rung_frames_through_the_abi() {
-    use spiv_core::light::{Light, LightState};
+    use spiv_core::light::Light;
     use spiv_core::rungs::{rung_frames, EventRing, Rungs};
     let px = usize::from(W) * usize::from(H);
     let depth = 160usize;
@@ -745,14 +750,7 @@ fn rung_frames_through_the_abi() {
         assert_eq!(spiv_ring_init(&mut ring, first), SpivStatus::SpivOk);
     }
     let mut r = LightArrays::new(px);
-    let state = LightState {
-        last: &mut r.last,
-        period: &mut r.period,
-        rate: &mut r.rate,
-        short: &mut r.short_run,
-        lead: &mut r.lead,
-        flags: &mut r.flags,
-    };
+    let state = r.state();
     let mut light = Light::new(W, H, first, state).expect("model");
     let (mut e2, mut s2) = (vec![0u32; px * 40], vec![0u32; depth + 1]);
     let mut core_ring = EventRing::new(&mut e2, &mut s2, first).expect("ring");

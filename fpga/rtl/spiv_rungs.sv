@@ -145,45 +145,53 @@ module spiv_rungs #(
     logic [15:0]        t1_at, t2_at;
     logic signed [35:0] t1_qx, t1_qy, t2_qx, t2_qy;
     logic signed [35:0] t2_ix, t2_iy;
+    // One axis, one stage each: the clamped coordinate of pixel p, the
+    // node below it, the entry {i, w0, w1}.
+    function automatic logic signed [35:0] clamped(input logic [15:0] p, input logic signed [31:0] first,
+                                                   input logic [15:0] n, input logic [3:0] sh);
+        logic signed [35:0] q, lo, hi;
+        lo = -(36'sd1 <<< sh);
+        hi = $signed({20'b0, n}) <<< sh;
+        q = $signed({16'b0, p, 4'b0}) - 36'(first);
+        clamped = (q < lo) ? lo : (q > hi) ? hi : q;
+    endfunction
+    function automatic logic signed [35:0] below(input logic signed [35:0] q, input logic [15:0] n,
+                                                 input logic [3:0] sh);
+        logic signed [35:0] i;
+        i = q >>> sh;
+        if (i > $signed({20'b0, n}) - 36'sd2) i = $signed({20'b0, n}) - 36'sd2;
+        below = (i < 36'sd0) ? 36'sd0 : i;
+    endfunction
+    function automatic logic [47:0] entry(input logic signed [35:0] q, input logic signed [35:0] i,
+                                          input logic [15:0] n, input logic [3:0] sh);
+        logic signed [15:0] f;
+        f = 16'(q - (i <<< sh));
+        entry = (n < 16'd2) ? {16'd0, 16'sd1 <<< sh, 16'sd0} : {i[15:0], (16'sd1 <<< sh) - f, f};
+    endfunction
+
     always_ff @(posedge clk) begin
-        logic signed [35:0] lo, hix, hiy, qx, qy, ix, iy;
-        lo = -(36'sd1 <<< ps);
-        hix = $signed({20'b0, cnx}) <<< ps;
-        hiy = $signed({20'b0, cny}) <<< ps;
-        // t1: the clamped coordinate
-        qx = $signed({16'b0, tb_at, 4'b0}) - 36'(cx0);
-        qy = $signed({16'b0, tb_at, 4'b0}) - 36'(cy0);
-        t1_qx <= (qx < lo) ? lo : (qx > hix) ? hix : qx;
-        t1_qy <= (qy < lo) ? lo : (qy > hiy) ? hiy : qy;
+        logic [47:0] ec, er;
+        t1_qx <= clamped(tb_at, cx0, cnx, ps);
+        t1_qy <= clamped(tb_at, cy0, cny, ps);
         t1_v <= phase == TABLES && 32'(tb_at) < TN;
         t1_at <= tb_at;
-        // t2: the node below it
-        ix = t1_qx >>> ps;
-        iy = t1_qy >>> ps;
-        if (ix > $signed({20'b0, cnx}) - 36'sd2) ix = $signed({20'b0, cnx}) - 36'sd2;
-        if (ix < 36'sd0) ix = 36'sd0;
-        if (iy > $signed({20'b0, cny}) - 36'sd2) iy = $signed({20'b0, cny}) - 36'sd2;
-        if (iy < 36'sd0) iy = 36'sd0;
-        t2_ix <= ix;
-        t2_iy <= iy;
+        t2_ix <= below(t1_qx, cnx, ps);
+        t2_iy <= below(t1_qy, cny, ps);
         t2_qx <= t1_qx;
         t2_qy <= t1_qy;
         t2_v <= t1_v;
         t2_at <= t1_at;
-        // t3: the weights, written
+        ec = entry(t2_qx, t2_ix, cnx, ps);
+        er = entry(t2_qy, t2_iy, cny, ps);
         if (t2_v && 32'(t2_at) < W) begin
-            logic signed [15:0] f;
-            f = 16'(t2_qx - (t2_ix <<< ps));
-            col_i[XB'(t2_at)] <= (cnx < 16'd2) ? 16'd0 : t2_ix[15:0];
-            col_w0[XB'(t2_at)] <= (cnx < 16'd2) ? (16'sd1 <<< ps) : (16'sd1 <<< ps) - f;
-            col_w1[XB'(t2_at)] <= (cnx < 16'd2) ? 16'sd0 : f;
+            col_i[XB'(t2_at)] <= ec[47:32];
+            col_w0[XB'(t2_at)] <= ec[31:16];
+            col_w1[XB'(t2_at)] <= ec[15:0];
         end
         if (t2_v && 32'(t2_at) < H) begin
-            logic signed [15:0] f;
-            f = 16'(t2_qy - (t2_iy <<< ps));
-            row_i[YB'(t2_at)] <= (cny < 16'd2) ? 16'd0 : t2_iy[15:0];
-            row_w0[YB'(t2_at)] <= (cny < 16'd2) ? (16'sd1 <<< ps) : (16'sd1 <<< ps) - f;
-            row_w1[YB'(t2_at)] <= (cny < 16'd2) ? 16'sd0 : f;
+            row_i[YB'(t2_at)] <= er[47:32];
+            row_w0[YB'(t2_at)] <= er[31:16];
+            row_w1[YB'(t2_at)] <= er[15:0];
         end
     end
 
