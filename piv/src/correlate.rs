@@ -2,15 +2,16 @@
 //! sub-pixel peak and the peak ratio.
 //!
 //! Both windows go through one complex FFT (`a + i·b`, separated by the
-//! conjugate symmetry of real signals), so a window pair costs one forward
-//! and one inverse 2-D transform. Plans are made once per window size and
+//! conjugate symmetry of real signals), and the real correlation comes
+//! back through half an inverse: the columns of half the spectrum, then two
+//! rows per complex transform. Plans are made once per window size and
 //! shared by all threads; each thread owns a [`Scratch`].
 
 use std::sync::{Arc, Mutex, OnceLock};
 
-use realfft::{ComplexToReal, RealFftPlanner};
 use rustfft::num_complex::Complex32;
 use rustfft::{Fft, FftPlanner};
+use wide::f32x8;
 
 use super::peak::{gaussian2d, parabolic, subpixel, width as peak_width, Subpixel};
 
@@ -19,8 +20,6 @@ pub struct Plan {
     n: usize,
     fwd: Arc<dyn Fft<f32>>,
     inv: Arc<dyn Fft<f32>>,
-    /// The last inverse step, to a real correlation row.
-    real: Arc<dyn ComplexToReal<f32>>,
 }
 
 impl std::fmt::Debug for Plan {
@@ -35,18 +34,14 @@ impl Plan {
     /// every size it has made: later passes and pairs reuse them.
     pub fn new(n: usize) -> Plan {
         static PLANNER: OnceLock<Mutex<FftPlanner<f32>>> = OnceLock::new();
-        static REAL: OnceLock<Mutex<RealFftPlanner<f32>>> = OnceLock::new();
         let planner = PLANNER.get_or_init(|| Mutex::new(FftPlanner::new()));
-        let real = REAL.get_or_init(|| Mutex::new(RealFftPlanner::new()));
         // A poisoned lock only means another thread panicked while
         // planning; the planner's cache is still valid.
         let mut planner = planner.lock().unwrap_or_else(|e| e.into_inner());
-        let mut real = real.lock().unwrap_or_else(|e| e.into_inner());
         Plan {
             n,
             fwd: planner.plan_fft_forward(n),
             inv: planner.plan_fft_inverse(n),
-            real: real.plan_fft_inverse(n),
         }
     }
 
@@ -92,8 +87,7 @@ impl Scratch {
         let len = plan
             .fwd
             .get_inplace_scratch_len()
-            .max(plan.inv.get_inplace_scratch_len())
-            .max(plan.real.get_scratch_len());
+            .max(plan.inv.get_inplace_scratch_len());
         Scratch {
             z: vec![Complex32::default(); n2],
             t: vec![Complex32::default(); n2],
@@ -230,22 +224,45 @@ pub fn plane(plan: &Plan, s: &mut Scratch) -> Result<PlaneScale, NoPeak> {
     }
     // Inverse. The correlation is real, so its spectrum is Hermitian: the
     // columns (rows of the transposed layout) are transformed for kx up to
-    // n/2 only, and each row of the plane is a complex-to-real transform
-    // of those half spectra (half the work of two complex passes).
+    // n/2 only. Each row of the plane is then real, so two rows go through
+    // one complex transform (the first row's full spectrum plus i times the
+    // second's), all pairs in one batched call: the real and imaginary
+    // parts come out as the two rows.
     plan.inv.process_with_scratch(&mut s.z[..h * n], &mut s.fft);
-    transpose::transpose(&s.z[..h * n], &mut s.t[..n * h], n, h);
-    for (half, row) in s.t[..n * h]
-        .chunks_exact_mut(h)
-        .zip(s.c.chunks_exact_mut(n))
-    {
-        // kx = 0 (and n/2 for even n) are real up to rounding.
-        half[0].im = 0.0;
-        if n.is_multiple_of(2) {
-            half[h - 1].im = 0.0;
+    let pairs = n.div_ceil(2);
+    // Row kx of the transposed half spectrum holds every row y of the
+    // plane at kx: rows 2q and 2q + 1 go into pair q. With n odd the last
+    // row has no partner; row n − 1 stands in (any real row does: its part
+    // comes out imaginary and is not kept).
+    let t = &mut s.t[..pairs * n];
+    for (kx, zk) in s.z[..h * n].chunks_exact(n).enumerate() {
+        let row_pairs = zk
+            .chunks(2)
+            .map(|p| (p[0], p.get(1).copied().unwrap_or(zk[n - 1])));
+        if kx == 0 || 2 * kx == n {
+            // Their own mirror: real up to rounding, the imaginary parts
+            // dropped.
+            for (out, (a, b)) in t.chunks_exact_mut(n).zip(row_pairs) {
+                out[kx] = Complex32::new(a.re, b.re);
+            }
+        } else {
+            // Above n/2 the spectrum is the conjugate of the one at n − kx.
+            for (out, (a, b)) in t.chunks_exact_mut(n).zip(row_pairs) {
+                out[kx] = Complex32::new(a.re - b.im, a.im + b.re);
+                out[n - kx] = Complex32::new(a.re + b.im, b.re - a.im);
+            }
         }
-        // The lengths match the plan and the imaginary parts that must be
-        // zero are: the transform cannot fail.
-        let _ = plan.real.process_with_scratch(half, row, &mut s.fft);
+    }
+    plan.inv
+        .process_with_scratch(&mut s.t[..pairs * n], &mut s.fft);
+    for (rows, z) in s.c.chunks_mut(2 * n).zip(s.t.chunks_exact(n)) {
+        let (first, second) = rows.split_at_mut(n.min(rows.len()));
+        for (c, v) in first.iter_mut().zip(z) {
+            *c = v.re;
+        }
+        for (c, v) in second.iter_mut().zip(z) {
+            *c = v.im;
+        }
     }
     let norm = 1.0 / (n2 * (ea * eb).sqrt());
     Ok(PlaneScale {
@@ -264,32 +281,49 @@ pub fn locate(
     norm: f64,
     method: Subpixel,
 ) -> Result<(Peak, (usize, usize)), NoPeak> {
-    let best_raw = max_of(cp, f32::NEG_INFINITY);
+    // Each row's maximum, in one vectorised pass: the peak, its place and
+    // the second peak come from them, and only the five rows around the
+    // peak are read again.
+    let mut on_stack = [f32::NEG_INFINITY; 64];
+    let mut on_heap = Vec::new();
+    let row_max: &mut [f32] = if n <= on_stack.len() {
+        &mut on_stack[..n]
+    } else {
+        on_heap.resize(n, f32::NEG_INFINITY);
+        &mut on_heap
+    };
+    for (m, row) in row_max.iter_mut().zip(cp.chunks_exact(n)) {
+        *m = max_of(row, f32::NEG_INFINITY);
+    }
+    let best_raw = max_of(row_max, f32::NEG_INFINITY);
     let best = f64::from(best_raw) * norm;
     if !best.is_finite() || best <= 0.0 {
         return Err(NoPeak::NoPeak);
     }
-    let best_k = cp
+    // The first sample equal to the peak, in row-major order.
+    let bi = row_max
         .iter()
         .position(|&v| v == best_raw)
         .ok_or(NoPeak::NoPeak)?;
-    let (bi, bj) = (best_k / n, best_k % n);
+    let bj = cp[bi * n..(bi + 1) * n]
+        .iter()
+        .position(|&v| v == best_raw)
+        .ok_or(NoPeak::NoPeak)?;
     let c = |i: usize, j: usize| f64::from(cp[(i % n) * n + (j % n)]) * norm;
     // The second peak: the maximum outside the 5×5 around the first.
+    // In the five rows around the peak, the columns outside its 5×5 are
+    // the cyclic run of n − 5 from bj + 3: at most two slices.
+    let (from, run) = ((bj + 3) % n, n.saturating_sub(5));
+    let (head, tail) = (run.min(n - from), run - run.min(n - from));
     let mut second_raw = 0.0f32;
     let dist = |k: usize, b: usize| if k >= b { k - b } else { k + n - b };
-    for i in 0..n {
+    for (i, &m) in row_max.iter().enumerate() {
         let di = dist(i, bi);
-        let row = &cp[i * n..(i + 1) * n];
         if di <= 2 || di >= n - 2 {
-            for (j, &v) in row.iter().enumerate() {
-                let dj = dist(j, bj);
-                if dj > 2 && dj < n - 2 {
-                    second_raw = second_raw.max(v);
-                }
-            }
-        } else {
-            second_raw = max_of(row, second_raw);
+            let row = &cp[i * n..(i + 1) * n];
+            second_raw = max_of(&row[from..from + head], max_of(&row[..tail], second_raw));
+        } else if m > second_raw {
+            second_raw = m;
         }
     }
     let second = f64::from(second_raw) * norm;
@@ -455,27 +489,26 @@ fn neighbourhood_variance(d: &[f32], n: usize) -> f64 {
     let (mut own, mut near) = (0.0f64, 0.0f64);
     for i in 0..n {
         let (r, q) = (&d[i * p..(i + 1) * p], &d[(i + 1) * p..(i + 2) * p]);
-        let (mut o, mut e) = ([0.0f32; 8], [0.0f32; 8]);
         // Pixel j is r[j + 1]; its forward half-neighbourhood (each pair
-        // counts twice) is r[j + 2], q[j], q[j + 1], q[j + 2].
-        let mut add = |l: usize, v: f32, fwd: f32| {
-            o[l] += v * v;
-            e[l] += v * fwd;
+        // counts twice) is r[j + 2], q[j], q[j + 1], q[j + 2]. Eight
+        // pixels at a time in `wide` lanes: the compiler does not
+        // vectorise this loop by itself.
+        let (mut o, mut e) = (f32x8::ZERO, f32x8::ZERO);
+        let lanes = |s: &[f32], k: usize| -> f32x8 {
+            f32x8::new(s[k..k + 8].try_into().unwrap_or([0.0; 8]))
         };
         let mut j = 0;
         while j + 8 <= n {
-            let at = |row: &[f32], k: usize| -> [f32; 8] {
-                row[k..k + 8].try_into().unwrap_or([0.0; 8])
-            };
-            let (v, right) = (at(r, j + 1), at(r, j + 2));
-            let (q0, q1, q2) = (at(q, j), at(q, j + 1), at(q, j + 2));
-            for l in 0..8 {
-                add(l, v[l], right[l] + q0[l] + q1[l] + q2[l]);
-            }
+            let v = lanes(r, j + 1);
+            o += v * v;
+            e += v * (((lanes(r, j + 2) + lanes(q, j)) + lanes(q, j + 1)) + lanes(q, j + 2));
             j += 8;
         }
+        let (mut o, mut e) = (o.to_array(), e.to_array());
         for j in j..n {
-            add(0, r[j + 1], r[j + 2] + q[j] + q[j + 1] + q[j + 2]);
+            let v = r[j + 1];
+            o[0] += v * v;
+            e[0] += v * (r[j + 2] + q[j] + q[j + 1] + q[j + 2]);
         }
         own += o.iter().map(|&x| f64::from(x)).sum::<f64>();
         near += e.iter().map(|&x| f64::from(x)).sum::<f64>();
@@ -508,18 +541,22 @@ fn cross(z: Complex32, w: Complex32) -> Complex32 {
     )
 }
 
-/// The largest of `v` and `init` (NaNs ignored), in 8 independent lanes so
-/// that it vectorises.
+/// The largest of `v` and `init` (NaN samples ignored; `init` must not be
+/// NaN), in 8 independent lanes so that it vectorises, the lanes reduced
+/// by the same comparison (no NaN can reach them), as a tree.
 pub fn max_of(v: &[f32], init: f32) -> f32 {
+    let larger = |m: f32, x: f32| if x > m { x } else { m };
     let mut acc = [init; 8];
     let mut chunks = v.chunks_exact(8);
     for ch in &mut chunks {
         for (a, &x) in acc.iter_mut().zip(ch) {
-            *a = if x > *a { x } else { *a };
+            *a = larger(*a, x);
         }
     }
-    let tail = chunks.remainder().iter().fold(init, |m, &x| m.max(x));
-    acc.iter().fold(tail, |m, &x| m.max(x))
+    let tail = chunks.remainder().iter().fold(init, |m, &x| larger(m, x));
+    let four: [f32; 4] = std::array::from_fn(|l| larger(acc[l], acc[l + 4]));
+    let two = [larger(four[0], four[2]), larger(four[1], four[3])];
+    larger(larger(two[0], two[1]), tail)
 }
 
 /// Σ f(v) over 16 independent f32 lanes (vectorises), the lanes added in
@@ -644,6 +681,64 @@ mod tests {
         }
     }
 
+    /// The peak, its lag and the peak ratio against their definitions read
+    /// off every sample: the first maximum in row-major order (NaNs
+    /// ignored, ties kept at the first), the second the largest sample
+    /// outside the cyclic 5×5 around it. Sizes on the stack and the heap
+    /// path, peaks at the wrap, ties and NaNs.
+    #[test]
+    fn locate_finds_the_first_maximum_and_the_second_outside_its_neighbourhood() {
+        let mut next = uniform(77);
+        for (case, n) in [4usize, 5, 16, 32, 64, 65, 96, 128].into_iter().enumerate() {
+            for trial in 0..12 {
+                let mut cp: Vec<f32> = (0..n * n).map(|_| next() - 0.3).collect();
+                let at = |r: f32| ((r * (n * n) as f32) as usize).min(n * n - 1);
+                match trial % 4 {
+                    // A tie: the same peak value twice.
+                    1 => {
+                        let (p, q) = (at(next()), at(next()));
+                        (cp[p], cp[q]) = (2.0, 2.0);
+                    }
+                    // NaNs, one where the maximum would be.
+                    2 => {
+                        for _ in 0..n {
+                            let p = at(next());
+                            cp[p] = f32::NAN;
+                        }
+                    }
+                    // A peak in the last row and column: its 5×5 wraps.
+                    3 => cp[n * n - 1] = 3.0,
+                    _ => {}
+                }
+                let norm = 0.5;
+                let (p, (bi, bj)) = locate(n, &cp, norm, Subpixel::Gaussian).expect("peak");
+                let (mut k, mut best) = (0, f32::NEG_INFINITY);
+                for (q, &v) in cp.iter().enumerate() {
+                    if v > best {
+                        (k, best) = (q, v);
+                    }
+                }
+                assert_eq!((bi, bj), (k / n, k % n), "n {n} case {case} trial {trial}");
+                assert_eq!(p.height, f64::from(best) * norm);
+                let d = |u: usize, v: usize| (u + n - v) % n;
+                let near = |q: usize| {
+                    let (di, dj) = (d(q / n, bi), d(q % n, bj));
+                    (di <= 2 || di >= n - 2) && (dj <= 2 || dj >= n - 2)
+                };
+                let second = (0..n * n)
+                    .filter(|&q| !near(q))
+                    .map(|q| cp[q])
+                    .fold(0.0f32, f32::max);
+                let ratio = if second > 0.0 {
+                    (f64::from(best) / f64::from(second)).min(1000.0)
+                } else {
+                    1000.0
+                };
+                assert_eq!(p.ratio, ratio, "n {n} trial {trial}");
+            }
+        }
+    }
+
     /// The FFT path against the cyclic cross-correlation summed directly:
     /// same integer peak, same normalised height and peak ratio.
     #[test]
@@ -704,6 +799,45 @@ mod tests {
             p.ratio,
             best / second
         );
+    }
+
+    /// Every sample of the raw plane against the cyclic correlation of the
+    /// zero-mean windows summed directly, for even and odd sides (an odd
+    /// side leaves the last row of the inverse without a partner).
+    #[test]
+    fn the_whole_plane_matches_the_direct_sum() {
+        let mut next = uniform(4242);
+        for n in [4usize, 15, 16, 33] {
+            let plan = Plan::new(n);
+            let mut s = Scratch::new(&plan);
+            let a: Vec<f32> = (0..n * n).map(|_| 50.0 * next()).collect();
+            let b: Vec<f32> = (0..n * n).map(|_| 50.0 * next()).collect();
+            s.a.copy_from_slice(&a);
+            s.b.copy_from_slice(&b);
+            plane(&plan, &mut s).expect("signal");
+            let zm = |v: &[f32]| {
+                let m = v.iter().map(|&x| f64::from(x)).sum::<f64>() / v.len() as f64;
+                v.iter().map(|&x| f64::from(x) - m).collect::<Vec<f64>>()
+            };
+            let (a0, b0) = (zm(&a), zm(&b));
+            let mut worst = 0.0f64;
+            let scale = a0.iter().map(|x| x * x).sum::<f64>().sqrt()
+                * b0.iter().map(|x| x * x).sum::<f64>().sqrt();
+            for dy in 0..n {
+                for dx in 0..n {
+                    let mut acc = 0.0;
+                    for i in 0..n {
+                        for j in 0..n {
+                            acc += a0[i * n + j] * b0[((i + dy) % n) * n + (j + dx) % n];
+                        }
+                    }
+                    // The FFT's plane carries a factor n².
+                    let fft = f64::from(s.plane()[dy * n + dx]) / (n * n) as f64;
+                    worst = worst.max((fft - acc).abs() / scale);
+                }
+            }
+            assert!(worst < 1e-5, "n {n}: worst {worst}");
+        }
     }
 
     /// Wieneke's spread summed pixel by pixel with cyclic indices, as its

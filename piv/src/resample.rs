@@ -352,9 +352,8 @@ impl<'r> PairRow<'r> {
     fn one(&self, j: usize, du: f32, dv: f32) -> (f32, f32) {
         let (pw, (last_x, last_y)) = (self.pw, self.last);
         let d = f32x4::new([du, dv, 0.0, 0.0]) * f32x4::splat(0.5);
-        let f = d.floor();
+        let (f, kk) = floor_lanes(d);
         let t = (d - f).to_array();
-        let kk = f.fast_trunc_int().to_array();
         let (xb, yb, xa, ya) = self.origins(j, kk[0], kk[1]);
         if xb <= last_x && yb <= last_y && xa <= last_x && ya <= last_y {
             let (wx, wy) = (weights4(self.k, t[0]), weights4(self.k, t[1]));
@@ -392,11 +391,7 @@ impl<'r> PairRow<'r> {
         let lanes = |s: &[f32]| f32x4::new([s[0], s[1], s[2], s[3]]);
         let half = f32x4::splat(0.5);
         let (dx, dy) = (lanes(u) * half, lanes(v) * half);
-        let (fx, fy) = (dx.floor(), dy.floor());
-        let (kx, ky) = (
-            fx.fast_trunc_int().to_array(),
-            fy.fast_trunc_int().to_array(),
-        );
+        let ((fx, kx), (fy, ky)) = (floor_lanes(dx), floor_lanes(dy));
         let shared = kx.iter().all(|&x| x == kx[0]) && ky.iter().all(|&y| y == ky[0]);
         let (xb, yb, xa, ya) = self.origins(j, kx[0], ky[0]);
         // The four blocks span 7 columns (a negative origin wraps to a huge
@@ -420,6 +415,18 @@ impl<'r> PairRow<'r> {
         );
         Some((sa.to_array(), sb.to_array()))
     }
+}
+
+/// Each lane rounded down, as a float and as an integer. Hand-written:
+/// SSE2 has no rounding instruction, and `f32x4::floor` there calls libm
+/// once per lane. Truncation, then one step down where it rounded up;
+/// exact for |x| < 2³¹. A lane that is NaN or beyond ±2³¹ gives i32::MIN
+/// (x86's truncation), which the callers' bounds tests reject.
+#[inline(always)]
+fn floor_lanes(x: f32x4) -> (f32x4, [i32; 4]) {
+    let whole = x.fast_trunc_int().round_float();
+    let down = whole - (whole.simd_gt(x) & f32x4::ONE);
+    (down, down.fast_trunc_int().to_array())
 }
 
 /// `w` with its lanes in reverse order: A's weights, B's mirrored.
@@ -683,6 +690,28 @@ fn keys(t: f64) -> [f64; 4] {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `floor_lanes` against `f32::floor` on whole numbers, halves, values
+    /// just off them, negatives and large values; NaN and values beyond
+    /// ±2³¹ give i32::MIN.
+    #[test]
+    fn floor_lanes_rounds_down_as_floor_does() {
+        let mut xs = vec![0.0f32, -0.0, 0.5, -0.5, 1.0, -1.0, 2.5, -2.5, 1e-7, -1e-7];
+        for k in -40..40 {
+            let x = k as f32 * 0.37;
+            xs.extend([x, x.floor(), f32::from_bits(x.to_bits() + 1), 1.0e6 * x]);
+        }
+        for x in xs.chunks_exact(4) {
+            let v = f32x4::new([x[0], x[1], x[2], x[3]]);
+            let (f, k) = floor_lanes(v);
+            for l in 0..4 {
+                assert_eq!(f.to_array()[l], x[l].floor(), "{}", x[l]);
+                assert_eq!(k[l], x[l].floor() as i32, "{}", x[l]);
+            }
+        }
+        let (_, k) = floor_lanes(f32x4::new([f32::NAN, 3e9, -3e9, f32::INFINITY]));
+        assert_eq!(k, [i32::MIN; 4]);
+    }
 
     /// The line prefilter in f64 (the reference for the lane version).
     fn prefilter(c: &mut [f64], poles: &[f64]) {
