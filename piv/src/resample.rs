@@ -417,15 +417,21 @@ impl<'r> PairRow<'r> {
     }
 }
 
-/// Each lane rounded down, as a float and as an integer. Hand-written:
-/// SSE2 has no rounding instruction, and `f32x4::floor` there calls libm
-/// once per lane. Truncation, then one step down where it rounded up;
-/// exact for |x| < 2³¹. A lane that is NaN or beyond ±2³¹ gives i32::MIN
-/// (x86's truncation), which the callers' bounds tests reject.
+/// Each lane rounded down, as a float and as an integer. Without SSE4.1
+/// (below the x86-64-v2 the workspace builds for) `f32x4::floor` calls
+/// libm once per lane, so it is hand-written there: truncation, then one
+/// step down where it rounded up; exact for |x| < 2³¹. A lane that is NaN
+/// or beyond ±2³¹ gives i32::MIN (x86's truncation), which the callers'
+/// bounds tests reject.
 #[inline(always)]
 fn floor_lanes(x: f32x4) -> (f32x4, [i32; 4]) {
-    let whole = x.fast_trunc_int().round_float();
-    let down = whole - (whole.simd_gt(x) & f32x4::ONE);
+    #[cfg(target_feature = "sse4.1")]
+    let down = x.floor();
+    #[cfg(not(target_feature = "sse4.1"))]
+    let down = {
+        let whole = x.fast_trunc_int().round_float();
+        whole - (whole.simd_gt(x) & f32x4::ONE)
+    };
     (down, down.fast_trunc_int().to_array())
 }
 
