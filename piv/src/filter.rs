@@ -29,12 +29,17 @@ pub fn highpass(img: &Array2<f32>, sigma: f32) -> Array2<f32> {
         });
     // Down columns: stripes of whole rows, one lane per column; the three
     // passes alternate between the stripe and one buffer.
-    for_column_blocks(&mut bg, |block, w| {
-        let mut tmp = vec![0.0f32; block.len()];
-        box_columns(block, &mut tmp, w, r);
-        box_columns(&tmp, block, w, r);
-        box_columns(block, &mut tmp, w, r);
-        block.copy_from_slice(&tmp);
+    for_column_blocks(&mut bg, |block, w, scratch| {
+        // The worker's scratch, grown, never cleared: each pass writes
+        // every sample of its output.
+        if scratch.len() < block.len() {
+            scratch.resize(block.len(), 0.0f32);
+        }
+        let tmp = &mut scratch[..block.len()];
+        box_columns(block, tmp, w, r);
+        box_columns(tmp, block, w, r);
+        box_columns(block, tmp, w, r);
+        block.copy_from_slice(tmp);
     });
     bg.zip_mut_with(img, |b, &v| *b = v - *b);
     bg
@@ -144,15 +149,20 @@ pub fn for_row_blocks(img: &mut Array2<f32>, f: impl Fn(&mut [f32], usize) + Syn
     const ROWS: usize = 32;
     img.axis_chunks_iter_mut(Axis(0), ROWS)
         .into_par_iter()
-        .for_each(|mut chunk| {
+        .for_each_init(Vec::new, |buf, mut chunk| {
             let (r, w) = chunk.dim();
-            let mut block = vec![0.0f32; r * w];
+            // One buffer per worker, grown, never cleared: the copy below
+            // writes every sample the filter reads.
+            if buf.len() < r * w {
+                buf.resize(r * w, 0.0f32);
+            }
+            let block = &mut buf[..r * w];
             for (i, row) in chunk.rows().into_iter().enumerate() {
                 for (lanes, &v) in block.chunks_exact_mut(r).zip(row) {
                     lanes[i] = v;
                 }
             }
-            f(&mut block, r);
+            f(block, r);
             for (i, mut row) in chunk.rows_mut().into_iter().enumerate() {
                 for (o, lanes) in row.iter_mut().zip(block.chunks_exact(r)) {
                     *o = lanes[i];
@@ -162,14 +172,18 @@ pub fn for_row_blocks(img: &mut Array2<f32>, f: impl Fn(&mut [f32], usize) + Syn
 }
 
 /// Columns of `img` in blocks, each copied to a contiguous row-major
-/// buffer (`block`, `width`), handed to `f` and copied back; blocks in
-/// parallel. The column filters run down whole block rows at once, which
+/// buffer (`block`, `width`), handed to `f` with a scratch vector of the
+/// worker's (holding whatever an earlier block left) and copied back;
+/// blocks in parallel. The column filters run down whole block rows at once, which
 /// vectorises, instead of transposing the image twice.
-pub fn for_column_blocks(img: &mut Array2<f32>, f: impl Fn(&mut [f32], usize) + Sync) {
+pub fn for_column_blocks(
+    img: &mut Array2<f32>,
+    f: impl Fn(&mut [f32], usize, &mut Vec<f32>) + Sync,
+) {
     const BLOCK: usize = 128;
     img.axis_chunks_iter_mut(Axis(1), BLOCK)
         .into_par_iter()
-        .for_each(|mut chunk| {
+        .for_each_init(Vec::new, |scratch, mut chunk| {
             let w = chunk.dim().1;
             let mut block = Vec::with_capacity(chunk.len());
             for row in chunk.rows() {
@@ -178,7 +192,7 @@ pub fn for_column_blocks(img: &mut Array2<f32>, f: impl Fn(&mut [f32], usize) + 
                     None => block.extend(row.iter().copied()),
                 }
             }
-            f(&mut block, w);
+            f(&mut block, w, scratch);
             for (mut row, src) in chunk.rows_mut().into_iter().zip(block.chunks_exact(w)) {
                 row.assign(&ndarray::aview1(src));
             }

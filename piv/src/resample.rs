@@ -533,7 +533,7 @@ pub fn bspline_coefficients(img: &Array2<f32>, poles: &[f64]) -> Array2<f32> {
     let mut c = img.as_standard_layout().into_owned();
     let lines = |block: &mut [f32], w: usize| columns_prefilter(block, w, poles);
     super::filter::for_row_blocks(&mut c, lines);
-    super::filter::for_column_blocks(&mut c, lines);
+    super::filter::for_column_blocks(&mut c, |block, w, _| lines(block, w));
     c
 }
 
