@@ -480,6 +480,12 @@ fn wrapped(w: &[f32], n: usize, (i0, j0): (usize, usize), mean: f32, out: &mut [
     }
 }
 
+/// Eight samples (`s` is 8 long; shorter or longer gives zeros) as lanes.
+#[inline(always)]
+fn eight(s: &[f32]) -> f32x8 {
+    f32x8::new(s.try_into().unwrap_or([0.0; 8]))
+}
+
 /// Σ Δ(x)·Δ(x′) over each pixel and its 3 × 3 neighbourhood, never below
 /// Σ Δ(x)²; `d` holds Δ as n+1 rows of n+2 with zeros around (see
 /// [`spread`]). Each row sums in 8 independent f32 lanes (so that it
@@ -495,9 +501,7 @@ fn neighbourhood_variance(d: &[f32], n: usize) -> f64 {
         // pixels at a time in `wide` lanes: the compiler does not
         // vectorise this loop by itself.
         let (mut o, mut e) = (f32x8::ZERO, f32x8::ZERO);
-        let lanes = |s: &[f32], k: usize| -> f32x8 {
-            f32x8::new(s[k..k + 8].try_into().unwrap_or([0.0; 8]))
-        };
+        let lanes = |s: &[f32], k: usize| eight(&s[k..k + 8]);
         let mut j = 0;
         while j + 8 <= n {
             let v = lanes(r, j + 1);
@@ -617,9 +621,8 @@ fn fill_z(z: &mut [Complex32], a: &[f32], b: &[f32], ma: f32, mb: f32) -> (f64, 
     let mut zc = zf.chunks_exact_mut(16);
     let (mut ac, mut bc) = (a.chunks_exact(8), b.chunks_exact(8));
     let (sa, sb) = (f32x8::splat(ma), f32x8::splat(mb));
-    let lanes = |s: &[f32]| f32x8::new(s.try_into().unwrap_or([0.0; 8]));
     for ((zs, xs), ys) in (&mut zc).zip(&mut ac).zip(&mut bc) {
-        let (x, y) = (lanes(xs) - sa, lanes(ys) - sb);
+        let (x, y) = (eight(xs) - sa, eight(ys) - sb);
         ea += x * x;
         eb += y * y;
         let (x, y) = (x.to_array(), y.to_array());
@@ -747,6 +750,31 @@ mod tests {
         }
     }
 
+    /// The cyclic cross-correlation of the zero-mean `a` and `b` (n×n)
+    /// summed directly, lag (dy, dx) at dy·n + dx, and the product of
+    /// their norms (what normalises it).
+    fn direct_correlation(a: &[f32], b: &[f32], n: usize) -> (Vec<f64>, f64) {
+        let zm = |v: &[f32]| {
+            let m = v.iter().map(|&x| f64::from(x)).sum::<f64>() / v.len() as f64;
+            v.iter().map(|&x| f64::from(x) - m).collect::<Vec<f64>>()
+        };
+        let (a0, b0) = (zm(a), zm(b));
+        let e = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>();
+        let mut c = vec![0.0; n * n];
+        for dy in 0..n {
+            for dx in 0..n {
+                let mut acc = 0.0;
+                for i in 0..n {
+                    for j in 0..n {
+                        acc += a0[i * n + j] * b0[((i + dy) % n) * n + (j + dx) % n];
+                    }
+                }
+                c[dy * n + dx] = acc;
+            }
+        }
+        (c, (e(&a0) * e(&b0)).sqrt())
+    }
+
     /// The FFT path against the cyclic cross-correlation summed directly:
     /// same integer peak, same normalised height and peak ratio.
     #[test]
@@ -766,25 +794,8 @@ mod tests {
         s.a.copy_from_slice(&a);
         s.b.copy_from_slice(&b);
         let p = correlate(&plan, &mut s, Subpixel::Parabolic).expect("peak");
-        let zm = |v: &[f32]| {
-            let m = v.iter().map(|&x| f64::from(x)).sum::<f64>() / v.len() as f64;
-            v.iter().map(|&x| f64::from(x) - m).collect::<Vec<f64>>()
-        };
-        let (a0, b0) = (zm(&a), zm(&b));
-        let e = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>();
-        let norm = (e(&a0) * e(&b0)).sqrt();
-        let mut c = vec![0.0; n * n];
-        for dy in 0..n {
-            for dx in 0..n {
-                let mut acc = 0.0;
-                for i in 0..n {
-                    for j in 0..n {
-                        acc += a0[i * n + j] * b0[((i + dy) % n) * n + (j + dx) % n];
-                    }
-                }
-                c[dy * n + dx] = acc / norm;
-            }
-        }
+        let (raw, norm) = direct_correlation(&a, &b, n);
+        let c: Vec<f64> = raw.iter().map(|&v| v / norm).collect();
         let (k, &best) = c
             .iter()
             .enumerate()
@@ -823,26 +834,12 @@ mod tests {
             s.a.copy_from_slice(&a);
             s.b.copy_from_slice(&b);
             plane(&plan, &mut s).expect("signal");
-            let zm = |v: &[f32]| {
-                let m = v.iter().map(|&x| f64::from(x)).sum::<f64>() / v.len() as f64;
-                v.iter().map(|&x| f64::from(x) - m).collect::<Vec<f64>>()
-            };
-            let (a0, b0) = (zm(&a), zm(&b));
+            let (direct, scale) = direct_correlation(&a, &b, n);
             let mut worst = 0.0f64;
-            let scale = a0.iter().map(|x| x * x).sum::<f64>().sqrt()
-                * b0.iter().map(|x| x * x).sum::<f64>().sqrt();
-            for dy in 0..n {
-                for dx in 0..n {
-                    let mut acc = 0.0;
-                    for i in 0..n {
-                        for j in 0..n {
-                            acc += a0[i * n + j] * b0[((i + dy) % n) * n + (j + dx) % n];
-                        }
-                    }
-                    // The FFT's plane carries a factor n².
-                    let fft = f64::from(s.plane()[dy * n + dx]) / (n * n) as f64;
-                    worst = worst.max((fft - acc).abs() / scale);
-                }
+            for (&fft, &acc) in s.plane().iter().zip(&direct) {
+                // The FFT's plane carries a factor n².
+                let fft = f64::from(fft) / (n * n) as f64;
+                worst = worst.max((fft - acc).abs() / scale);
             }
             assert!(worst < 1e-5, "n {n}: worst {worst}");
         }
