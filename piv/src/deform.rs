@@ -4,6 +4,8 @@
 //! next pass correlates what is left. The images are sampled by
 //! [`super::resample`].
 
+use std::borrow::Cow;
+
 use ndarray::{Array2, Axis};
 use rayon::prelude::*;
 
@@ -89,7 +91,7 @@ impl Dense {
         let blend = |f: &Array2<f64>| -> Vec<f64> {
             let mut e = Vec::with_capacity(f.ncols() + 5);
             e.extend([0.0, 0.0]);
-            e.extend(f.columns().into_iter().map(|col| y.cubic(|k| col[k], ny)));
+            y.cubic_rows(f, &mut e);
             extend_in_place(&mut e);
             e
         };
@@ -193,8 +195,51 @@ impl Position {
                 f(k as usize)
             }
         };
-        let (k, t, t2, t3) = (self.k, self.t, self.t2, self.t3);
+        let k = self.k;
+        self.blend(at(k - 1), at(k), at(k + 1), at(k + 2))
+    }
+
+    /// [`Position::cubic`] down every column of `f` (nodes along axis 0),
+    /// appended to `out`: the four rows around the position (extended
+    /// linearly beyond the ends, as `cubic` extends them) blended column
+    /// by column with the same arithmetic, so that the loop runs over
+    /// contiguous rows instead of strided columns.
+    fn cubic_rows(&self, f: &Array2<f64>, out: &mut Vec<f64>) {
+        let (n, nx) = f.dim();
+        let Some(flat) = f.as_slice().filter(|_| n >= 2) else {
+            out.extend(f.columns().into_iter().map(|col| self.cubic(|k| col[k], n)));
+            return;
+        };
+        let row = |k: usize| &flat[k * nx..(k + 1) * nx];
+        let at = |k: isize| -> Cow<'_, [f64]> {
+            if k < 0 {
+                let (a, b) = (row(0), row(1));
+                a.iter()
+                    .zip(b)
+                    .map(|(&a, &b)| a + k as f64 * (b - a))
+                    .collect()
+            } else if k as usize >= n {
+                let (a, b, far) = (row(n - 2), row(n - 1), k as f64 - (n - 1) as f64);
+                a.iter().zip(b).map(|(&a, &b)| b + far * (b - a)).collect()
+            } else {
+                Cow::Borrowed(row(k as usize))
+            }
+        };
+        let k = self.k;
         let (p0, p1, p2, p3) = (at(k - 1), at(k), at(k + 1), at(k + 2));
+        out.extend(
+            p0.iter()
+                .zip(p1.iter())
+                .zip(p2.iter())
+                .zip(p3.iter())
+                .map(|(((&p0, &p1), &p2), &p3)| self.blend(p0, p1, p2, p3)),
+        );
+    }
+
+    /// The Catmull-Rom curve through `p1` and `p2` at this fraction.
+    #[inline(always)]
+    fn blend(&self, p0: f64, p1: f64, p2: f64, p3: f64) -> f64 {
+        let (t, t2, t3) = (self.t, self.t2, self.t3);
         0.5 * (2.0 * p1
             + (p2 - p0) * t
             + (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) * t2
@@ -265,4 +310,73 @@ pub fn deform(a: &Resampler, b: &Resampler, d: &Dense) -> (Array2<f32>, Array2<f
             },
         );
     (oa, ob, out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ndarray::ShapeBuilder;
+
+    /// Every row of the field, from `u`, `v` as given.
+    fn rows(grid: &Grid, u: &Array2<f64>, v: &Array2<f64>, (h, w): (usize, usize)) -> Vec<f32> {
+        let d = Dense::new(grid, u, v, (h, w));
+        let (mut ru, mut rv) = (vec![0.0; w], vec![0.0; w]);
+        let mut out = Vec::new();
+        for i in 0..h {
+            d.row(i, &mut ru, &mut rv);
+            out.extend_from_slice(&ru);
+            out.extend_from_slice(&rv);
+        }
+        out
+    }
+
+    /// The rows blended down contiguous node rows (a row-major field)
+    /// equal the column-by-column blend (the same field stored column-major)
+    /// bit for bit, on grids of one, two and many node rows, over every
+    /// image row (including those beyond the outer centres, where the
+    /// nodes are extended); and a linear field comes out linear.
+    #[test]
+    fn node_rows_blend_as_node_columns_do() {
+        for (h, size, step) in [(40, 32, 16), (48, 32, 16), (150, 32, 16), (97, 16, 5)] {
+            let w = 90;
+            let grid = Grid::new(w, h, size, step).expect("fits");
+            let shape = (grid.ny, grid.nx);
+            let field = |f: &dyn Fn(f64, f64) -> f64| {
+                let c = Array2::from_shape_fn(shape, |(r, c)| {
+                    let (x, y) = grid.centre(r, c);
+                    f(x, y)
+                });
+                let mut f_order = Array2::zeros(shape.f());
+                f_order.assign(&c);
+                (c, f_order)
+            };
+            let (u, uf) = field(&|x, y| (0.07 * x).sin() * 3.0 + 0.01 * y * y);
+            let (v, vf) = field(&|x, y| 0.3 * x - 0.2 * y + 1.5);
+            assert!(u.as_slice().is_some() && (grid.ny == 1 || uf.as_slice().is_none()));
+            let fast = rows(&grid, &u, &v, (h, w));
+            let strided = rows(&grid, &uf, &vf, (h, w));
+            assert_eq!(fast, strided, "{h}x{w} grid {size}/{step}");
+            // v is linear: reproduced at every pixel, inside and beyond
+            // (one node row is a constant along y).
+            for i in (0..h).filter(|_| grid.ny > 1) {
+                let rv = &fast[(2 * i + 1) * w..(2 * i + 2) * w];
+                for (j, &got) in rv.iter().enumerate() {
+                    let want = 0.3 * j as f64 - 0.2 * i as f64 + 1.5;
+                    // Positions are clamped one node beyond the outer
+                    // centres: compare only inside that.
+                    let (x0, y0) = grid.centre(0, 0);
+                    let (x1, y1) = grid.centre(grid.ny - 1, grid.nx - 1);
+                    let s = step as f64;
+                    let inside = (x0 - s..=x1 + s).contains(&(j as f64))
+                        && (y0 - s..=y1 + s).contains(&(i as f64));
+                    if inside {
+                        assert!(
+                            (f64::from(got) - want).abs() < 1e-4,
+                            "{i},{j}: {got} vs {want}"
+                        );
+                    }
+                }
+            }
+        }
+    }
 }
