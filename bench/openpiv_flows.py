@@ -37,6 +37,8 @@ FAMILIES = [
     ("paper-linear", "paper-linear", None, 300),
     ("paper-quadratic", "paper-quadratic", None, 300),
     ("paper-log", "paper-log", None, 300),
+    ("paper-log 0.3", "paper-log", 0.3, 300),
+    ("paper-log 1.0", "paper-log", 1.0, 300),
     ("blasius", "blasius", None, 300),
     ("uniform", "uniform", None, 300),
     ("vortex", "vortex", None, 300),

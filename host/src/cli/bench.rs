@@ -273,7 +273,7 @@ fn flows(
     vectors: Option<&Path>,
     dense: bool,
 ) -> Result<(), CliError> {
-    use spiv_host::bench::flows::{family_rows, FlowsRow, SPIV_FLOW, SPIV_FLOW_DENSE};
+    use spiv_host::bench::flows::{family_rows, worst, FlowsRow, SPIV_FLOW, SPIV_FLOW_DENSE};
     let seeds = parse_seeds(seeds)?;
     let fams = chosen_families(only)?;
     let b = bar((fams.len() * seeds.len()) as u64, "recordings");
@@ -288,12 +288,21 @@ fn flows(
     // The method column fits the longest method name.
     let mw = if dense { SPIV_FLOW_DENSE.len() } else { 13 };
     println!(
-        "seeds {:?}; EPE px per pair of measured vectors (mean over seeds); coverage: error components within 1σ",
+        "seeds {:?}; EPE px per pair of measured vectors (mean over seeds); worst: the seed whose measured vectors are furthest off, their EPE; coverage: error components within 1σ",
         seeds
     );
     println!(
-        "{:<17} {:<mw$} {:>9} {:>9} {:>8} {:>9} {:>9} {:>10} {:>9}",
-        "family", "method", "glare", "other", "flagged", "coverage", "dense", "mean |d|", "ms/pair"
+        "{:<17} {:<mw$} {:>9} {:>9} {:>13} {:>8} {:>9} {:>9} {:>10} {:>9}",
+        "family",
+        "method",
+        "glare",
+        "other",
+        "worst",
+        "flagged",
+        "coverage",
+        "dense",
+        "mean |d|",
+        "ms/pair"
     );
     for f in &fams {
         let flow = if dense { SPIV_FLOW_DENSE } else { SPIV_FLOW };
@@ -302,12 +311,16 @@ fn flows(
                 .iter()
                 .filter(|r| r.family == f.name && r.method == method)
                 .collect();
+            let worst = worst(&rs).map_or("-".into(), |r| {
+                format!("{:.3} s{}", r.measured.unwrap_or(f64::NAN), r.seed)
+            });
             println!(
-                "{:<17} {:<mw$} {:>9} {:>9} {:>7.1}% {:>9} {:>9} {:>10.2} {:>9.1}",
+                "{:<17} {:<mw$} {:>9} {:>9} {:>13} {:>7.1}% {:>9} {:>9} {:>10.2} {:>9.1}",
                 f.name,
                 method,
                 f3(mean(rs.iter().map(|r| r.glare).collect())),
                 f3(mean(rs.iter().map(|r| r.other).collect())),
+                worst,
                 100.0 * mean(rs.iter().map(|r| Some(r.flagged)).collect()).unwrap_or(0.0),
                 mean(rs.iter().map(|r| r.coverage).collect())
                     .map_or("-".into(), |c| format!("{:.0}%", 100.0 * c)),
