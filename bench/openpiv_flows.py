@@ -5,7 +5,7 @@ deformation (windows 64, 32, 32 at 50 % overlap: the grid of spiv piv's
 defaults and of the truth), scored as `spiv bench flows` scores its rows.
 
     python3 -m venv bench/.venv && MATURIN_PEP517_ARGS="--features sim" bench/.venv/bin/pip install ./python openpiv imageio
-    bench/.venv/bin/python bench/openpiv_flows.py [--seeds 101-110]
+    bench/.venv/bin/python bench/openpiv_flows.py [--seeds 101-110] [--families "paper-log 0.3,vortex"]
 
 Per family and seed: the recording is `spiv.simulate` of the family
 (host/src/bench/flows.rs `families()`: scene, top speed, planes; flow seed
@@ -68,10 +68,15 @@ def score(u, v, measured, truth, h, band):
 def main():
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--seeds", default="101-110")
+    ap.add_argument("--families", help="comma-separated family names (all without it)")
     ap.add_argument("--json", type=pathlib.Path)
     args = ap.parse_args()
+    only = None if args.families is None else {f.strip() for f in args.families.split(",")}
+    families = [f for f in FAMILIES if only is None or f[0] in only]
+    if not families:
+        sys.exit(f"--families: none of {', '.join(f[0] for f in FAMILIES)}")
     rows = []
-    for name, scene, speed, ticks in FAMILIES:
+    for name, scene, speed, ticks in families:
         for seed in seeds_of(args.seeds):
             with tempfile.TemporaryDirectory() as tmp:
                 sim = spiv.simulate(scene, seed=seed, ticks=ticks, speed=speed, flow_seed=seed,
@@ -102,7 +107,7 @@ def main():
     print(f"seeds {args.seeds}; EPE px per pair, glare rows / other rows; flagged")
     print("| family | " + " | ".join(methods) + " |")
     print("|---" * (len(methods) + 1) + "|")
-    for name, *_ in FAMILIES:
+    for name, *_ in families:
         cells = []
         for m in methods:
             rs = [r for r in rows if r[0] == name and r[2] == m]

@@ -3,7 +3,7 @@
 # verilates fpga/rtl with the C++ testbenches fpga/tb/tb_tfp.cpp (the TFP
 # frame), fpga/tb/tb_light.cpp (the static-light model and its events) and
 # fpga/tb/tb_rungs.cpp (the live mode's rung frames, scattered along a
-# flow), linked to spiv-core's C ABI (the spiv-ffi static library), and runs them
+# flow) and fpga/tb/tb_rice.cpp (the Rice tile coder), linked to spiv-core's C ABI (the spiv-ffi static library), and runs them
 # on the committed strip and on a paper-linear and a vortex-array
 # recording that `spiv simulate` makes, at several windows and schedules;
 # the light model also on a synthetic recording of every light level. CI
@@ -59,6 +59,16 @@ for size in "$W $H 6" "400 250 7"; do
     exit 1
   }
 done
+
+# The Rice tile coder, rows up to 512 samples.
+verilator --cc --exe --build -O2 -j 2 -Wall -Wno-DECLFILENAME -Wno-UNUSEDSIGNAL \
+  --Mdir "$work/rice" -GWMAX=512 \
+  -CFLAGS "-DTB_WMAX=512 -I$root/ffi/include" \
+  -LDFLAGS "$target/debug/libspiv_ffi.a -lpthread -ldl -lm" \
+  "$root/fpga/rtl/spiv_rice.sv" "$root/fpga/tb/tb_rice.cpp" >"$work/verilator-rice.log" 2>&1 || {
+  tail -30 "$work/verilator-rice.log"
+  exit 1
+}
 
 for scene in paper-linear vortex-array; do
   "$spiv" simulate --scene "$scene" --seed 7 --width $W --height $H --ticks 300 \
@@ -131,3 +141,14 @@ for r in firmware-sim/cortex-m4/data/strip.dat "$work/paper-linear/spikes.dat" \
 done
 got=$("$work/rungs400/Vspiv_rungs" "$work/paper-linear-400/spikes.dat")
 printf 'rungs    %-31s %s\n' "400x250 paper-linear/spikes.dat" "$got"
+
+# Tiles of TFP-like frames of each recording, then the synthetic tiles
+# (tb_rice.cpp lists them), each back to back and with pauses.
+got=$("$work/rice/Vspiv_rice")
+printf 'rice     %-31s %s\n' "synthetic tiles" "$got"
+for r in "firmware-sim/cortex-m4/data/strip.dat $W $H" "$work/paper-linear/spikes.dat $W $H" \
+  "$work/vortex-array/spikes.dat $W $H" "$work/paper-linear-400/spikes.dat 400 250"; do
+  # shellcheck disable=SC2086
+  got=$("$work/rice/Vspiv_rice" $r)
+  printf 'rice     %-31s %s\n' "$(basename "$(dirname ${r%% *})")/$(basename ${r%% *}) ${r#* }" "$got"
+done

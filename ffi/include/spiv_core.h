@@ -497,4 +497,23 @@ enum SpivStatus spiv_rung_frames(struct SpivRing *r,
                                  int16_t *frames,
                                  size_t len);
 
+// Codes one tile, the band `samples` of `rows × width` levels (row by
+// row), as the wire codes it ([`spiv_core::wire::codec::encode_tile`])
+// with the lossless encoding `encoding` (`SPIV_ENCODING_RICE` or
+// `SPIV_ENCODING_CONTEXT`): the encoding it took (`*used`: the one asked
+// for, or raw where that would not be shorter than the raw tile) and the
+// payload in `out[..*len]`. `cap` is the room in `out`.
+//
+// # Safety
+// `samples` `width·rows` readable entries; `out` `cap` writable bytes;
+// `used` and `len` writable.
+enum SpivStatus spiv_encode_tile(uint8_t encoding,
+                                 const uint16_t *samples,
+                                 uint16_t width,
+                                 uint16_t rows,
+                                 uint8_t *out,
+                                 size_t cap,
+                                 uint8_t *used,
+                                 size_t *len);
+
 #endif  /* SPIV_CORE_H */

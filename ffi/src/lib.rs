@@ -1625,6 +1625,61 @@ pub unsafe extern "C" fn spiv_rung_frames(
     })())
 }
 
+/// Codes one tile, the band `samples` of `rows × width` levels (row by
+/// row), as the wire codes it ([`spiv_core::wire::codec::encode_tile`])
+/// with the lossless encoding `encoding` (`SPIV_ENCODING_RICE` or
+/// `SPIV_ENCODING_CONTEXT`): the encoding it took (`*used`: the one asked
+/// for, or raw where that would not be shorter than the raw tile) and the
+/// payload in `out[..*len]`. `cap` is the room in `out`.
+///
+/// # Safety
+/// `samples` `width·rows` readable entries; `out` `cap` writable bytes;
+/// `used` and `len` writable.
+#[no_mangle]
+pub unsafe extern "C" fn spiv_encode_tile(
+    encoding: u8,
+    samples: *const u16,
+    width: u16,
+    rows: u16,
+    out: *mut u8,
+    cap: usize,
+    used: *mut u8,
+    len: *mut usize,
+) -> SpivStatus {
+    status((|| {
+        let want = match Encoding::from_u8(encoding) {
+            Some(e @ (Encoding::Rice | Encoding::Context)) => e,
+            _ => return Err(SpivStatus::SpivErrConfig),
+        };
+        if width == 0 || rows == 0 {
+            return Err(SpivStatus::SpivErrConfig);
+        }
+        let n = usize::from(width) * usize::from(rows);
+        let p = nonnull(samples, n)?;
+        if out.is_null() || used.is_null() || len.is_null() {
+            return Err(SpivStatus::SpivErrNull);
+        }
+        // SAFETY: `width·rows` readable entries, `cap` writable bytes (the
+        // caller's promise).
+        let (given, dst) = unsafe {
+            (
+                core::slice::from_raw_parts(p, n),
+                core::slice::from_raw_parts_mut(out, cap),
+            )
+        };
+        let lossy = spiv_core::wire::codec::Lossy::DEFAULT;
+        let (enc, n) =
+            spiv_core::wire::codec::encode_tile(want, given, width, rows, &lossy, &mut [], dst)
+                .map_err(core_status)?;
+        // SAFETY: writable (the caller's promise), checked non-null above.
+        unsafe {
+            *used = enc as u8;
+            *len = n;
+        }
+        Ok(())
+    })())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

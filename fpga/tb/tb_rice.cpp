@@ -1,0 +1,239 @@
+// Verilator testbench of fpga/rtl/spiv_rice.sv: streams tiles through
+// the RTL and holds every payload it makes to the one spiv-core makes
+// through its C ABI (`spiv_encode_tile`, `SPIV_ENCODING_RICE`), byte for
+// byte, with the same choice of Rice or raw and the same width flag.
+//
+//   tb_rice [FILE.dat WIDTH HEIGHT]
+//
+// The tiles: bands of 1, 7 and 16 rows of TFP-like frames of the
+// recording (each pixel's spikes over 8 planes times 32, at most 255),
+// when one is given; then synthetic tiles: all zero, flat full scale, a
+// ramp, 8-bit noise (raw), 16-bit noise (wide, escapes, k up to 16),
+// levels alternating 0 and 65535 (the largest residuals), lone spikes
+// after long runs of zeros (escapes at k = 0), one-sample rows, a single
+// sample, rows of 400 and WMAX samples, lone residuals of +-12 at k = 0
+// (quotients 23 and 24: the longest plain code and the first escape),
+// and noise tiles of many sizes whose payload comes near the raw tile's
+// (`ties`: as long as it, sent raw). Every tile goes through twice:
+// back to back, and with in_valid low on a third of the clocks.
+//
+// Prints `tiles=N rice=R raw=K ties=T bytes=B equal` and exits 0, or names the
+// first differing tile and byte and exits 1.
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "Vspiv_rice.h"
+#include "read_file.h"
+#include "verilated.h"
+
+extern "C" {
+#include "spiv_core.h"
+}
+
+#ifndef TB_WMAX
+#error "TB_WMAX must match the model's WMAX"
+#endif
+
+struct Tile {
+    std::string name;
+    int width, rows;
+    std::vector<uint16_t> s;
+};
+
+struct Bench {
+    Vspiv_rice m;
+    uint32_t lcg = 12345;
+
+    bool coin() {  // in_valid low on about a third of the clocks
+        lcg = lcg * 1664525u + 1013904223u;
+        return (lcg >> 24) % 3 == 0;
+    }
+
+    void clock(std::vector<uint8_t>& out, bool& done) {
+        m.clk = 0;
+        m.eval();
+        m.clk = 1;
+        m.eval();
+        for (int w = 0; w < m.out_words; ++w) {
+            uint32_t word = (uint32_t)(m.out_data >> (32 * (1 - w)));
+            for (int b = 3; b >= 0; --b) out.push_back((uint8_t)(word >> (8 * b)));
+        }
+        if (m.out_done) {
+            for (int b = 0; b < m.out_tail_bytes; ++b)
+                out.push_back((uint8_t)(m.out_tail >> (24 - 8 * b)));
+            done = true;
+        }
+    }
+
+    // The tile through the RTL: its payload bytes, width flag and choice.
+    bool run(const Tile& t, bool pauses, std::vector<uint8_t>& out, bool& wide, bool& rice,
+             uint32_t& bytes) {
+        out.clear();
+        bool done = false;
+        m.width = (uint16_t)t.width;
+        const size_t n = t.s.size();
+        for (size_t i = 0; i < n;) {
+            const bool idle = pauses && coin();
+            m.in_valid = !idle;
+            m.in_first = !idle && i == 0;
+            m.in_last = !idle && i + 1 == n;
+            m.in_sample = t.s[i];
+            clock(out, done);
+            if (!idle) ++i;
+        }
+        m.in_valid = 0;
+        m.in_first = 0;
+        m.in_last = 0;
+        for (int k = 0; k < 16 && !done; ++k) clock(out, done);
+        if (!done) return false;
+        wide = m.out_wide;
+        rice = m.out_rice;
+        bytes = m.out_bytes;
+        return true;
+    }
+};
+
+int main(int argc, char** argv) {
+    const int WMAX = TB_WMAX;
+    std::vector<Tile> tiles;
+    if (argc == 4) {
+        const std::vector<uint8_t> dat = read_file(argv[1]);
+        const int w = std::atoi(argv[2]), h = std::atoi(argv[3]);
+        const size_t plane = (size_t)w * h / 8;
+        if (w < 1 || w > WMAX || h < 1 || dat.empty() || dat.size() % plane != 0) {
+            std::fprintf(stderr, "%s: not whole %dx%d planes, or wider than %d\n", argv[1], w,
+                         h, WMAX);
+            return 2;
+        }
+        const size_t planes = dat.size() / plane;
+        for (size_t p0 = 0; p0 + 8 <= planes; p0 += planes / 3 > 8 ? planes / 3 : 8) {
+            std::vector<uint16_t> frame((size_t)w * h, 0);
+            for (size_t p = p0; p < p0 + 8; ++p)
+                for (size_t i = 0; i < frame.size(); ++i)
+                    frame[i] += 32 * ((dat[p * plane + i / 8] >> (i % 8)) & 1);
+            for (auto& v : frame) v = v > 255 ? 255 : v;
+            for (int rows : {1, 7, 16}) {
+                for (int r0 = 0; r0 + rows <= h; r0 += rows * 3) {
+                    Tile t{"frame " + std::to_string(p0) + " rows " + std::to_string(r0) + "+" +
+                               std::to_string(rows),
+                           w, rows, {}};
+                    t.s.assign(frame.begin() + (size_t)r0 * w,
+                               frame.begin() + (size_t)(r0 + rows) * w);
+                    tiles.push_back(t);
+                }
+            }
+        }
+    } else if (argc != 1) {
+        std::fprintf(stderr, "usage: tb_rice [FILE.dat WIDTH HEIGHT]\n");
+        return 2;
+    }
+    uint32_t seed = 7;
+    auto rnd = [&]() {
+        seed = seed * 1664525u + 1013904223u;
+        return seed >> 8;
+    };
+    auto synth = [&](const char* name, int width, int rows, auto f) {
+        Tile t{name, width, rows, {}};
+        for (int i = 0; i < width * rows; ++i) t.s.push_back((uint16_t)f(i % width, i / width));
+        tiles.push_back(t);
+    };
+    synth("zero", 64, 8, [](int, int) { return 0; });
+    synth("flat 255", 64, 8, [](int, int) { return 255; });
+    synth("ramp", 100, 10, [](int x, int y) { return (3 * x + 5 * y) % 256; });
+    synth("noise 8-bit", 64, 8, [&](int, int) { return rnd() % 256; });
+    synth("noise 16-bit", 64, 8, [&](int, int) { return rnd() % 65536; });
+    synth("alternating 0/65535", 33, 5,
+          [](int x, int y) { return ((x + y) % 2) ? 65535 : 0; });
+    synth("lone spikes", 128, 6,
+          [](int x, int y) { return (x * 7 + y * 13) % 97 == 0 ? 255 : 0; });
+    synth("one-sample rows", 1, 40, [&](int, int) { return rnd() % 40; });
+    synth("one sample", 1, 1, [](int, int) { return 200; });
+    synth("sensor row", 400, 3,
+          [&](int x, int) { return (x % 50 < 4) ? 180 + rnd() % 60 : rnd() % 4; });
+    synth("widest row", WMAX, 2, [&](int x, int) { return (x * x) % 300; });
+    // Level 12 with lone 0s and 24s: residuals of -12 and +12 at k = 0,
+    // quotients 23 (the longest plain code) and 24 (the first escape).
+    synth("steps of 12", 97, 6, [](int x, int y) {
+        const int i = 97 * y + x;
+        return i % 41 == 0 ? 0 : i % 53 == 0 ? 24 : 12;
+    });
+    // Noise whose payload comes near the raw tile's length, over many
+    // sizes and amplitudes: some tie with it (the core then sends raw).
+    for (int amp = 64; amp <= 256; amp += 16)
+        for (int width = 3; width <= 24; width += 3)
+            synth("near raw", width, 1 + width % 3, [&](int, int) { return rnd() % amp; });
+
+    Bench b;
+    b.m.rst = 1;
+    b.m.in_valid = 0;
+    b.m.width = 1;
+    std::vector<uint8_t> junk;
+    bool d = false;
+    for (int k = 0; k < 4; ++k) b.clock(junk, d);
+    b.m.rst = 0;
+
+    int ntiles = 0, nrice = 0, nraw = 0, nties = 0;
+    size_t nbytes = 0;
+    std::vector<uint8_t> core(4 * (size_t)WMAX * 16 + 64), got;
+    for (int pass = 0; pass < 2; ++pass) {
+        for (const Tile& t : tiles) {
+            uint8_t used = 0;
+            size_t len = 0;
+            if (spiv_encode_tile(SPIV_ENCODING_RICE, t.s.data(), (uint16_t)t.width,
+                                 (uint16_t)t.rows, core.data(), core.size(), &used,
+                                 &len) != SPIV_OK) {
+                std::fprintf(stderr, "%s: the core refused the tile\n", t.name.c_str());
+                return 1;
+            }
+            bool wide = false, rice = false;
+            uint32_t bytes = 0;
+            if (!b.run(t, pass == 1, got, wide, rice, bytes)) {
+                std::fprintf(stderr, "%s: the RTL did not finish the tile\n", t.name.c_str());
+                return 1;
+            }
+            bool core_wide = false;
+            for (uint16_t v : t.s) core_wide |= v > 255;
+            const bool core_rice = used == SPIV_ENCODING_RICE;
+            if (wide != core_wide || rice != core_rice || got.size() != bytes) {
+                std::fprintf(stderr, "%s: RTL wide %d rice %d (%zu bytes, %u counted), core wide %d %s\n",
+                             t.name.c_str(), wide, rice, got.size(), bytes, core_wide,
+                             core_rice ? "rice" : "raw");
+                return 1;
+            }
+            if (core_rice) {
+                if (got.size() != len) {
+                    std::fprintf(stderr, "%s: RTL %zu bytes, core %zu\n", t.name.c_str(),
+                                 got.size(), len);
+                    return 1;
+                }
+                for (size_t i = 0; i < len; ++i) {
+                    if (got[i] != core[i]) {
+                        std::fprintf(stderr, "%s: byte %zu: RTL %02x, core %02x\n",
+                                     t.name.c_str(), i, got[i], core[i]);
+                        return 1;
+                    }
+                }
+                ++nrice;
+                nbytes += len;
+            } else {
+                // Raw: the RTL's payload is no shorter than the raw tile.
+                const size_t raw = t.s.size() * (core_wide ? 2 : 1);
+                nties += got.size() == raw;
+                if (got.size() < raw) {
+                    std::fprintf(stderr, "%s: raw in the core, %zu Rice bytes in the RTL\n",
+                                 t.name.c_str(), got.size());
+                    return 1;
+                }
+                ++nraw;
+            }
+            ++ntiles;
+        }
+    }
+    std::printf("tiles=%d rice=%d raw=%d ties=%d bytes=%zu equal\n", ntiles, nrice, nraw, nties,
+                nbytes);
+    return 0;
+}
