@@ -93,6 +93,9 @@ pub struct FlowsRow {
     /// Share of error components within 1σ (valid vectors with a finite
     /// uncertainty); `None` without any.
     pub coverage: Option<f64>,
+    /// Share of the same vectors confidently wrong: off by more than 0.3
+    /// px and by more than 3σ in u or v; `None` without any.
+    pub beyond_3sigma: Option<f64>,
     /// EPE of the field interpolated to every pixel, px per pair.
     pub dense: Option<f64>,
     /// Mean truth displacement over the vectors, px per pair.
@@ -121,6 +124,9 @@ pub(crate) struct Score {
     other: (f64, usize),
     flagged: usize,
     covered: (usize, usize),
+    /// Valid vectors with a finite uncertainty off by more than 0.3 px and
+    /// 3σ, and all of them.
+    beyond: (usize, usize),
     truth: f64,
     all: usize,
 }
@@ -156,6 +162,9 @@ impl Score {
                 if su.is_finite() && sv.is_finite() {
                     self.covered.0 += usize::from(eu.abs() <= su) + usize::from(ev.abs() <= sv);
                     self.covered.1 += 2;
+                    let far = eu.hypot(ev) > 0.3 && (eu.abs() > 3.0 * su || ev.abs() > 3.0 * sv);
+                    self.beyond.0 += usize::from(far);
+                    self.beyond.1 += 1;
                 }
             }
         }
@@ -185,6 +194,7 @@ impl Score {
             measured: self.measured_epe(),
             flagged: self.flagged as f64 / self.all.max(1) as f64,
             coverage: (self.covered.1 > 0).then(|| self.covered.0 as f64 / self.covered.1 as f64),
+            beyond_3sigma: (self.beyond.1 > 0).then(|| self.beyond.0 as f64 / self.beyond.1 as f64),
             dense,
             mean_truth: self.truth / self.all.max(1) as f64,
             ms_per_pair: ms,
@@ -422,5 +432,34 @@ mod tests {
         assert_eq!(worst(&refs).map(|r| r.seed), Some(3));
         assert_eq!(worst(&refs[..2]).map(|r| r.seed), Some(2));
         assert!(worst(&refs[3..]).is_none());
+    }
+
+    /// A valid vector is confidently wrong when it is off by more than 0.3
+    /// px and by more than 3σ in either component: not when it is off by
+    /// more than 3σ but within 0.3 px, nor when its σ covers it.
+    #[test]
+    fn confidently_wrong_needs_both_bounds() {
+        let scene = Scene::new(SceneParams::new(SceneKind::Uniform), 1, 40);
+        let dt = 13.0;
+        let truth = scene.truth(&[(100.0, 100.0)], dt)[0];
+        let vector = |du: f64| Vector {
+            x: 100.0,
+            y: 100.0,
+            u: truth.2 + du,
+            v: truth.3,
+            state: State::Valid,
+        };
+        let mut s = Score::default();
+        // off by 0.5 with σ 0.1: wrong; 0.2 with σ 0.01: within 0.3 px;
+        // 0.5 with σ 0.2: within 3σ.
+        let vs = [vector(0.5), vector(0.2), vector(0.5)];
+        s.add(
+            &scene,
+            dt,
+            &vs,
+            Some(&[(0.1, 0.1), (0.01, 0.01), (0.2, 0.2)]),
+        );
+        let r = s.row("uniform", 1, SPIV_FLOW, None, 1.0);
+        assert_eq!(r.beyond_3sigma, Some(1.0 / 3.0));
     }
 }

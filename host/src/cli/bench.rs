@@ -288,11 +288,11 @@ fn flows(
     // The method column fits the longest method name.
     let mw = if dense { SPIV_FLOW_DENSE.len() } else { 13 };
     println!(
-        "seeds {:?}; EPE px per pair of measured vectors (mean over seeds); worst: the seed whose measured vectors are furthest off, their EPE; coverage: error components within 1σ",
+        "seeds {:?}; EPE px per pair of measured vectors (mean over seeds); worst: the seed whose measured vectors are furthest off, their EPE; coverage: error components within 1σ; >3σ: valid vectors off by more than 3σ and 0.3 px",
         seeds
     );
     println!(
-        "{:<17} {:<mw$} {:>9} {:>9} {:>13} {:>8} {:>9} {:>9} {:>10} {:>9}",
+        "{:<17} {:<mw$} {:>9} {:>9} {:>13} {:>8} {:>9} {:>6} {:>9} {:>10} {:>9}",
         "family",
         "method",
         "glare",
@@ -300,6 +300,7 @@ fn flows(
         "worst",
         "flagged",
         "coverage",
+        ">3σ",
         "dense",
         "mean |d|",
         "ms/pair"
@@ -315,7 +316,7 @@ fn flows(
                 format!("{:.3} s{}", r.measured.unwrap_or(f64::NAN), r.seed)
             });
             println!(
-                "{:<17} {:<mw$} {:>9} {:>9} {:>13} {:>7.1}% {:>9} {:>9} {:>10.2} {:>9.1}",
+                "{:<17} {:<mw$} {:>9} {:>9} {:>13} {:>7.1}% {:>9} {:>6} {:>9} {:>10.2} {:>9.1}",
                 f.name,
                 method,
                 f3(mean(rs.iter().map(|r| r.glare).collect())),
@@ -324,6 +325,8 @@ fn flows(
                 100.0 * mean(rs.iter().map(|r| Some(r.flagged)).collect()).unwrap_or(0.0),
                 mean(rs.iter().map(|r| r.coverage).collect())
                     .map_or("-".into(), |c| format!("{:.0}%", 100.0 * c)),
+                mean(rs.iter().map(|r| r.beyond_3sigma).collect())
+                    .map_or("-".into(), |c| format!("{:.1}%", 100.0 * c)),
                 f3(mean(rs.iter().map(|r| r.dense).collect())),
                 mean(rs.iter().map(|r| Some(r.mean_truth)).collect()).unwrap_or(0.0),
                 mean(rs.iter().map(|r| Some(r.ms_per_pair)).collect()).unwrap_or(0.0),
