@@ -3,7 +3,8 @@
 # verilates fpga/rtl with the C++ testbenches fpga/tb/tb_tfp.cpp (the TFP
 # frame), fpga/tb/tb_light.cpp (the static-light model and its events) and
 # fpga/tb/tb_rungs.cpp (the live mode's rung frames, scattered along a
-# flow) and fpga/tb/tb_rice.cpp (the Rice tile coder), linked to spiv-core's C ABI (the spiv-ffi static library), and runs them
+# flow), fpga/tb/tb_rice.cpp (the Rice tile coder) and fpga/tb/tb_ring.cpp
+# (the event ring and its reader), linked to spiv-core's C ABI (the spiv-ffi static library), and runs them
 # on the committed strip and on a paper-linear and a vortex-array
 # recording that `spiv simulate` makes, at several windows and schedules;
 # the light model also on a synthetic recording of every light level. CI
@@ -67,6 +68,17 @@ verilator --cc --exe --build -O2 -j 2 -Wall -Wno-DECLFILENAME -Wno-UNUSEDSIGNAL 
   -LDFLAGS "$target/debug/libspiv_ffi.a -lpthread -ldl -lm" \
   "$root/fpga/rtl/spiv_rice.sv" "$root/fpga/tb/tb_rice.cpp" >"$work/verilator-rice.log" 2>&1 || {
   tail -30 "$work/verilator-rice.log"
+  exit 1
+}
+
+# The event ring: 4,096 events over 31 ticks, small enough that the
+# recordings evict ticks and the synthetic ones lose events.
+verilator --cc --exe --build -O2 -j 2 -Wall -Wno-DECLFILENAME -Wno-UNUSEDSIGNAL \
+  --Mdir "$work/ring" -GCAPB=12 -GDEPB=5 \
+  -CFLAGS "-DTB_W=$W -DTB_H=$H -DTB_CAPB=12 -DTB_DEPB=5 -I$root/ffi/include" \
+  -LDFLAGS "$target/debug/libspiv_ffi.a -lpthread -ldl -lm" \
+  "$root/fpga/rtl/spiv_ring.sv" "$root/fpga/tb/tb_ring.cpp" >"$work/verilator-ring.log" 2>&1 || {
+  tail -30 "$work/verilator-ring.log"
   exit 1
 }
 
@@ -151,4 +163,12 @@ for r in "firmware-sim/cortex-m4/data/strip.dat $W $H" "$work/paper-linear/spike
   # shellcheck disable=SC2086
   got=$("$work/rice/Vspiv_rice" $r)
   printf 'rice     %-31s %s\n' "$(basename "$(dirname ${r%% *})")/$(basename ${r%% *}) ${r#* }" "$got"
+done
+
+# FILE | noise:N | burst:N | slow:N (tb_ring.cpp): every plane's ring
+# state and, every fifth plane, six reads.
+for r in firmware-sim/cortex-m4/data/strip.dat "$work/paper-linear/spikes.dat" \
+  "$work/vortex-array/spikes.dat" noise:120 burst:100 slow:1500; do
+  got=$("$work/ring/Vspiv_ring" "$r")
+  printf 'ring     %-31s %s\n' "$(basename "$(dirname "$r")")/$(basename "$r")" "$got"
 done

