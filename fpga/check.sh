@@ -4,8 +4,9 @@
 # frame), fpga/tb/tb_light.cpp (the static-light model and its events) and
 # fpga/tb/tb_rungs.cpp (the live mode's rung frames, scattered along a
 # flow), fpga/tb/tb_ring.cpp (the event ring and its reader),
-# fpga/tb/tb_pair.cpp (the ring chained to the rung frames: spiv_pair.sv)
-# and fpga/tb/tb_rice.cpp (the Rice tile coder), linked to spiv-core's C
+# fpga/tb/tb_live.cpp (the live mode's pipeline: spiv_live.sv, the light
+# model, the ring and the rung frames chained) and fpga/tb/tb_rice.cpp
+# (the Rice tile coder), linked to spiv-core's C
 # ABI (the spiv-ffi static library), and runs them
 # on the committed strip and on a paper-linear and a vortex-array
 # recording that `spiv simulate` makes, at several windows and schedules;
@@ -51,8 +52,8 @@ done
 # The rung frames: eight lanes (a pair's most rungs), fed the core ring's
 # events, on the sensor's 400x250 (a frame that is no power of two, node
 # grids up to 128 across); on the model's size they are fed by the RTL's
-# ring (spiv_pair: 524,288 events over 1,023 ticks, so that noise evicts
-# ticks).
+# light model and ring (spiv_live: 8 pixels per clock into the light
+# model, 524,288 events over 1,023 ticks, so that noise evicts ticks).
 verilator --cc --exe --build -O2 -j 2 -Wall -Wno-DECLFILENAME -Wno-UNUSEDSIGNAL \
   --Mdir "$work/rungs400" -GW=400 -GH=250 -GNR=8 -GNXB=7 -GNYB=7 \
   -CFLAGS "-DTB_W=400 -DTB_H=250 -DTB_NR=8 -I$root/ffi/include" \
@@ -62,13 +63,14 @@ verilator --cc --exe --build -O2 -j 2 -Wall -Wno-DECLFILENAME -Wno-UNUSEDSIGNAL 
   exit 1
 }
 verilator --cc --exe --build -O2 -j 2 -Wall -Wno-DECLFILENAME -Wno-UNUSEDSIGNAL \
-  --Mdir "$work/pair" --top-module spiv_pair -GW=$W -GH=$H -GNR=8 -GNXB=6 -GNYB=6 \
+  --Mdir "$work/live" --top-module spiv_live -GW=$W -GH=$H -GP=8 -GNR=8 -GNXB=6 -GNYB=6 \
   -GCAPB=19 -GDEPB=10 \
-  -CFLAGS "-DTB_W=$W -DTB_H=$H -DTB_NR=8 -DTB_CAPB=19 -DTB_DEPB=10 -I$root/ffi/include" \
+  -CFLAGS "-DTB_W=$W -DTB_H=$H -DTB_P=8 -DTB_NR=8 -DTB_CAPB=19 -DTB_DEPB=10 -I$root/ffi/include" \
   -LDFLAGS "$target/debug/libspiv_ffi.a -lpthread -ldl -lm" \
-  "$root/fpga/rtl/spiv_pair.sv" "$root/fpga/rtl/spiv_ring.sv" "$root/fpga/rtl/spiv_rungs.sv" \
-  "$root/fpga/tb/tb_pair.cpp" >"$work/verilator-pair.log" 2>&1 || {
-  tail -30 "$work/verilator-pair.log"
+  "$root/fpga/rtl/spiv_live.sv" "$root/fpga/rtl/spiv_light.sv" "$root/fpga/rtl/spiv_pair.sv" \
+  "$root/fpga/rtl/spiv_ring.sv" "$root/fpga/rtl/spiv_rungs.sv" \
+  "$root/fpga/tb/tb_live.cpp" >"$work/verilator-live.log" 2>&1 || {
+  tail -30 "$work/verilator-live.log"
   exit 1
 }
 
@@ -160,8 +162,8 @@ done
 for r in firmware-sim/cortex-m4/data/strip.dat "$work/paper-linear/spikes.dat" \
   "$work/vortex-array/spikes.dat" "$work/paper-linear-long/spikes.dat" "$work/all.dat" noise:200 \
   dim:560; do
-  got=$("$work/pair/Vspiv_pair" "$r")
-  printf 'pair     %-31s %s\n' "$(basename "$(dirname "$r")")/$(basename "$r")" "$got"
+  got=$("$work/live/Vspiv_live" "$r")
+  printf 'live     %-31s %s\n' "$(basename "$(dirname "$r")")/$(basename "$r")" "$got"
 done
 got=$("$work/rungs400/Vspiv_rungs" "$work/paper-linear-400/spikes.dat")
 printf 'rungs    %-31s %s\n' "400x250 paper-linear/spikes.dat" "$got"

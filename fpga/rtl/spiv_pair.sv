@@ -4,7 +4,7 @@
 // once they take events, the ring's reader streams the events of ticks
 // `ev_from` to the ring's next tick into them, in the order stored, then
 // ends them. Bit-exact with spiv-core's `rungs::rung_frames` on the core's
-// `EventRing` (fpga/tb/tb_pair.cpp).
+// `EventRing` (fpga/tb/tb_live.cpp drives it inside spiv_live.sv).
 //
 // The ring's and the rung frames' ports are theirs (see those modules);
 // `ev_from` is held with `start`. A pair whose ticks the ring no longer

@@ -1,19 +1,15 @@
-// Verilator testbench of fpga/rtl/spiv_pair.sv, the event ring chained to
-// the rung frames: the events of a recording (spiv-core's static-light
-// model, `spiv_light_push`) go into the RTL's ring plane by plane, while an
-// identical light model feeds the core's ring of the same size
-// (`spiv_ring_push`); at each pair the RTL reads its own ring into its rung
-// frames, and every sample of every frame must equal `spiv_rung_frames`'s.
-// The pairs and flows are tb_rungs.cpp's (the same list).
+// Verilator testbench of fpga/rtl/spiv_live.sv, the live mode's frame
+// pipeline in RTL: spike planes go into the RTL's light model, ring and
+// rung frames, and into spiv-core's (`spiv_ring_push` through the core's
+// light model into a ring of the same size); at each pair every sample of
+// every frame must equal `spiv_rung_frames`'. The pairs and flows are
+// tb_rungs.cpp's; each pair made is asked again a tick late, which both
+// refuse.
 //
-//   tb_pair FILE.dat | noise:N | dim:N
+//   tb_live FILE.dat | noise:N | dim:N
 //
-// The ring holds 2^TB_CAPB events over 2^TB_DEPB - 1 ticks: noise:N evicts
-// ticks, and the pairs whose ticks were evicted are made from what both
-// rings still hold, and each pair made is asked again a tick late, which
-// both refuse. Prints `pairs=N refused=R events=E evicted=V
-// samples=S nonzero=Z clocks=C equal` and exits 0, or names the first
-// difference and exits 1.
+// Prints `pairs=N refused=R events=E evicted=V samples=S nonzero=Z
+// clocks=C equal` and exits 0, or names the first difference and exits 1.
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -22,7 +18,7 @@
 #include <cstring>
 #include <vector>
 
-#include "Vspiv_pair.h"
+#include "Vspiv_live.h"
 #include "read_file.h"
 #include "verilated.h"
 
@@ -31,7 +27,7 @@ extern "C" {
 }
 
 #ifndef TB_W
-#error "TB_W, TB_H, TB_NR, TB_CAPB and TB_DEPB must match the model's"
+#error "TB_W, TB_H, TB_P, TB_NR, TB_CAPB and TB_DEPB must match the model's"
 #endif
 
 static const int W = TB_W, H = TB_H, NR = TB_NR;
@@ -190,7 +186,7 @@ static std::vector<Case> cases(uint64_t seed) {
 }
 
 struct Bench {
-    Vspiv_pair m;
+    Vspiv_live m;
     uint64_t clocks = 0;
     void clock() {
         m.clk = 0;
@@ -204,7 +200,7 @@ struct Bench {
 int main(int argc, char** argv) {
     Verilated::commandArgs(argc, argv);
     if (argc < 2) {
-        std::fprintf(stderr, "usage: tb_pair FILE.dat | noise:N | dim:N\n");
+        std::fprintf(stderr, "usage: tb_live FILE.dat | noise:N | dim:N\n");
         return 2;
     }
     std::vector<uint8_t> dat;
@@ -258,15 +254,6 @@ int main(int argc, char** argv) {
     std::vector<uint32_t> entries(cap), starts(depth + 1);
     SpivRing ring{entries.data(), cap, starts.data(), depth, 0, 0, 0, 0, 0};
     if (spiv_ring_init(&ring, first) != SPIV_OK) return 2;
-    // The light model whose events go into the RTL's ring.
-    std::vector<uint16_t> last2(PX), period2(PX), short_run2(PX);
-    std::vector<uint32_t> rate2(PX);
-    std::vector<int8_t> lead2(PX);
-    std::vector<uint8_t> flags2(PX);
-    SpivLight l2{last2.data(), period2.data(), rate2.data(), short_run2.data(),
-                 lead2.data(), flags2.data(), (size_t)PX, 0, 0};
-    if (spiv_light_init(&l2, W, H, first) != SPIV_OK) return 2;
-    std::vector<SpivEvent> evs(PX);
 
     std::vector<Case> all = cases(planes);
     Bench b;
@@ -296,35 +283,38 @@ int main(int argc, char** argv) {
         while (pushed < at) {
             const uint8_t* plane = &dat[pushed * PLANE_BYTES];
             if (spiv_ring_push(&ring, &l, W, H, plane, PLANE_BYTES) != SPIV_OK) return 2;
-            size_t n = 0;
-            if (spiv_light_push(&l2, W, H, plane, PLANE_BYTES, evs.data(), evs.size(), &n) != SPIV_OK)
-                return 2;
-            // The plane's events into the RTL's ring.
-            b.m.in_open = 1;
-            b.m.in_tick = first + (uint32_t)pushed;
-            b.clock();
-            b.m.in_open = 0;
-            for (size_t i = 0; i < n;) {
-                b.m.in_valid = 1;
-                b.m.in_index = evs[i].index;
-                b.m.in_etick = evs[i].tick;
-                b.m.in_neg = evs[i].sign < 0;
-                const bool take = b.m.in_ready;
+            // The plane into the RTL, TB_P pixels per beat, pausing when it
+            // asks; then until the ring has closed the plane's tick.
+            for (int beat = 0; beat < PX / TB_P;) {
+                b.m.in_valid = 0;
+                if (b.m.in_ready) {
+                    uint32_t bits = 0;
+                    for (int l = 0; l < TB_P; ++l) {
+                        const int p = beat * TB_P + l;
+                        bits |= (uint32_t)((plane[p / 8] >> (p % 8)) & 1) << l;
+                    }
+                    b.m.in_valid = 1;
+                    b.m.in_bits = bits;
+                    ++beat;
+                }
                 b.clock();
-                if (take) ++i;
             }
             b.m.in_valid = 0;
-            for (int k = 0; k < 4 * (int)depth + 8 && !b.m.in_ready; ++k) b.clock();
-            b.m.in_close = 1;
-            b.clock();
-            b.m.in_close = 0;
-            b.clock();
+            for (uint64_t k = 0; b.m.ring_next != first + (uint32_t)pushed + 1; ++k) {
+                if (k > 4 * (uint64_t)PX + 1000) {
+                    std::fprintf(stderr, "plane %zu: the RTL did not close it\n", pushed);
+                    return 1;
+                }
+                b.clock();
+            }
             ++pushed;
         }
         if (b.m.ring_bad_tick || b.m.ring_first != ring.first || b.m.ring_next != ring.next ||
             b.m.ring_stored != ring.stored || b.m.ring_lost != ring.lost ||
             b.m.ring_evicted != ring.evicted) {
-            std::fprintf(stderr, "%s: the rings differ\n", c.name);
+            std::fprintf(stderr, "%s: the rings differ (RTL stored %u lost %u evicted %u, core %u %u %u)\n",
+                         c.name, b.m.ring_stored, b.m.ring_lost, b.m.ring_evicted, ring.stored,
+                         ring.lost, ring.evicted);
             return 1;
         }
         const uint32_t mid = ring.next - longest - 16;
@@ -395,12 +385,6 @@ int main(int argc, char** argv) {
         size_t outs = 0;
         uint64_t guard = 0;
         for (;;) {
-            // The state word of the pixel asked for, as a block RAM gives it.
-            const uint32_t p = b.m.rate_addr;
-            if (p < (uint32_t)PX) {
-                b.m.rate_q24 = rate[p];
-                b.m.rate_flags = flags[p];
-            }
             b.clock();
             if (b.m.out_valid) {
                 const uint32_t i = b.m.out_index;
