@@ -176,9 +176,16 @@ module spiv_ring #(
     logic [DEPB-1:0] raddr;
     logic        pend;        // an entry read is on its way
     logic [31:0] pend_t;
+    // the entry read, registered once more before it is judged (the block
+    // RAMs' output multiplexer is a clock of its own)
+    logic        pend2;
+    logic [31:0] pend_t2, entry_q2;
     always_ff @(posedge clk) begin
         rstarts_q <= starts_r[raddr];
         entry_q <= entries[CAPB'(k)];
+        entry_q2 <= entry_q;
+        pend_t2 <= pend_t;
+        pend2 <= !rst && pend;
     end
     always_comb begin
         raddr = (rs == R_S0) ? DEPB'(rt) : DEPB'(rt + 1);
@@ -188,9 +195,9 @@ module spiv_ring #(
     logic [31:0] bt;
     always_comb bt = (rd_b > 32'hffffffff - TOLERANCE) ? 32'hffffffff : rd_b + TOLERANCE;
 
-    // the entry read last clock, as an event
+    // the entry read two clocks ago, as an event
     logic [31:0] e_tick;
-    always_comb e_tick = pend_t - {27'b0, entry_q[5:1]};
+    always_comb e_tick = pend_t2 - {27'b0, entry_q2[5:1]};
 
     always_ff @(posedge clk) begin
         ev_valid <= 0;
@@ -199,12 +206,12 @@ module spiv_ring #(
             rs <= R_IDLE;
             pend <= 0;
         end else begin
-            // the entry read last clock
-            if (pend && e_tick >= ra && e_tick < rb) begin
+            // the entry read two clocks ago
+            if (pend2 && e_tick >= ra && e_tick < rb) begin
                 ev_valid <= 1;
-                ev_index <= entry_q[31:6];
+                ev_index <= entry_q2[31:6];
                 ev_tick <= e_tick;
-                ev_neg <= entry_q[0];
+                ev_neg <= entry_q2[0];
             end
             pend <= 0;
             case (rs)
@@ -247,7 +254,7 @@ module spiv_ring #(
                     end
                 end
                 R_DONE: begin
-                    if (!pend) begin
+                    if (!pend && !pend2) begin
                         rd_done <= 1;
                         rs <= R_IDLE;
                     end
