@@ -25,28 +25,34 @@ cargo build --quiet -p spiv-ffi
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
 
+# verilate DIR "PARAMETERS" "DEFINES" FILE...: one testbench, its RTL
+# and C++ FILEs, built into $work/DIR against the C ABI's static library,
+# with the model's parameters (-G) and the testbench's matching defines
+# (-D); the build's log is shown when it fails.
+verilate() {
+  local dir=$1 params=$2 defines=$3
+  shift 3
+  # shellcheck disable=SC2086
+  verilator --cc --exe --build -O2 -j 2 -Wall -Wno-DECLFILENAME -Wno-UNUSEDSIGNAL \
+    --Mdir "$work/$dir" $params -CFLAGS "$defines -I$root/ffi/include" \
+    -LDFLAGS "$target/debug/libspiv_ffi.a -lpthread -ldl -lm" \
+    "$@" >"$work/verilator-$dir.log" 2>&1 || {
+    tail -30 "$work/verilator-$dir.log"
+    exit 1
+  }
+}
+rtl="$root/fpga/rtl" tbs="$root/fpga/tb"
+
 # The model: 128 x 64 px, 32 pixels per clock, windows up to 16 ticks.
 W=128 H=64 P=32 NMAX=16
-verilator --cc --exe --build -O2 -j 2 -Wall -Wno-DECLFILENAME -Wno-UNUSEDSIGNAL \
-  --Mdir "$work/obj" -GW=$W -GH=$H -GP=$P -GNMAX=$NMAX \
-  -CFLAGS "-DTB_W=$W -DTB_H=$H -DTB_P=$P -I$root/ffi/include" \
-  -LDFLAGS "$target/debug/libspiv_ffi.a -lpthread -ldl -lm" \
-  "$root/fpga/rtl/spiv_tfp.sv" "$root/fpga/tb/tb_tfp.cpp" >"$work/verilator.log" 2>&1 || {
-  tail -30 "$work/verilator.log"
-  exit 1
-}
+verilate obj "-GW=$W -GH=$H -GP=$P -GNMAX=$NMAX" "-DTB_W=$W -DTB_H=$H -DTB_P=$P" \
+  "$rtl/spiv_tfp.sv" "$tbs/tb_tfp.cpp"
 tb="$work/obj/Vspiv_tfp"
 
 # The static-light model: 8 pixels per clock, and 32 (as placed).
 for LP in 8 32; do
-  verilator --cc --exe --build -O2 -j 2 -Wall -Wno-DECLFILENAME -Wno-UNUSEDSIGNAL \
-    --Mdir "$work/light$LP" -GW=$W -GH=$H -GP=$LP \
-    -CFLAGS "-DTB_W=$W -DTB_H=$H -DTB_P=$LP -I$root/ffi/include" \
-    -LDFLAGS "$target/debug/libspiv_ffi.a -lpthread -ldl -lm" \
-    "$root/fpga/rtl/spiv_light.sv" "$root/fpga/tb/tb_light.cpp" >"$work/verilator-light.log" 2>&1 || {
-    tail -30 "$work/verilator-light.log"
-    exit 1
-  }
+  verilate "light$LP" "-GW=$W -GH=$H -GP=$LP" "-DTB_W=$W -DTB_H=$H -DTB_P=$LP" \
+    "$rtl/spiv_light.sv" "$tbs/tb_light.cpp"
 done
 
 # The rung frames: eight lanes (a pair's most rungs), fed the core ring's
@@ -54,46 +60,20 @@ done
 # grids up to 128 across); on the model's size they are fed by the RTL's
 # light model and ring (spiv_live: 8 pixels per clock into the light
 # model, 524,288 events over 1,023 ticks, so that noise evicts ticks).
-verilator --cc --exe --build -O2 -j 2 -Wall -Wno-DECLFILENAME -Wno-UNUSEDSIGNAL \
-  --Mdir "$work/rungs400" -GW=400 -GH=250 -GNR=8 -GNXB=7 -GNYB=7 \
-  -CFLAGS "-DTB_W=400 -DTB_H=250 -DTB_NR=8 -I$root/ffi/include" \
-  -LDFLAGS "$target/debug/libspiv_ffi.a -lpthread -ldl -lm" \
-  "$root/fpga/rtl/spiv_rungs.sv" "$root/fpga/tb/tb_rungs.cpp" >"$work/verilator-rungs.log" 2>&1 || {
-  tail -30 "$work/verilator-rungs.log"
-  exit 1
-}
-verilator --cc --exe --build -O2 -j 2 -Wall -Wno-DECLFILENAME -Wno-UNUSEDSIGNAL \
-  --Mdir "$work/live" --top-module spiv_live -GW=$W -GH=$H -GP=8 -GNR=8 -GNXB=6 -GNYB=6 \
-  -GCAPB=19 -GDEPB=10 \
-  -CFLAGS "-DTB_W=$W -DTB_H=$H -DTB_P=8 -DTB_NR=8 -DTB_CAPB=19 -DTB_DEPB=10 -I$root/ffi/include" \
-  -LDFLAGS "$target/debug/libspiv_ffi.a -lpthread -ldl -lm" \
-  "$root/fpga/rtl/spiv_live.sv" "$root/fpga/rtl/spiv_light.sv" "$root/fpga/rtl/spiv_pair.sv" \
-  "$root/fpga/rtl/spiv_ring.sv" "$root/fpga/rtl/spiv_rungs.sv" \
-  "$root/fpga/tb/tb_live.cpp" >"$work/verilator-live.log" 2>&1 || {
-  tail -30 "$work/verilator-live.log"
-  exit 1
-}
+verilate rungs400 "-GW=400 -GH=250 -GNR=8 -GNXB=7 -GNYB=7" "-DTB_W=400 -DTB_H=250 -DTB_NR=8" \
+  "$rtl/spiv_rungs.sv" "$tbs/tb_rungs.cpp"
+verilate live "--top-module spiv_live -GW=$W -GH=$H -GP=8 -GNR=8 -GNXB=6 -GNYB=6 -GCAPB=19 -GDEPB=10" \
+  "-DTB_W=$W -DTB_H=$H -DTB_P=8 -DTB_NR=8 -DTB_CAPB=19 -DTB_DEPB=10" \
+  "$rtl/spiv_live.sv" "$rtl/spiv_light.sv" "$rtl/spiv_pair.sv" "$rtl/spiv_ring.sv" \
+  "$rtl/spiv_rungs.sv" "$tbs/tb_live.cpp"
 
 # The Rice tile coder, rows up to 512 samples.
-verilator --cc --exe --build -O2 -j 2 -Wall -Wno-DECLFILENAME -Wno-UNUSEDSIGNAL \
-  --Mdir "$work/rice" -GWMAX=512 \
-  -CFLAGS "-DTB_WMAX=512 -I$root/ffi/include" \
-  -LDFLAGS "$target/debug/libspiv_ffi.a -lpthread -ldl -lm" \
-  "$root/fpga/rtl/spiv_rice.sv" "$root/fpga/tb/tb_rice.cpp" >"$work/verilator-rice.log" 2>&1 || {
-  tail -30 "$work/verilator-rice.log"
-  exit 1
-}
+verilate rice "-GWMAX=512" "-DTB_WMAX=512" "$rtl/spiv_rice.sv" "$tbs/tb_rice.cpp"
 
 # The event ring: 4,096 events over 31 ticks, small enough that the
 # recordings evict ticks and the synthetic ones lose events.
-verilator --cc --exe --build -O2 -j 2 -Wall -Wno-DECLFILENAME -Wno-UNUSEDSIGNAL \
-  --Mdir "$work/ring" -GCAPB=12 -GDEPB=5 \
-  -CFLAGS "-DTB_W=$W -DTB_H=$H -DTB_CAPB=12 -DTB_DEPB=5 -I$root/ffi/include" \
-  -LDFLAGS "$target/debug/libspiv_ffi.a -lpthread -ldl -lm" \
-  "$root/fpga/rtl/spiv_ring.sv" "$root/fpga/tb/tb_ring.cpp" >"$work/verilator-ring.log" 2>&1 || {
-  tail -30 "$work/verilator-ring.log"
-  exit 1
-}
+verilate ring "-GCAPB=12 -GDEPB=5" "-DTB_W=$W -DTB_H=$H -DTB_CAPB=12 -DTB_DEPB=5" \
+  "$rtl/spiv_ring.sv" "$tbs/tb_ring.cpp"
 
 for scene in paper-linear vortex-array; do
   "$spiv" simulate --scene "$scene" --seed 7 --width $W --height $H --ticks 300 \

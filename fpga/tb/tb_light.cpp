@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "Vspiv_light.h"
+#include "core_light.h"
 #include "read_file.h"
 #include "verilated.h"
 
@@ -124,13 +125,8 @@ int main(int argc, char** argv) {
     const size_t planes = dat.size() / PLANE_BYTES;
 
     // The core's model, through its C ABI.
-    std::vector<uint16_t> last(PX), period(PX), short_run(PX);
-    std::vector<uint32_t> rate(PX);
-    std::vector<int8_t> lead(PX);
-    std::vector<uint8_t> flags(PX);
-    SpivLight light = {last.data(), period.data(), rate.data(), short_run.data(),
-                       lead.data(), flags.data(), (size_t)PX, 0, 0};
-    if (spiv_light_init(&light, W, H, first) != SPIV_OK) return 2;
+    CoreLight core(W, H, first);
+    SpivLight& light = core.l;
     std::vector<SpivEvent> events(PX);
     // The core's plane `t`, as the RTL's first beat of it comes out.
     Snapshot s;
@@ -141,12 +137,12 @@ int main(int argc, char** argv) {
         if (spiv_light_push(&light, W, H, &dat[t * PLANE_BYTES], PLANE_BYTES, events.data(),
                             events.size(), &n) != SPIV_OK)
             return false;
-        s.last = last;
-        s.period = period;
-        s.short_run = short_run;
-        s.rate = rate;
-        s.lead = lead;
-        s.flags = flags;
+        s.last = core.last;
+        s.period = core.period;
+        s.short_run = core.short_run;
+        s.rate = core.rate;
+        s.lead = core.lead;
+        s.flags = core.flags;
         s.sign.assign(PX, 0);
         s.tick.assign(PX, 0);
         for (size_t e = 0; e < n; ++e) {

@@ -27,6 +27,7 @@
 #include <vector>
 
 #include "Vspiv_ring.h"
+#include "core_light.h"
 #include "read_file.h"
 #include "verilated.h"
 
@@ -40,20 +41,6 @@ extern "C" {
 
 static const int W = TB_W, H = TB_H, PX = W * H, PLANE_BYTES = PX / 8;
 static const size_t CAP = (size_t)1 << TB_CAPB, DEPTH = ((size_t)1 << TB_DEPB) - 1;
-
-struct Light {
-    std::vector<uint16_t> last, period, short_run;
-    std::vector<uint32_t> rate;
-    std::vector<int8_t> lead;
-    std::vector<uint8_t> flags;
-    SpivLight l;
-    explicit Light(uint32_t first)
-        : last(PX), period(PX), short_run(PX), rate(PX), lead(PX), flags(PX) {
-        l = SpivLight{last.data(), period.data(), rate.data(), short_run.data(),
-                      lead.data(), flags.data(), (size_t)PX, 0, 0};
-        if (spiv_light_init(&l, W, H, first) != SPIV_OK) std::exit(2);
-    }
-};
 
 struct Bench {
     Vspiv_ring m;
@@ -111,7 +98,7 @@ int main(int argc, char** argv) {
     }
     const uint32_t first = 1000;
 
-    Light core_light(first), rtl_light(first);
+    CoreLight core_light(W, H, first), rtl_light(W, H, first);
     std::vector<uint32_t> entries(CAP), starts(DEPTH + 1);
     SpivRing ring{entries.data(), CAP, starts.data(), DEPTH, 0, 0, 0, 0, 0};
     if (spiv_ring_init(&ring, first) != SPIV_OK) return 2;
