@@ -197,14 +197,16 @@ pub fn simulate_to_dir(
     }
     let pair = sim.meta.capture.pair;
     let dt = f64::from(pair[1] - pair[0]);
-    let truth = sim.scene.truth_vectors(
+    let mid = Scene::pair_mid(u64::from(pair[0]), u64::from(pair[1]));
+    let truth = sim.scene.truth_vectors_at(
         &Grid::new(usize::from(w), usize::from(h), 32, 16)
             .map(|g| g.centres())
             .unwrap_or_default(),
+        mid,
         dt,
     );
     write_vectors(&dir.join("truth.csv"), &truth)?;
-    write_dense(&dir.join("truth.flo"), &sim.scene.truth_dense(dt))?;
+    write_dense(&dir.join("truth.flo"), &sim.scene.truth_dense_at(mid, dt))?;
     write_profile(&dir.join("profile.csv"), &sim.scene.profile(dt))?;
     sim.meta.write(&dir.join("scene.json"))?;
     Ok(sim)

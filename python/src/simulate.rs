@@ -77,6 +77,7 @@ mod with_sim {
     use numpy::IntoPyArray;
     use pyo3::prelude::*;
     use pyo3::types::PyDict;
+    use spiv_firmware_sim::scene::Scene;
     use spiv_firmware_sim::simulation::{simulate_planes, simulate_to_dir, Request};
     use spiv_formats::dat::{unpack_upright, DatOptions, DatReader};
     use spiv_formats::grid::Grid;
@@ -137,8 +138,9 @@ mod with_sim {
         let dtp = f64::from(pair[1] - pair[0]);
         let grid = Grid::new(usize::from(w), usize::from(h), 32, 16)
             .ok_or_else(|| format!("{w}x{h} px: smaller than the 32-px truth grid"))?;
-        let truth = sim.scene.truth_vectors(&grid.centres(), dtp);
-        let dense = sim.scene.truth_dense(dtp);
+        let mid = Scene::pair_mid(u64::from(pair[0]), u64::from(pair[1]));
+        let truth = sim.scene.truth_vectors_at(&grid.centres(), mid, dtp);
+        let dense = sim.scene.truth_dense_at(mid, dtp);
         let [fa, fb] = sim.frames;
         Ok(Simulation {
             spikes,

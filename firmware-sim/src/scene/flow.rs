@@ -45,9 +45,11 @@ pub enum Flow {
         /// px/tick, down.
         v: f64,
     },
-    /// Kinematic turbulence (beyond the paper): a frozen,
-    /// divergence-free field of random Fourier modes of the stream function
-    /// ψ = Σ a·cos(kx·x + ky·row + φ), u = ∂ψ/∂row, v = −∂ψ/∂x, periodic
+    /// Kinematic turbulence (beyond the paper): a divergence-free field of
+    /// random Fourier modes of the stream function
+    /// ψ = Σ a·cos(kx·x + ky·row + φ − ω·t), u = ∂ψ/∂row, v = −∂ψ/∂x
+    /// (frozen where every ω is 0; [`evolving`] gives each mode its own
+    /// frequency, so the field changes as particles cross it), periodic
     /// over `period` px in both directions (every k a multiple of
     /// 2π/period), with a Kolmogorov-like spectrum ([`turbulence_modes`]).
     /// Particles are advected by RK4 (steps of [`RK4_STEP`] ticks).
@@ -76,7 +78,7 @@ pub enum Flow {
 }
 
 /// One Fourier mode of a turbulence stream function:
-/// ψ = `amp`·cos(`kx`·x + `ky`·row + `phase`).
+/// ψ = `amp`·cos(`kx`·x + `ky`·row + `phase` − `omega`·t).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Mode {
     /// Wavenumber along x, rad/px.
@@ -85,8 +87,11 @@ pub struct Mode {
     pub ky: f64,
     /// Amplitude of ψ, px²/tick.
     pub amp: f64,
-    /// Phase, rad.
+    /// Phase at tick 0, rad.
     pub phase: f64,
+    /// Angular frequency, rad/tick (0: the mode is frozen).
+    #[serde(default)]
+    pub omega: f64,
 }
 
 /// RK4 step of the turbulence advection, ticks (the error at the smallest
@@ -134,6 +139,7 @@ pub fn turbulence_modes(
             ky,
             amp: k.powf(-1.0 / 3.0) * (-(k * l_min / tau).powi(2)).exp() / k,
             phase: rng.gen::<f64>() * tau,
+            omega: 0.0,
         });
     }
     let probe = Flow::Turbulence {
@@ -172,14 +178,52 @@ pub fn taylor_green_modes(cell: f64, speed: f64, (x0, y0): (f64, f64)) -> Vec<Mo
             ky: -k,
             amp: a,
             phase: k * (x0 - y0),
+            omega: 0.0,
         },
         Mode {
             kx: k,
             ky: k,
             amp: -a,
             phase: k * (x0 + y0),
+            omega: 0.0,
         },
     ]
+}
+
+/// `modes` made to evolve: each mode gets the frequency of its own eddy
+/// turnover, ω = ±`rate`·|k|·u_k (u_k = `amp`·|k|, its peak speed), the
+/// sign and a factor uniform in [0.5, 1.5] drawn from `seed`. A mode then
+/// travels along its wavevector at `rate`·u_k (times that factor), so small
+/// eddies are swept and decorrelate faster than large ones, as in a
+/// turbulent flow; the field stays divergence-free.
+pub fn evolving(mut modes: Vec<Mode>, rate: f64, seed: u64) -> Vec<Mode> {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ 0x6576_6f6c_7665);
+    for m in &mut modes {
+        let k2 = m.kx * m.kx + m.ky * m.ky;
+        let sign = if rng.gen::<bool>() { 1.0 } else { -1.0 };
+        m.omega = sign * rate * (0.5 + rng.gen::<f64>()) * m.amp.abs() * k2;
+    }
+    modes
+}
+
+/// The root-mean-square speed of `modes` at tick 0 over one `period`
+/// (sampled on a 2-px lattice), px/tick.
+pub fn rms_speed(modes: &[Mode], period: f64) -> f64 {
+    let probe = Flow::Turbulence {
+        period,
+        modes: modes.to_vec(),
+        drift: (0.0, 0.0),
+    };
+    let cells = (period / 2.0).ceil().max(1.0) as usize;
+    let mut sum = 0.0;
+    for i in 0..cells {
+        for j in 0..cells {
+            let (u, v) = probe.velocity(2.0 * j as f64, 2.0 * i as f64);
+            sum += u * u + v * v;
+        }
+    }
+    (sum / (cells * cells) as f64).sqrt()
 }
 
 /// Blasius solution `f'(η)` on η ∈ [0, 10], step 0.01, with `f''(0)`.
@@ -282,7 +326,7 @@ impl Flow {
     pub fn advect(&self, x: f64, row: f64, t0: f64, t1: f64) -> (f64, f64) {
         let dt = t1 - t0;
         if let Flow::Turbulence { .. } = self {
-            return self.rk4(x, row, dt);
+            return self.rk4(x, row, t0, dt);
         }
         match *self {
             Flow::Shear {
@@ -306,13 +350,19 @@ impl Flow {
         }
     }
 
-    /// The velocity at `(x, row)`, px/tick (right, down).
+    /// The velocity at `(x, row)` at tick 0, px/tick (right, down): at
+    /// every tick for the steady flows.
     pub fn velocity(&self, x: f64, row: f64) -> (f64, f64) {
+        self.velocity_at(x, row, 0.0)
+    }
+
+    /// The velocity at `(x, row)` at tick `t`, px/tick (right, down).
+    pub fn velocity_at(&self, x: f64, row: f64, t: f64) -> (f64, f64) {
         match self {
             Flow::Turbulence { modes, drift, .. } => {
                 let (mut u, mut v) = *drift;
                 for m in modes {
-                    let s = (m.kx * x + m.ky * row + m.phase).sin() * m.amp;
+                    let s = (m.kx * x + m.ky * row + (m.phase - m.omega * t)).sin() * m.amp;
                     u -= m.ky * s;
                     v += m.kx * s;
                 }
@@ -325,16 +375,18 @@ impl Flow {
         }
     }
 
-    /// RK4 over `dt` ticks (either sign) in steps of at most [`RK4_STEP`].
-    fn rk4(&self, x: f64, row: f64, dt: f64) -> (f64, f64) {
+    /// RK4 from tick `t0` over `dt` ticks (either sign) in steps of at
+    /// most [`RK4_STEP`].
+    fn rk4(&self, x: f64, row: f64, t0: f64, dt: f64) -> (f64, f64) {
         let n = (dt.abs() / RK4_STEP).ceil().max(1.0);
         let h = dt / n;
         let (mut px, mut pr) = (x, row);
-        for _ in 0..n as usize {
-            let k1 = self.velocity(px, pr);
-            let k2 = self.velocity(px + 0.5 * h * k1.0, pr + 0.5 * h * k1.1);
-            let k3 = self.velocity(px + 0.5 * h * k2.0, pr + 0.5 * h * k2.1);
-            let k4 = self.velocity(px + h * k3.0, pr + h * k3.1);
+        for s in 0..n as usize {
+            let t = t0 + h * s as f64;
+            let k1 = self.velocity_at(px, pr, t);
+            let k2 = self.velocity_at(px + 0.5 * h * k1.0, pr + 0.5 * h * k1.1, t + 0.5 * h);
+            let k3 = self.velocity_at(px + 0.5 * h * k2.0, pr + 0.5 * h * k2.1, t + 0.5 * h);
+            let k4 = self.velocity_at(px + h * k3.0, pr + h * k3.1, t + h);
             px += h / 6.0 * (k1.0 + 2.0 * k2.0 + 2.0 * k3.0 + k4.0);
             pr += h / 6.0 * (k1.1 + 2.0 * k2.1 + 2.0 * k3.1 + k4.1);
         }
@@ -343,11 +395,23 @@ impl Flow {
 
     /// The true displacement over `dt` ticks of the particle that is at
     /// `(x, row)` halfway through (px right, px down): symmetric about the
-    /// pair's midpoint, as a PIV window centred there measures it.
+    /// pair's midpoint, as a PIV window centred there measures it. For a
+    /// pair centred on tick 0 ([`Flow::displacement_at`] for any other):
+    /// every pair of a steady flow.
     pub fn displacement(&self, x: f64, row: f64, dt: f64) -> (f64, f64) {
-        let (xa, ra) = self.advect(x, row, 0.0, -dt / 2.0);
-        let (xb, rb) = self.advect(x, row, 0.0, dt / 2.0);
+        self.displacement_at(x, row, 0.0, dt)
+    }
+
+    /// [`Flow::displacement`] for a pair centred on tick `mid`.
+    pub fn displacement_at(&self, x: f64, row: f64, mid: f64, dt: f64) -> (f64, f64) {
+        let (xa, ra) = self.advect(x, row, mid, mid - dt / 2.0);
+        let (xb, rb) = self.advect(x, row, mid, mid + dt / 2.0);
         (xb - xa, rb - ra)
+    }
+
+    /// Whether the field changes with time (a mode with a frequency).
+    pub fn evolves(&self) -> bool {
+        matches!(self, Flow::Turbulence { modes, .. } if modes.iter().any(|m| m.omega != 0.0))
     }
 
     /// The profile u(y) of a shear flow in px/tick (`None` for other flows).
@@ -489,12 +553,79 @@ mod tests {
         let n = 21 * 8;
         let (mut a, mut b) = (100.0, 80.0);
         for _ in 0..n {
-            (a, b) = f.rk4(a, b, 21.0 / n as f64);
+            (a, b) = f.rk4(a, b, 0.0, 21.0 / n as f64);
         }
         assert!((x - a).hypot(r - b) < 1e-4, "{x},{r} vs {a},{b}");
         // Back again.
         let (x0, r0) = f.advect(x, r, 21.0, 0.0);
         assert!((x0 - 100.0).hypot(r0 - 80.0) < 1e-6);
+    }
+
+    /// Modes with frequencies: the field changes with time, stays
+    /// divergence-free at every tick, and a path integrated forward comes
+    /// back when integrated backward from where it ended; at frequency 0
+    /// the field is the frozen one at every tick.
+    #[test]
+    fn evolving_modes_change_the_field_and_keep_it_divergence_free() {
+        let frozen = turbulence();
+        let Flow::Turbulence { period, modes, .. } = frozen.clone() else {
+            unreachable!()
+        };
+        let f = Flow::Turbulence {
+            period,
+            modes: evolving(modes.clone(), 1.0, 3),
+            drift: (0.0, 0.0),
+        };
+        assert!(f.evolves() && !frozen.evolves());
+        let e = 1e-4;
+        let mut moved: f64 = 0.0;
+        for i in 0..12 {
+            for j in 0..12 {
+                let (x, r, t) = (j as f64 * 21.3, i as f64 * 19.7, 40.0 + i as f64);
+                let div = (f.velocity_at(x + e, r, t).0 - f.velocity_at(x - e, r, t).0
+                    + f.velocity_at(x, r + e, t).1
+                    - f.velocity_at(x, r - e, t).1)
+                    / (2.0 * e);
+                let (u, v) = f.velocity_at(x, r, t);
+                assert!(div.abs() < 1e-6 * (1.0 + u.hypot(v)), "div {div}");
+                let (u0, v0) = f.velocity_at(x, r, 0.0);
+                moved = moved.max((u - u0).hypot(v - v0));
+                assert_eq!(frozen.velocity_at(x, r, t), frozen.velocity(x, r));
+                assert_eq!(f.velocity_at(x, r, 0.0), f.velocity(x, r));
+            }
+        }
+        assert!(moved > 0.1 * 25.0 / 21.0, "the field moved {moved} px/tick");
+        // Forward from tick 30 to 51, then back.
+        let (x, r) = f.advect(100.0, 80.0, 30.0, 51.0);
+        let (x0, r0) = f.advect(x, r, 51.0, 30.0);
+        assert!((x0 - 100.0).hypot(r0 - 80.0) < 1e-6);
+        // The frozen field's displacement is the same for any pair's middle;
+        // the evolving one's is not.
+        assert_eq!(
+            frozen.displacement_at(50.0, 60.0, 33.5, 21.0),
+            frozen.displacement(50.0, 60.0, 21.0)
+        );
+        let (a, b) = (
+            f.displacement_at(50.0, 60.0, 33.5, 21.0),
+            f.displacement_at(50.0, 60.0, 0.0, 21.0),
+        );
+        assert!((a.0 - b.0).hypot(a.1 - b.1) > 0.05, "{a:?} {b:?}");
+    }
+
+    /// [`rms_speed`] is the root mean square of the field's speed: a
+    /// single mode's speed varies as |sin|, whose rms is 1/√2 of its peak.
+    #[test]
+    fn rms_speed_of_one_mode() {
+        let k = std::f64::consts::TAU / 64.0;
+        let m = Mode {
+            kx: k,
+            ky: 0.0,
+            amp: 2.0 / k,
+            phase: 0.3,
+            omega: 0.0,
+        };
+        let rms = rms_speed(&[m], 128.0);
+        assert!((rms - 2.0 / 2f64.sqrt()).abs() < 1e-9, "{rms}");
     }
 
     #[test]

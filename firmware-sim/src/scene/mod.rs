@@ -40,11 +40,17 @@ pub enum SceneKind {
     /// An array of Taylor–Green vortices carried by a uniform drift over the
     /// glare band (beyond the paper): a 2-D flow with glare.
     VortexArray,
+    /// Turbulence as a DNS recording holds it (beyond the paper): a
+    /// continuous spectrum down to the smallest eddy with a dissipation
+    /// roll-off, modes that evolve at their own turnover frequencies
+    /// ([`flow::evolving`]), particles crossing a light sheet of finite
+    /// thickness ([`Sheet`]); scaled by its rms displacement per pair.
+    SpectralTurbulence,
 }
 
 impl SceneKind {
     /// Every scene, by name.
-    pub const ALL: [(&'static str, SceneKind); 9] = [
+    pub const ALL: [(&'static str, SceneKind); 10] = [
         ("paper-linear", SceneKind::PaperLinear),
         ("paper-quadratic", SceneKind::PaperQuadratic),
         ("paper-log", SceneKind::PaperLog),
@@ -54,6 +60,7 @@ impl SceneKind {
         ("turbulence", SceneKind::Turbulence),
         ("large-shift", SceneKind::LargeShift),
         ("vortex-array", SceneKind::VortexArray),
+        ("spectral-turbulence", SceneKind::SpectralTurbulence),
     ];
 
     /// The scene of a name, if any.
@@ -140,6 +147,32 @@ pub struct SceneParams {
     /// direction and the array's offset come from `flow_seed`).
     #[serde(default = "default_drift")]
     pub drift: f64,
+    /// Spectral turbulence: the rms displacement per pair, px (the field
+    /// is scaled by it instead of `max_shift`).
+    #[serde(default)]
+    pub rms_shift: Option<f64>,
+    /// Spectral turbulence: the modes' turnover rate ([`flow::evolving`];
+    /// 0: frozen).
+    #[serde(default)]
+    pub evolution: f64,
+    /// The light sheet (`None`: every particle lit in full, as in a 2-D
+    /// flow).
+    #[serde(default)]
+    pub sheet: Option<Sheet>,
+}
+
+/// A light sheet of finite thickness: each particle sits at a depth `z`
+/// and moves out of plane at its own constant speed `w`, wrapping over
+/// `depth`; its light is scaled by exp(−8·z²/thickness²), so it fades out
+/// of the sheet and others fade in (out-of-plane loss of pairs).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Sheet {
+    /// e⁻² full thickness of the sheet, px.
+    pub thickness: f64,
+    /// Depth over which particles wrap, px (centred on the sheet).
+    pub depth: f64,
+    /// Standard deviation of the particles' out-of-plane speed, px/tick.
+    pub w_rms: f64,
 }
 
 fn default_eddies() -> (f64, f64) {
@@ -186,6 +219,9 @@ impl SceneParams {
             flow_seed: default_flow_seed(),
             cell: default_cell(),
             drift: default_drift(),
+            rms_shift: None,
+            evolution: 0.0,
+            sheet: None,
         };
         // Turbulence: the spike-flow datasets' layout (256×256 px, pairs
         // 21 ticks apart), no glare, dense seeding for small eddies.
@@ -214,6 +250,21 @@ impl SceneParams {
                 ..base
             },
             SceneKind::Turbulence => turbulent,
+            // The middle of the span `spiv bench flows` draws its members
+            // from: eddies from 8 px, 2 px rms per pair, a 16-px sheet that
+            // loses about a tenth of the particles per pair.
+            SceneKind::SpectralTurbulence => SceneParams {
+                eddies: (8.0, 128.0),
+                modes: 96,
+                rms_shift: Some(2.0),
+                evolution: 1.0,
+                sheet: Some(Sheet {
+                    thickness: 16.0,
+                    depth: 32.0,
+                    w_rms: 0.08,
+                }),
+                ..turbulent
+            },
             SceneKind::LargeShift => SceneParams {
                 eddies: (32.0, 128.0),
                 modes: 24,
@@ -264,6 +315,33 @@ impl SceneParams {
                 Flow::Uniform {
                     u: self.shift.0 / dt,
                     v: self.shift.1 / dt,
+                }
+            }
+            SceneKind::SpectralTurbulence => {
+                let period = self.period();
+                let dt = f64::from(self.pair_dt.max(1));
+                let modes = flow::turbulence_modes(
+                    self.flow_seed,
+                    period,
+                    2.0 * self.eddies.0,
+                    2.0 * self.eddies.1,
+                    self.modes,
+                    1.0,
+                );
+                let rms = flow::rms_speed(&modes, period);
+                let want = self.rms_shift.unwrap_or(self.max_shift) / dt;
+                let scale = if rms > 0.0 { want / rms } else { 0.0 };
+                let modes = modes
+                    .into_iter()
+                    .map(|m| flow::Mode {
+                        amp: m.amp * scale,
+                        ..m
+                    })
+                    .collect();
+                Flow::Turbulence {
+                    period,
+                    drift: (0.0, 0.0),
+                    modes: flow::evolving(modes, self.evolution, self.flow_seed),
                 }
             }
             SceneKind::Turbulence | SceneKind::LargeShift => {
@@ -323,6 +401,23 @@ pub struct Particle {
     pub peak: f64,
     /// e⁻² diameter, px.
     pub diameter: f64,
+    /// Depth at tick 0 relative to the light sheet's centre, px (0 without
+    /// a sheet).
+    #[serde(default)]
+    pub z: f64,
+    /// Out-of-plane speed, px/tick.
+    #[serde(default)]
+    pub w: f64,
+}
+
+impl Particle {
+    /// Its light at tick `t` as a fraction of its peak in `sheet`.
+    pub fn lit(&self, sheet: &Sheet, t: f64) -> f64 {
+        let d = sheet.depth.max(1e-9);
+        let z = (self.z + self.w * t + d / 2.0).rem_euclid(d) - d / 2.0;
+        let th = sheet.thickness.max(1e-9);
+        (-8.0 * z * z / (th * th)).exp()
+    }
 }
 
 /// A seeded scene.
@@ -375,7 +470,8 @@ impl Tracks {
                 let (mut x, mut r) = (p.x, p.row);
                 (0..samples).map(move |j| {
                     if j > 0 {
-                        (x, r) = flow.advect(x, r, 0.0, Self::STEP);
+                        let t = Self::STEP * (j - 1) as f64;
+                        (x, r) = flow.advect(x, r, t, t + Self::STEP);
                     }
                     (x as f32, r as f32)
                 })
@@ -439,12 +535,25 @@ fn seeding_area(params: &SceneParams, flow: &Flow, last_tick: u32) -> (f64, f64,
 
 /// Particles over `area` from `seed`: per cell at least `per_cell`,
 /// centres at least `min_spacing` apart, at most 1000 tries per particle.
+/// Behind a light sheet `per_cell` and `min_spacing` count the particles
+/// in it: the volume holds `depth / thickness` times as many, their
+/// projected centres closer by the square root of that.
 fn seed_particles(
     params: &SceneParams,
     (x0, x1, r0, r1): (f64, f64, f64, f64),
     seed: u64,
 ) -> Vec<Particle> {
     let cell = SEED_CELL;
+    let (per_cell, min_spacing) = match params.sheet {
+        Some(sh) => {
+            let f = (sh.depth / sh.thickness.max(1e-9)).max(1.0);
+            (
+                (params.per_cell as f64 * f).round() as usize,
+                params.min_spacing / f.sqrt(),
+            )
+        }
+        None => (params.per_cell, params.min_spacing),
+    };
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut particles: Vec<Particle> = Vec::new();
     let (nx, ny) = (
@@ -453,14 +562,14 @@ fn seed_particles(
     );
     // A grid of particle indices for the spacing test.
     let mut grid: Vec<Vec<usize>> = vec![Vec::new(); nx * ny];
-    let min2 = params.min_spacing * params.min_spacing;
+    let min2 = min_spacing * min_spacing;
     for cy in 0..ny {
         for cx in 0..nx {
             let (cx0, cy0) = (x0 + cell * cx as f64, r0 + cell * cy as f64);
             let (cw, ch) = (cell.min(x1 - cx0), cell.min(r1 - cy0));
             let mut have = grid[cy * nx + cx].len();
             let mut tries = 0;
-            while have < params.per_cell && tries < 1000 * params.per_cell {
+            while have < per_cell && tries < 1000 * per_cell {
                 tries += 1;
                 let x = cx0 + rng.gen::<f64>() * cw;
                 let row = cy0 + rng.gen::<f64>() * ch;
@@ -478,18 +587,37 @@ fn seed_particles(
                 let peak = params.particle_peak * (1.0 + 0.3 * (2.0 * rng.gen::<f64>() - 1.0));
                 let d =
                     params.diameter.0 + (params.diameter.1 - params.diameter.0) * rng.gen::<f64>();
+                // Depth and out-of-plane speed only where a sheet asks
+                // (the other scenes' draws stay as they were).
+                let (z, w) = match params.sheet {
+                    Some(sh) => {
+                        let z = (rng.gen::<f64>() - 0.5) * sh.depth;
+                        let g = normal(&mut rng);
+                        (z, g * sh.w_rms)
+                    }
+                    None => (0.0, 0.0),
+                };
                 grid[cy * nx + cx].push(particles.len());
                 particles.push(Particle {
                     x,
                     row,
                     peak,
                     diameter: d,
+                    z,
+                    w,
                 });
                 have += 1;
             }
         }
     }
     particles
+}
+
+/// A standard normal draw (Box–Muller).
+fn normal(rng: &mut ChaCha8Rng) -> f64 {
+    let u1 = rng.gen::<f64>().max(1e-300);
+    let u2 = rng.gen::<f64>();
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
 
 /// Density reached over the image's full 32×32 cells at tick 0 (cells cut
@@ -547,10 +675,23 @@ impl Scene {
         }
     }
 
-    /// The dense ground truth of a pair `dt` ticks apart: the displacement
-    /// of the particle at each pixel centre halfway through, px (u right, v
-    /// down), `width × height` upright.
+    /// The scene tick halfway through the pair of frames at ticks `ka` and
+    /// `kb` (each frame centred on the middle of its tick).
+    pub fn pair_mid(ka: u64, kb: u64) -> f64 {
+        (ka as f64 + kb as f64) / 2.0 + 0.5
+    }
+
+    /// The dense ground truth of a pair `dt` ticks apart centred on tick 0
+    /// (of any pair of a steady flow; [`Scene::truth_dense_at`] for a
+    /// flow that evolves).
     pub fn truth_dense(&self, dt: f64) -> DenseField {
+        self.truth_dense_at(0.0, dt)
+    }
+
+    /// The dense ground truth of a pair `dt` ticks apart centred on tick
+    /// `mid`: the displacement of the particle at each pixel centre
+    /// halfway through, px (u right, v down), `width × height` upright.
+    pub fn truth_dense_at(&self, mid: f64, dt: f64) -> DenseField {
         use rayon::prelude::*;
         let (w, h) = (
             usize::from(self.params.width),
@@ -561,7 +702,9 @@ impl Scene {
             .map(|i| {
                 (0..w)
                     .map(|j| {
-                        let (u, v) = self.flow.displacement(j as f64 + 0.5, i as f64 + 0.5, dt);
+                        let (u, v) =
+                            self.flow
+                                .displacement_at(j as f64 + 0.5, i as f64 + 0.5, mid, dt);
                         (u as f32, v as f32)
                     })
                     .collect()
@@ -614,6 +757,10 @@ impl Scene {
                 Some(per) if r > per - 16.0 => r - per,
                 _ => r,
             };
+            let peak = match &self.params.sheet {
+                Some(sh) => p.peak * p.lit(sh, t),
+                None => p.peak,
+            };
             let sigma = p.diameter / 4.0;
             let rad = (3.0 * sigma).min(15.0);
             let (c0, c1) = ((x - rad).floor().max(0.0), (x + rad).ceil().min(w as f64));
@@ -629,7 +776,7 @@ impl Scene {
             }
             for (i, e) in (r0..r1).zip(ey.iter_mut()) {
                 let d = i as f64 + 0.5 - r;
-                *e = (p.peak * (d * d * k).exp()) as f32;
+                *e = (peak * (d * d * k).exp()) as f32;
             }
             for (i, &eyi) in (r0..r1).zip(ey.iter()) {
                 let row = &mut light[i * w + c0..i * w + c1];
@@ -640,15 +787,22 @@ impl Scene {
         }
     }
 
-    /// Ground truth at vector positions `(x, y)` (docs/formats.md: pixel (row i,
-    /// column j) has its centre at (x = j, y = i)) for a pair `dt` ticks apart:
-    /// `(x, y, u, v)` in px, u right, v down.
+    /// Ground truth at vector positions `(x, y)` for a pair `dt` ticks
+    /// apart centred on tick 0 (of any pair of a steady flow;
+    /// [`Scene::truth_at`] for a flow that evolves).
     pub fn truth(&self, points: &[(f64, f64)], dt: f64) -> Vec<(f64, f64, f64, f64)> {
+        self.truth_at(points, 0.0, dt)
+    }
+
+    /// Ground truth at vector positions `(x, y)` (docs/formats.md: pixel (row i,
+    /// column j) has its centre at (x = j, y = i)) for a pair `dt` ticks apart
+    /// centred on tick `mid`: `(x, y, u, v)` in px, u right, v down.
+    pub fn truth_at(&self, points: &[(f64, f64)], mid: f64, dt: f64) -> Vec<(f64, f64, f64, f64)> {
         points
             .iter()
             .map(|&(x, y)| {
                 // Vector coordinates put pixel centres on integers; the scene on half-integers.
-                let (u, v) = self.flow.displacement(x + 0.5, y + 0.5, dt);
+                let (u, v) = self.flow.displacement_at(x + 0.5, y + 0.5, mid, dt);
                 (x, y, u, v)
             })
             .collect()
@@ -660,7 +814,17 @@ impl Scene {
         points: &[(f64, f64)],
         dt: f64,
     ) -> Vec<spiv_formats::vectors::Vector> {
-        self.truth(points, dt)
+        self.truth_vectors_at(points, 0.0, dt)
+    }
+
+    /// [`Scene::truth_at`] as vector-field rows (flag 0).
+    pub fn truth_vectors_at(
+        &self,
+        points: &[(f64, f64)],
+        mid: f64,
+        dt: f64,
+    ) -> Vec<spiv_formats::vectors::Vector> {
+        self.truth_at(points, mid, dt)
             .into_iter()
             .map(|(x, y, u, v)| spiv_formats::vectors::Vector {
                 x,
@@ -761,6 +925,61 @@ mod tests {
         let s = Scene::new(p, 1, 160);
         let (ok, all) = s.density_reached;
         assert!(ok as f64 >= 0.95 * all as f64, "{ok}/{all}");
+    }
+
+    /// The spectral turbulence moves by its rms displacement per pair,
+    /// evolves, and lights its particles by where they are in the sheet:
+    /// about as many lit (above e⁻²) as `per_cell` asks, each fading in
+    /// and out as it crosses the sheet.
+    #[test]
+    fn spectral_turbulence_is_as_fast_as_asked_and_lit_by_its_sheet() {
+        let p = SceneParams {
+            width: 128,
+            height: 128,
+            ..SceneParams::new(SceneKind::SpectralTurbulence)
+        };
+        let s = Scene::new(p.clone(), 2, 62);
+        assert!(s.flow.evolves());
+        let dt = f64::from(p.pair_dt);
+        let t = s.truth_dense_at(31.0, dt);
+        let rms =
+            (t.u.iter()
+                .zip(&t.v)
+                .map(|(&u, &v)| f64::from(u * u + v * v))
+                .sum::<f64>()
+                / t.u.len() as f64)
+                .sqrt();
+        // Over a 128² crop of one period: within a third of the whole.
+        assert!((rms - 2.0).abs() < 0.7, "rms {rms} px per pair");
+        let other = s.truth_dense_at(0.0, dt);
+        assert_ne!(t.u, other.u);
+        let sheet = p.sheet.unwrap();
+        let lit = |t: f64| {
+            s.particles
+                .iter()
+                .filter(|q| q.lit(&sheet, t) > (-2f64).exp())
+                .count()
+        };
+        let cells = (s.params.period() / 32.0).powi(2);
+        let (l0, l1) = (lit(0.0) as f64, lit(60.0) as f64);
+        assert!(
+            (l0 / cells - 12.0).abs() < 3.0,
+            "{l0} lit over {cells} cells"
+        );
+        assert!((l1 - l0).abs() < 0.1 * l0, "{l0} then {l1}");
+        let turned = s
+            .particles
+            .iter()
+            .filter(|q| (q.lit(&sheet, 0.0) > 0.5) != (q.lit(&sheet, 60.0) > 0.5))
+            .count();
+        assert!(
+            turned as f64 > 0.05 * l0,
+            "{turned} of {l0} crossed the sheet's edge"
+        );
+        // Without a sheet every particle is as bright as it was seeded and
+        // the frozen scenes draw no depth.
+        let plain = Scene::new(SceneParams::new(SceneKind::Turbulence), 2, 10);
+        assert!(plain.particles.iter().all(|q| q.z == 0.0 && q.w == 0.0));
     }
 
     #[test]

@@ -2,9 +2,10 @@
 //! with its defaults, against the dense truth, beside the frame camera and
 //! a TFP pair of the same spikes through `spiv piv`'s defaults.
 //!
-//! Every family's flow is steady, so each pair of a recording has the same
-//! truth: the displacement over the pair of the particle at each vector's
-//! centre halfway through ([`Scene::truth`]). Per family and seed it
+//! Each pair's truth is the displacement over the pair of the particle at
+//! each vector's centre halfway through ([`Scene::truth_at`], at the pair's
+//! own middle tick: the spectral turbulence evolves; every other family is
+//! steady). Per family and seed it
 //! reports the end-point error (EPE, px per pair) of the measured (valid or
 //! replaced) vectors in the glare rows (centres within 2σ of the wall,
 //! docs/spec.md §7; the bottom rows where a scene has no glare) and in the other
@@ -18,7 +19,7 @@
 use std::time::Instant;
 
 use spiv_core::{Method, Params};
-use spiv_firmware_sim::scene::{Scene, SceneKind, SceneParams};
+use spiv_firmware_sim::scene::{Scene, SceneKind, SceneParams, Sheet};
 use spiv_firmware_sim::simulation::{simulate_planes, Request};
 use spiv_formats::dense::DenseField;
 use spiv_formats::{State, Vector};
@@ -42,13 +43,108 @@ pub struct Family {
     pub ticks: u32,
 }
 
+impl Family {
+    /// The scene parameters of the family's member `seed`: the scene's
+    /// defaults at the family's speed with the seed's flow, and for the
+    /// spectral turbulence the member [`spectral_member`] draws.
+    pub fn params(&self, seed: u64) -> SceneParams {
+        let mut p = match self.scene {
+            SceneKind::SpectralTurbulence => spectral_member(seed).params(),
+            kind => SceneParams::new(kind),
+        };
+        if let Some(s) = self.speed {
+            p.top_speed = s;
+        }
+        p.flow_seed = seed;
+        p
+    }
+}
+
+/// One member of the spectral-turbulence family: what varies from seed to
+/// seed, each drawn from the seed over the span the third-party DNS
+/// recordings and their cousins cover.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Member {
+    /// The smallest eddy (half a wavelength, where the dissipation range
+    /// begins), px: log-uniform in [4, 32].
+    pub smallest_eddy: f64,
+    /// Rms displacement per pair (21 ticks), px: log-uniform in [0.5, 8].
+    pub rms_shift: f64,
+    /// Particles per 32×32 cell at least: 6 to 16.
+    pub per_cell: usize,
+    /// Particle e⁻² diameters, px: from d to d + 2, d uniform in [2.5, 4.5].
+    pub diameter: (f64, f64),
+    /// Mean particle light, thresholds/tick (the sensor's threshold seen
+    /// from the particle): log-uniform in [0.1, 0.4].
+    pub particle_peak: f64,
+    /// Light-sheet thickness (e⁻² full width), px: uniform in [12, 24].
+    pub sheet: f64,
+    /// Rms out-of-plane travel per pair as a fraction of the sheet's
+    /// thickness: uniform in [0.05, 0.25].
+    pub out_of_plane: f64,
+    /// The modes' turnover rate ([`spiv_firmware_sim::scene::flow::evolving`]):
+    /// uniform in [0.5, 1.5].
+    pub evolution: f64,
+}
+
+/// The spectral-turbulence member of `seed`.
+pub fn spectral_member(seed: u64) -> Member {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ 0x7370_6563_7472);
+    let mut u = || rng.gen::<f64>();
+    let smallest_eddy = 4.0 * 8f64.powf(u());
+    let rms_shift = 0.5 * 16f64.powf(u());
+    let per_cell = 6 + (u() * 11.0).floor().min(10.0) as usize;
+    let d = 2.5 + 2.0 * u();
+    let particle_peak = 0.1 * 4f64.powf(u());
+    let sheet = 12.0 + 12.0 * u();
+    let out_of_plane = 0.05 + 0.2 * u();
+    let evolution = 0.5 + u();
+    Member {
+        smallest_eddy,
+        rms_shift,
+        per_cell,
+        diameter: (d, d + 2.0),
+        particle_peak,
+        sheet,
+        out_of_plane,
+        evolution,
+    }
+}
+
+impl Member {
+    /// The scene of this member (flow seed left to the caller).
+    pub fn params(&self) -> SceneParams {
+        let base = SceneParams::new(SceneKind::SpectralTurbulence);
+        let dt = f64::from(base.pair_dt.max(1));
+        SceneParams {
+            eddies: (self.smallest_eddy, base.eddies.1),
+            rms_shift: Some(self.rms_shift),
+            per_cell: self.per_cell,
+            // Dense seeding needs closer centres (16 per cell: one per 64
+            // px², 4.5 px apart at most on average).
+            min_spacing: if self.per_cell > 10 { 4.0 } else { 5.0 },
+            diameter: self.diameter,
+            particle_peak: self.particle_peak,
+            evolution: self.evolution,
+            sheet: Some(Sheet {
+                thickness: self.sheet,
+                depth: 2.0 * self.sheet,
+                w_rms: self.out_of_plane * self.sheet / dt,
+            }),
+            ..base
+        }
+    }
+}
+
 /// The families: the paper's three (1.25 px/tick in the free stream),
 /// the log profile again at 0.3 and 1 px/tick (a wall-bounded shear with
 /// the glare at the wall, where the velocity falls to zero), Blasius,
 /// uniform, the Lamb–Oseen vortex, the turbulence and large-shift
 /// recordings as the third-party spike-flow sets hold them (62 planes,
-/// pairs 21 ticks apart), and the vortex array over glare at 0.3 and 1
-/// px/tick.
+/// pairs 21 ticks apart), the vortex array over glare at 0.3 and 1
+/// px/tick, and the spectral turbulence, whose every seed is another
+/// member ([`spectral_member`]), recorded as the turbulence family.
 pub fn families() -> Vec<Family> {
     let f = |name: &str, scene, speed, ticks| Family {
         name: name.into(),
@@ -69,6 +165,12 @@ pub fn families() -> Vec<Family> {
         f("large-shift", SceneKind::LargeShift, None, 62),
         f("vortex-array 0.3", SceneKind::VortexArray, Some(0.3), 160),
         f("vortex-array 1.0", SceneKind::VortexArray, Some(1.0), 160),
+        f(
+            "spectral turbulence",
+            SceneKind::SpectralTurbulence,
+            None,
+            62,
+        ),
     ]
 }
 
@@ -102,6 +204,8 @@ pub struct FlowsRow {
     pub mean_truth: f64,
     /// Wall time per pair, ms.
     pub ms_per_pair: f64,
+    /// The family's member, where its seeds draw one.
+    pub member: Option<Member>,
 }
 
 /// The row (one family's member: a seed) whose measured vectors are
@@ -132,17 +236,19 @@ pub(crate) struct Score {
 }
 
 impl Score {
+    /// Scores `vs` (with their uncertainties) against the truth of a pair
+    /// `dt` ticks apart centred on tick `mid`.
     pub(crate) fn add(
         &mut self,
         scene: &Scene,
-        dt: f64,
+        (mid, dt): (f64, f64),
         vs: &[Vector],
         sigma: Option<&[(f64, f64)]>,
     ) {
         let h = f64::from(scene.params.height);
         let band = 2.0 * scene.params.glare_sigma;
         let pts: Vec<(f64, f64)> = vs.iter().map(|v| (v.x, v.y)).collect();
-        for (k, (v, t)) in vs.iter().zip(scene.truth(&pts, dt)).enumerate() {
+        for (k, (v, t)) in vs.iter().zip(scene.truth_at(&pts, mid, dt)).enumerate() {
             self.all += 1;
             self.truth += t.2.hypot(t.3);
             if !v.state.is_measured() {
@@ -198,6 +304,7 @@ impl Score {
             dense,
             mean_truth: self.truth / self.all.max(1) as f64,
             ms_per_pair: ms,
+            member: None,
         }
     }
 }
@@ -228,25 +335,33 @@ pub const SPIV_FLOW_DENSE: &str = "spiv flow --dense";
 /// With `vectors`, every vector of `spiv flow`'s pairs is appended there
 /// as a CSV line ([`dump`]). With `dense`, `spiv flow --dense` instead:
 /// its dense EPE is that of the dense field it writes (the mean over pairs
-/// of each pair's dense flow; every family's truth is steady).
+/// of each pair's dense flow) against the mean of the pairs' truths.
 pub fn family_rows(
     fam: &Family,
     seed: u64,
     vectors: Option<&std::path::Path>,
     dense: bool,
 ) -> Result<Vec<FlowsRow>, Error> {
-    let mut p = SceneParams::new(fam.scene);
-    if let Some(s) = fam.speed {
-        p.top_speed = s;
-    }
-    p.flow_seed = seed;
+    let p = fam.params(seed);
+    let member = (fam.scene == SceneKind::SpectralTurbulence).then(|| spectral_member(seed));
     let mut req = Request::new(p.clone(), seed);
     req.ticks = Some(fam.ticks);
     let (data, sim) = simulate_planes(&req)?;
     let (w, h) = (usize::from(p.width), usize::from(p.height));
     let pair = sim.meta.capture.pair;
     let dt = f64::from(pair[1] - pair[0]);
-    let truth = sim.scene.truth_dense(dt);
+    let mid = Scene::pair_mid(u64::from(pair[0]), u64::from(pair[1]));
+    let truth = sim.scene.truth_dense_at(mid, dt);
+    // The truth of each of `spiv flow`'s pairs: the capture pair's where
+    // the flow is steady.
+    let truth_of = |ticks: [u64; 2]| {
+        let m = Scene::pair_mid(ticks[0], ticks[1]);
+        if sim.scene.flow.evolves() && m != mid {
+            sim.scene.truth_dense_at(m, dt)
+        } else {
+            truth.clone()
+        }
+    };
     let mut rows = Vec::new();
 
     let user = PivOptions::default().settings()?;
@@ -265,8 +380,11 @@ pub fn family_rows(
         let ms = t0.elapsed().as_secs_f64() * 1e3;
         let mut s = Score::default();
         let sigma: Vec<(f64, f64)> = f.sigma.iter().copied().collect();
-        s.add(&sim.scene, dt, &f.vectors(), Some(&sigma));
-        rows.push(s.row(&fam.name, seed, name, Some(dense_epe(&f, &truth)), ms));
+        s.add(&sim.scene, (mid, dt), &f.vectors(), Some(&sigma));
+        rows.push(FlowsRow {
+            member,
+            ..s.row(&fam.name, seed, name, Some(dense_epe(&f, &truth)), ms)
+        });
     }
 
     let rec = Recording::simulated(p.width, p.height, data, pair[1] - pair[0]);
@@ -280,18 +398,31 @@ pub fn family_rows(
     }
     let mut s = Score::default();
     let mut interpolated = 0.0;
+    let mut mean_truth = DenseField::zeros(truth.width, truth.height);
     for pr in &out.pairs {
-        s.add(&sim.scene, dt, &pr.vectors, Some(&pr.sigma));
-        interpolated += dense_epe(&field_of(&out.grid, pr), &truth);
+        let m = Scene::pair_mid(pr.ticks[0], pr.ticks[1]);
+        s.add(&sim.scene, (m, dt), &pr.vectors, Some(&pr.sigma));
+        let t = truth_of(pr.ticks);
+        interpolated += dense_epe(&field_of(&out.grid, pr), &t);
+        let k = 1.0 / out.pairs.len() as f32;
+        for (a, b) in mean_truth.u.iter_mut().zip(&t.u) {
+            *a += k * b;
+        }
+        for (a, b) in mean_truth.v.iter_mut().zip(&t.v) {
+            *a += k * b;
+        }
     }
     let (name, epe) = match &out.mean_dense {
-        Some(d) if dense => (SPIV_FLOW_DENSE, d.epe(&truth, None)),
+        Some(d) if dense => (SPIV_FLOW_DENSE, d.epe(&mean_truth, None)),
         _ => (
             SPIV_FLOW,
             Some(interpolated / out.pairs.len().max(1) as f64),
         ),
     };
-    rows.push(s.row(&fam.name, seed, name, epe, ms));
+    rows.push(FlowsRow {
+        member,
+        ..s.row(&fam.name, seed, name, epe, ms)
+    });
     Ok(rows)
 }
 
@@ -345,11 +476,12 @@ pub fn dump(
         .map_err(spiv_formats::io_err(path))?;
     let g = out.grid;
     for (k, pr) in out.pairs.iter().enumerate() {
+        let mid = Scene::pair_mid(pr.ticks[0], pr.ticks[1]);
         let at = |r: usize, c: usize| pr.vectors.get(r * g.nx + c);
         for r in 0..g.ny {
             for c in 0..g.nx {
                 let Some(v) = at(r, c) else { continue };
-                let t = scene.truth(&[(v.x, v.y)], dt)[0];
+                let t = scene.truth_at(&[(v.x, v.y)], mid, dt)[0];
                 let lap = |f: &dyn Fn(&Vector) -> f64| {
                     let mut l = 0.0;
                     let mut n = 0;
@@ -434,6 +566,42 @@ mod tests {
         assert!(worst(&refs[3..]).is_none());
     }
 
+    /// The spectral family's members span what the family promises, each
+    /// seed its own, and the family's scene is the member's.
+    #[test]
+    fn spectral_members_span_their_ranges() {
+        let ms: Vec<Member> = (1..=200).map(spectral_member).collect();
+        let span = |f: &dyn Fn(&Member) -> f64| {
+            ms.iter()
+                .map(f)
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
+                    (a.min(x), b.max(x))
+                })
+        };
+        let within = |(lo, hi): (f64, f64), (a, b): (f64, f64)| {
+            lo >= a && hi <= b && hi - lo > 0.8 * (b - a)
+        };
+        assert!(within(span(&|m| m.smallest_eddy), (4.0, 32.0)));
+        assert!(within(span(&|m| m.rms_shift), (0.5, 8.0)));
+        assert!(within(span(&|m| m.per_cell as f64), (6.0, 16.0)));
+        assert!(within(span(&|m| m.particle_peak), (0.1, 0.4)));
+        assert!(within(span(&|m| m.out_of_plane), (0.05, 0.25)));
+        // Half the members at most 2 px rms (log-uniform from 0.5 to 8).
+        let slow = ms.iter().filter(|m| m.rms_shift <= 2.0).count();
+        assert!((70..130).contains(&slow), "{slow}");
+        assert_ne!(spectral_member(1), spectral_member(2));
+        let fam = families()
+            .into_iter()
+            .find(|f| f.scene == SceneKind::SpectralTurbulence)
+            .unwrap();
+        let p = fam.params(7);
+        assert_eq!(p.flow_seed, 7);
+        assert_eq!(p.rms_shift, Some(spectral_member(7).rms_shift));
+        let sheet = p.sheet.unwrap();
+        let travel = sheet.w_rms * f64::from(p.pair_dt) / sheet.thickness;
+        assert!((travel - spectral_member(7).out_of_plane).abs() < 1e-12);
+    }
+
     /// A valid vector is confidently wrong when it is off by more than 0.3
     /// px and by more than 3σ in either component: not when it is off by
     /// more than 3σ but within 0.3 px, nor when its σ covers it.
@@ -455,7 +623,7 @@ mod tests {
         let vs = [vector(0.5), vector(0.2), vector(0.5)];
         s.add(
             &scene,
-            dt,
+            (0.0, dt),
             &vs,
             Some(&[(0.1, 0.1), (0.01, 0.01), (0.2, 0.2)]),
         );

@@ -11,7 +11,7 @@
 //! events on the wire ([`crate::estimator::uplink`]) against the raw spikes
 //! between pairs, and the lateness of the asks in pairs.
 
-use spiv_firmware_sim::scene::SceneParams;
+use spiv_firmware_sim::scene::Scene;
 use spiv_firmware_sim::simulation::{simulate_planes, Request};
 
 use super::flows::{Family, Score};
@@ -92,11 +92,7 @@ pub fn modes(seed: u64) -> Vec<(&'static str, Delivery)> {
 
 /// The rows of one family and seed, `pairs` pairs after the third.
 pub fn live_rows(fam: &Family, seed: u64, pairs: usize) -> Result<Vec<LiveRow>, Error> {
-    let mut p = SceneParams::new(fam.scene);
-    if let Some(s) = fam.speed {
-        p.top_speed = s;
-    }
-    p.flow_seed = seed;
+    let p = fam.params(seed);
     let dt = p.pair_dt.max(1);
     let every = 4 * dt;
     let wanted = SKIPPED + pairs;
@@ -126,9 +122,10 @@ pub fn live_rows(fam: &Family, seed: u64, pairs: usize) -> Result<Vec<LiveRow>, 
         let (mut bytes, mut counted) = (0u64, 0usize);
         let mut per_pair = Vec::new();
         for pr in out.pairs.iter().skip(SKIPPED) {
-            s.add(&sim.scene, f64::from(dt), &pr.vectors, Some(&pr.sigma));
+            let at = (Scene::pair_mid(pr.ticks[0], pr.ticks[1]), f64::from(dt));
+            s.add(&sim.scene, at, &pr.vectors, Some(&pr.sigma));
             let mut one = Score::default();
-            one.add(&sim.scene, f64::from(dt), &pr.vectors, None);
+            one.add(&sim.scene, at, &pr.vectors, None);
             per_pair.push(one.measured_epe());
             if let Some(b) = pr.bytes {
                 bytes += b.total();

@@ -292,7 +292,7 @@ fn flows(
         seeds
     );
     println!(
-        "{:<17} {:<mw$} {:>9} {:>9} {:>13} {:>8} {:>9} {:>6} {:>9} {:>10} {:>9}",
+        "{:<19} {:<mw$} {:>9} {:>9} {:>13} {:>8} {:>9} {:>6} {:>9} {:>10} {:>9}",
         "family",
         "method",
         "glare",
@@ -316,7 +316,7 @@ fn flows(
                 format!("{:.3} s{}", r.measured.unwrap_or(f64::NAN), r.seed)
             });
             println!(
-                "{:<17} {:<mw$} {:>9} {:>9} {:>13} {:>7.1}% {:>9} {:>6} {:>9} {:>10.2} {:>9.1}",
+                "{:<19} {:<mw$} {:>9} {:>9} {:>13} {:>7.1}% {:>9} {:>6} {:>9} {:>10.2} {:>9.1}",
                 f.name,
                 method,
                 f3(mean(rs.iter().map(|r| r.glare).collect())),
@@ -333,11 +333,70 @@ fn flows(
             );
         }
     }
+    for f in &fams {
+        members(
+            &rows,
+            &f.name,
+            if dense { SPIV_FLOW_DENSE } else { SPIV_FLOW },
+        );
+    }
     if let Some(p) = json_out {
         std::fs::write(p, serde_json::to_string_pretty(&rows).unwrap_or_default())
             .map_err(|e| CliError::Usage(format!("{}: {e}", p.display())))?;
     }
     Ok(())
+}
+
+/// The table of a family whose seeds are members of their own (the
+/// spectral turbulence): one line per seed with what it drew and the
+/// dense EPE of each method; nothing for the other families.
+fn members(rows: &[spiv_host::bench::flows::FlowsRow], family: &str, flow: &str) {
+    let of = |seed: u64, method: &str| {
+        rows.iter()
+            .find(|r| r.family == family && r.seed == seed && r.method == method)
+    };
+    let mut seeds: Vec<u64> = rows
+        .iter()
+        .filter(|r| r.family == family && r.member.is_some())
+        .map(|r| r.seed)
+        .collect();
+    seeds.dedup();
+    if seeds.is_empty() {
+        return;
+    }
+    println!(
+        "\n{family}, each seed a member: smallest eddy px, rms px per pair, particles per 32² cell, diameters px, light thresholds/tick, sheet px, out-of-plane travel per pair / sheet, turnover rate; dense EPE px per pair; {flow}: measured EPE, coverage, >3σ"
+    );
+    println!(
+        "{:>5} {:>6} {:>6} {:>5} {:>9} {:>6} {:>6} {:>6} {:>5} {:>8} {:>8} {:>8} {:>8} {:>9} {:>9} {:>6}",
+        "seed", "eddy", "rms", "cell", "d", "light", "sheet", "w", "rate", "|d|",
+        "frame", "TFP 8", "dense", "measured", "coverage", ">3σ"
+    );
+    for seed in seeds {
+        let Some(r) = of(seed, flow) else { continue };
+        let Some(m) = r.member else { continue };
+        let dense = |method: &str| f3(of(seed, method).and_then(|r| r.dense));
+        println!(
+            "{:>5} {:>6.1} {:>6.2} {:>5} {:>9} {:>6.3} {:>6.1} {:>6.2} {:>5.2} {:>8.2} {:>8} {:>8} {:>8} {:>9} {:>9} {:>6}",
+            seed,
+            m.smallest_eddy,
+            m.rms_shift,
+            m.per_cell,
+            format!("{:.1}-{:.1}", m.diameter.0, m.diameter.1),
+            m.particle_peak,
+            m.sheet,
+            m.out_of_plane,
+            m.evolution,
+            r.mean_truth,
+            dense("frame camera"),
+            dense("TFP 8"),
+            f3(r.dense),
+            f3(r.measured),
+            r.coverage.map_or("-".into(), |c| format!("{:.0}%", 100.0 * c)),
+            r.beyond_3sigma
+                .map_or("-".into(), |c| format!("{:.1}%", 100.0 * c)),
+        );
+    }
 }
 
 fn turbulence(seed: u64, json_out: Option<&PathBuf>) -> Result<(), CliError> {

@@ -12,7 +12,7 @@ use super::CliError;
 /// Simulate a scene: spikes.dat, scene.json, frame_a.png, frame_b.png, truth.csv, truth.flo (dense), profile.csv.
 #[derive(Debug, Args)]
 pub struct SimulateArgs {
-    /// Scene: paper-linear, paper-quadratic, paper-log, blasius, uniform, vortex, turbulence, large-shift, vortex-array.
+    /// Scene: paper-linear, paper-quadratic, paper-log, blasius, uniform, vortex, turbulence, large-shift, vortex-array, spectral-turbulence.
     #[arg(long, default_value = "paper-linear")]
     scene: String,
     /// Output folder (created if missing).
