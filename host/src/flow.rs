@@ -255,7 +255,8 @@ pub struct FlowOptions {
     /// The time ladder of motion-compensated pairs.
     pub ladder: LadderSettings,
     /// Also run the dense stage on every pair ([`crate::piv::dense`]) and
-    /// average it into [`FlowOutcome::mean_dense`].
+    /// average it into [`FlowOutcome::mean_dense`] (over the pairs that
+    /// measured a usable field; none: no dense field).
     pub dense: bool,
     /// The recording's calibration, when known: the outputs give m/s and
     /// seconds beside px per pair and ticks.
@@ -744,8 +745,9 @@ pub struct FlowOutcome {
     pub full_scale: u16,
     /// The grid of every pair's field.
     pub grid: Grid,
-    /// With [`FlowOptions::dense`]: the mean over pairs of the dense stage's
-    /// field (px per pair, v down, upright).
+    /// With [`FlowOptions::dense`]: the mean of the dense stage's field
+    /// over the pairs that measured a usable field (px per pair, v down,
+    /// upright); `None` when none did.
     pub mean_dense: Option<spiv_formats::dense::DenseField>,
     /// Pixels under glare around the first pair (upright, `width × height`,
     /// [`glare`]).
@@ -1053,8 +1055,14 @@ impl Chain {
     /// Adds a measured pair at `ticks` (frames shown up to `full_scale`).
     fn take(&mut self, mut m: Measured, ticks: [u64; 2], opts: &FlowOptions, full_scale: u16) {
         if opts.dense {
+            // A pair that measured nothing usable has no field for the
+            // dense stage to refine, and its frames none to start from
+            // rest on (dim short rungs: the pyramid walks off to tens of
+            // px): it adds nothing to the mean.
             let measured = m.dense.take();
-            self.dense.add(&m, measured, f64::from(opts.dt));
+            if measured.is_some() || m.field.usable() {
+                self.dense.add(&m, measured, f64::from(opts.dt));
+            }
         }
         if self.first_frames.is_none() {
             self.first_frames = Some(m.frames.clone().map(|f| gray(&f, full_scale)));

@@ -79,3 +79,61 @@ fn turbulence_is_measured_densely_with_honest_uncertainty() {
     // The first pass alone gives 0.855.
     assert!(dense <= 0.84, "dense EPE {dense}");
 }
+
+/// `spiv flow --dense` on the spectral family's hardest kind of member
+/// (seed 1: eddies down to 4.3 px, 4.4 px rms per pair, dim particles in a
+/// light sheet): its pairs measure no usable field, and the dense stage
+/// from rest on their dim 4-tick frames ran off to 115 px where the truth
+/// moves at most a tenth of that. Whatever the dense field holds, it stays
+/// within twice the truth's largest displacement, plus a pixel; a pair
+/// that measured nothing usable adds nothing to it.
+#[test]
+fn the_dense_field_never_runs_away() {
+    use spiv_firmware_sim::scene::Scene;
+    use spiv_host::bench::flows::families;
+    let seed = 1;
+    let fam = families()
+        .into_iter()
+        .find(|f| f.scene == SceneKind::SpectralTurbulence)
+        .expect("the family");
+    let p = fam.params(seed);
+    let mut req = Request::new(p.clone(), seed);
+    req.ticks = Some(fam.ticks);
+    let (data, sim) = simulate_planes(&req).expect("simulates");
+    let pair = sim.meta.capture.pair;
+    let dt = pair[1] - pair[0];
+    let rec = Recording::simulated(p.width, p.height, data, dt);
+    let mut opts = FlowOptions::new(&rec, dt);
+    opts.dense = true;
+    let out = run_flow(&rec, &opts, |_, _| {}).expect("runs");
+    let mid = Scene::pair_mid(u64::from(pair[0]), u64::from(pair[1]));
+    let truth = sim.scene.truth_dense_at(mid, f64::from(dt));
+    let top = |u: &[f32], v: &[f32]| {
+        u.iter()
+            .zip(v)
+            .map(|(a, b)| a.hypot(*b))
+            .fold(0f32, |m, x| {
+                if x.is_finite() {
+                    m.max(x)
+                } else {
+                    f32::INFINITY
+                }
+            })
+    };
+    let bound = 2.0 * top(&truth.u, &truth.v) + 1.0;
+    match &out.mean_dense {
+        Some(d) => {
+            let m = top(&d.u, &d.v);
+            assert!(
+                m <= bound,
+                "dense field up to {m} px, truth bound {bound} px"
+            );
+        }
+        None => assert!(
+            out.pairs
+                .iter()
+                .all(|pr| !spiv_host::piv::usable_counts(pr.counts())),
+            "a pair measured a usable field but the dense stage wrote nothing"
+        ),
+    }
+}

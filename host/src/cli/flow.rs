@@ -165,6 +165,11 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
             .map_err(|e| CliError::Usage(e.to_string()))?;
     }
     println!("{}", run_line(a, &rec, &o, &out, info.seconds));
+    if a.dense && out.mean_dense.is_none() {
+        eprintln!(
+            "warning: --dense: no pair measured a usable field, so no mean_dense.flo was written"
+        );
+    }
     let lost = out.lost();
     if !lost.is_none() {
         eprintln!(
