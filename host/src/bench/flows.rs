@@ -412,12 +412,20 @@ pub fn family_rows(
             *a += k * b;
         }
     }
-    let (name, epe) = match &out.mean_dense {
-        Some(d) if dense => (SPIV_FLOW_DENSE, d.epe(&mean_truth, None)),
-        _ => (
+    // `--dense` without a dense field (no pair measured a usable one):
+    // the row keeps its name, with no dense EPE.
+    let (name, epe) = if dense {
+        (
+            SPIV_FLOW_DENSE,
+            out.mean_dense
+                .as_ref()
+                .and_then(|d| d.epe(&mean_truth, None)),
+        )
+    } else {
+        (
             SPIV_FLOW,
             Some(interpolated / out.pairs.len().max(1) as f64),
-        ),
+        )
     };
     rows.push(FlowsRow {
         member,
