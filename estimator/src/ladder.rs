@@ -307,6 +307,7 @@ pub fn measure(
         frames,
         ..
     } = climb;
+    let best = best.filter(|_| !refuted(&rungs));
     let velocity = match best {
         Some(mut b) => {
             if let Some(c) = &change {
@@ -347,6 +348,25 @@ pub fn measure(
         confirmed,
         ensemble: false,
     })
+}
+
+/// Whether the climb's field rests on its first rung alone while a longer
+/// rung, compensated along that rung's field, measured nothing at all: a
+/// right field carries the longer rung's frames onto each other. On dim
+/// particles the shortest rung is shorter than their pixels' spike period
+/// (a pixel that fired in A cannot fire again in B), the correlation dips
+/// at zero lag, and its peak sits a particle radius off on every window:
+/// confidently wrong (`docs/results.md`, spectral turbulence).
+fn refuted(rungs: &[Rung]) -> bool {
+    let Some(first) = rungs.first() else {
+        return false;
+    };
+    let rest = &rungs[1..];
+    first.kept > 0
+        && rest.iter().all(|r| r.kept == 0)
+        && rest
+            .iter()
+            .any(|r| r.separation > first.separation && r.counts.0 == 0)
 }
 
 /// The climb over the rung frames along `start`, on from `from` (the
@@ -1010,4 +1030,36 @@ fn finished(kept: &Field, dt: f64) -> Field {
     validate::replace(&mut f.u, &mut f.v, &mut f.state, &replaceable, 4);
     validate::replaced_uncertainty(&f.u, &f.v, &f.state, &mut f.sigma);
     f
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rung(separation: u32, counts: (usize, usize, usize), kept: usize) -> Rung {
+        Rung {
+            separation,
+            counts,
+            kept,
+            ms: 0.0,
+        }
+    }
+
+    /// A field from the first rung alone is refuted by a longer rung that
+    /// measured nothing at all; not when a longer rung kept vectors, nor
+    /// when the longer rung measured some (its own vectors were not
+    /// better), nor when no longer rung fit.
+    #[test]
+    fn a_lone_first_rung_is_refuted_by_a_longer_rung_that_measured_nothing() {
+        let dim = [rung(4, (78, 147, 0), 78), rung(8, (0, 0, 225), 0)];
+        assert!(refuted(&dim));
+        let confirmed = [rung(4, (83, 142, 0), 83), rung(8, (162, 63, 0), 154)];
+        assert!(!refuted(&confirmed));
+        let weaker = [rung(4, (102, 123, 0), 102), rung(8, (40, 60, 125), 0)];
+        assert!(!refuted(&weaker));
+        assert!(!refuted(&dim[..1]));
+        assert!(!refuted(&[]));
+        let nothing_first = [rung(4, (0, 0, 225), 0), rung(8, (0, 0, 225), 0)];
+        assert!(!refuted(&nothing_first));
+    }
 }

@@ -8,7 +8,8 @@ use pyo3::types::PyDict;
 
 /// A simulated recording (the same as `spiv simulate`): `scene` is
 /// "paper-linear", "paper-quadratic", "paper-log", "blasius", "uniform",
-/// "vortex", "turbulence", "large-shift" or "vortex-array"; `width`,
+/// "vortex", "turbulence", "large-shift", "vortex-array" or
+/// "spectral-turbulence"; `width`,
 /// `height` px; `ticks` planes; `dt` the pair's separation, ticks; `shift`
 /// the uniform scene's (u, v) px per pair; `spacing` the minimum particle
 /// spacing, px; `speed` the top speed of the shear scenes and the vortex
