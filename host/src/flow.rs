@@ -255,8 +255,9 @@ pub struct FlowOptions {
     /// The time ladder of motion-compensated pairs.
     pub ladder: LadderSettings,
     /// Also run the dense stage on every pair ([`crate::piv::dense`]) and
-    /// average it into [`FlowOutcome::mean_dense`] (over the pairs that
-    /// measured a usable field; none: no dense field).
+    /// average it into [`FlowOutcome::mean_dense`] (leaving out the pairs
+    /// that measured no usable field on frames shorter than the pair; none
+    /// left: no dense field).
     pub dense: bool,
     /// The recording's calibration, when known: the outputs give m/s and
     /// seconds beside px per pair and ticks.
@@ -746,8 +747,8 @@ pub struct FlowOutcome {
     /// The grid of every pair's field.
     pub grid: Grid,
     /// With [`FlowOptions::dense`]: the mean of the dense stage's field
-    /// over the pairs that measured a usable field (px per pair, v down,
-    /// upright); `None` when none did.
+    /// over the pairs ([`FlowOptions::dense`] says which), px per pair, v
+    /// down, upright; `None` when no pair was kept.
     pub mean_dense: Option<spiv_formats::dense::DenseField>,
     /// Pixels under glare around the first pair (upright, `width × height`,
     /// [`glare`]).
@@ -1055,12 +1056,12 @@ impl Chain {
     /// Adds a measured pair at `ticks` (frames shown up to `full_scale`).
     fn take(&mut self, mut m: Measured, ticks: [u64; 2], opts: &FlowOptions, full_scale: u16) {
         if opts.dense {
-            // A pair that measured nothing usable has no field for the
-            // dense stage to refine, and its frames none to start from
-            // rest on (dim short rungs: the pyramid walks off to tens of
-            // px): it adds nothing to the mean.
+            // A pair that measured nothing usable on frames shorter than
+            // the pair adds nothing to the mean: its dense flow would start
+            // from rest on those frames and be scaled up to the pair (dim
+            // 4-tick rungs: the pyramid walks off to 20 px, times 5).
             let measured = m.dense.take();
-            if measured.is_some() || m.field.usable() {
+            if measured.is_some() || m.field.usable() || m.frame_ticks >= f64::from(opts.dt) {
                 self.dense.add(&m, measured, f64::from(opts.dt));
             }
         }

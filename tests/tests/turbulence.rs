@@ -83,10 +83,11 @@ fn turbulence_is_measured_densely_with_honest_uncertainty() {
 /// `spiv flow --dense` on the spectral family's hardest kind of member
 /// (seed 1: eddies down to 4.3 px, 4.4 px rms per pair, dim particles in a
 /// light sheet): its pairs measure no usable field, and the dense stage
-/// from rest on their dim 4-tick frames ran off to 115 px where the truth
-/// moves at most a tenth of that. Whatever the dense field holds, it stays
-/// within twice the truth's largest displacement, plus a pixel; a pair
-/// that measured nothing usable adds nothing to it.
+/// from rest on their dim 4-tick rung frames, scaled up to the pair, ran
+/// off to 115 px where the truth moves at most a tenth of that. Whatever
+/// the dense field holds, it stays within twice the truth's largest
+/// displacement, plus a pixel; a pair that measured nothing usable on
+/// frames shorter than the pair adds nothing to it.
 #[test]
 fn the_dense_field_never_runs_away() {
     use spiv_firmware_sim::scene::Scene;

@@ -167,7 +167,7 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
     println!("{}", run_line(a, &rec, &o, &out, info.seconds));
     if a.dense && out.mean_dense.is_none() {
         eprintln!(
-            "warning: --dense: no pair measured a usable field, so no mean_dense.flo was written"
+            "warning: --dense: no pair measured a usable field (on frames as long as the pair or shorter ones), so no mean_dense.flo was written"
         );
     }
     let lost = out.lost();
