@@ -64,7 +64,8 @@ pub struct FlowArgs {
     #[arg(long)]
     allow_truncated: bool,
     /// Also run the dense stage on every pair and write its mean,
-    /// `mean_dense.flo` (one vector per pixel, px per pair, v down).
+    /// `mean_dense.flo` (one vector per pixel, px per pair, v down; a pair
+    /// that measured nothing on frames shorter than the pair is left out).
     #[arg(long)]
     dense: bool,
     /// Pixel size on the object, mm (else from scene.json beside the
