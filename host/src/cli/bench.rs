@@ -150,6 +150,18 @@ fn f3(x: Option<f64>) -> String {
     x.map_or("-".to_string(), |x| format!("{x:.3}"))
 }
 
+/// The mean of the values present (three decimals), with how many there
+/// were in brackets when some are missing ("0.923 (8)" of 10 seeds), so
+/// that a mean over fewer members says so; "-" for none.
+fn of_some(xs: Vec<Option<f64>>) -> String {
+    let n = xs.iter().flatten().count();
+    let all = xs.len();
+    match mean(xs) {
+        Some(m) if n < all => format!("{m:.3} ({n})"),
+        m => f3(m),
+    }
+}
+
 /// Seeds from "A-B", "N" or "A,B,C": each 1..=1_000_000, at most 1000.
 fn parse_seeds(s: &str) -> Result<Vec<u64>, CliError> {
     let bad = || CliError::Usage(format!("--seeds {s}: expected A-B, N or a list like 1,2,7"));
@@ -327,7 +339,7 @@ fn flows(
                     .map_or("-".into(), |c| format!("{:.0}%", 100.0 * c)),
                 mean(rs.iter().map(|r| r.beyond_3sigma).collect())
                     .map_or("-".into(), |c| format!("{:.1}%", 100.0 * c)),
-                f3(mean(rs.iter().map(|r| r.dense).collect())),
+                of_some(rs.iter().map(|r| r.dense).collect()),
                 mean(rs.iter().map(|r| Some(r.mean_truth)).collect()).unwrap_or(0.0),
                 mean(rs.iter().map(|r| Some(r.ms_per_pair)).collect()).unwrap_or(0.0),
             );
@@ -522,4 +534,18 @@ fn speed(plot_path: &Path) -> Result<(), CliError> {
         .map_err(|e| CliError::Usage(e.to_string()))?;
     println!("Pareto plot -> {}", plot_path.display());
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A mean over fewer members than asked says how many it had.
+    #[test]
+    fn a_mean_over_some_members_says_how_many() {
+        assert_eq!(of_some(vec![Some(1.0), Some(2.0)]), "1.500");
+        assert_eq!(of_some(vec![Some(1.0), None, Some(2.0)]), "1.500 (2)");
+        assert_eq!(of_some(vec![None, None]), "-");
+        assert_eq!(of_some(vec![]), "-");
+    }
 }
