@@ -39,6 +39,10 @@ pub struct SimulateRequest {
     /// Seed of the turbulence field and of the vortex array's offset and
     /// drift direction.
     pub flow_seed: Option<u64>,
+    /// Spectral turbulence: the member `spiv bench flows` draws from this
+    /// seed ([`crate::bench::flows::spectral_member`]), its flow seed too
+    /// unless `flow_seed` is given.
+    pub member: Option<u64>,
 }
 
 impl SimulateRequest {
@@ -55,6 +59,7 @@ impl SimulateRequest {
             spacing: None,
             speed: None,
             flow_seed: None,
+            member: None,
         }
     }
 
@@ -62,7 +67,19 @@ impl SimulateRequest {
     pub fn request(&self) -> Result<Request, Error> {
         let bad = |m: String| Err(Error::Request(m));
         let kind = SceneKind::parse(&self.scene).map_err(|e| Error::Request(e.to_string()))?;
-        let mut p = SceneParams::new(kind);
+        let mut p = match self.member {
+            None => SceneParams::new(kind),
+            Some(m) if kind == SceneKind::SpectralTurbulence => SceneParams {
+                flow_seed: m,
+                ..crate::bench::flows::spectral_member(m).params()
+            },
+            Some(_) => {
+                return bad(format!(
+                    "--member applies to spectral-turbulence, not {}",
+                    self.scene
+                ))
+            }
+        };
         p.width = self.width.unwrap_or(p.width);
         p.height = self.height.unwrap_or(p.height);
         let px = u64::from(p.width) * u64::from(p.height);
@@ -129,7 +146,10 @@ impl SimulateRequest {
         // their tracks are kept for at most this many ticks.
         let integrated = matches!(
             kind,
-            SceneKind::Turbulence | SceneKind::LargeShift | SceneKind::VortexArray
+            SceneKind::Turbulence
+                | SceneKind::LargeShift
+                | SceneKind::VortexArray
+                | SceneKind::SpectralTurbulence
         );
         if integrated && self.ticks.is_some_and(|t| t > MAX_TURBULENCE_TICKS) {
             return bad(format!(
@@ -158,5 +178,25 @@ mod tests {
         r.shift = Some((1.0, 0.0));
         assert!(r.request().unwrap_err().to_string().contains("uniform"));
         assert!(SimulateRequest::new("nope", 1).request().is_err());
+    }
+
+    /// `--member` makes the bench's member of the spectral turbulence
+    /// (and only of it), and its ticks are bounded as the other integrated
+    /// scenes' are.
+    #[test]
+    fn a_member_is_the_benchs_and_bounded() {
+        let mut r = SimulateRequest::new("spectral-turbulence", 3);
+        r.member = Some(107);
+        let p = r.request().unwrap().scene;
+        let fam = crate::bench::flows::families()
+            .into_iter()
+            .find(|f| f.scene == SceneKind::SpectralTurbulence)
+            .unwrap();
+        assert_eq!(p, fam.params(107));
+        r.ticks = Some(MAX_TURBULENCE_TICKS + 1);
+        assert!(r.request().unwrap_err().to_string().contains("--ticks"));
+        let mut r = SimulateRequest::new("turbulence", 3);
+        r.member = Some(1);
+        assert!(r.request().unwrap_err().to_string().contains("--member"));
     }
 }

@@ -14,7 +14,8 @@ use pyo3::types::PyDict;
 /// the uniform scene's (u, v) px per pair; `spacing` the minimum particle
 /// spacing, px; `speed` the top speed of the shear scenes and the vortex
 /// array, px/tick; `flow_seed` the seed of a turbulence field or of the
-/// vortex array's offset and drift; `out` a folder to also
+/// vortex array's offset and drift; `member` the spectral-turbulence
+/// member `spiv bench flows` draws from that seed; `out` a folder to also
 /// write `spiv simulate`'s files to (spikes.dat, scene.json, frame_a.png,
 /// frame_b.png, truth.csv, truth.flo, profile.csv).
 ///
@@ -28,7 +29,7 @@ use pyo3::types::PyDict;
 /// A build without the `sim` feature raises `SpivError` saying how to
 /// build one that has it.
 #[pyfunction]
-#[pyo3(signature = (scene="paper-linear", seed=1, width=None, height=None, ticks=None, dt=None, shift=None, spacing=None, out=None, speed=None, flow_seed=None))]
+#[pyo3(signature = (scene="paper-linear", seed=1, width=None, height=None, ticks=None, dt=None, shift=None, spacing=None, out=None, speed=None, flow_seed=None, member=None))]
 #[allow(clippy::too_many_arguments)]
 #[cfg_attr(not(feature = "sim"), allow(unused_variables))]
 pub(crate) fn simulate<'py>(
@@ -44,6 +45,7 @@ pub(crate) fn simulate<'py>(
     out: Option<PathBuf>,
     speed: Option<f64>,
     flow_seed: Option<u64>,
+    member: Option<u64>,
 ) -> PyResult<Bound<'py, PyDict>> {
     #[cfg(feature = "sim")]
     {
@@ -58,6 +60,7 @@ pub(crate) fn simulate<'py>(
             spacing,
             speed,
             flow_seed,
+            member,
         }
         .request()
         .map_err(crate::err)?;

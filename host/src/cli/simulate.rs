@@ -46,6 +46,10 @@ pub struct SimulateArgs {
     /// drift direction.
     #[arg(long)]
     flow_seed: Option<u64>,
+    /// Spectral turbulence: the member `spiv bench flows` draws from this
+    /// seed (eddies, speed, seeding, light, sheet; its flow seed too).
+    #[arg(long)]
+    member: Option<u64>,
 }
 
 /// Runs it.
@@ -70,6 +74,7 @@ pub fn run(a: &SimulateArgs) -> Result<(), CliError> {
         spacing: a.spacing,
         speed: a.speed,
         flow_seed: a.flow_seed,
+        member: a.member,
     }
     .request()?;
     let (ticks, _) = req.layout()?;
