@@ -3,6 +3,7 @@
 and on bad input (the CLI's messages, never a crash)."""
 
 import csv
+import json
 import os
 import subprocess
 import struct
@@ -145,6 +146,23 @@ def test_simulated_pair_measures_the_truth():
     ok = flags < 2
     assert np.sqrt(np.mean((u[ok] - t["u"][ok]) ** 2 + (v[ok] - t["v"][ok]) ** 2)) < 0.1
     np.testing.assert_allclose(x, t["x"])
+
+
+def test_a_spectral_member_is_the_benchs_and_its_truth_evolves(cli, tmp_path):
+    # The member of seed 107: dim, slow; the same recording as the CLI's.
+    kw = dict(seed=107, width=64, height=64, ticks=40)
+    sim = spiv.simulate("spectral-turbulence", member=107, **kw)
+    cli("simulate", "--scene", "spectral-turbulence", "--member", "107", "--seed", "107",
+        "--width", "64", "--height", "64", "--ticks", "40", "--out", tmp_path / "m")
+    got = spiv.read_dat(tmp_path / "m" / "spikes.dat")
+    np.testing.assert_array_equal(np.asarray(got), sim["spikes"])
+    meta = json.loads((tmp_path / "m" / "scene.json").read_text())
+    assert abs(meta["scene"]["params"]["particle_peak"] - 0.106) < 5e-4
+    # Another member of the same scene is another recording.
+    other = spiv.simulate("spectral-turbulence", member=108, **kw)
+    assert not np.array_equal(other["spikes"], sim["spikes"])
+    with pytest.raises(spiv.SpivError, match="--member"):
+        spiv.simulate("turbulence", member=1, ticks=40)
 
 
 def test_flow_gives_the_cli_mean_field(cli, tmp_path):
