@@ -148,7 +148,7 @@ def test_simulated_pair_measures_the_truth():
     np.testing.assert_allclose(x, t["x"])
 
 
-def test_a_spectral_member_is_the_benchs_and_its_truth_evolves(cli, tmp_path):
+def test_a_spectral_member_is_the_clis_and_its_own(cli, tmp_path):
     # The member of seed 107: dim, slow; the same recording as the CLI's.
     kw = dict(seed=107, width=64, height=64, ticks=40)
     sim = spiv.simulate("spectral-turbulence", member=107, **kw)
