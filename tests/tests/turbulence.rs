@@ -12,26 +12,42 @@
 //! fitted to every pair of frames, 100 % at 0.76 px and 0.86 px (0.855);
 //! with the second pass on 12-tick frames, 100 % at 0.75 px and 0.81 px.
 
-use spiv_firmware_sim::scene::{SceneKind, SceneParams};
-use spiv_firmware_sim::simulation::{simulate_planes, Request};
+use spiv_firmware_sim::scene::{Scene, SceneKind, SceneParams};
+use spiv_firmware_sim::simulation::{simulate_planes, Request, Simulated};
 use spiv_formats::State;
+use spiv_host::bench::flows::{families, Family};
 use spiv_host::estimator::ensemble;
-use spiv_host::flow::{run_flow, FlowOptions, Recording};
+use spiv_host::flow::{run_flow, FlowOptions, FlowOutcome, Recording};
+
+/// `spiv flow` with its defaults (and `dense`) on `ticks` planes of scene
+/// `p` from `seed`: the simulation, the pair's separation and the outcome.
+fn flow_of(p: &SceneParams, seed: u64, ticks: u32, dense: bool) -> (Simulated, u32, FlowOutcome) {
+    let mut req = Request::new(p.clone(), seed);
+    req.ticks = Some(ticks);
+    let (data, sim) = simulate_planes(&req).expect("simulates");
+    let pair = sim.meta.capture.pair;
+    let dt = pair[1] - pair[0];
+    let rec = Recording::simulated(p.width, p.height, data, dt);
+    let mut opts = FlowOptions::new(&rec, dt);
+    opts.dense = dense;
+    let out = run_flow(&rec, &opts, |_, _| {}).expect("runs");
+    (sim, dt, out)
+}
+
+/// The spectral turbulence's family of `spiv bench flows`.
+fn spectral() -> Family {
+    families()
+        .into_iter()
+        .find(|f| f.scene == SceneKind::SpectralTurbulence)
+        .expect("the family")
+}
 
 #[test]
 fn turbulence_is_measured_densely_with_honest_uncertainty() {
     let seed = 2;
     let mut p = SceneParams::new(SceneKind::Turbulence);
     p.flow_seed = seed;
-    let mut req = Request::new(p.clone(), seed);
-    req.ticks = Some(62);
-    let (data, sim) = simulate_planes(&req).expect("simulates");
-    let pair = sim.meta.capture.pair;
-    let dt = pair[1] - pair[0];
-    let rec = Recording::simulated(p.width, p.height, data, dt);
-    let mut opts = FlowOptions::new(&rec, dt);
-    opts.dense = true;
-    let out = run_flow(&rec, &opts, |_, _| {}).expect("runs");
+    let (sim, dt, out) = flow_of(&p, seed, 62, true);
     assert!(!out.pairs.is_empty());
     let dtf = f64::from(dt);
     let (mut err, mut measured, mut all, mut within, mut comps) = (0.0, 0, 0, 0, 0);
@@ -90,23 +106,10 @@ fn turbulence_is_measured_densely_with_honest_uncertainty() {
 /// frames shorter than the pair adds nothing to it.
 #[test]
 fn the_dense_field_never_runs_away() {
-    use spiv_firmware_sim::scene::Scene;
-    use spiv_host::bench::flows::families;
     let seed = 1;
-    let fam = families()
-        .into_iter()
-        .find(|f| f.scene == SceneKind::SpectralTurbulence)
-        .expect("the family");
-    let p = fam.params(seed);
-    let mut req = Request::new(p.clone(), seed);
-    req.ticks = Some(fam.ticks);
-    let (data, sim) = simulate_planes(&req).expect("simulates");
+    let fam = spectral();
+    let (sim, dt, out) = flow_of(&fam.params(seed), seed, fam.ticks, true);
     let pair = sim.meta.capture.pair;
-    let dt = pair[1] - pair[0];
-    let rec = Recording::simulated(p.width, p.height, data, dt);
-    let mut opts = FlowOptions::new(&rec, dt);
-    opts.dense = true;
-    let out = run_flow(&rec, &opts, |_, _| {}).expect("runs");
     let mid = Scene::pair_mid(u64::from(pair[0]), u64::from(pair[1]));
     let truth = sim.scene.truth_dense_at(mid, f64::from(dt));
     let top = |u: &[f32], v: &[f32]| {
@@ -147,22 +150,11 @@ fn the_dense_field_never_runs_away() {
 /// valid is off by more than 3σ and 0.3 px.
 #[test]
 fn dim_slow_turbulence_is_not_confidently_wrong() {
-    use spiv_firmware_sim::scene::Scene;
-    use spiv_host::bench::flows::families;
-    let fam = families()
-        .into_iter()
-        .find(|f| f.scene == SceneKind::SpectralTurbulence)
-        .expect("the family");
+    let fam = spectral();
     for seed in [107, 109] {
         let p = fam.params(seed);
         assert!(p.particle_peak < 0.12, "seed {seed} is a dim member");
-        let mut req = Request::new(p.clone(), seed);
-        req.ticks = Some(fam.ticks);
-        let (data, sim) = simulate_planes(&req).expect("simulates");
-        let pair = sim.meta.capture.pair;
-        let dt = pair[1] - pair[0];
-        let rec = Recording::simulated(p.width, p.height, data, dt);
-        let out = run_flow(&rec, &FlowOptions::new(&rec, dt), |_, _| {}).expect("runs");
+        let (sim, dt, out) = flow_of(&p, seed, fam.ticks, false);
         let (mut valid, mut wrong) = (0, 0);
         for pr in &out.pairs {
             let mid = Scene::pair_mid(pr.ticks[0], pr.ticks[1]);

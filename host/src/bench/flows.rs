@@ -44,14 +44,19 @@ pub struct Family {
 }
 
 impl Family {
+    /// The member [`spectral_member`] draws for `seed` where the family's
+    /// seeds are members of their own (the spectral turbulence).
+    pub fn member(&self, seed: u64) -> Option<Member> {
+        (self.scene == SceneKind::SpectralTurbulence).then(|| spectral_member(seed))
+    }
+
     /// The scene parameters of the family's member `seed`: the scene's
-    /// defaults at the family's speed with the seed's flow, and for the
-    /// spectral turbulence the member [`spectral_member`] draws.
+    /// defaults (or its [`Family::member`]'s) at the family's speed with
+    /// the seed's flow.
     pub fn params(&self, seed: u64) -> SceneParams {
-        let mut p = match self.scene {
-            SceneKind::SpectralTurbulence => spectral_member(seed).params(),
-            kind => SceneParams::new(kind),
-        };
+        let mut p = self
+            .member(seed)
+            .map_or_else(|| SceneParams::new(self.scene), |m| m.params());
         if let Some(s) = self.speed {
             p.top_speed = s;
         }
@@ -343,7 +348,7 @@ pub fn family_rows(
     dense: bool,
 ) -> Result<Vec<FlowsRow>, Error> {
     let p = fam.params(seed);
-    let member = (fam.scene == SceneKind::SpectralTurbulence).then(|| spectral_member(seed));
+    let member = fam.member(seed);
     let mut req = Request::new(p.clone(), seed);
     req.ticks = Some(fam.ticks);
     let (data, sim) = simulate_planes(&req)?;
@@ -357,9 +362,9 @@ pub fn family_rows(
     let truth_of = |ticks: [u64; 2]| {
         let m = Scene::pair_mid(ticks[0], ticks[1]);
         if sim.scene.flow.evolves() && m != mid {
-            sim.scene.truth_dense_at(m, dt)
+            std::borrow::Cow::Owned(sim.scene.truth_dense_at(m, dt))
         } else {
-            truth.clone()
+            std::borrow::Cow::Borrowed(&truth)
         }
     };
     let mut rows = Vec::new();
@@ -398,18 +403,21 @@ pub fn family_rows(
     }
     let mut s = Score::default();
     let mut interpolated = 0.0;
+    // `--dense` scores the mean dense field against the mean truth.
     let mut mean_truth = DenseField::zeros(truth.width, truth.height);
     for pr in &out.pairs {
         let m = Scene::pair_mid(pr.ticks[0], pr.ticks[1]);
         s.add(&sim.scene, (m, dt), &pr.vectors, Some(&pr.sigma));
         let t = truth_of(pr.ticks);
         interpolated += dense_epe(&field_of(&out.grid, pr), &t);
-        let k = 1.0 / out.pairs.len() as f32;
-        for (a, b) in mean_truth.u.iter_mut().zip(&t.u) {
-            *a += k * b;
-        }
-        for (a, b) in mean_truth.v.iter_mut().zip(&t.v) {
-            *a += k * b;
+        if dense {
+            let k = 1.0 / out.pairs.len() as f32;
+            for (a, b) in mean_truth.u.iter_mut().zip(&t.u) {
+                *a += k * b;
+            }
+            for (a, b) in mean_truth.v.iter_mut().zip(&t.v) {
+                *a += k * b;
+            }
         }
     }
     // `--dense` without a dense field (no pair measured a usable one):
