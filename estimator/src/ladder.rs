@@ -465,11 +465,8 @@ fn climb_events(
 ) -> Result<Climb, PivError> {
     let span = ev.range();
     let mut climb = Climb::new(estimate, dt);
-    for &s in &cfg.separations {
+    for s in separations_held(&cfg.separations, mid, &span) {
         let s64 = u64::from(s.max(2));
-        if mid < span.start + s64 || mid + s64 > span.end {
-            break;
-        }
         if climb.estimate.is_none() && s > cfg.bootstrap_longest {
             break;
         }
@@ -493,6 +490,39 @@ fn climb_events(
         }
     }
     Ok(climb)
+}
+
+/// Longest rung past the configured separations that the events hold,
+/// as a share of the last one that fits: below it the extra rung gathers
+/// too little more light to be worth its PIV.
+const HELD_GAIN: f64 = 1.25;
+
+/// The separations of `asked` (shortest first) whose frames the events
+/// of `span` hold around `mid` — `s` ticks before it and `s` after —
+/// then, when the next asked one does not fit, the longest that does if
+/// it is at least [`HELD_GAIN`] times the last: a short recording's
+/// central pair (62 planes: 31 ticks on each side) climbs to 31 ticks
+/// instead of stopping at 16, and dim or slow particles gather twice the
+/// light (`docs/results.md`, spectral turbulence).
+fn separations_held(asked: &[u32], mid: u64, span: &std::ops::Range<u64>) -> Vec<u32> {
+    let held = mid
+        .saturating_sub(span.start)
+        .min(span.end.saturating_sub(mid));
+    let held = u32::try_from(held).unwrap_or(u32::MAX);
+    let mut out: Vec<u32> = Vec::new();
+    for &s in asked {
+        if s.max(2) <= held {
+            out.push(s);
+            continue;
+        }
+        if let Some(&last) = out.last() {
+            if f64::from(held) >= HELD_GAIN * f64::from(last) {
+                out.push(held);
+            }
+        }
+        break;
+    }
+    out
 }
 
 /// Largest share of flagged vectors in the ladder's field with which it
@@ -1049,6 +1079,28 @@ mod tests {
     /// measured nothing at all; not when a longer rung kept vectors, nor
     /// when the longer rung measured some (its own vectors were not
     /// better), nor when no longer rung fit.
+    /// A short recording's central pair (62 planes, midpoint 31) climbs
+    /// to the 31 ticks it holds on each side; a rung barely longer than
+    /// the last that fits is not worth its PIV, and a pair that holds no
+    /// asked rung climbs none.
+    #[test]
+    fn the_events_climb_to_the_longest_rung_they_hold() {
+        let asked = SEPARATIONS;
+        assert_eq!(separations_held(&asked, 31, &(0..62)), [4, 8, 16, 31]);
+        // A cold pair of a long recording: its events reach 32 on each side.
+        assert_eq!(separations_held(&asked, 100, &(68..132)), [4, 8, 16, 32]);
+        // 38 ticks: less than a quarter more than 32.
+        assert_eq!(separations_held(&asked, 100, &(62..200)), [4, 8, 16, 32]);
+        assert_eq!(
+            separations_held(&asked, 100, &(60..140)),
+            [4, 8, 16, 32, 40]
+        );
+        assert_eq!(separations_held(&asked, 10, &(0..200)), [4, 8, 10]);
+        assert_eq!(separations_held(&asked, 9, &(0..200)), [4, 8]);
+        assert!(separations_held(&asked, 3, &(0..200)).is_empty());
+        assert!(separations_held(&asked, 300, &(0..200)).is_empty());
+    }
+
     #[test]
     fn a_lone_first_rung_is_refuted_by_a_longer_rung_that_measured_nothing() {
         let dim = [rung(4, (78, 147, 0), 78), rung(8, (0, 0, 225), 0)];
