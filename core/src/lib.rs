@@ -28,6 +28,7 @@
 //! | [`sidecar`] | the sidecar loop over borrowed memory: planes in, scheduled frames out through the sender; the dwell cap |
 //! | `buffers` | owned buffers of the history, the workspace and the loop (`std` feature) |
 //! | `pairs` | the live loop's sidecar state over owned buffers: light model, event ring, the asks heard, each pair made or sent (`std` feature; `spiv flow` and the simulated sidecar run it) |
+//! | `training` | the light the static-light model is trained on before a recording's first plane: slow particles trained on their background (`std` feature) |
 //! | [`state`] | the caller-owned per-pixel working memory |
 //! | [`q`] | the fixed-point formats, in one place |
 //! | [`wire`] | the sidecar link: message header, COBS framing, CRC, stream decoder, tile codecs (`wire::codec`), the sender (`wire::sender`) |
@@ -74,6 +75,8 @@ pub mod state;
 pub mod suppress;
 #[cfg(test)]
 mod testing;
+#[cfg(feature = "std")]
+pub mod training;
 pub mod warp;
 pub mod window;
 pub mod wire;

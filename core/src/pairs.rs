@@ -100,12 +100,24 @@ impl PairMaker {
     /// again while `len` asks for more — the recording's start mirrored
     /// in time stands in for the light a sidecar that ran before the
     /// recording would have seen, and a mirror joins its planes without a
-    /// jump.
+    /// jump. A pixel that a particle lights steadily through the planes is
+    /// trained on its surroundings' background instead
+    /// ([`crate::training`]): the sidecar would have seen the particle
+    /// arrive.
     pub fn train(&mut self, planes: &[&[u8]], len: usize) -> Result<(), Error> {
         let n = planes.len();
         if n == 0 || len == 0 {
             return Ok(());
         }
+        let owned = crate::training::background_planes(planes, self.width, self.height);
+        let replaced: Vec<&[u8]>;
+        let planes = match &owned {
+            Some(o) => {
+                replaced = o.iter().map(Vec::as_slice).collect();
+                &replaced[..]
+            }
+            None => planes,
+        };
         let start = LightClock {
             next: self.clock.next.wrapping_sub(len as u32),
             ..self.clock
