@@ -263,8 +263,9 @@ impl Climb {
 /// first rung's own field. Without rung frames, the pair climbs from its
 /// events: the uncompensated rungs up to
 /// [`LadderSettings::bootstrap_longest`], then rungs compensated along
-/// the estimate so far, as far as the events reach; then once more, every
-/// rung compensated along the estimate that climb reached. Every kept vector's
+/// the estimate so far, as far as the events reach (with `rescue`, on to
+/// the longest rung they hold: [`separations_held`]); then once more,
+/// every rung compensated along the estimate that climb reached. Every kept vector's
 /// uncertainty includes its change from the estimate that predicted its
 /// rung.
 ///
@@ -295,7 +296,15 @@ pub fn measure(
             c
         }
         _ => match &input.events {
-            Some(ev) => again(ev, mid, dt, cfg, cold(ev, mid, dt, cfg)?)?,
+            Some(ev) => {
+                // A pair measured for itself climbs on to the longest rung
+                // its events hold; one that only starts the next pair
+                // climbs the asked rungs (the next pair's rung frames go
+                // further).
+                let reach = if rescue { Reach::Held } else { Reach::Asked };
+                let first = climb_events(ev, mid, dt, cfg, None, reach)?;
+                again(ev, mid, dt, cfg, first, reach)?
+            }
             None => Climb::new(None, dt),
         },
     };
@@ -419,9 +428,10 @@ fn warm(
     Ok((climb, confirmed))
 }
 
-/// The climb of a pair from its events alone.
+/// The climb of a pair from its events alone, over the asked rungs (its
+/// rung frames go on from there).
 fn cold(ev: &Events, mid: u64, dt: f64, cfg: &LadderSettings) -> Result<Climb, PivError> {
-    climb_events(ev, mid, dt, cfg, None)
+    climb_events(ev, mid, dt, cfg, None, Reach::Asked)
 }
 
 /// A pair with no flow to follow climbs its events a second time along
@@ -429,18 +439,20 @@ fn cold(ev: &Events, mid: u64, dt: f64, cfg: &LadderSettings) -> Result<Climb, P
 /// then compensated, where the first climb's bootstrap rungs were blurred
 /// by the motion (a third climb gains nothing: docs/results.md). The
 /// second climb stands when it keeps at least as many valid vectors as
-/// the first (at a recording's clipped ends it can keep fewer).
+/// the first (at a recording's clipped ends it can keep fewer). `reach`
+/// as the first climb's.
 fn again(
     ev: &Events,
     mid: u64,
     dt: f64,
     cfg: &LadderSettings,
     first: Climb,
+    reach: Reach,
 ) -> Result<Climb, PivError> {
     let Some(e) = first.estimate.clone() else {
         return Ok(first);
     };
-    let mut second = climb_events(ev, mid, dt, cfg, Some(e))?;
+    let mut second = climb_events(ev, mid, dt, cfg, Some(e), reach)?;
     let valid = |c: &Climb| c.best.as_ref().map_or(0, |b| b.counts().0);
     if valid(&second) < valid(&first) {
         return Ok(first);
@@ -454,6 +466,17 @@ fn again(
     Ok(second)
 }
 
+/// How far a climb over a pair's events goes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Reach {
+    /// The asked separations the events hold: the pair's rung frames go
+    /// on from there.
+    Asked,
+    /// On to the longest rung the events hold ([`separations_held`]): the
+    /// events are all the pair has.
+    Held,
+}
+
 /// The climb over `ev`'s rungs, compensated along `estimate` (and along
 /// what each rung adds) or, without one, from the bootstrap rungs.
 fn climb_events(
@@ -462,10 +485,15 @@ fn climb_events(
     dt: f64,
     cfg: &LadderSettings,
     estimate: Option<Field>,
+    reach: Reach,
 ) -> Result<Climb, PivError> {
     let span = ev.range();
     let mut climb = Climb::new(estimate, dt);
-    for s in separations_held(&cfg.separations, mid, &span) {
+    let mut separations = separations_held(&cfg.separations, mid, &span);
+    if reach == Reach::Asked {
+        separations.retain(|s| cfg.separations.contains(s));
+    }
+    for s in separations {
         let s64 = u64::from(s.max(2));
         if climb.estimate.is_none() && s > cfg.bootstrap_longest {
             break;
