@@ -265,9 +265,9 @@ impl Climb {
 /// [`LadderSettings::bootstrap_longest`], then rungs compensated along
 /// the estimate so far, as far as the events reach (with `rescue`, on to
 /// the longest rung they hold: [`separations_held`]); then once more,
-/// every rung compensated along the estimate that climb reached. Every kept vector's
-/// uncertainty includes its change from the estimate that predicted its
-/// rung.
+/// every rung compensated along the estimate that climb reached. Every
+/// kept vector's uncertainty includes its change from the estimate that
+/// predicted its rung.
 ///
 /// A field that is not usable is measured again by the dense ensemble;
 /// with `rescue`, so is a usable one with more than [`ENSEMBLE_FLAGGED`]
@@ -469,8 +469,9 @@ fn again(
 /// How far a climb over a pair's events goes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Reach {
-    /// The asked separations the events hold: the pair's rung frames go
-    /// on from there.
+    /// The asked separations the events hold: beside a pair's rung frames
+    /// (they go on from there), and for a warm-up pair (the next pair's
+    /// rung frames do).
     Asked,
     /// On to the longest rung the events hold ([`separations_held`]): the
     /// events are all the pair has.
