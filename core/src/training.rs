@@ -288,4 +288,55 @@ mod tests {
             "{fired} spikes in {n} ticks at 0.1 per tick"
         );
     }
+
+    proptest::proptest! {
+        /// Any planes of a small size: the planes back unchanged (`None`)
+        /// or as many planes of the same length, never a panic; a pixel
+        /// that changed fires fewer spikes than it did. A size no plane
+        /// has gives `None`.
+        #[test]
+        fn any_planes_train_on_fewer_spikes_or_as_they_were(
+            w8 in 1u16..4,
+            h in 1u16..24,
+            n in 0usize..48,
+            seed in proptest::num::u64::ANY,
+            density in 0u64..8,
+        ) {
+            let mut x = seed | 1;
+            let mut next = move || {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                x
+            };
+            let w = 8 * w8;
+            // A size no plane has: nothing to train on.
+            proptest::prop_assert!(background_planes(&[&[0u8; 4][..]; 20], w + 1, h | 1).is_none());
+            let bytes = crate::plane::plane_bytes(w, h).unwrap();
+            // Dense blobs in some runs: a pixel fires where a random
+            // pattern shared by every plane says so, or at random.
+            let still: Vec<u8> = (0..bytes).map(|_| next() as u8).collect();
+            let planes: Vec<Vec<u8>> = (0..n)
+                .map(|_| {
+                    (0..bytes)
+                        .map(|k| if next() % 8 < density { still[k] } else { next() as u8 & still[k] })
+                        .collect()
+                })
+                .collect();
+            let refs: Vec<&[u8]> = planes.iter().map(Vec::as_slice).collect();
+            if let Some(out) = background_planes(&refs, w, h) {
+                proptest::prop_assert_eq!(out.len(), planes.len());
+                let px = usize::from(w) * usize::from(h);
+                let fired = |ps: &[Vec<u8>], i: usize| ps.iter().filter(|p| (p[i / 8] >> (i % 8)) & 1 == 1).count();
+                for i in 0..px {
+                    let (a, b) = (fired(&planes, i), fired(&out, i));
+                    let same = planes.iter().zip(&out).all(|(p, q)| (p[i / 8] ^ q[i / 8]) >> (i % 8) & 1 == 0);
+                    proptest::prop_assert!(same || b < a, "pixel {} fired {} then {}", i, a, b);
+                }
+                for p in &out {
+                    proptest::prop_assert_eq!(p.len(), bytes);
+                }
+            }
+        }
+    }
 }
