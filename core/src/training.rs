@@ -49,8 +49,9 @@ pub fn above(count: u32, background: u32) -> bool {
 /// The planes `planes` (each `width × height` pixels packed as
 /// [`crate::plane::PlaneView`] reads them) with every pixel lit steadily
 /// above its background replaced by a regular train at that background's
-/// rate; `None` when no pixel is (the planes serve as they are), or when
-/// a plane's length does not match the size.
+/// rate; `None` when no pixel is (the planes serve as they are), when
+/// there are fewer than two blocks of planes, or when a plane's length
+/// does not match the size.
 pub fn background_planes(planes: &[&[u8]], width: u16, height: u16) -> Option<Vec<Vec<u8>>> {
     let (w, h) = (usize::from(width), usize::from(height));
     let px = w.checked_mul(h)?;
