@@ -54,10 +54,11 @@ pub fn above(count: u32, background: u32) -> bool {
 /// does not match the size.
 pub fn background_planes(planes: &[&[u8]], width: u16, height: u16) -> Option<Vec<Vec<u8>>> {
     let (w, h) = (usize::from(width), usize::from(height));
-    let px = w.checked_mul(h)?;
+    let px = w * h;
+    // `None` for an empty size too.
     let bytes = crate::plane::plane_bytes(width, height)?;
     let n = planes.len();
-    if n < 2 * BLOCK || px == 0 || planes.iter().any(|p| p.len() != bytes) {
+    if n < 2 * BLOCK || planes.iter().any(|p| p.len() != bytes) {
         return None;
     }
     let bit = |p: &[u8], i: usize| (p[i / 8] >> (i % 8)) & 1 == 1;
