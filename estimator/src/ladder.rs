@@ -190,7 +190,10 @@ struct Climb {
     best: Option<Field>,
     separation: Option<Array2<u32>>,
     estimate: Option<Field>,
-    change: Option<Array2<(f64, f64)>>,
+    change: Option<Array2<Step>>,
+    /// The estimate comes from compensated rungs or a given start (not
+    /// from the uncompensated bootstrap rungs alone).
+    compensated: bool,
     rungs: Vec<Rung>,
     frames: Option<RungFrames>,
     dt: f64,
@@ -199,6 +202,7 @@ struct Climb {
 impl Climb {
     fn new(estimate: Option<Field>, dt: f64) -> Climb {
         Climb {
+            compensated: estimate.is_some(),
             best: None,
             separation: None,
             estimate,
@@ -226,13 +230,10 @@ impl Climb {
             unconfirmed(&mut self.best, &self.separation, &rung, longest_bootstrap);
         }
         let kept = keep(&mut self.best, &mut self.separation, &rung, s);
-        changes(
-            &mut self.change,
-            &self.separation,
-            &rung,
-            self.estimate.as_ref(),
-            s,
-        );
+        // A step from an estimate of the uncompensated rungs measures
+        // their blur, not this rung's model error: it is not recorded.
+        let estimate = self.estimate.as_ref().filter(|_| self.compensated);
+        changes(&mut self.change, &self.separation, &rung, estimate, s);
         if self.rungs.iter().all(|r| r.kept < kept) {
             self.frames = Some(RungFrames {
                 separation: s,
@@ -246,6 +247,7 @@ impl Climb {
             ms,
         });
         if measured {
+            self.compensated |= self.estimate.is_some();
             self.estimate = self.best.as_ref().map(|b| finished(b, self.dt));
         }
         measured
@@ -317,14 +319,12 @@ pub fn measure(
         ..
     } = climb;
     let best = best.filter(|_| !refuted(&rungs));
-    let velocity = match best {
+    let (velocity, model) = match best {
         Some(mut b) => {
-            if let Some(c) = &change {
-                with_change(&mut b, c);
-            }
+            let model = change.as_ref().map(|c| with_change(&mut b, c));
             let mut f = finished(&b, dt);
-            with_resolution(&mut f, dt);
-            f
+            with_resolution(&mut f);
+            (f, model)
         }
         None => {
             return match ensemble_pair(input, mid, dt, cfg, &rungs)? {
@@ -334,7 +334,8 @@ pub fn measure(
         }
     };
     let mut field = flow_map(&velocity, &dense_velocity(&velocity, h, w), dt);
-    flag_uncertain(&mut field);
+    let model = model.map(|m| m.mapv(|(a, b)| (a * dt, b * dt)));
+    flag_uncertain(&mut field, model.as_ref());
     let (_, _, invalid) = field.counts();
     let flagged = invalid as f64 > ENSEMBLE_FLAGGED * field.grid.len() as f64;
     if !field.usable() || (rescue && flagged) {
@@ -583,7 +584,7 @@ fn ensemble_pair(
     if !field.usable() {
         return Ok(None);
     }
-    flag_uncertain(&mut field);
+    flag_uncertain(&mut field, None);
     let frame = ensemble::FRAME as u32;
     let separation = field
         .state
@@ -889,67 +890,117 @@ fn departed(rung: &Field, e: &Field) -> Array2<bool> {
     out
 }
 
+/// A kept vector's step from the estimate that predicted its rung, px
+/// per tick: how far it moved (`by`) and the estimate's own uncertainty
+/// there (`prior`); NaN where no estimate predicted the rung (the first
+/// rung of a climb from nothing).
+#[derive(Debug, Clone, Copy)]
+struct Step {
+    by: (f64, f64),
+    prior: (f64, f64),
+}
+
+impl Step {
+    const UNKNOWN: Step = Step {
+        by: (f64::NAN, f64::NAN),
+        prior: (f64::NAN, f64::NAN),
+    };
+}
+
 /// Records, for each node whose kept vector came from rung `s` (`f`),
-/// how far it moved from the estimate that predicted the rung (the
-/// shorter rungs' kept field, validated and filled, or the given start):
-/// a rung twice as long reads the chord of a path twice as long, whose
-/// departure from the velocity at the node grows with the square of its
-/// length, so the step from the shorter rungs measures the model error of
-/// the longer one that the correlation statistics cannot see (and a
-/// wrong start shows as a large step).
+/// its [`Step`] from the estimate that predicted the rung (the shorter
+/// rungs' kept field, validated and filled, or the given start): a rung
+/// twice as long reads the chord of a path twice as long, whose departure
+/// from the velocity at the node grows with the square of its length, so
+/// the step from the shorter rungs, beyond the noise both sides carry,
+/// measures the model error of the longer one that the correlation
+/// statistics cannot see (and a wrong start shows as a large step).
 fn changes(
-    change: &mut Option<Array2<(f64, f64)>>,
+    change: &mut Option<Array2<Step>>,
     sep: &Option<Array2<u32>>,
     f: &Field,
     previous: Option<&Field>,
     s: u32,
 ) {
-    // NaN: no estimate predicted the node's kept rung (the first rung of a
-    // climb from nothing).
-    let c = change.get_or_insert_with(|| Array2::from_elem(f.u.dim(), (f64::NAN, f64::NAN)));
-    let (Some(sp), Some(p)) = (sep.as_ref(), previous) else {
+    let c = change.get_or_insert_with(|| Array2::from_elem(f.u.dim(), Step::UNKNOWN));
+    let Some(sp) = sep.as_ref() else {
         return;
     };
-    if p.grid != f.grid {
-        return;
-    }
+    let previous = previous.filter(|p| p.grid == f.grid);
     for idx in ndarray::indices(f.u.dim()) {
-        if sp[idx] == s && p.state[idx] != State::Invalid {
-            c[idx] = (f.u[idx] - p.u[idx], f.v[idx] - p.v[idx]);
+        if sp[idx] != s {
+            continue;
         }
+        c[idx] = match previous {
+            Some(p) if p.state[idx] != State::Invalid => Step {
+                by: (f.u[idx] - p.u[idx], f.v[idx] - p.v[idx]),
+                prior: p.sigma[idx],
+            },
+            _ => Step::UNKNOWN,
+        };
     }
 }
 
-/// Scale of the correlation statistics' uncertainty in a ladder vector's.
-/// Below 1: the rung change ([`CHANGE`]) carries part of the same noise.
-const CORRELATION: f64 = 0.6;
+/// Model error of a rung's vector per unit of its step's excess over the
+/// noise: the chord's departure from the velocity grows with the square
+/// of the separation, so a rung twice as long departs four times as far
+/// as the estimate of half its length that predicted it, and the step
+/// between them is three quarters of the longer rung's departure.
+const MODEL: f64 = 4.0 / 3.0;
 
-/// Weight of a kept vector's change from the estimate that predicted its
-/// rung ([`changes`]) in its uncertainty.
-const CHANGE: f64 = 0.25;
+/// The median of a squared standard normal variable over its mean: the
+/// median of the neighbourhood's squared steps, divided by it, estimates
+/// their mean square without letting one outlying step decide it.
+const CHI2_MEDIAN: f64 = 0.454_936_423_119_572_8;
 
-/// Uncertainty every ladder vector carries, px per pair: what the
-/// correlation misses on a uniform flow (sub-pixel bias, the sensor's
-/// pixel noise).
-const FLOOR: f64 = 0.015;
-
-/// Scales each kept vector's correlation uncertainty by [`CORRELATION`]
-/// (where a change is known: a vector of a climb's first rung from
-/// nothing keeps it whole) and adds its change from the estimate that predicted its rung ([`changes`]) times
-/// [`CHANGE`] in quadrature. The constants are fitted for 60–76 % of
-/// error components within 1σ (`docs/results.md#the-constants-and-what-chose-them`).
-fn with_change(b: &mut Field, change: &Array2<(f64, f64)>) {
-    for (sg, &(cu, cv)) in b.sigma.iter_mut().zip(change.iter()) {
-        if cu.is_nan() || cv.is_nan() {
-            // No change to carry part of the noise: the correlation
-            // statistics' uncertainty stands whole.
+/// Adds to each kept vector's correlation uncertainty, in quadrature, the
+/// model error its rung's steps measure ([`changes`]), and returns that
+/// model error per node (px per tick; zero where none). A step's excess is
+/// its square less the squares of the two uncertainties it carries (the
+/// rung's correlation statistics and the predicting estimate's); the
+/// model error is [`MODEL`] times the root of the larger of the node's own
+/// excess and the median excess over the node and its measured
+/// 8-neighbours with a known step (over [`CHI2_MEDIAN`]), where positive.
+/// One step is one draw of the noise: the neighbourhood measures what one
+/// vector's step cannot, and a step far beyond it still counts for its
+/// own node. A node whose rung no estimate predicted keeps its
+/// correlation statistics alone.
+fn with_change(b: &mut Field, change: &Array2<Step>) -> Array2<(f64, f64)> {
+    let (ny, nx) = b.u.dim();
+    let excess = |r: usize, c: usize| -> Option<(f64, f64)> {
+        let st = change[[r, c]];
+        let (q, p) = (b.sigma[[r, c]], st.prior);
+        let e = (
+            st.by.0 * st.by.0 - q.0 * q.0 - p.0 * p.0,
+            st.by.1 * st.by.1 - q.1 * q.1 - p.1 * p.1,
+        );
+        (b.state[[r, c]] == State::Valid && e.0.is_finite() && e.1.is_finite()).then_some(e)
+    };
+    let mut model = Array2::from_elem((ny, nx), (0.0, 0.0));
+    for (r, c) in ndarray::indices((ny, nx)) {
+        let Some(own) = excess(r, c) else {
             continue;
+        };
+        let (mut eu, mut ev) = (Vec::with_capacity(9), Vec::with_capacity(9));
+        for rr in r.saturating_sub(1)..(r + 2).min(ny) {
+            for cc in c.saturating_sub(1)..(c + 2).min(nx) {
+                if let Some((a, e)) = excess(rr, cc) {
+                    eu.push(a);
+                    ev.push(e);
+                }
+            }
         }
-        *sg = (
-            (CORRELATION * sg.0).hypot(CHANGE * cu),
-            (CORRELATION * sg.1).hypot(CHANGE * cv),
+        let pooled =
+            |x: &mut Vec<f64>, own: f64| (validate::median(x) / CHI2_MEDIAN).max(own).max(0.0);
+        model[[r, c]] = (
+            MODEL * pooled(&mut eu, own.0).sqrt(),
+            MODEL * pooled(&mut ev, own.1).sqrt(),
         );
     }
+    for (sg, &(mu, mv)) in b.sigma.iter_mut().zip(model.iter()) {
+        *sg = (sg.0.hypot(mu), sg.1.hypot(mv));
+    }
+    model
 }
 
 /// Weight of the field's local curvature in a vector's uncertainty: a
@@ -957,9 +1008,8 @@ fn with_change(b: &mut Field, change: &Array2<(f64, f64)>) {
 /// it the window's vector differs from the flow at its centre by about
 /// the curvature times the window's side squared over 24 — with windows
 /// twice the grid pitch, a sixth of the 4-neighbour Laplacian (the
-/// vector's difference from the mean of its neighbours, times four);
-/// fitted with [`with_change`]'s constants: 0.15.
-const CURVATURE: f64 = 0.15;
+/// vector's difference from the mean of its neighbours, times four).
+const CURVATURE: f64 = 1.0 / 6.0;
 
 /// Largest standard uncertainty of a reported vector, as a share of the
 /// field's median displacement, and at least [`SIGMA_FLOOR`] px: a vector
@@ -970,11 +1020,9 @@ const SIGMA_SHARE: f64 = 0.25;
 const SIGMA_FLOOR: f64 = 0.5;
 
 /// Adds the field's local curvature ([`CURVATURE`] times the
-/// 4-neighbour Laplacian over measured neighbours) and [`FLOOR`] to each
-/// measured vector's uncertainty (`f` in px per tick, pairs `dt` ticks
-/// apart), in quadrature.
-fn with_resolution(f: &mut Field, dt: f64) {
-    let floor = FLOOR / dt.max(1.0);
+/// 4-neighbour Laplacian over measured neighbours) to each measured
+/// vector's uncertainty (`f` in px per tick), in quadrature.
+fn with_resolution(f: &mut Field) {
     let (ny, nx) = f.u.dim();
     let measured = |r: usize, c: usize| f.state[[r, c]] != State::Invalid;
     let mut add = Array2::from_elem((ny, nx), (0.0, 0.0));
@@ -1003,18 +1051,22 @@ fn with_resolution(f: &mut Field, dt: f64) {
     }
     for ((sg, &(a, b)), st) in f.sigma.iter_mut().zip(add.iter()).zip(f.state.iter()) {
         if *st != State::Invalid {
-            *sg = (sg.0.hypot(a).hypot(floor), sg.1.hypot(b).hypot(floor));
+            *sg = (sg.0.hypot(a), sg.1.hypot(b));
         }
     }
 }
 
 /// Flags (invalid, no uncertainty) every vector of `f` (px per pair) whose
 /// standard uncertainty exceeds [`SIGMA_SHARE`] of the median measured
-/// displacement or [`SIGMA_FLOOR`], whichever is larger. When a valid
-/// vector goes, the replaced ones are filled again from the valid ones
-/// left (their values and uncertainties leaned on it) and flagged by the
-/// same bound.
-fn flag_uncertain(f: &mut Field) {
+/// displacement or [`SIGMA_FLOOR`], whichever is larger: for a valid
+/// vector, its uncertainty without the model error its rung's steps
+/// measured (`model`, px per pair, [`with_change`]: the vector measured,
+/// and how far its rung's chord may be off is in its σ), and not when its
+/// valid neighbours would replace it less certainly still
+/// ([`fill_uncertainty`]). When a valid vector goes, the replaced ones are
+/// filled again from the valid ones left (their values and uncertainties
+/// leaned on it) and flagged by the same bound.
+fn flag_uncertain(f: &mut Field, model: Option<&Array2<(f64, f64)>>) {
     let mut d: Vec<f64> =
         f.u.iter()
             .zip(f.v.iter())
@@ -1023,9 +1075,26 @@ fn flag_uncertain(f: &mut Field) {
             .map(|((u, v), _)| u.hypot(*v))
             .collect();
     let bound = (SIGMA_SHARE * validate::median(&mut d)).max(SIGMA_FLOOR);
+    let fill = fill_uncertainty(f, bound);
+    let zero = Array2::from_elem(f.u.dim(), (0.0, 0.0));
+    let model = model.filter(|m| m.dim() == f.u.dim()).unwrap_or(&zero);
     let mut dropped = false;
-    for (st, sg) in f.state.iter_mut().zip(f.sigma.iter_mut()) {
-        if *st != State::Invalid && sg.0.hypot(sg.1) > bound {
+    for (((st, sg), &fs), &(mu, mv)) in f
+        .state
+        .iter_mut()
+        .zip(f.sigma.iter_mut())
+        .zip(fill.iter())
+        .zip(model.iter())
+    {
+        let own = if *st == State::Valid {
+            (sg.0 * sg.0 - mu * mu)
+                .max(0.0)
+                .sqrt()
+                .hypot((sg.1 * sg.1 - mv * mv).max(0.0).sqrt())
+        } else {
+            sg.0.hypot(sg.1)
+        };
+        if *st != State::Invalid && own > bound && !(*st == State::Valid && own < fs) {
             dropped |= *st == State::Valid;
             *st = State::Invalid;
             *sg = NO_SIGMA;
@@ -1048,6 +1117,39 @@ fn flag_uncertain(f: &mut Field) {
             *sg = NO_SIGMA;
         }
     }
+}
+
+/// The uncertainty (length, px) with which each valid vector of `f` whose
+/// σ exceeds `bound` would be replaced from its valid neighbours whose σ
+/// does not ([`validate::replaced_uncertainty`]); zero where no neighbour
+/// would fill it, and for every other vector.
+fn fill_uncertainty(f: &Field, bound: f64) -> Array2<f64> {
+    let over = Array2::from_shape_fn(f.u.dim(), |idx| {
+        f.state[idx] == State::Valid && f.sigma[idx].0.hypot(f.sigma[idx].1) > bound
+    });
+    let mut out = Array2::zeros(f.u.dim());
+    if !over.iter().any(|&o| o) {
+        return out;
+    }
+    let mut g = f.clone();
+    for (st, &o) in g.state.iter_mut().zip(over.iter()) {
+        if o || *st == State::Replaced {
+            *st = State::Invalid;
+        }
+    }
+    validate::replace(&mut g.u, &mut g.v, &mut g.state, &over, 1);
+    validate::replaced_uncertainty(&g.u, &g.v, &g.state, &mut g.sigma);
+    for (idx, &o) in over.indexed_iter() {
+        if o {
+            let (a, b) = g.sigma[idx];
+            out[idx] = if g.state[idx] == State::Replaced {
+                a.hypot(b)
+            } else {
+                0.0
+            };
+        }
+    }
+    out
 }
 
 /// Drops the kept vectors that came from an unestimated rung (separation
@@ -1104,10 +1206,129 @@ mod tests {
         }
     }
 
-    /// A field from the first rung alone is refuted by a longer rung that
-    /// measured nothing at all; not when a longer rung kept vectors, nor
-    /// when the longer rung measured some (its own vectors were not
-    /// better), nor when no longer rung fit.
+    /// A 3 × 3 field of valid vectors, each with correlation
+    /// uncertainty `q` (px per tick).
+    fn valid_field(q: f64) -> Field {
+        let grid = Grid {
+            size: 32,
+            step: 16,
+            nx: 3,
+            ny: 3,
+        };
+        let mut f = Field::unmeasured(grid);
+        f.state.fill(State::Valid);
+        f.sigma.fill((q, q));
+        f
+    }
+
+    #[test]
+    fn steps_within_their_noise_add_no_model_error() {
+        // Steps of the size the two uncertainties they carry explain:
+        // 0.05² = 0.03² + 0.04².
+        let mut f = valid_field(0.03);
+        let change = Array2::from_elem(
+            (3, 3),
+            Step {
+                by: (0.05, -0.05),
+                prior: (0.04, 0.04),
+            },
+        );
+        with_change(&mut f, &change);
+        for &(a, b) in &f.sigma {
+            assert!(
+                (a - 0.03).abs() < 1e-12 && (b - 0.03).abs() < 1e-12,
+                "{a} {b}"
+            );
+        }
+    }
+
+    fn steps(by: f64) -> Array2<Step> {
+        Array2::from_elem(
+            (3, 3),
+            Step {
+                by: (by, 0.0),
+                prior: (0.0, 0.0),
+            },
+        )
+    }
+
+    #[test]
+    fn one_outlying_step_counts_for_its_own_node_alone() {
+        // One node stepped by 0.3 px per tick, its correlation and prior
+        // claiming no noise: the median of every neighbourhood's excess is
+        // zero, so only the node itself carries it.
+        let mut f = valid_field(0.0);
+        let mut change = steps(0.0);
+        change[[0, 0]].by = (0.3, 0.0);
+        let model = with_change(&mut f, &change);
+        assert!(
+            (f.sigma[[0, 0]].0 - MODEL * 0.3).abs() < 1e-12,
+            "{:?}",
+            f.sigma
+        );
+        assert_eq!(model[[0, 0]], f.sigma[[0, 0]]);
+        for idx in ndarray::indices((3, 3)) {
+            if idx != (0, 0) {
+                assert_eq!(f.sigma[idx], (0.0, 0.0), "{idx:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_neighbourhood_of_steps_measures_the_node_whose_own_step_is_small() {
+        // Every node but the centre stepped by 0.3 px per tick: the centre
+        // takes the neighbourhood's median square over its mean's share.
+        let mut f = valid_field(0.0);
+        let mut change = steps(0.3);
+        change[[1, 1]].by = (0.0, 0.0);
+        with_change(&mut f, &change);
+        let centre = MODEL * (0.09f64 / CHI2_MEDIAN).sqrt();
+        assert!((f.sigma[[1, 1]].0 - centre).abs() < 1e-12, "{:?}", f.sigma);
+        // A node no estimate predicted keeps its correlation statistics.
+        let mut g = valid_field(0.02);
+        with_change(&mut g, &Array2::from_elem((3, 3), Step::UNKNOWN));
+        assert!(g.sigma.iter().all(|&s| s == (0.02, 0.02)));
+    }
+
+    #[test]
+    fn a_vector_uncertain_only_by_its_model_error_is_not_flagged() {
+        // Displacements of 4 px per pair: the bound is 1 px. The centre's
+        // σ of 2 px is all model error (its rung's chord), the corner's
+        // measurement itself is that uncertain.
+        let mut f = valid_field(0.1);
+        f.u.fill(4.0);
+        f.sigma[[1, 1]] = (2.0, 0.1);
+        f.sigma[[0, 0]] = (2.0, 0.1);
+        let mut model = Array2::from_elem((3, 3), (0.0, 0.0));
+        model[[1, 1]] = (2.0, 0.0);
+        flag_uncertain(&mut f, Some(&model));
+        assert_eq!(f.state[[1, 1]], State::Valid);
+        assert_eq!(f.sigma[[1, 1]], (2.0, 0.1), "its σ as measured");
+        assert_ne!(f.state[[0, 0]], State::Valid);
+    }
+
+    #[test]
+    fn a_vector_its_neighbours_would_fill_less_certainly_is_not_flagged() {
+        // The centre's σ of 1.5 px is over the 1 px bound, but its
+        // neighbours disagree by ±3 px: their fill would be less certain.
+        let mut f = valid_field(0.1);
+        f.u.fill(4.0);
+        for (c, u) in [(0, 1.0), (2, 7.0)] {
+            for r in 0..3 {
+                f.u[[r, c]] = u;
+            }
+        }
+        f.sigma[[1, 1]] = (1.5, 0.1);
+        flag_uncertain(&mut f, None);
+        assert_eq!(f.state[[1, 1]], State::Valid);
+        // Neighbours that agree would fill it better: it goes.
+        let mut g = valid_field(0.1);
+        g.u.fill(4.0);
+        g.sigma[[1, 1]] = (1.5, 0.1);
+        flag_uncertain(&mut g, None);
+        assert_ne!(g.state[[1, 1]], State::Valid);
+    }
+
     /// A short recording's central pair (62 planes, midpoint 31) climbs
     /// to the 31 ticks it holds on each side; a rung barely longer than
     /// the last that fits is not worth its PIV, and a pair that holds no
@@ -1130,6 +1351,10 @@ mod tests {
         assert!(separations_held(&asked, 300, &(0..200)).is_empty());
     }
 
+    /// A field from the first rung alone is refuted by a longer rung that
+    /// measured nothing at all; not when a longer rung kept vectors, nor
+    /// when the longer rung measured some (its own vectors were not
+    /// better), nor when no longer rung fit.
     #[test]
     fn a_lone_first_rung_is_refuted_by_a_longer_rung_that_measured_nothing() {
         let dim = [rung(4, (78, 147, 0), 78), rung(8, (0, 0, 225), 0)];
