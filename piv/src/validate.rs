@@ -370,8 +370,9 @@ pub fn replace(
 /// The uncertainty of every replaced vector, px, from its neighbours: the
 /// root of the mean of their squared uncertainties plus the spread of their
 /// values about the replacement (what a neighbour fit cannot know of the
-/// window itself), over the measured vectors of its 3 × 3 neighbourhood;
-/// infinite where it has none. Invalid vectors get infinite uncertainty;
+/// window itself), over the measured vectors of its 3 × 3 neighbourhood,
+/// plus, where they all lie on one side of it, the field's change over
+/// the next step outwards ([`extrapolation`]); infinite where it has none. Invalid vectors get infinite uncertainty;
 /// valid ones keep theirs.
 pub fn replaced_uncertainty(
     u: &Array2<f64>,
@@ -392,6 +393,7 @@ pub fn replaced_uncertainty(
                 State::Replaced => {}
             }
             let (mut n, mut su, mut sv) = (0usize, 0.0f64, 0.0f64);
+            let mut sides = Vec::with_capacity(8);
             for rr in r.saturating_sub(1)..(r + 2).min(ny) {
                 for cc in c.saturating_sub(1)..(c + 2).min(nx) {
                     if (rr, cc) == (r, c) || state[[rr, cc]] != State::Valid {
@@ -404,16 +406,66 @@ pub fn replaced_uncertainty(
                     n += 1;
                     su += a * a + (u[[rr, cc]] - u[[r, c]]).powi(2);
                     sv += b * b + (v[[rr, cc]] - v[[r, c]]).powi(2);
+                    sides.push((rr as isize - r as isize, cc as isize - c as isize));
                 }
             }
+            let (eu, ev) = if surrounded(&sides) {
+                (0.0, 0.0)
+            } else {
+                extrapolation(u, v, state, (r, c), &sides)
+            };
             out[[r, c]] = if n == 0 {
                 (f64::INFINITY, f64::INFINITY)
             } else {
-                ((su / n as f64).sqrt(), (sv / n as f64).sqrt())
+                ((su / n as f64 + eu).sqrt(), (sv / n as f64 + ev).sqrt())
             };
         }
     }
     *sigma = out;
+}
+
+/// Whether neighbours at the offsets `sides` (row, column) lie on both
+/// sides of their node along some line through it: a fill between them
+/// interpolates.
+fn surrounded(sides: &[(isize, isize)]) -> bool {
+    sides.iter().any(|&(dr, dc)| sides.contains(&(-dr, -dc)))
+}
+
+/// The squared change of the field over one step just beyond a one-sided
+/// node's valid neighbours (at `sides`), going away from it: the mean,
+/// over each neighbour whose next node outwards is valid, of the squared
+/// difference between them. A fill from one side extrapolates, and can be
+/// off by as much as the field changes over a step there (a vortex's edge
+/// filled from its inside), which the neighbours' spread about the fill
+/// does not show.
+fn extrapolation(
+    u: &Array2<f64>,
+    v: &Array2<f64>,
+    state: &Array2<State>,
+    (r, c): (usize, usize),
+    sides: &[(isize, isize)],
+) -> (f64, f64) {
+    let (ny, nx) = u.dim();
+    let (mut n, mut su, mut sv) = (0usize, 0.0f64, 0.0f64);
+    for &(dr, dc) in sides {
+        let (r1, c1) = (r as isize + dr, c as isize + dc);
+        let (r2, c2) = (r1 + dr, c1 + dc);
+        if r2 < 0 || c2 < 0 || r2 >= ny as isize || c2 >= nx as isize {
+            continue;
+        }
+        let (a, b) = ((r1 as usize, c1 as usize), (r2 as usize, c2 as usize));
+        if state[b] != State::Valid {
+            continue;
+        }
+        n += 1;
+        su += (u[a] - u[b]).powi(2);
+        sv += (v[a] - v[b]).powi(2);
+    }
+    if n == 0 {
+        (0.0, 0.0)
+    } else {
+        (su / n as f64, sv / n as f64)
+    }
 }
 
 /// `u`, `v` with every vector that was not measured (invalid, including
@@ -681,6 +733,57 @@ mod tests {
         let none = Array2::from_elem((4, 6), State::Invalid);
         let (eu, _) = extended(&Array2::zeros((4, 6)), &v, &none);
         assert!(eu.iter().all(|&x| x == 0.0));
+    }
+
+    /// A 3 × 4 field whose u is `col(c)` down every column, σ 0.1,
+    /// the last column replaced from its valid neighbours.
+    fn filled_edge(col: impl Fn(usize) -> f64) -> Array2<(f64, f64)> {
+        let u = Array2::from_shape_fn((3, 4), |(_, c)| col(c));
+        let v = Array2::zeros((3, 4));
+        let mut state = Array2::from_elem((3, 4), State::Valid);
+        let mut sigma = Array2::from_elem((3, 4), (0.1, 0.1));
+        for r in 0..3 {
+            state[[r, 3]] = State::Replaced;
+            sigma[[r, 3]] = (0.0, 0.0);
+        }
+        // The fill: the inside column's value, as a mean of one side gives.
+        let mut u = u;
+        for r in 0..3 {
+            u[[r, 3]] = u[[r, 2]];
+        }
+        replaced_uncertainty(&u, &v, &state, &mut sigma);
+        sigma
+    }
+
+    #[test]
+    fn a_fill_from_one_side_carries_the_change_over_the_next_step() {
+        // u changes by 2 px from the second column to the third: a fill of
+        // the fourth from the third alone may be off by that much.
+        let sigma = filled_edge(|c| if c < 2 { 0.0 } else { 2.0 });
+        let (su, sv) = sigma[[1, 3]];
+        assert!((su - (0.01f64 + 4.0).sqrt()).abs() < 1e-12, "{su}");
+        assert!((sv - 0.1).abs() < 1e-12, "{sv}");
+        // A uniform field beyond it adds nothing.
+        let (su, _) = filled_edge(|_| 1.0)[[1, 3]];
+        assert!((su - 0.1).abs() < 1e-12, "{su}");
+    }
+
+    #[test]
+    fn a_fill_between_neighbours_interpolates() {
+        let u = Array2::from_shape_fn((3, 3), |(_, c)| [0.0, 1.0, 5.0][c]);
+        let v = Array2::zeros((3, 3));
+        let mut state = Array2::from_elem((3, 3), State::Valid);
+        state[[1, 1]] = State::Replaced;
+        let mut sigma = Array2::from_elem((3, 3), (0.0, 0.0));
+        replaced_uncertainty(&u, &v, &state, &mut sigma);
+        // Neighbours on both sides: only their spread about the fill (1),
+        // none of the change beyond them.
+        let spread = ((3.0 * 1.0 + 3.0 * 16.0 + 2.0 * 0.0) / 8.0f64).sqrt();
+        assert!(
+            (sigma[[1, 1]].0 - spread).abs() < 1e-12,
+            "{:?}",
+            sigma[[1, 1]]
+        );
     }
 
     #[test]

@@ -164,12 +164,14 @@ fn predicted(scene: &Scene, (w, h): (usize, usize), k: f64) -> Field {
 /// events instead. Every valid vector whose uncertainty tells the truth
 /// from the prediction lies nearer the truth (in the glare band's bottom
 /// corner a vector 2 px off with σ above half the difference lies nearer
-/// neither by its own account), and so do all but 1 % of the replaced
-/// ones: a replaced vector in the grid's outer column is filled from the
-/// column inside it, and where a vortex's edge runs between the two (u
-/// −2.5 px per pair inside, −0.6 at the edge) it reads the inside's
-/// speed with the inside's uncertainty, which lies nearer twice the
-/// truth. At most 2 % of the valid and replaced vectors miss by more than
+/// neither by its own account), and so does every replaced one: a
+/// replaced vector in the grid's outer column is filled from the column
+/// inside it, and where a vortex's edge runs between the two (u −2.5 px
+/// per pair inside, −0.6 at the edge) it reads the inside's speed, nearer
+/// twice the truth; its uncertainty carries the field's change over the
+/// next step inwards (without it, two such vectors carried the inside's
+/// 0.18 px and one of them lay nearer the prediction by its own account).
+/// At most 2 % of the valid and replaced vectors miss by more than
 /// 4σ + 0.1 px: the remainder is the bottom grid row in the glare band,
 /// where the glare's fixed pattern pulls the wall-normal component towards
 /// zero by about 0.5 px per pair, a bias the correlation statistics cannot
@@ -247,10 +249,7 @@ fn a_wrong_prediction_is_not_confirmed() {
             bad.len()
         );
         assert_eq!(measured, 0, "prediction × {k} confirmed");
-        assert!(
-            filled * 100 <= v + r + i,
-            "prediction × {k}: {filled} replaced vectors nearer it"
-        );
+        assert_eq!(filled, 0, "prediction × {k}: replaced vectors nearer it");
         assert!(
             bad.len() * 50 <= v + r,
             "prediction × {k}: {:?}",
