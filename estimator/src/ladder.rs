@@ -976,15 +976,16 @@ fn with_change(b: &mut Field, change: &Array2<Step>) -> Array2<(f64, f64)> {
         );
         (b.state[[r, c]] == State::Valid && e.0.is_finite() && e.1.is_finite()).then_some(e)
     };
+    let excess = Array2::from_shape_fn((ny, nx), |(r, c)| excess(r, c));
     let mut model = Array2::from_elem((ny, nx), (0.0, 0.0));
     for (r, c) in ndarray::indices((ny, nx)) {
-        let Some(own) = excess(r, c) else {
+        let Some(own) = excess[[r, c]] else {
             continue;
         };
         let (mut eu, mut ev) = (Vec::with_capacity(9), Vec::with_capacity(9));
         for rr in r.saturating_sub(1)..(r + 2).min(ny) {
             for cc in c.saturating_sub(1)..(c + 2).min(nx) {
-                if let Some((a, e)) = excess(rr, cc) {
+                if let Some((a, e)) = excess[[rr, cc]] {
                     eu.push(a);
                     ev.push(e);
                 }
@@ -1076,16 +1077,14 @@ fn flag_uncertain(f: &mut Field, model: Option<&Array2<(f64, f64)>>) {
             .collect();
     let bound = (SIGMA_SHARE * validate::median(&mut d)).max(SIGMA_FLOOR);
     let fill = fill_uncertainty(f, bound);
-    let zero = Array2::from_elem(f.u.dim(), (0.0, 0.0));
-    let model = model.filter(|m| m.dim() == f.u.dim()).unwrap_or(&zero);
+    let model = model.filter(|m| m.dim() == f.u.dim());
     let mut dropped = false;
-    for (((st, sg), &fs), &(mu, mv)) in f
-        .state
-        .iter_mut()
-        .zip(f.sigma.iter_mut())
-        .zip(fill.iter())
-        .zip(model.iter())
-    {
+    for idx in ndarray::indices(f.u.dim()) {
+        let (st, sg) = (&mut f.state[idx], &mut f.sigma[idx]);
+        let (mu, mv) = model
+            .and_then(|m| m.get(idx))
+            .copied()
+            .unwrap_or((0.0, 0.0));
         let own = if *st == State::Valid {
             (sg.0 * sg.0 - mu * mu)
                 .max(0.0)
@@ -1094,7 +1093,7 @@ fn flag_uncertain(f: &mut Field, model: Option<&Array2<(f64, f64)>>) {
         } else {
             sg.0.hypot(sg.1)
         };
-        if *st != State::Invalid && own > bound && !(*st == State::Valid && own < fs) {
+        if *st != State::Invalid && own > bound && !(*st == State::Valid && own < fill[idx]) {
             dropped |= *st == State::Valid;
             *st = State::Invalid;
             *sg = NO_SIGMA;
