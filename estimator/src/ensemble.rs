@@ -17,9 +17,12 @@
 //!
 //! The uncertainty of each node's vector comes from the pairs' own
 //! disagreement with the fit: each consecutive pair's least-squares
-//! correction over [`LOOK`] px around the node (`look`) is one look,
-//! and the looks' standard error of the mean, scaled by [`SPREAD`], is the
-//! standard uncertainty.
+//! correction over [`LOOK`] px around the node (`look`) is one look, and
+//! the looks' standard error of the mean is the standard uncertainty —
+//! or, where larger, the mean of its measured neighbours' squared errors
+//! ([`pooled`]): a node's few looks alone leave its error's estimate
+//! spread wide, and one that reads low by chance would claim a certainty
+//! the data do not hold.
 //!
 //! A node is measured only where the frames, warped by the flow, match
 //! ([`MIN_MATCH`]: the mean zero-normalised correlation over the node's
@@ -92,18 +95,12 @@ pub const MIN_MATCH: f64 = 0.2;
 /// `docs/results.md#the-constants-and-what-chose-them`).
 pub const LOOK: usize = 8;
 
-/// Scale of the looks' standard error in a vector's uncertainty: the one
-/// that puts the most families' true errors within 1σ 60–76 % of the
-/// time on the tuning seeds, erring on the cautious side
-/// (`docs/results.md#the-constants-and-what-chose-them`).
-pub const SPREAD: f64 = 1.15;
-
 /// A pair measured by the dense ensemble.
 #[derive(Debug, Clone)]
 pub struct Ensemble {
     /// Velocities per node (px per tick) on the grid asked for: valid
     /// where the frames match, with the pairs' looks' standard error
-    /// ([`SPREAD`]) as the uncertainty; invalid, with none, elsewhere. `peak_height`
+    /// ([`pooled`]) as the uncertainty; invalid, with none, elsewhere. `peak_height`
     /// holds each node's match (the mean correlation, `−1..=1`).
     pub field: Field,
     /// The fitted flow per pixel, px per tick.
@@ -183,13 +180,19 @@ pub fn measure(ev: &Events, mid: u64, grid: &Grid, reach: u64) -> Option<Ensembl
             Node { mean, se, m }
         })
         .collect();
-    for (&(r, c), &Node { mean, se, m }) in nodes.iter().zip(&per_node) {
-        field.u[[r, c]] = mean.0;
-        field.v[[r, c]] = mean.1;
-        field.peak_height[[r, c]] = m;
-        if m >= MIN_MATCH && se.0.is_finite() && se.1.is_finite() {
+    let mut se = Array2::from_elem((grid.ny, grid.nx), None);
+    for (&(r, c), node) in nodes.iter().zip(&per_node) {
+        field.u[[r, c]] = node.mean.0;
+        field.v[[r, c]] = node.mean.1;
+        field.peak_height[[r, c]] = node.m;
+        if node.m >= MIN_MATCH && node.se.0.is_finite() && node.se.1.is_finite() {
             field.state[[r, c]] = State::Valid;
-            field.sigma[[r, c]] = (SPREAD * se.0, SPREAD * se.1);
+            se[[r, c]] = Some(node.se);
+        }
+    }
+    for ((r, c), s) in pooled(&se).indexed_iter() {
+        if let Some(s) = s {
+            field.sigma[[r, c]] = *s;
         }
     }
     Some(Ensemble {
@@ -197,6 +200,31 @@ pub fn measure(ev: &Events, mid: u64, grid: &Grid, reach: u64) -> Option<Ensembl
         velocity,
         frames,
         centre: (back / s) as usize,
+    })
+}
+
+/// Each measured node's standard error (px per tick, per component): its
+/// own, or the mean of the squared errors of the measured nodes of its
+/// 3×3 neighbourhood (itself included) where that is larger. Nine looks
+/// give an error's square with eight degrees of freedom, which reads below
+/// half its true value one time in seven; the neighbourhood's pool holds
+/// up to nine times as many, while a node whose own looks disagree more
+/// keeps its own. `None` where the node is not measured.
+fn pooled(se: &Array2<Option<(f64, f64)>>) -> Array2<Option<(f64, f64)>> {
+    let (ny, nx) = se.dim();
+    Array2::from_shape_fn((ny, nx), |(r, c)| {
+        let own = se[[r, c]]?;
+        let (mut su, mut sv, mut n) = (0.0, 0.0, 0.0);
+        for y in r.saturating_sub(1)..(r + 2).min(ny) {
+            for x in c.saturating_sub(1)..(c + 2).min(nx) {
+                if let Some(s) = se[[y, x]] {
+                    su += s.0 * s.0;
+                    sv += s.1 * s.1;
+                    n += 1.0;
+                }
+            }
+        }
+        Some((own.0.max((su / n).sqrt()), own.1.max((sv / n).sqrt())))
     })
 }
 
@@ -383,5 +411,27 @@ mod tests {
         assert!(m < 0.2, "not carried: {m}");
         let flat = Array2::zeros((64, 64));
         assert_eq!(matched(&flat, &b, &right, &grid, (1, 1)), 0.0);
+    }
+
+    #[test]
+    fn a_node_that_reads_certain_by_chance_takes_its_neighbours_error() {
+        // A 3×3 grid: the centre's looks agree by chance (0.01), its
+        // neighbours' do not (0.1); one corner is unmeasured; one edge
+        // node's own looks disagree more than the pool (0.3).
+        let mut se = Array2::from_elem((3, 3), Some((0.1, 0.1)));
+        se[[1, 1]] = Some((0.01, 0.1));
+        se[[0, 0]] = None;
+        se[[2, 1]] = Some((0.3, 0.3));
+        let p = pooled(&se);
+        assert_eq!(p[[0, 0]], None, "an unmeasured node stays unmeasured");
+        // The centre pools all eight measured nodes: (6·0.01 + 0.0001 + 0.09) / 8.
+        let u = ((6.0 * 0.01 + 0.0001 + 0.09) / 8.0f64).sqrt();
+        let (pu, pv) = p[[1, 1]].unwrap();
+        assert!((pu - u).abs() < 1e-12, "{pu} against {u}");
+        assert!(pv > 0.1, "the pool with the 0.3 node lifts v too: {pv}");
+        assert_eq!(p[[2, 1]], Some((0.3, 0.3)), "its own larger error stands");
+        // Beside the unmeasured corner the pool holds five nodes, whose
+        // u error (0.090) is below the node's own.
+        assert_eq!(p[[0, 1]], Some((0.1, 0.1)));
     }
 }
