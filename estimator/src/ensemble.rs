@@ -103,6 +103,11 @@ pub struct Ensemble {
     /// ([`pooled`]) as the uncertainty; invalid, with none, elsewhere. `peak_height`
     /// holds each node's match (the mean correlation, `−1..=1`).
     pub field: Field,
+    /// What the neighbourhood's pool adds to each measured node's own
+    /// standard error, in quadrature (px per tick; zero where its own is
+    /// the larger): the node's measurement is as certain as its own
+    /// looks say, its reported σ as the pool says.
+    pub pool: Array2<(f64, f64)>,
     /// The fitted flow per pixel, px per tick.
     pub velocity: Velocity,
     /// The consecutive frames, oldest first; frames `centre - 1` and
@@ -190,13 +195,17 @@ pub fn measure(ev: &Events, mid: u64, grid: &Grid, reach: u64) -> Option<Ensembl
             se[[r, c]] = Some(node.se);
         }
     }
+    let mut pool = Array2::from_elem((grid.ny, grid.nx), (0.0, 0.0));
     for ((r, c), s) in pooled(&se).indexed_iter() {
-        if let Some(s) = s {
+        if let (Some(s), Some(own)) = (s, se[[r, c]]) {
             field.sigma[[r, c]] = *s;
+            let excess = |p: f64, o: f64| (p * p - o * o).max(0.0).sqrt();
+            pool[[r, c]] = (excess(s.0, own.0), excess(s.1, own.1));
         }
     }
     Some(Ensemble {
         field,
+        pool,
         velocity,
         frames,
         centre: (back / s) as usize,

@@ -584,7 +584,10 @@ fn ensemble_pair(
     if !field.usable() {
         return Ok(None);
     }
-    flag_uncertain(&mut field, None);
+    // A node is flagged by its own looks' spread, not by its neighbours'
+    // pooled into its σ.
+    let pool = e.pool.mapv(|(a, b)| (a * dt, b * dt));
+    flag_uncertain(&mut field, Some(&pool));
     let frame = ensemble::FRAME as u32;
     let separation = field
         .state
@@ -1060,9 +1063,10 @@ fn with_resolution(f: &mut Field) {
 /// Flags (invalid, no uncertainty) every vector of `f` (px per pair) whose
 /// standard uncertainty exceeds [`SIGMA_SHARE`] of the median measured
 /// displacement or [`SIGMA_FLOOR`], whichever is larger: for a valid
-/// vector, its uncertainty without the model error its rung's steps
-/// measured (`model`, px per pair, [`with_change`]: the vector measured,
-/// and how far its rung's chord may be off is in its σ), and not when its
+/// vector, its uncertainty without what `model` adds to it (px per pair:
+/// the model error its rung's steps measured, [`with_change`] — the
+/// vector measured, and how far its rung's chord may be off is in its σ;
+/// or the ensemble's neighbourhood pool), and not when its
 /// valid neighbours would replace it less certainly still
 /// ([`fill_uncertainty`]). When a valid vector goes, the replaced ones are
 /// filled again from the valid ones left (their values and uncertainties
