@@ -147,7 +147,7 @@ for r in firmware-sim/cortex-m4/data/strip.dat "$work/paper-linear/spikes.dat" \
   got=$("$work/live/Vspiv_live" "$r")
   printf 'live     %-31s %s\n' "$(basename "$(dirname "$r")")/$(basename "$r")" "$got"
 done
-got=$("$work/rungs400/Vspiv_rungs" "$work/paper-linear-400/spikes.dat")
+got=$(TB_FRAMES="$work/rung-frames.u16" "$work/rungs400/Vspiv_rungs" "$work/paper-linear-400/spikes.dat")
 printf 'rungs    %-31s %s\n' "400x250 paper-linear/spikes.dat" "$got"
 
 # Tiles of TFP-like frames of each recording, then the synthetic tiles
@@ -163,6 +163,9 @@ for r in "firmware-sim/cortex-m4/data/strip.dat $W $H" "$work/paper-linear/spike
 done
 got=$("$work/context/Vspiv_context")
 printf 'context  %-31s %s\n' "synthetic tiles" "$got"
+# The live mode's rung frames of the 400x250 run above, as it sends them.
+got=$("$work/context/Vspiv_context" frames "$work/rung-frames.u16" 400 250)
+printf 'context  %-31s %s\n' "400x250 rung frames" "$got"
 for r in "firmware-sim/cortex-m4/data/strip.dat $W $H" "$work/paper-linear/spikes.dat $W $H" \
   "$work/vortex-array/spikes.dat $W $H" "$work/paper-linear-400/spikes.dat 400 250"; do
   # shellcheck disable=SC2086

@@ -5,6 +5,7 @@
 // flag, and counts the clocks each sample took.
 //
 //   tb_context [FILE.dat WIDTH HEIGHT]
+//   tb_context frames FILE WIDTH HEIGHT
 //
 // The tiles: bands of 1, 7 and 16 rows of TFP-like frames of the
 // recording (each pixel's spikes over 8 planes times 32, at most 255),
@@ -17,11 +18,14 @@
 // particles, rows of 400 and WMAX samples, every activity and brightness
 // class (levels stepping by 0..80), long runs that make the coder's low
 // word hold 0xFF bytes and carry into them, and noise tiles of many sizes
-// whose payload comes near the raw tile's. Every tile goes through twice:
+// whose payload comes near the raw tile's. With `frames`, only the live
+// mode's rung frames that tb_rungs.cpp writes (TB_FRAMES), in bands of 16
+// rows. Every tile goes through twice:
 // back to back, and with in_valid low on a third of the clocks.
 //
 // Prints `tiles=N context=C raw=K ties=T bytes=B clocks/sample=R equal`
 // and exits 0, or names the first differing tile and byte and exits 1.
+#include <algorithm>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -118,6 +122,7 @@ struct Bench {
 int main(int argc, char** argv) {
     const int WMAX = TB_WMAX;
     std::vector<Tile> tiles;
+    bool frames_only = false;
     if (argc == 4) {
         const std::vector<uint8_t> dat = read_file(argv[1]);
         const int w = std::atoi(argv[2]), h = std::atoi(argv[3]);
@@ -145,60 +150,84 @@ int main(int argc, char** argv) {
                 }
             }
         }
+    } else if (argc == 5 && std::string(argv[1]) == "frames") {
+        // The live mode's rung frames as tb_rungs.cpp writes them: 16-bit
+        // levels, WIDTH x HEIGHT each, in bands of 16 rows.
+        const std::vector<uint8_t> raw = read_file(argv[2]);
+        const int w = std::atoi(argv[3]), h = std::atoi(argv[4]);
+        const size_t px = (size_t)w * h;
+        if (w < 1 || w > WMAX || h < 1 || raw.empty() || raw.size() % (2 * px) != 0) {
+            std::fprintf(stderr, "%s: not whole %dx%d frames of 16-bit levels\n", argv[2], w, h);
+            return 2;
+        }
+        const size_t frames = raw.size() / (2 * px);
+        for (size_t f = 0; f < frames; ++f)
+            for (int r0 = 0; r0 < h; r0 += 16) {
+                const int rows = std::min(16, h - r0);
+                Tile t{"rung frame " + std::to_string(f) + " rows " + std::to_string(r0), w, rows, {}};
+                for (size_t i = (size_t)r0 * w; i < (size_t)(r0 + rows) * w; ++i) {
+                    const size_t at = 2 * (f * px + i);
+                    t.s.push_back((uint16_t)(raw[at] | (raw[at + 1] << 8)));
+                }
+                tiles.push_back(t);
+            }
+        frames_only = true;
     } else if (argc != 1) {
-        std::fprintf(stderr, "usage: tb_context [FILE.dat WIDTH HEIGHT]\n");
+        std::fprintf(stderr, "usage: tb_context [FILE.dat WIDTH HEIGHT | frames FILE WIDTH HEIGHT]\n");
         return 2;
     }
-    uint32_t seed = 7;
-    auto rnd = [&]() {
-        seed = seed * 1664525u + 1013904223u;
-        return seed >> 8;
-    };
-    auto synth = [&](const char* name, int width, int rows, auto f) {
-        Tile t{name, width, rows, {}};
-        for (int i = 0; i < width * rows; ++i) t.s.push_back((uint16_t)f(i % width, i / width));
-        tiles.push_back(t);
-    };
-    synth("zero", 64, 8, [](int, int) { return 0; });
-    synth("flat 255", 64, 8, [](int, int) { return 255; });
-    synth("ramp", 100, 10, [](int x, int y) { return (3 * x + 5 * y) % 256; });
-    synth("noise 8-bit", 64, 8, [&](int, int) { return rnd() % 256; });
-    synth("noise 16-bit", 64, 8, [&](int, int) { return rnd() % 65536; });
-    synth("alternating 0/65535", 33, 5,
-          [](int x, int y) { return ((x + y) % 2) ? 65535 : 0; });
-    synth("lone spikes", 128, 6,
-          [](int x, int y) { return (x * 7 + y * 13) % 97 == 0 ? 255 : 0; });
-    synth("one-sample rows", 1, 40, [&](int, int) { return rnd() % 40; });
-    synth("one sample", 1, 1, [](int, int) { return 200; });
-    synth("sensor row", 400, 3,
-          [&](int x, int) { return (x % 50 < 4) ? 180 + rnd() % 60 : rnd() % 4; });
-    synth("widest row", WMAX, 2, [&](int x, int) { return (x * x) % 300; });
-    // Level 12 with lone 0s and 24s: residuals of -12 and +12 at k = 0,
-    // quotients 23 (the longest plain code) and 24 (the first escape).
-    synth("steps of 12", 97, 6, [](int x, int y) {
-        const int i = 97 * y + x;
-        return i % 41 == 0 ? 0 : i % 53 == 0 ? 24 : 12;
-    });
-    // Rows of one and two samples, slowly varying: coded (not raw), so
-    // the row above read as it is written is compared byte for byte.
-    synth("one-sample rows, smooth", 1, 300, [](int, int y) { return (y / 9) % 7 * 3; });
-    synth("two-sample rows, smooth", 2, 200, [](int x, int y) { return (y / 7) % 5 * 4 + x; });
-    synth("every class", 90, 12, [&](int x, int y) {
-        const int step = (y * 7) % 81;  // activity 0..240 across a row
-        return (x % 2 ? step : 0) + (y % 3) * 12;
-    });
-    // Residuals that put the low word at 0xFF.. for a while: the coder
-    // holds those bytes, and a carry later turns them to 0x00.
-    synth("held bytes", 256, 16, [&](int x, int y) {
-        return ((x * 31 + y * 17) % 251 < 3) ? rnd() % 256 : 255;
-    });
-    synth("long zero run, then noise", 512, 16,
-          [&](int x, int y) { return y < 14 ? 0 : (int)(rnd() % 256); });
-    // Noise whose payload comes near the raw tile's length, over many
-    // sizes and amplitudes: some tie with it (the core then sends raw).
-    for (int amp = 4; amp <= 256; amp += 12)
-        for (int width = 3; width <= 24; width += 3)
-            synth("near raw", width, 1 + width % 3, [&](int, int) { return rnd() % amp; });
+    if (!frames_only) {
+        uint32_t seed = 7;
+        auto rnd = [&]() {
+            seed = seed * 1664525u + 1013904223u;
+            return seed >> 8;
+        };
+        auto synth = [&](const char* name, int width, int rows, auto f) {
+            Tile t{name, width, rows, {}};
+            for (int i = 0; i < width * rows; ++i) t.s.push_back((uint16_t)f(i % width, i / width));
+            tiles.push_back(t);
+        };
+        synth("zero", 64, 8, [](int, int) { return 0; });
+        synth("flat 255", 64, 8, [](int, int) { return 255; });
+        synth("ramp", 100, 10, [](int x, int y) { return (3 * x + 5 * y) % 256; });
+        synth("noise 8-bit", 64, 8, [&](int, int) { return rnd() % 256; });
+        synth("noise 16-bit", 64, 8, [&](int, int) { return rnd() % 65536; });
+        synth("alternating 0/65535", 33, 5,
+              [](int x, int y) { return ((x + y) % 2) ? 65535 : 0; });
+        synth("lone spikes", 128, 6,
+              [](int x, int y) { return (x * 7 + y * 13) % 97 == 0 ? 255 : 0; });
+        synth("one-sample rows", 1, 40, [&](int, int) { return rnd() % 40; });
+        synth("one sample", 1, 1, [](int, int) { return 200; });
+        synth("sensor row", 400, 3,
+              [&](int x, int) { return (x % 50 < 4) ? 180 + rnd() % 60 : rnd() % 4; });
+        synth("widest row", WMAX, 2, [&](int x, int) { return (x * x) % 300; });
+        // Level 12 with lone 0s and 24s: residuals of -12 and +12 at k = 0,
+        // quotients 23 (the longest plain code) and 24 (the first escape).
+        synth("steps of 12", 97, 6, [](int x, int y) {
+            const int i = 97 * y + x;
+            return i % 41 == 0 ? 0 : i % 53 == 0 ? 24 : 12;
+        });
+        // Rows of one and two samples, slowly varying: coded (not raw), so
+        // the row above read as it is written is compared byte for byte.
+        synth("one-sample rows, smooth", 1, 300, [](int, int y) { return (y / 9) % 7 * 3; });
+        synth("two-sample rows, smooth", 2, 200, [](int x, int y) { return (y / 7) % 5 * 4 + x; });
+        synth("every class", 90, 12, [&](int x, int y) {
+            const int step = (y * 7) % 81;  // activity 0..240 across a row
+            return (x % 2 ? step : 0) + (y % 3) * 12;
+        });
+        // Residuals that put the low word at 0xFF.. for a while: the coder
+        // holds those bytes, and a carry later turns them to 0x00.
+        synth("held bytes", 256, 16, [&](int x, int y) {
+            return ((x * 31 + y * 17) % 251 < 3) ? rnd() % 256 : 255;
+        });
+        synth("long zero run, then noise", 512, 16,
+              [&](int x, int y) { return y < 14 ? 0 : (int)(rnd() % 256); });
+        // Noise whose payload comes near the raw tile's length, over many
+        // sizes and amplitudes: some tie with it (the core then sends raw).
+        for (int amp = 4; amp <= 256; amp += 12)
+            for (int width = 3; width <= 24; width += 3)
+                synth("near raw", width, 1 + width % 3, [&](int, int) { return rnd() % amp; });
+    }
 
     Bench b;
     b.m.rst = 1;

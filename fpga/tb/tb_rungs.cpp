@@ -22,7 +22,10 @@
 // (and made by the core): the design takes the host's power-of-two grids
 // only, and the testbench checks it refuses. Prints `pairs=N refused=R
 // events=E samples=S nonzero=Z clocks=C equal` and exits 0, or names the
-// first difference and exits 1; TB_VERBOSE=1 prints each pair's clocks.
+// first difference and exits 1; TB_VERBOSE=1 prints each pair's clocks,
+// TB_FRAMES=FILE appends the core's frames to FILE as the live mode sends
+// them, for tb_context.cpp.
+#include <algorithm>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -118,6 +121,23 @@ int main(int argc, char** argv) {
             SPIV_OK) {
             std::fprintf(stderr, "%s: the core refused the pair\n", c.name);
             return 2;
+        }
+        // TB_FRAMES=FILE appends the core's frames as the live mode sends
+        // them (`rungs::send_pair`): each frame less its smallest sample,
+        // in whole spikes (1/64), 16-bit little-endian, W x H each; the
+        // Context coder's testbench codes them (fpga/check.sh).
+        if (const char* path = std::getenv("TB_FRAMES")) {
+            if (FILE* out = std::fopen(path, "ab")) {
+                for (int k = 0; k < 2 * n; ++k) {
+                    const int16_t* fr = &want[(size_t)k * PX];
+                    int low = fr[0];
+                    for (int i = 1; i < PX; ++i) low = std::min(low, (int)fr[i]);
+                    std::vector<uint16_t> lv(PX);
+                    for (int i = 0; i < PX; ++i) lv[i] = (uint16_t)((fr[i] - low) / 64);
+                    std::fwrite(lv.data(), 2, lv.size(), out);
+                }
+                std::fclose(out);
+            }
         }
         // The ring's events from before the longest rung's A (the RTL
         // leaves those out) to the last tick held.
