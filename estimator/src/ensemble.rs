@@ -19,10 +19,11 @@
 //! disagreement with the fit: each consecutive pair's least-squares
 //! correction over [`LOOK`] px around the node (`look`) is one look, and
 //! the looks' standard error of the mean is the standard uncertainty —
-//! or, where larger, the mean of its measured neighbours' squared errors
-//! ([`pooled`]): a node's few looks alone leave its error's estimate
-//! spread wide, and one that reads low by chance would claim a certainty
-//! the data do not hold.
+//! or, where larger, the root mean square of its measured 3×3
+//! neighbourhood's (`pooled`): a node's few looks alone leave its
+//! error's estimate spread wide, and one that reads low by chance would
+//! claim a certainty the data do not hold. A node is flagged by its own
+//! looks' spread ([`Ensemble::pool`]).
 //!
 //! A node is measured only where the frames, warped by the flow, match
 //! ([`MIN_MATCH`]: the mean zero-normalised correlation over the node's
@@ -100,7 +101,7 @@ pub const LOOK: usize = 8;
 pub struct Ensemble {
     /// Velocities per node (px per tick) on the grid asked for: valid
     /// where the frames match, with the pairs' looks' standard error
-    /// ([`pooled`]) as the uncertainty; invalid, with none, elsewhere. `peak_height`
+    /// (`pooled`) as the uncertainty; invalid, with none, elsewhere. `peak_height`
     /// holds each node's match (the mean correlation, `−1..=1`).
     pub field: Field,
     /// What the neighbourhood's pool adds to each measured node's own
