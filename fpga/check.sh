@@ -153,25 +153,19 @@ printf 'rungs    %-31s %s\n' "400x250 paper-linear/spikes.dat" "$got"
 # Tiles of TFP-like frames of each recording, then the synthetic tiles
 # (tb_rice.cpp and tb_context.cpp list them), each back to back and with
 # pauses, through both coders.
-got=$("$work/rice/Vspiv_rice")
-printf 'rice     %-31s %s\n' "synthetic tiles" "$got"
-for r in "firmware-sim/cortex-m4/data/strip.dat $W $H" "$work/paper-linear/spikes.dat $W $H" \
-  "$work/vortex-array/spikes.dat $W $H" "$work/paper-linear-400/spikes.dat 400 250"; do
-  # shellcheck disable=SC2086
-  got=$("$work/rice/Vspiv_rice" $r)
-  printf 'rice     %-31s %s\n' "$(basename "$(dirname ${r%% *})")/$(basename ${r%% *}) ${r#* }" "$got"
+for coder in rice context; do
+  got=$("$work/$coder/Vspiv_$coder")
+  printf '%-8s %-31s %s\n' "$coder" "synthetic tiles" "$got"
+  for r in "firmware-sim/cortex-m4/data/strip.dat $W $H" "$work/paper-linear/spikes.dat $W $H" \
+    "$work/vortex-array/spikes.dat $W $H" "$work/paper-linear-400/spikes.dat 400 250"; do
+    # shellcheck disable=SC2086
+    got=$("$work/$coder/Vspiv_$coder" $r)
+    printf '%-8s %-31s %s\n' "$coder" "$(basename "$(dirname ${r%% *})")/$(basename ${r%% *}) ${r#* }" "$got"
+  done
 done
-got=$("$work/context/Vspiv_context")
-printf 'context  %-31s %s\n' "synthetic tiles" "$got"
 # The live mode's rung frames of the 400x250 run above, as it sends them.
 got=$("$work/context/Vspiv_context" frames "$work/rung-frames.u16" 400 250)
 printf 'context  %-31s %s\n' "400x250 rung frames" "$got"
-for r in "firmware-sim/cortex-m4/data/strip.dat $W $H" "$work/paper-linear/spikes.dat $W $H" \
-  "$work/vortex-array/spikes.dat $W $H" "$work/paper-linear-400/spikes.dat 400 250"; do
-  # shellcheck disable=SC2086
-  got=$("$work/context/Vspiv_context" $r)
-  printf 'context  %-31s %s\n' "$(basename "$(dirname ${r%% *})")/$(basename ${r%% *}) ${r#* }" "$got"
-done
 
 # FILE | noise:N | burst:N | slow:N (tb_ring.cpp): every plane's ring
 # state and, every fifth plane, six reads.

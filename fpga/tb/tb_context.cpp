@@ -34,7 +34,7 @@
 #include <vector>
 
 #include "Vspiv_context.h"
-#include "read_file.h"
+#include "tiles.h"
 #include "verilated.h"
 
 extern "C" {
@@ -44,12 +44,6 @@ extern "C" {
 #ifndef TB_WMAX
 #error "TB_WMAX must match the model's WMAX"
 #endif
-
-struct Tile {
-    std::string name;
-    int width, rows;
-    std::vector<uint16_t> s;
-};
 
 struct Bench {
     Vspiv_context m;
@@ -124,32 +118,8 @@ int main(int argc, char** argv) {
     std::vector<Tile> tiles;
     bool frames_only = false;
     if (argc == 4) {
-        const std::vector<uint8_t> dat = read_file(argv[1]);
-        const int w = std::atoi(argv[2]), h = std::atoi(argv[3]);
-        const size_t plane = (size_t)w * h / 8;
-        if (w < 1 || w > WMAX || h < 1 || dat.empty() || dat.size() % plane != 0) {
-            std::fprintf(stderr, "%s: not whole %dx%d planes, or wider than %d\n", argv[1], w,
-                         h, WMAX);
+        if (!recording_tiles(argv[1], std::atoi(argv[2]), std::atoi(argv[3]), WMAX, tiles))
             return 2;
-        }
-        const size_t planes = dat.size() / plane;
-        for (size_t p0 = 0; p0 + 8 <= planes; p0 += planes / 3 > 8 ? planes / 3 : 8) {
-            std::vector<uint16_t> frame((size_t)w * h, 0);
-            for (size_t p = p0; p < p0 + 8; ++p)
-                for (size_t i = 0; i < frame.size(); ++i)
-                    frame[i] += 32 * ((dat[p * plane + i / 8] >> (i % 8)) & 1);
-            for (auto& v : frame) v = v > 255 ? 255 : v;
-            for (int rows : {1, 7, 16}) {
-                for (int r0 = 0; r0 + rows <= h; r0 += rows * 3) {
-                    Tile t{"frame " + std::to_string(p0) + " rows " + std::to_string(r0) + "+" +
-                               std::to_string(rows),
-                           w, rows, {}};
-                    t.s.assign(frame.begin() + (size_t)r0 * w,
-                               frame.begin() + (size_t)(r0 + rows) * w);
-                    tiles.push_back(t);
-                }
-            }
-        }
     } else if (argc == 5 && std::string(argv[1]) == "frames") {
         // The live mode's rung frames as tb_rungs.cpp writes them: 16-bit
         // levels, WIDTH x HEIGHT each, in bands of 16 rows.
@@ -177,56 +147,28 @@ int main(int argc, char** argv) {
         return 2;
     }
     if (!frames_only) {
-        uint32_t seed = 7;
-        auto rnd = [&]() {
-            seed = seed * 1664525u + 1013904223u;
-            return seed >> 8;
-        };
-        auto synth = [&](const char* name, int width, int rows, auto f) {
-            Tile t{name, width, rows, {}};
-            for (int i = 0; i < width * rows; ++i) t.s.push_back((uint16_t)f(i % width, i / width));
-            tiles.push_back(t);
-        };
-        synth("zero", 64, 8, [](int, int) { return 0; });
-        synth("flat 255", 64, 8, [](int, int) { return 255; });
-        synth("ramp", 100, 10, [](int x, int y) { return (3 * x + 5 * y) % 256; });
-        synth("noise 8-bit", 64, 8, [&](int, int) { return rnd() % 256; });
-        synth("noise 16-bit", 64, 8, [&](int, int) { return rnd() % 65536; });
-        synth("alternating 0/65535", 33, 5,
-              [](int x, int y) { return ((x + y) % 2) ? 65535 : 0; });
-        synth("lone spikes", 128, 6,
-              [](int x, int y) { return (x * 7 + y * 13) % 97 == 0 ? 255 : 0; });
-        synth("one-sample rows", 1, 40, [&](int, int) { return rnd() % 40; });
-        synth("one sample", 1, 1, [](int, int) { return 200; });
-        synth("sensor row", 400, 3,
-              [&](int x, int) { return (x % 50 < 4) ? 180 + rnd() % 60 : rnd() % 4; });
-        synth("widest row", WMAX, 2, [&](int x, int) { return (x * x) % 300; });
-        // Level 12 with lone 0s and 24s: residuals of -12 and +12 at k = 0,
-        // quotients 23 (the longest plain code) and 24 (the first escape).
-        synth("steps of 12", 97, 6, [](int x, int y) {
-            const int i = 97 * y + x;
-            return i % 41 == 0 ? 0 : i % 53 == 0 ? 24 : 12;
-        });
+        Lcg rnd;
+        common_tiles(tiles, WMAX, rnd);
         // Rows of one and two samples, slowly varying: coded (not raw), so
         // the row above read as it is written is compared byte for byte.
-        synth("one-sample rows, smooth", 1, 300, [](int, int y) { return (y / 9) % 7 * 3; });
-        synth("two-sample rows, smooth", 2, 200, [](int x, int y) { return (y / 7) % 5 * 4 + x; });
-        synth("every class", 90, 12, [&](int x, int y) {
+        synth(tiles, "one-sample rows, smooth", 1, 300, [](int, int y) { return (y / 9) % 7 * 3; });
+        synth(tiles, "two-sample rows, smooth", 2, 200, [](int x, int y) { return (y / 7) % 5 * 4 + x; });
+        synth(tiles, "every class", 90, 12, [&](int x, int y) {
             const int step = (y * 7) % 81;  // activity 0..240 across a row
             return (x % 2 ? step : 0) + (y % 3) * 12;
         });
         // Residuals that put the low word at 0xFF.. for a while: the coder
         // holds those bytes, and a carry later turns them to 0x00.
-        synth("held bytes", 256, 16, [&](int x, int y) {
+        synth(tiles, "held bytes", 256, 16, [&](int x, int y) {
             return ((x * 31 + y * 17) % 251 < 3) ? rnd() % 256 : 255;
         });
-        synth("long zero run, then noise", 512, 16,
+        synth(tiles, "long zero run, then noise", 512, 16,
               [&](int x, int y) { return y < 14 ? 0 : (int)(rnd() % 256); });
         // Noise whose payload comes near the raw tile's length, over many
         // sizes and amplitudes: some tie with it (the core then sends raw).
         for (int amp = 4; amp <= 256; amp += 12)
             for (int width = 3; width <= 24; width += 3)
-                synth("near raw", width, 1 + width % 3, [&](int, int) { return rnd() % amp; });
+                synth(tiles, "near raw", width, 1 + width % 3, [&](int, int) { return rnd() % amp; });
     }
 
     Bench b;
