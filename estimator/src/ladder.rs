@@ -304,7 +304,7 @@ pub fn measure(
                 // climbs the asked rungs (the next pair's rung frames go
                 // further).
                 let reach = if rescue { Reach::Held } else { Reach::Asked };
-                let first = climb_events(ev, mid, dt, cfg, None, reach)?;
+                let first = climb_events(ev, mid, cfg, Climb::new(None, dt), reach)?;
                 again(ev, mid, dt, cfg, first, reach)?
             }
             None => Climb::new(None, dt),
@@ -319,23 +319,17 @@ pub fn measure(
         ..
     } = climb;
     let best = best.filter(|_| !refuted(&rungs));
-    let (velocity, model) = match best {
-        Some(mut b) => {
-            let model = change.as_ref().map(|c| with_change(&mut b, c));
-            let mut f = finished(&b, dt);
-            with_resolution(&mut f);
-            (f, model)
+    let Some(best) = best else {
+        if let Some(m) = ensemble_pair(input, mid, dt, cfg, &rungs)? {
+            return Ok(Measurement { confirmed, ..m });
         }
-        None => {
-            return match ensemble_pair(input, mid, dt, cfg, &rungs)? {
-                Some(m) => Ok(Measurement { confirmed, ..m }),
-                None => Ok(nothing((w, h), dt, cfg, rungs, confirmed)?),
-            }
-        }
+        let m = match from_rest(input, mid, dt, cfg, (w, h), rescue, &rungs)? {
+            Some(m) => m,
+            None => nothing((w, h), dt, cfg, rungs, confirmed)?,
+        };
+        return Ok(Measurement { confirmed, ..m });
     };
-    let mut field = flow_map(&velocity, &dense_velocity(&velocity, h, w), dt);
-    let model = model.map(|m| m.mapv(|(a, b)| (a * dt, b * dt)));
-    flag_uncertain(&mut field, model.as_ref());
+    let field = kept_field(best, change.as_ref(), dt, (w, h));
     let (_, _, invalid) = field.counts();
     let flagged = invalid as f64 > ENSEMBLE_FLAGGED * field.grid.len() as f64;
     if !field.usable() || (rescue && flagged) {
@@ -343,21 +337,116 @@ pub fn measure(
             return Ok(Measurement { confirmed, ..m });
         }
     }
-    let mut separation = separation.unwrap_or_else(|| Array2::zeros(field.u.dim()));
-    for (s, st) in separation.iter_mut().zip(field.state.iter()) {
-        if *st != State::Valid {
-            *s = 0;
-        }
-    }
     Ok(Measurement {
+        separation: valid_separations(separation, &field),
         field: PerPair::new(field, Ticks(dt)),
-        separation,
         rungs,
         frames,
         dense: None,
         confirmed,
         ensemble: false,
     })
+}
+
+/// The kept velocities `best` (per tick) as the pair's field: their model
+/// error from `change` (the steps between rungs), validated and filled
+/// ([`finished`]), with the resolution term, carried along their paths
+/// over `dt` and flagged where their measurement is too uncertain.
+fn kept_field(
+    mut best: Field,
+    change: Option<&Array2<Step>>,
+    dt: f64,
+    (w, h): (usize, usize),
+) -> Field {
+    let model = change.map(|c| with_change(&mut best, c));
+    let mut velocity = finished(&best, dt);
+    with_resolution(&mut velocity);
+    let mut field = flow_map(&velocity, &dense_velocity(&velocity, h, w), dt);
+    let model = model.map(|m| m.mapv(|(a, b)| (a * dt, b * dt)));
+    flag_uncertain(&mut field, model.as_ref());
+    field
+}
+
+/// Each node's rung separation where `field` holds a valid vector, 0
+/// elsewhere.
+fn valid_separations(separation: Option<Array2<u32>>, field: &Field) -> Array2<u32> {
+    let mut separation = separation.unwrap_or_else(|| Array2::zeros(field.u.dim()));
+    for (s, st) in separation.iter_mut().zip(field.state.iter()) {
+        if *st != State::Valid {
+            *s = 0;
+        }
+    }
+    separation
+}
+
+/// The climb of a pair that neither its bootstrap rungs nor the dense
+/// ensemble measured, from rest: the rungs longer than the bootstrap's,
+/// uncompensated, PIV predicted by a still flow, then (as [`again`]) once
+/// more along what they measured. Dim particles give the short rungs too
+/// few spikes, and a slow flow leaves little for the ensemble's 6-tick
+/// frames to see, yet blurs little over a longer rung: on spectral
+/// turbulence's dim, slow members a 62-plane recording measured nothing,
+/// and from rest measures (`docs/results.md`). The step from rest to the
+/// first rung is the displacement itself, not a model error, so it is not
+/// recorded. `None` when it keeps no usable field: pure noise and static
+/// light still measure nothing.
+fn from_rest(
+    input: &PairInput,
+    mid: u64,
+    dt: f64,
+    cfg: &LadderSettings,
+    (w, h): (usize, usize),
+    rescue: bool,
+    before: &[Rung],
+) -> Result<Option<Measurement>, crate::Error> {
+    let Some(ev) = &input.events else {
+        return Ok(None);
+    };
+    let grid = grid_of(w, h, cfg)?;
+    let still = Field {
+        state: Array2::from_elem((grid.ny, grid.nx), State::Valid),
+        sigma: Array2::from_elem((grid.ny, grid.nx), (0.0, 0.0)),
+        ..Field::unmeasured(grid)
+    };
+    let longer = LadderSettings {
+        separations: cfg
+            .separations
+            .iter()
+            .copied()
+            .filter(|&s| s > cfg.bootstrap_longest)
+            .collect(),
+        ..cfg.clone()
+    };
+    let reach = if rescue { Reach::Held } else { Reach::Asked };
+    let rest = Climb {
+        compensated: false,
+        ..Climb::new(Some(still), dt)
+    };
+    let first = climb_events(ev, mid, &longer, rest, reach)?;
+    let Climb {
+        best,
+        separation,
+        change,
+        rungs,
+        frames,
+        ..
+    } = again(ev, mid, dt, &longer, first, reach)?;
+    let Some(best) = best else {
+        return Ok(None);
+    };
+    let field = kept_field(best, change.as_ref(), dt, (w, h));
+    if !field.usable() {
+        return Ok(None);
+    }
+    Ok(Some(Measurement {
+        separation: valid_separations(separation, &field),
+        field: PerPair::new(field, Ticks(dt)),
+        rungs: before.iter().copied().chain(rungs).collect(),
+        frames,
+        dense: None,
+        confirmed: None,
+        ensemble: false,
+    }))
 }
 
 /// Whether the climb's field rests on its first rung alone while a longer
@@ -432,7 +521,7 @@ fn warm(
 /// The climb of a pair from its events alone, over the asked rungs (its
 /// rung frames go on from there).
 fn cold(ev: &Events, mid: u64, dt: f64, cfg: &LadderSettings) -> Result<Climb, PivError> {
-    climb_events(ev, mid, dt, cfg, None, Reach::Asked)
+    climb_events(ev, mid, cfg, Climb::new(None, dt), Reach::Asked)
 }
 
 /// A pair with no flow to follow climbs its events a second time along
@@ -453,7 +542,7 @@ fn again(
     let Some(e) = first.estimate.clone() else {
         return Ok(first);
     };
-    let mut second = climb_events(ev, mid, dt, cfg, Some(e), reach)?;
+    let mut second = climb_events(ev, mid, cfg, Climb::new(Some(e), dt), reach)?;
     let valid = |c: &Climb| c.best.as_ref().map_or(0, |b| b.counts().0);
     if valid(&second) < valid(&first) {
         return Ok(first);
@@ -484,13 +573,11 @@ enum Reach {
 fn climb_events(
     ev: &Events,
     mid: u64,
-    dt: f64,
     cfg: &LadderSettings,
-    estimate: Option<Field>,
+    mut climb: Climb,
     reach: Reach,
 ) -> Result<Climb, PivError> {
     let span = ev.range();
-    let mut climb = Climb::new(estimate, dt);
     let mut separations = separations_held(&cfg.separations, mid, &span);
     if reach == Reach::Asked {
         separations.retain(|s| cfg.separations.contains(s));
