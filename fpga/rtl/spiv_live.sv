@@ -103,9 +103,9 @@ module spiv_live #(
             flags_in[8*l +: 8] = {l_state[78*l + 3], 4'b0, l_state[78*l +: 3]};
         end
     end
-    // The rung frames register rate_addr and take the word the next clock:
-    // the copy is read at that registered address without a register of
-    // its own.
+    // The rung frames register rate_addr, take the word the next clock and
+    // register it: the copy is read at that registered address, its
+    // output (through the lane's choice) into that register alone.
     logic [AW-1:0]    rate_addr;
     logic [32*P-1:0]  rate_q;
     logic [8*P-1:0]   flag_q;

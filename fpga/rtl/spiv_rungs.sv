@@ -32,8 +32,9 @@
 // events of the ring in its order (ev_valid while ev_ready; the ring's
 // events of other ticks are ignored), then pulse `ev_end`; the design
 // reads every pixel's light state, one pixel per clock (rate_addr;
-// rate_q24 and rate_flags the next clock, as from a block RAM), and takes
-// off the static rates of the pixels that have one, one block per clock;
+// rate_q24 and rate_flags the next clock, as from a block RAM; the design
+// registers them before it uses them, so the RAM's output drives no logic
+// but that register), and takes off the static rates of the pixels that have one, one block per clock;
 // then it streams frames A and B of every lane side by side, pixel by
 // pixel, out_valid high, clearing its RAMs as it goes; then `done` (with
 // `error` when the configuration was refused and nothing was made).
@@ -229,17 +230,23 @@ module spiv_rungs #(
     // pixel whose blocks go out, its rate, the block
     logic [31:0]   pix;
     logic [15:0]   px_x, px_y;
-    logic          rq_v;
-    logic [31:0]   rq_pix;
-    logic [15:0]   rq_x, rq_y;
+    logic          rs_v, rq_v;      // read issued; its state registered
+    logic [31:0]   rs_pix, rq_pix;
+    logic [15:0]   rs_x, rs_y, rq_x, rq_y;
+    logic [31:0]   rate_r;          // the state, registered after the RAM
+    logic [7:0]    flags_r;
     logic [15:0]   cur_x, cur_y;
     logic [15:0]   r16;
     logic [5:0]    blk;
     // rate_samples(r, n) = (r * n * 64 + 2^15) >> 16 (at most 512): of a
     // whole block, and of each lane's last
     logic signed [15:0] sub8, sub_last [NR];
-    wire  [31:0]   rate_rounded = (rate_q24 + 32'd128) >> 8;
-    wire           periodic = rate_flags[7] && rate_flags[3:0] >= 4'd2;
+    always_ff @(posedge clk) begin
+        rate_r <= rate_q24;
+        flags_r <= rate_flags;
+    end
+    wire  [31:0]   rate_rounded = (rate_r + 32'd128) >> 8;
+    wire           periodic = flags_r[7] && flags_r[3:0] >= 4'd2;
     wire  [15:0]   rate_now = periodic ? 16'd0
                             : (rate_rounded > 32'hFFFF) ? 16'hFFFF : rate_rounded[15:0];
 
@@ -661,11 +668,17 @@ module spiv_rungs #(
                 pix <= '0;
                 px_x <= '0;
                 px_y <= '0;
+                rs_v <= 1'b0;
                 rq_v <= 1'b0;
             end
             RSCAN: begin
-                // The state of rq_pix arrives; a pixel with a static rate
-                // sends its blocks (ROPS), and the reads go on after it.
+                // A read's state arrives the clock after it is issued
+                // (rs_*) and is registered the next (rq_*, rate_r): a
+                // pixel with a static rate sends its blocks (ROPS), the
+                // read behind it is dropped, and the reads go on after it.
+                rq_v <= rs_v;
+                {rq_pix, rq_x, rq_y} <= {rs_pix, rs_x, rs_y};
+                rs_v <= 1'b0;
                 if (rq_v && rate_now != 16'd0 && most_blocks != 6'd0) begin
                     r16 <= rate_now;
                     cur_x <= rq_x;
@@ -683,10 +696,10 @@ module spiv_rungs #(
                     end
                 end else if (pix != 32'(PX)) begin
                     rate_addr <= AW'(pix);
-                    rq_v <= 1'b1;
-                    rq_pix <= pix;
-                    rq_x <= px_x;
-                    rq_y <= px_y;
+                    rs_v <= 1'b1;
+                    rs_pix <= pix;
+                    rs_x <= px_x;
+                    rs_y <= px_y;
                     pix <= pix + 32'd1;
                     if (px_x == 16'(W - 1)) begin
                         px_x <= '0;
@@ -694,8 +707,7 @@ module spiv_rungs #(
                     end else begin
                         px_x <= px_x + 1'b1;
                     end
-                end else begin
-                    rq_v <= 1'b0;
+                end else if (!rs_v && !rq_v) begin
                     phase <= DRAIN;
                     drain <= '0;
                 end
