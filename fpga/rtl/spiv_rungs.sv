@@ -148,11 +148,11 @@ module spiv_rungs #(
     logic signed [35:0] t2_ix, t2_iy;
     // One axis, one stage each: the clamped coordinate of pixel p, the
     // node below it, the entry {i, w0, w1}.
+    // The bounds -pitch and n pitch are the pair's: registered at start.
+    logic signed [35:0] q_lo, q_hix, q_hiy;
     function automatic logic signed [35:0] clamped(input logic [15:0] p, input logic signed [31:0] first,
-                                                   input logic [15:0] n, input logic [3:0] sh);
-        logic signed [35:0] q, lo, hi;
-        lo = -(36'sd1 <<< sh);
-        hi = $signed({20'b0, n}) <<< sh;
+                                                   input logic signed [35:0] lo, input logic signed [35:0] hi);
+        logic signed [35:0] q;
         q = $signed({16'b0, p, 4'b0}) - 36'(first);
         clamped = (q < lo) ? lo : (q > hi) ? hi : q;
     endfunction
@@ -172,8 +172,8 @@ module spiv_rungs #(
 
     always_ff @(posedge clk) begin
         logic [47:0] ec, er;
-        t1_qx <= clamped(tb_at, cx0, cnx, ps);
-        t1_qy <= clamped(tb_at, cy0, cny, ps);
+        t1_qx <= clamped(tb_at, cx0, q_lo, q_hix);
+        t1_qy <= clamped(tb_at, cy0, q_lo, q_hiy);
         t1_v <= phase == TABLES && 32'(tb_at) < TN;
         t1_at <= tb_at;
         t2_ix <= below(t1_qx, cnx, ps);
@@ -646,6 +646,9 @@ module spiv_rungs #(
                         bad = 1'b1;
                 end
                 ps <= (p == 5'd31) ? 4'd4 : p[3:0];
+                q_lo <= -(36'sd1 <<< ((p == 5'd31) ? 4'd4 : p[3:0]));
+                q_hix <= $signed({20'b0, nx}) <<< ((p == 5'd31) ? 4'd4 : p[3:0]);
+                q_hiy <= $signed({20'b0, ny}) <<< ((p == 5'd31) ? 4'd4 : p[3:0]);
                 {cnx, cny, cx0, cy0, cmid} <= {nx, ny, x0, y0, mid};
                 error <= bad;
                 tb_at <= '0;
