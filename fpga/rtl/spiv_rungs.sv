@@ -33,8 +33,8 @@
 // events of other ticks are ignored), then pulse `ev_end`; the design
 // reads every pixel's light state, one pixel per clock (rate_addr;
 // rate_q24 and rate_flags the next clock, as from a block RAM; the design
-// registers them before it uses them, so the RAM's output drives no logic
-// but that register), and takes off the static rates of the pixels that have one, one block per clock;
+// registers them, and the rate it works out of them, before it decides:
+// the RAM's output drives no logic but that register), and takes off the static rates of the pixels that have one, one block per clock;
 // then it streams frames A and B of every lane side by side, pixel by
 // pixel, out_valid high, clearing its RAMs as it goes; then `done` (with
 // `error` when the configuration was refused and nothing was made).
@@ -230,9 +230,11 @@ module spiv_rungs #(
     // pixel whose blocks go out, its rate, the block
     logic [31:0]   pix;
     logic [15:0]   px_x, px_y;
-    logic          rs_v, rq_v;      // read issued; its state registered
-    logic [31:0]   rs_pix, rq_pix;
-    logic [15:0]   rs_x, rs_y, rq_x, rq_y;
+    // reads issued (rs), their state registered (rm), its rate worked out
+    // (rq)
+    logic          rs_v, rm_v, rq_v;
+    logic [31:0]   rs_pix, rm_pix, rq_pix;
+    logic [15:0]   rs_x, rs_y, rm_x, rm_y, rq_x, rq_y;
     logic [31:0]   rate_r;          // the state, registered after the RAM
     logic [7:0]    flags_r;
     logic [15:0]   cur_x, cur_y;
@@ -249,6 +251,8 @@ module spiv_rungs #(
     wire           periodic = flags_r[7] && flags_r[3:0] >= 4'd2;
     wire  [15:0]   rate_now = periodic ? 16'd0
                             : (rate_rounded > 32'hFFFF) ? 16'hFFFF : rate_rounded[15:0];
+    logic [15:0]   rate_now_r;
+    always_ff @(posedge clk) rate_now_r <= rate_now;
 
     // per lane: the event's frame and d2; a rate block's d2 and samples
     logic               ln_in_a [NR], ln_in_b [NR], ln_blk_on [NR];
@@ -672,21 +676,26 @@ module spiv_rungs #(
                 px_x <= '0;
                 px_y <= '0;
                 rs_v <= 1'b0;
+                rm_v <= 1'b0;
                 rq_v <= 1'b0;
             end
             RSCAN: begin
                 // A read's state arrives the clock after it is issued
-                // (rs_*) and is registered the next (rq_*, rate_r): a
-                // pixel with a static rate sends its blocks (ROPS), the
-                // read behind it is dropped, and the reads go on after it.
-                rq_v <= rs_v;
-                {rq_pix, rq_x, rq_y} <= {rs_pix, rs_x, rs_y};
+                // (rs_*), is registered the next (rm_*, rate_r) and its
+                // rate the next (rq_*, rate_now_r): a pixel with a static
+                // rate sends its blocks (ROPS), the two reads behind it
+                // are dropped, and the reads go on after it.
+                rm_v <= rs_v;
+                {rm_pix, rm_x, rm_y} <= {rs_pix, rs_x, rs_y};
+                rq_v <= rm_v;
+                {rq_pix, rq_x, rq_y} <= {rm_pix, rm_x, rm_y};
                 rs_v <= 1'b0;
-                if (rq_v && rate_now != 16'd0 && most_blocks != 6'd0) begin
-                    r16 <= rate_now;
+                if (rq_v && rate_now_r != 16'd0 && most_blocks != 6'd0) begin
+                    r16 <= rate_now_r;
                     cur_x <= rq_x;
                     cur_y <= rq_y;
                     blk <= '0;
+                    rm_v <= 1'b0;
                     rq_v <= 1'b0;
                     phase <= RPREP;
                     pix <= rq_pix + 32'd1;
@@ -710,7 +719,7 @@ module spiv_rungs #(
                     end else begin
                         px_x <= px_x + 1'b1;
                     end
-                end else if (!rs_v && !rq_v) begin
+                end else if (!rs_v && !rm_v && !rq_v) begin
                     phase <= DRAIN;
                     drain <= '0;
                 end
