@@ -275,6 +275,8 @@ impl Climb {
 /// with `rescue`, so is a usable one with more than [`ENSEMBLE_FLAGGED`]
 /// of its vectors flagged (a pair that only starts the next one leaves
 /// `rescue` off: the next pair's first rung confirms or drops its field).
+/// A pair that kept no field and that the ensemble does not measure
+/// climbs its events once more from rest ([`from_rest`]).
 pub fn measure(
     input: &PairInput,
     mid: u64,
@@ -568,8 +570,9 @@ enum Reach {
     Held,
 }
 
-/// The climb over `ev`'s rungs, compensated along `estimate` (and along
-/// what each rung adds) or, without one, from the bootstrap rungs.
+/// The climb over `ev`'s rungs on from `climb`: compensated along its
+/// estimate (and along what each rung adds) or, without one, from the
+/// bootstrap rungs.
 fn climb_events(
     ev: &Events,
     mid: u64,
