@@ -266,7 +266,7 @@ impl Climb {
 /// events: the uncompensated rungs up to
 /// [`LadderSettings::bootstrap_longest`], then rungs compensated along
 /// the estimate so far, as far as the events reach (with `rescue`, on to
-/// the longest rung they hold: [`separations_held`]); then once more,
+/// the longest rung they hold: `separations_held`); then once more,
 /// every rung compensated along the estimate that climb reached. Every
 /// kept vector's uncertainty includes its change from the estimate that
 /// predicted its rung.
@@ -276,7 +276,7 @@ impl Climb {
 /// of its vectors flagged (a pair that only starts the next one leaves
 /// `rescue` off: the next pair's first rung confirms or drops its field).
 /// A pair that kept no field and that the ensemble does not measure
-/// climbs its events once more from rest ([`from_rest`]).
+/// climbs its events once more from rest (`from_rest`).
 pub fn measure(
     input: &PairInput,
     mid: u64,
