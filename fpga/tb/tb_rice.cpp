@@ -110,72 +110,9 @@ int main(int argc, char** argv) {
             synth(tiles, "near raw", width, 1 + width % 3, [&](int, int) { return rnd() % amp; });
 
     Bench b;
-    b.m.rst = 1;
-    b.m.in_valid = 0;
-    b.m.width = 1;
-    std::vector<uint8_t> junk;
-    bool d = false;
-    for (int k = 0; k < 4; ++k) b.clock(junk, d);
-    b.m.rst = 0;
-
-    int ntiles = 0, nrice = 0, nraw = 0, nties = 0;
-    size_t nbytes = 0;
-    std::vector<uint8_t> core(4 * (size_t)WMAX * 16 + 64), got;
-    for (int pass = 0; pass < 2; ++pass) {
-        for (const Tile& t : tiles) {
-            uint8_t used = 0;
-            size_t len = 0;
-            if (spiv_encode_tile(SPIV_ENCODING_RICE, t.s.data(), (uint16_t)t.width,
-                                 (uint16_t)t.rows, core.data(), core.size(), &used,
-                                 &len) != SPIV_OK) {
-                std::fprintf(stderr, "%s: the core refused the tile\n", t.name.c_str());
-                return 1;
-            }
-            bool wide = false, rice = false;
-            uint32_t bytes = 0;
-            if (!b.run(t, pass == 1, got, wide, rice, bytes)) {
-                std::fprintf(stderr, "%s: the RTL did not finish the tile\n", t.name.c_str());
-                return 1;
-            }
-            bool core_wide = false;
-            for (uint16_t v : t.s) core_wide |= v > 255;
-            const bool core_rice = used == SPIV_ENCODING_RICE;
-            if (wide != core_wide || rice != core_rice || got.size() != bytes) {
-                std::fprintf(stderr, "%s: RTL wide %d rice %d (%zu bytes, %u counted), core wide %d %s\n",
-                             t.name.c_str(), wide, rice, got.size(), bytes, core_wide,
-                             core_rice ? "rice" : "raw");
-                return 1;
-            }
-            if (core_rice) {
-                if (got.size() != len) {
-                    std::fprintf(stderr, "%s: RTL %zu bytes, core %zu\n", t.name.c_str(),
-                                 got.size(), len);
-                    return 1;
-                }
-                for (size_t i = 0; i < len; ++i) {
-                    if (got[i] != core[i]) {
-                        std::fprintf(stderr, "%s: byte %zu: RTL %02x, core %02x\n",
-                                     t.name.c_str(), i, got[i], core[i]);
-                        return 1;
-                    }
-                }
-                ++nrice;
-                nbytes += len;
-            } else {
-                // Raw: the RTL's payload is no shorter than the raw tile.
-                const size_t raw = t.s.size() * (core_wide ? 2 : 1);
-                nties += got.size() == raw;
-                if (got.size() < raw) {
-                    std::fprintf(stderr, "%s: raw in the core, %zu Rice bytes in the RTL\n",
-                                 t.name.c_str(), got.size());
-                    return 1;
-                }
-                ++nraw;
-            }
-            ++ntiles;
-        }
-    }
-    std::printf("tiles=%d rice=%d raw=%d ties=%d bytes=%zu equal\n", ntiles, nrice, nraw, nties,
-                nbytes);
+    TileCounts n;
+    if (!compare_tiles(b, tiles, SPIV_ENCODING_RICE, "Rice", WMAX, n)) return 1;
+    std::printf("tiles=%d rice=%d raw=%d ties=%d bytes=%zu equal\n", n.tiles, n.coded, n.raw, n.ties,
+                n.bytes);
     return 0;
 }

@@ -1,5 +1,6 @@
 // What the tile coders' testbenches (tb_rice.cpp, tb_context.cpp) share:
-// the tiles of a recording and the synthetic tiles both coders take.
+// the tiles of a recording, the synthetic tiles both coders take, and
+// their comparison with the core.
 #pragma once
 
 #include <cstdint>
@@ -8,6 +9,10 @@
 #include <vector>
 
 #include "read_file.h"
+
+extern "C" {
+#include "spiv_core.h"
+}
 
 struct Tile {
     std::string name;
@@ -89,4 +94,87 @@ static void common_tiles(std::vector<Tile>& tiles, int wmax, Lcg& rnd) {
         const int i = 97 * y + x;
         return i % 41 == 0 ? 0 : i % 53 == 0 ? 24 : 12;
     });
+}
+
+// What a run of the tiles found: tiles, coded (the coder's own coding),
+// raw, raw tiles whose coded payload tied with the raw length, and the
+// coded payloads' bytes.
+struct TileCounts {
+    int tiles = 0, coded = 0, raw = 0, ties = 0;
+    size_t bytes = 0;
+};
+
+// Resets bench B (a coder's testbench: its model `m`, `clock` and `run`),
+// then codes every tile twice, back to back and with in_valid low on a
+// third of the clocks, and holds each to spiv_encode_tile(ENCODING): the
+// same choice of coded or raw and width, and byte for byte when coded;
+// raw in the core, the RTL's payload is no shorter than the raw tile.
+// False, with a message naming the tile and the coder NAME, at the first
+// difference.
+template <class Bench>
+static bool compare_tiles(Bench& b, const std::vector<Tile>& tiles, uint8_t encoding,
+                          const char* name, size_t wmax, TileCounts& n) {
+    b.m.rst = 1;
+    b.m.in_valid = 0;
+    b.m.width = 1;
+    std::vector<uint8_t> junk;
+    bool d = false;
+    for (int k = 0; k < 4; ++k) b.clock(junk, d);
+    b.m.rst = 0;
+
+    std::vector<uint8_t> core(4 * wmax * 16 + 64), got;
+    for (int pass = 0; pass < 2; ++pass) {
+        for (const Tile& t : tiles) {
+            uint8_t used = 0;
+            size_t len = 0;
+            if (spiv_encode_tile(encoding, t.s.data(), (uint16_t)t.width, (uint16_t)t.rows,
+                                 core.data(), core.size(), &used, &len) != SPIV_OK) {
+                std::fprintf(stderr, "%s: the core refused the tile\n", t.name.c_str());
+                return false;
+            }
+            bool wide = false, coded = false;
+            uint32_t bytes = 0;
+            if (!b.run(t, pass == 1, got, wide, coded, bytes)) {
+                std::fprintf(stderr, "%s: the RTL did not finish the tile\n", t.name.c_str());
+                return false;
+            }
+            bool core_wide = false;
+            for (uint16_t v : t.s) core_wide |= v > 255;
+            const bool core_coded = used == encoding;
+            if (wide != core_wide || coded != core_coded || got.size() != bytes) {
+                std::fprintf(stderr,
+                             "%s: RTL wide %d %s %d (%zu bytes, %u counted), core wide %d %s (%zu bytes)\n",
+                             t.name.c_str(), wide, name, coded, got.size(), bytes, core_wide,
+                             core_coded ? name : "raw", len);
+                return false;
+            }
+            if (core_coded) {
+                if (got.size() != len) {
+                    std::fprintf(stderr, "%s: RTL %zu bytes, core %zu\n", t.name.c_str(),
+                                 got.size(), len);
+                    return false;
+                }
+                for (size_t i = 0; i < len; ++i) {
+                    if (got[i] != core[i]) {
+                        std::fprintf(stderr, "%s: byte %zu: RTL %02x, core %02x\n",
+                                     t.name.c_str(), i, got[i], core[i]);
+                        return false;
+                    }
+                }
+                ++n.coded;
+                n.bytes += len;
+            } else {
+                const size_t raw = t.s.size() * (core_wide ? 2 : 1);
+                n.ties += got.size() == raw;
+                if (got.size() < raw) {
+                    std::fprintf(stderr, "%s: raw in the core, %zu %s bytes in the RTL\n",
+                                 t.name.c_str(), got.size(), name);
+                    return false;
+                }
+                ++n.raw;
+            }
+            ++n.tiles;
+        }
+    }
+    return true;
 }

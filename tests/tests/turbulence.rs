@@ -17,7 +17,7 @@ use spiv_firmware_sim::simulation::{simulate_planes, Request, Simulated};
 use spiv_formats::State;
 use spiv_host::bench::flows::{families, Family};
 use spiv_host::estimator::ensemble;
-use spiv_host::flow::{run_flow, FlowOptions, FlowOutcome, Recording};
+use spiv_host::flow::{run_flow, FlowOptions, FlowOutcome, PairResult, Recording};
 
 /// `spiv flow` with its defaults (and `dense`) on `ticks` planes of scene
 /// `p` from `seed`: the simulation, the pair's separation and the outcome.
@@ -142,6 +142,40 @@ fn the_dense_field_never_runs_away() {
     }
 }
 
+/// Pair `pr`'s vectors against the truth: all of them, the valid ones,
+/// the valid ones off by more than 3σ and 0.3 px, and the valid ones'
+/// summed error (px per pair).
+#[derive(Default)]
+struct ValidScore {
+    all: usize,
+    valid: usize,
+    wrong: usize,
+    err: f64,
+}
+
+impl ValidScore {
+    fn add(&mut self, sim: &Simulated, dt: u32, pr: &PairResult) {
+        let mid = Scene::pair_mid(pr.ticks[0], pr.ticks[1]);
+        let pts: Vec<(f64, f64)> = pr.vectors.iter().map(|v| (v.x, v.y)).collect();
+        for ((v, t), &(su, sv)) in pr
+            .vectors
+            .iter()
+            .zip(sim.scene.truth_at(&pts, mid, f64::from(dt)))
+            .zip(&pr.sigma)
+        {
+            self.all += 1;
+            if v.state != State::Valid {
+                continue;
+            }
+            self.valid += 1;
+            let (eu, ev) = (v.u - t.2, v.v - t.3);
+            self.err += eu.hypot(ev);
+            self.wrong +=
+                usize::from(eu.hypot(ev) > 0.3 && (eu.abs() > 3.0 * su || ev.abs() > 3.0 * sv));
+        }
+    }
+}
+
 /// `spiv flow` on the spectral family's dimmest slow members (seeds 107
 /// and 109: 0.11 thresholds/tick, 0.5-1.1 px per pair): their pixels fire
 /// every 9 ticks, so the 4-tick rung's frames anticorrelate and its peak
@@ -155,25 +189,11 @@ fn dim_slow_turbulence_is_not_confidently_wrong() {
         let p = fam.params(seed);
         assert!(p.particle_peak < 0.12, "seed {seed} is a dim member");
         let (sim, dt, out) = flow_of(&p, seed, fam.ticks, false);
-        let (mut valid, mut wrong) = (0, 0);
+        let mut score = ValidScore::default();
         for pr in &out.pairs {
-            let mid = Scene::pair_mid(pr.ticks[0], pr.ticks[1]);
-            let pts: Vec<(f64, f64)> = pr.vectors.iter().map(|v| (v.x, v.y)).collect();
-            for ((v, t), &(su, sv)) in pr
-                .vectors
-                .iter()
-                .zip(sim.scene.truth_at(&pts, mid, f64::from(dt)))
-                .zip(&pr.sigma)
-            {
-                if v.state != State::Valid {
-                    continue;
-                }
-                valid += 1;
-                let (eu, ev) = (v.u - t.2, v.v - t.3);
-                wrong +=
-                    usize::from(eu.hypot(ev) > 0.3 && (eu.abs() > 3.0 * su || ev.abs() > 3.0 * sv));
-            }
+            score.add(&sim, dt, pr);
         }
+        let ValidScore { valid, wrong, .. } = score;
         assert!(
             wrong * 20 <= valid,
             "seed {seed}: {wrong} of {valid} valid vectors confidently wrong"
@@ -242,30 +262,19 @@ fn a_dim_slow_flow_is_climbed_from_rest() {
     let fam = spectral();
     let p = fam.params(seed);
     let (sim, dt, out) = flow_of(&p, seed, fam.ticks, false);
-    let (mut all, mut valid, mut wrong, mut err) = (0, 0, 0, 0.0);
+    let mut score = ValidScore::default();
     for pr in &out.pairs {
         let bootstrap_refuted = pr.rungs.iter().any(|r| r.separation == 8 && r.kept == 0);
         let from_rest = pr.rungs.iter().any(|r| r.separation == 16 && r.kept > 0);
         assert!(bootstrap_refuted && from_rest, "rungs {:?}", pr.rungs);
-        let mid = Scene::pair_mid(pr.ticks[0], pr.ticks[1]);
-        let pts: Vec<(f64, f64)> = pr.vectors.iter().map(|v| (v.x, v.y)).collect();
-        for ((v, t), &(su, sv)) in pr
-            .vectors
-            .iter()
-            .zip(sim.scene.truth_at(&pts, mid, f64::from(dt)))
-            .zip(&pr.sigma)
-        {
-            all += 1;
-            if v.state != State::Valid {
-                continue;
-            }
-            valid += 1;
-            let (eu, ev) = (v.u - t.2, v.v - t.3);
-            err += eu.hypot(ev);
-            wrong +=
-                usize::from(eu.hypot(ev) > 0.3 && (eu.abs() > 3.0 * su || ev.abs() > 3.0 * sv));
-        }
+        score.add(&sim, dt, pr);
     }
+    let ValidScore {
+        all,
+        valid,
+        wrong,
+        err,
+    } = score;
     let share = valid as f64 / all as f64;
     let epe = err / valid.max(1) as f64;
     assert!(share >= 0.6, "{:.0} % of the vectors valid", 100.0 * share);
