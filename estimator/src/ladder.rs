@@ -47,6 +47,7 @@ use spiv_piv::Grid;
 use crate::compensate::WarpFlow;
 use crate::ensemble;
 use crate::events::Events;
+use crate::joint::JointSettings;
 use crate::units::{PerPair, PerTick, Ticks};
 use crate::Velocity;
 
@@ -85,6 +86,9 @@ pub struct LadderSettings {
     /// body, a region outside the flow. The compensated rungs keep every
     /// pixel.
     pub mask: Option<Array2<bool>>,
+    /// The joint fit ([`crate::joint`]) of the pair's dense flow, from the
+    /// field measured, when asked for.
+    pub joint: Option<JointSettings>,
 }
 
 impl Default for LadderSettings {
@@ -99,6 +103,7 @@ impl Default for LadderSettings {
                 ..Settings::for_compensated_frames()
             },
             mask: None,
+            joint: None,
         }
     }
 }
@@ -139,7 +144,8 @@ pub struct Measurement {
     /// The frames of the rung most vectors came from.
     pub frames: Option<RungFrames>,
     /// The dense flow per pixel, px per `dt` ticks, when the dense
-    /// ensemble ([`ensemble`]) measured the pair.
+    /// ensemble ([`ensemble`]) measured the pair or the joint fit
+    /// ([`crate::joint`]) refined it.
     pub dense: Option<Flow>,
     /// Whether the first rung confirmed the flow the rung frames followed
     /// (`None`: the pair had no such flow).
@@ -277,7 +283,56 @@ impl Climb {
 /// `rescue` off: the next pair's first rung confirms or drops its field).
 /// A pair that kept no field and that the ensemble does not measure
 /// climbs its events once more from rest (`from_rest`).
+///
+/// With [`LadderSettings::joint`], a pair measured for itself (`rescue`)
+/// with events and a usable field or the ensemble's dense flow has its
+/// dense flow refined by the joint fit ([`crate::joint::fit`]) of every
+/// short frame within its reach: [`Measurement::dense`] is then the flow
+/// it started from plus the fit's correction, both carried along their
+/// paths over `dt`.
 pub fn measure(
+    input: &PairInput,
+    mid: u64,
+    dt: Ticks,
+    cfg: &LadderSettings,
+    (w, h): (usize, usize),
+    rescue: bool,
+) -> Result<Measurement, crate::Error> {
+    let mut m = measure_field(input, mid, dt, cfg, (w, h), rescue)?;
+    // The joint fit refines the dense flow of a pair measured for itself,
+    // from the ensemble's flow or the field's vectors between the nodes.
+    if let (Some(joint), Some(ev), true) = (&cfg.joint, &input.events, rescue) {
+        let measured = m.dense.is_some() || m.field.usable();
+        if measured && (ev.width, ev.height) == (w, h) {
+            let Ticks(d) = dt;
+            let start = match &m.dense {
+                Some(f) => Velocity::from_displacement(&f.u, &f.v, d),
+                None => dense_velocity(&m.field.per_tick(), h, w),
+            };
+            if let Some(vel) = crate::joint::fit(ev, mid, &start, joint) {
+                // The fit's correction, carried along the paths, added to
+                // the dense flow it started from.
+                let (u, v) = vel.displacements(d);
+                let (u0, v0) = start.displacements(d);
+                let base = match m.dense.take() {
+                    Some(f) => f,
+                    None => Flow {
+                        u: u0.clone(),
+                        v: v0.clone(),
+                    },
+                };
+                m.dense = Some(Flow {
+                    u: &base.u + &(&u - &u0),
+                    v: &base.v + &(&v - &v0),
+                });
+            }
+        }
+    }
+    Ok(m)
+}
+
+/// [`measure`] before the joint fit.
+fn measure_field(
     input: &PairInput,
     mid: u64,
     dt: Ticks,

@@ -10,6 +10,7 @@
 //! | [`compensate`] | the flows frames follow: per pixel ([`Velocity`], px per tick) and on the core's node grid ([`WarpFlow`]) |
 //! | [`ladder`] | the time ladder: disjoint compensated frames at growing separations, PIV on each, the most certain vector per node |
 //! | [`ensemble`] | where window PIV cannot start the ladder, the dense stage's one flow fitted to every pair of consecutive short frames, each pair's disagreement with it the uncertainty |
+//! | [`joint`] | a pair's dense flow refined by one steady flow fitted to every short frame around it at once, along its own paths |
 //! | [`units`] | ticks, px per tick and px per pair as types: [`units::Ticks`], [`units::PerTick`], [`units::PerPair`] |
 //! | [`error`] | the crate's one error type, [`Error`] |
 //! | [`control`] | the loop between pairs: what the next pair is made with (the ask), from what the estimator measured |
@@ -27,6 +28,7 @@ pub mod control;
 pub mod ensemble;
 pub mod error;
 pub mod events;
+pub mod joint;
 pub mod ladder;
 pub mod units;
 

@@ -36,6 +36,7 @@ use spiv_formats::{FormatError, State, Vector};
 
 use crate::dwell::{adaptive_banded, caps_for};
 use crate::estimator::control::{Ask, AskLink, Delivery, Heard};
+use crate::estimator::joint::JointSettings;
 use crate::estimator::ladder::{self, LadderSettings, Rung};
 use crate::estimator::make::pair_input;
 use crate::estimator::uplink::{PairBytes, PairReader, Uplink};
@@ -254,11 +255,18 @@ pub struct FlowOptions {
     pub piv: Settings,
     /// The time ladder of motion-compensated pairs.
     pub ladder: LadderSettings,
-    /// Also run the dense stage on every pair ([`crate::piv::dense`]) and
-    /// average it into [`FlowOutcome::mean_dense`] (leaving out the pairs
-    /// that measured no usable field on frames shorter than the pair; none
-    /// left: no dense field).
+    /// Also average each pair's dense flow into [`FlowOutcome::mean_dense`]
+    /// (leaving out the pairs that measured no usable field on frames
+    /// shorter than the pair; none left: no dense field): the time
+    /// ladder's vectors between the nodes, carried along their paths, or
+    /// the dense ensemble's flow, each refined by [`FlowOptions::joint`]
+    /// where the pair carries its events; the dense stage
+    /// ([`crate::piv::dense`]) on a plain pair's frames.
     pub dense: bool,
+    /// With `dense`, the joint fit that refines each motion-compensated
+    /// pair's dense flow ([`crate::estimator::joint`]; `None`: the flow
+    /// as the ladder or the dense ensemble measured it).
+    pub joint: Option<JointSettings>,
     /// The recording's calibration, when known: the outputs give m/s and
     /// seconds beside px per pair and ticks.
     pub calibration: Option<Calibration>,
@@ -317,6 +325,7 @@ impl FlowOptions {
             piv: Settings::for_spike_frames(),
             ladder: LadderSettings::default(),
             dense: false,
+            joint: Some(JointSettings::default()),
             calibration: rec.meta_calibration,
             mask: None,
             pairs: None,
@@ -404,6 +413,10 @@ pub struct FlowRequest {
     pub windows: Option<Vec<usize>>,
     /// Run the dense stage on every pair and average it.
     pub dense: bool,
+    /// With `dense`, refine each pair's dense flow by the joint fit of
+    /// every short frame around it ([`crate::estimator::joint`]); default
+    /// on.
+    pub joint: bool,
     /// Pixel size on the object, mm (default: the `scene.json` beside the
     /// file).
     pub pixel_mm: Option<f64>,
@@ -429,6 +442,7 @@ impl Default for FlowRequest {
             dwell_cap: Some(DWELL_CAP),
             windows: None,
             dense: false,
+            joint: true,
             pixel_mm: None,
             tick_hz: None,
             mask: None,
@@ -480,6 +494,9 @@ impl FlowRequest {
             o.ladder.piv.windows = w.clone();
         }
         o.dense = self.dense;
+        if !self.joint {
+            o.joint = None;
+        }
         o.calibration = Calibration::resolve(self.pixel_mm, self.tick_hz, rec.meta_calibration)
             .map_err(|e| Error::Schedule(e.to_string()))?;
         if let Some(m) = &self.mask {
@@ -1141,7 +1158,11 @@ fn ladder_loop(
     tell: &(impl Fn() + Sync),
     stop: &AtomicBool,
 ) -> Result<Chain, Error> {
-    let cfg = &opts.ladder;
+    // The joint fit runs only where its dense flow is written.
+    let cfg = &LadderSettings {
+        joint: opts.joint.clone().filter(|_| opts.dense),
+        ..opts.ladder.clone()
+    };
     let dt = u64::from(opts.dt);
     let every = u64::from(opts.every.max(1));
     let half = dt.div_ceil(2);
@@ -1412,12 +1433,22 @@ struct DenseSum {
 }
 
 impl DenseSum {
-    /// Adds `measured`, the dense flow `m` was measured by, or else the
-    /// dense stage's field of `m`'s frames, in px per `dt` ticks.
+    /// Adds `measured`, the dense flow `m` was measured by; else, for a
+    /// pair of the time ladder with a usable field, its vectors
+    /// interpolated between the nodes and carried along their paths over
+    /// the pair; else the dense stage's field of `m`'s frames; in px per
+    /// `dt` ticks.
     fn add(&mut self, m: &Measured, measured: Option<crate::piv::dense::Flow>, dt: f64) {
         let [a, b] = &m.frames;
         let (flow, k) = match measured {
             Some(f) => (f, 1.0),
+            None if m.method == Method::Ladder && m.field.usable() => {
+                let per_tick = PerPair::new(m.field.clone(), Ticks(dt)).per_tick();
+                let (h, w) = a.dim();
+                let (u, v) = per_tick.predictor(h, w);
+                let (u, v) = crate::estimator::Velocity { u, v }.displacements(dt);
+                (crate::piv::dense::Flow { u, v }, 1.0)
+            }
             None => {
                 let start = PerPair::new(m.field.clone(), Ticks(dt)).over(Ticks(m.frame_ticks));
                 (

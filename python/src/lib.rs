@@ -549,6 +549,7 @@ fn flow<'py>(
         dwell_cap,
         windows,
         dense,
+        joint: true,
         pixel_mm: pixel_size,
         tick_hz,
         mask,

@@ -10,7 +10,8 @@
 //! the ensemble's flows averaged per frame pair, this recording measured
 //! 92 % of its vectors at 1.28 px and a dense EPE of 1.68 px; with one flow
 //! fitted to every pair of frames, 100 % at 0.76 px and 0.86 px (0.855);
-//! with the second pass on 12-tick frames, 100 % at 0.75 px and 0.81 px.
+//! with the second pass on 12-tick frames, 100 % at 0.75 px and 0.81 px;
+//! with the joint fit of `spiv flow --dense`, a dense EPE of 0.776 px.
 
 use spiv_firmware_sim::scene::{Scene, SceneKind, SceneParams};
 use spiv_firmware_sim::simulation::{simulate_planes, Request, Simulated};
@@ -92,8 +93,9 @@ fn turbulence_is_measured_densely_with_honest_uncertainty() {
     assert!(share >= 0.95, "measured {share}");
     assert!(epe <= 1.0, "EPE {epe}");
     assert!((0.5..=0.85).contains(&coverage), "coverage {coverage}");
-    // The first pass alone gives 0.855.
-    assert!(dense <= 0.84, "dense EPE {dense}");
+    // The ensemble's first pass alone gives 0.855, both passes 0.81, the
+    // joint fit after them 0.776.
+    assert!(dense <= 0.80, "dense EPE {dense}");
 }
 
 /// `spiv flow --dense` on the spectral family's hardest kind of member

@@ -332,21 +332,48 @@ fn dense_epe(f: &Field, truth: &DenseField) -> f64 {
 /// The method name of `spiv flow`'s row.
 pub const SPIV_FLOW: &str = "spiv flow";
 
-/// The method name of `spiv flow --dense`'s row.
-pub const SPIV_FLOW_DENSE: &str = "spiv flow --dense";
+/// What `spiv flow` runs for its row.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FlowRun {
+    /// `spiv flow`: its vectors, interpolated for the dense column.
+    Vectors,
+    /// `spiv flow --dense`: the dense field it writes, each pair's
+    /// refined by the joint fit.
+    Dense,
+    /// `spiv flow --dense --no-joint`: the dense field as the ladder or
+    /// the dense ensemble measured it.
+    DenseNoJoint,
+}
+
+impl FlowRun {
+    /// The method name of its row.
+    pub fn name(self) -> &'static str {
+        match self {
+            FlowRun::Vectors => SPIV_FLOW,
+            FlowRun::Dense => "spiv flow --dense",
+            FlowRun::DenseNoJoint => "spiv flow --dense --no-joint",
+        }
+    }
+
+    fn dense(self) -> bool {
+        self != FlowRun::Vectors
+    }
+}
 
 /// The rows of one family and seed: `spiv flow` with its defaults, and the
 /// frame camera's and the TFP 8 pair's PIV (`spiv piv`'s defaults).
 /// With `vectors`, every vector of `spiv flow`'s pairs is appended there
-/// as a CSV line ([`dump`]). With `dense`, `spiv flow --dense` instead:
-/// its dense EPE is that of the dense field it writes (the mean over pairs
-/// of each pair's dense flow) against the mean of the pairs' truths.
+/// as a CSV line ([`dump`]). With a dense `run`, `spiv flow --dense`
+/// instead: its dense EPE is that of the dense field it writes (the mean
+/// over pairs of each pair's dense flow) against the mean of the pairs'
+/// truths.
 pub fn family_rows(
     fam: &Family,
     seed: u64,
     vectors: Option<&std::path::Path>,
-    dense: bool,
+    run: FlowRun,
 ) -> Result<Vec<FlowsRow>, Error> {
+    let dense = run.dense();
     let p = fam.params(seed);
     let member = fam.member(seed);
     let mut req = Request::new(p.clone(), seed);
@@ -395,6 +422,9 @@ pub fn family_rows(
     let rec = Recording::simulated(p.width, p.height, data, pair[1] - pair[0]);
     let mut opts = FlowOptions::new(&rec, pair[1] - pair[0]);
     opts.dense = dense;
+    if run == FlowRun::DenseNoJoint {
+        opts.joint = None;
+    }
     let t0 = Instant::now();
     let out = run_flow(&rec, &opts, |_, _| {})?;
     let ms = t0.elapsed().as_secs_f64() * 1e3 / out.pairs.len().max(1) as f64;
@@ -424,7 +454,7 @@ pub fn family_rows(
     // the row keeps its name, with no dense EPE.
     let (name, epe) = if dense {
         (
-            SPIV_FLOW_DENSE,
+            run.name(),
             out.mean_dense
                 .as_ref()
                 .and_then(|d| d.epe(&mean_truth, None)),

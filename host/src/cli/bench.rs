@@ -6,6 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use clap::{Args, Subcommand};
+use spiv_host::bench::flows::FlowRun;
 use spiv_host::bench::paper::{blasius_bench, paper_bench, PAPER};
 use spiv_host::metrics::MeanCi;
 
@@ -83,6 +84,11 @@ enum Which {
         /// (`mean_dense.flo`), not of its vectors interpolated.
         #[arg(long)]
         dense: bool,
+        /// With --dense, `spiv flow --dense --no-joint` instead (the row
+        /// "spiv flow --dense --no-joint"): each pair's dense flow as the
+        /// ladder or the dense ensemble measured it.
+        #[arg(long, requires = "dense")]
+        no_joint: bool,
     },
     /// Every scene family through the live loop (asks 1 and 3 pairs
     /// late, 1 late with 10 % lost, or 1 late with 5 % lost and 5 %
@@ -123,12 +129,17 @@ pub fn run(a: &BenchArgs) -> Result<(), CliError> {
             json,
             vectors,
             dense,
+            no_joint,
         } => flows(
             seeds,
             families.as_deref(),
             json.as_ref(),
             vectors.as_deref(),
-            *dense,
+            match (*dense, *no_joint) {
+                (false, _) => FlowRun::Vectors,
+                (true, false) => FlowRun::Dense,
+                (true, true) => FlowRun::DenseNoJoint,
+            },
         ),
         Which::Live {
             seeds,
@@ -283,22 +294,22 @@ fn flows(
     only: Option<&[String]>,
     json_out: Option<&PathBuf>,
     vectors: Option<&Path>,
-    dense: bool,
+    run: FlowRun,
 ) -> Result<(), CliError> {
-    use spiv_host::bench::flows::{family_rows, worst, FlowsRow, SPIV_FLOW, SPIV_FLOW_DENSE};
+    use spiv_host::bench::flows::{family_rows, worst, FlowsRow};
     let seeds = parse_seeds(seeds)?;
     let fams = chosen_families(only)?;
     let b = bar((fams.len() * seeds.len()) as u64, "recordings");
     let mut rows: Vec<FlowsRow> = Vec::new();
     for f in &fams {
         for &seed in &seeds {
-            rows.extend(family_rows(f, seed, vectors, dense)?);
+            rows.extend(family_rows(f, seed, vectors, run)?);
             b.inc(1);
         }
     }
     b.finish_and_clear();
     // The method column fits the longest method name.
-    let mw = if dense { SPIV_FLOW_DENSE.len() } else { 13 };
+    let mw = run.name().len().max(13);
     println!(
         "seeds {:?}; EPE px per pair of measured vectors (mean over seeds); worst: the seed whose measured vectors are furthest off, their EPE; coverage: error components within 1σ; >3σ: valid vectors off by more than 3σ and 0.3 px",
         seeds
@@ -318,7 +329,7 @@ fn flows(
         "ms/pair"
     );
     for f in &fams {
-        let flow = if dense { SPIV_FLOW_DENSE } else { SPIV_FLOW };
+        let flow = run.name();
         for method in ["frame camera", "TFP 8", flow] {
             let rs: Vec<&FlowsRow> = rows
                 .iter()
@@ -346,11 +357,7 @@ fn flows(
         }
     }
     for f in &fams {
-        members(
-            &rows,
-            &f.name,
-            if dense { SPIV_FLOW_DENSE } else { SPIV_FLOW },
-        );
+        members(&rows, &f.name, run.name());
     }
     if let Some(p) = json_out {
         std::fs::write(p, serde_json::to_string_pretty(&rows).unwrap_or_default())

@@ -63,11 +63,20 @@ pub struct FlowArgs {
     /// Read a file whose last plane is truncated.
     #[arg(long)]
     allow_truncated: bool,
-    /// Also run the dense stage on every pair and write its mean,
-    /// `mean_dense.flo` (one vector per pixel, px per pair, v down; a pair
-    /// that measured nothing on frames shorter than the pair is left out).
+    /// Also write the mean dense flow over the pairs, `mean_dense.flo`
+    /// (one vector per pixel, px per pair, v down): each pair's is its
+    /// vectors between the nodes or the dense ensemble's flow, refined by
+    /// the joint fit of every short frame around it where the pair carries
+    /// its events (plain frame methods: the dense stage on the pair's
+    /// frames); a pair that measured nothing on frames shorter than the
+    /// pair is left out.
     #[arg(long)]
     dense: bool,
+    /// With --dense, keep each pair's dense flow as the ladder or the
+    /// dense ensemble measured it, without the joint fit of every short
+    /// frame around the pair (faster, less accurate).
+    #[arg(long, requires = "dense")]
+    no_joint: bool,
     /// Pixel size on the object, mm (else from scene.json beside the
     /// recording); with the tick rate, the outputs give m/s beside px per
     /// pair.
@@ -122,6 +131,7 @@ pub fn run(a: &FlowArgs) -> Result<(), CliError> {
         dwell_cap: parse_dwell_cap(&a.dwell_cap)?,
         windows: a.windows.clone(),
         dense: a.dense,
+        joint: !a.no_joint,
         pixel_mm: a.pixel_size,
         tick_hz: a.tick_hz,
         pairs: None,

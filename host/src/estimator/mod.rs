@@ -18,9 +18,11 @@
 //! - [`uplink`]: what a pair's frames and events cost on the wire;
 //! - [`ensemble`]: where window PIV cannot start the ladder, the dense
 //!   stage's one flow fitted to every pair of consecutive short frames,
-//!   each pair's disagreement with it the uncertainty.
+//!   each pair's disagreement with it the uncertainty;
+//! - [`joint`]: a pair's dense flow refined by one steady flow fitted to
+//!   every short frame around it at once, along its own paths.
 
-pub use spiv_estimator::{compensate, control, ensemble, events, ladder, units};
+pub use spiv_estimator::{compensate, control, ensemble, events, joint, ladder, units};
 pub mod make;
 pub mod uplink;
 
