@@ -411,7 +411,7 @@ pub struct FlowRequest {
     /// PIV window side of each pass, px (default: 64,32,32, and
     /// 64,32,32,32,32,32,32 for motion-compensated pairs).
     pub windows: Option<Vec<usize>>,
-    /// Run the dense stage on every pair and average it.
+    /// Average each pair's dense flow ([`FlowOptions::dense`]).
     pub dense: bool,
     /// With `dense`, refine each pair's dense flow by the joint fit of
     /// every short frame around it ([`crate::estimator::joint`]); default
