@@ -137,21 +137,31 @@ pub fn fit(ev: &Events, mid: u64, start: &Velocity, cfg: &JointSettings) -> Opti
         })
         .collect();
     let mut correction: Option<Nodes> = None;
+    // The band-passed frames and their energy, kept while the levels'
+    // blur stays the same.
+    let mut passed: Option<(f32, Vec<Frame>, f64)> = None;
     for level in &cfg.levels {
-        let frames = band_passed(&raw, level.blur, cfg.highpass);
-        let energy: f64 = frames
-            .iter()
-            .map(|fr| {
-                fr.f.iter()
-                    .map(|&x| f64::from(x) * f64::from(x))
-                    .sum::<f64>()
-            })
-            .sum();
-        if energy <= 0.0 || !energy.is_finite() {
-            return None;
+        if passed.as_ref().is_none_or(|p| p.0 != level.blur) {
+            let frames = band_passed(&raw, level.blur, cfg.highpass);
+            let energy: f64 = frames
+                .iter()
+                .map(|fr| {
+                    fr.f.iter()
+                        .map(|&x| f64::from(x) * f64::from(x))
+                        .sum::<f64>()
+                })
+                .sum();
+            if energy <= 0.0 || !energy.is_finite() {
+                return None;
+            }
+            passed = Some((level.blur, frames, energy));
         }
+        let Some((_, frames, energy)) = &passed else {
+            return None;
+        };
+        let (frames, energy) = (frames.as_slice(), *energy);
         let fit = Fit {
-            frames: &frames,
+            frames,
             start,
             cfg,
             energy,
@@ -195,7 +205,7 @@ fn band_passed(raw: &[(Array2<f32>, f64)], blur: f32, highpass: f32) -> Vec<Fram
             if highpass > blur {
                 b -= &blurred(f, highpass);
             }
-            let (gx, gy) = gradient(&b);
+            let (gx, gy) = spiv_piv::dense::gradients(&b);
             Frame {
                 f: b,
                 gx,
@@ -573,20 +583,6 @@ fn blurred(a: &Array2<f32>, sigma: f32) -> Array2<f32> {
         })
     };
     pass(&pass(a, true), false)
-}
-
-/// Central differences of `a` (one-sided at the edges), per px.
-fn gradient(a: &Array2<f32>) -> (Array2<f32>, Array2<f32>) {
-    let (h, w) = a.dim();
-    let gx = Array2::from_shape_fn((h, w), |(i, j)| {
-        let (l, r) = (j.saturating_sub(1), (j + 1).min(w - 1));
-        (a[[i, r]] - a[[i, l]]) / (r - l).max(1) as f32
-    });
-    let gy = Array2::from_shape_fn((h, w), |(i, j)| {
-        let (t, b) = (i.saturating_sub(1), (i + 1).min(h - 1));
-        (a[[b, j]] - a[[t, j]]) / (b - t).max(1) as f32
-    });
-    (gx, gy)
 }
 
 #[cfg(test)]

@@ -310,20 +310,18 @@ pub fn measure(
                 None => dense_velocity(&m.field.per_tick(), h, w),
             };
             if let Some(vel) = crate::joint::fit(ev, mid, &start, joint) {
-                // The fit's correction, carried along the paths, added to
-                // the dense flow it started from.
                 let (u, v) = vel.displacements(d);
-                let (u0, v0) = start.displacements(d);
-                let base = match m.dense.take() {
-                    Some(f) => f,
-                    None => Flow {
-                        u: u0.clone(),
-                        v: v0.clone(),
-                    },
-                };
-                m.dense = Some(Flow {
-                    u: &base.u + &(&u - &u0),
-                    v: &base.v + &(&v - &v0),
+                m.dense = Some(match m.dense.take() {
+                    // The fit's correction, carried along the paths, added
+                    // to the ensemble's dense flow it started from.
+                    Some(base) => {
+                        let (u0, v0) = start.displacements(d);
+                        Flow {
+                            u: base.u + &u - &u0,
+                            v: base.v + &v - &v0,
+                        }
+                    }
+                    None => Flow { u, v },
                 });
             }
         }

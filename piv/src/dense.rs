@@ -141,8 +141,8 @@ fn up(f: &Flow, h: usize, w: usize) -> Flow {
     }
 }
 
-/// Central differences (one-sided at the edges): (d/dx, d/dy).
-fn gradients(a: &Array2<f32>) -> (Array2<f32>, Array2<f32>) {
+/// Central differences (one-sided at the edges): (d/dx, d/dy), per px.
+pub fn gradients(a: &Array2<f32>) -> (Array2<f32>, Array2<f32>) {
     let (h, w) = a.dim();
     let gx = Array2::from_shape_fn((h, w), |(i, j)| {
         let (l, r) = (j.saturating_sub(1), (j + 1).min(w - 1));

@@ -372,7 +372,7 @@ pub fn replace(
 /// values about the replacement (what a neighbour fit cannot know of the
 /// window itself), over the measured vectors of its 3 × 3 neighbourhood,
 /// plus, where they all lie on one side of it, the field's change over
-/// the next step outwards ([`extrapolation`]); infinite where it has none. Invalid vectors get infinite uncertainty;
+/// the next step outwards (`extrapolation`); infinite where it has none. Invalid vectors get infinite uncertainty;
 /// valid ones keep theirs.
 pub fn replaced_uncertainty(
     u: &Array2<f64>,

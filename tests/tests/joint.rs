@@ -4,34 +4,13 @@
 //! a steady flow's dense field made of its vectors between the nodes where
 //! the pair is made from rung frames alone.
 
-use spiv_firmware_sim::scene::{Scene, SceneKind, SceneParams};
-use spiv_firmware_sim::simulation::{simulate_planes, Request, Simulated};
-use spiv_host::bench::flows::families;
-use spiv_host::flow::{run_flow, FlowOptions, FlowOutcome, Recording};
+mod common;
 
-/// `spiv flow` with its defaults on `ticks` planes of `p` from `seed`,
-/// `dense` as asked and, with it, the joint fit unless `no_joint`.
-fn flow_of(
-    p: &SceneParams,
-    seed: u64,
-    ticks: u32,
-    dense: bool,
-    no_joint: bool,
-) -> (Simulated, FlowOutcome) {
-    let mut req = Request::new(p.clone(), seed);
-    req.ticks = Some(ticks);
-    let (data, sim) = simulate_planes(&req).expect("simulates");
-    let pair = sim.meta.capture.pair;
-    let dt = pair[1] - pair[0];
-    let rec = Recording::simulated(p.width, p.height, data, dt);
-    let mut opts = FlowOptions::new(&rec, dt);
-    opts.dense = dense;
-    if no_joint {
-        opts.joint = None;
-    }
-    let out = run_flow(&rec, &opts, |_, _| {}).expect("runs");
-    (sim, out)
-}
+use common::flow_of;
+use spiv_firmware_sim::scene::{Scene, SceneKind, SceneParams};
+use spiv_firmware_sim::simulation::Simulated;
+use spiv_host::bench::flows::families;
+use spiv_host::flow::FlowOutcome;
 
 /// The dense EPE of `out`'s mean dense field against the mean of its
 /// pairs' truths, px per pair.
@@ -62,8 +41,8 @@ fn the_joint_fit_sharpens_the_dense_flow_of_a_pair_with_events() {
         .expect("the family");
     let seed = 23;
     let p = fam.params(seed);
-    let (sim, joint) = flow_of(&p, seed, fam.ticks, true, false);
-    let (_, without) = flow_of(&p, seed, fam.ticks, true, true);
+    let (sim, _, joint) = flow_of(&p, seed, fam.ticks, true, true);
+    let (_, _, without) = flow_of(&p, seed, fam.ticks, true, false);
     let (a, b) = (dense_epe(&sim, &joint), dense_epe(&sim, &without));
     eprintln!("dense EPE: joint {a:.3}, without {b:.3} px per pair");
     assert!(a <= 0.85 * b, "joint {a} against {b}");
@@ -82,8 +61,8 @@ const JOINT_BOUND: f64 = 0.65;
 fn a_steady_flows_dense_field_is_its_vectors_between_the_nodes() {
     let p = SceneParams::new(SceneKind::PaperLinear);
     let seed = 3;
-    let (sim, dense) = flow_of(&p, seed, 142, true, false);
-    let (_, plain) = flow_of(&p, seed, 142, false, false);
+    let (sim, _, dense) = flow_of(&p, seed, 142, true, true);
+    let (_, _, plain) = flow_of(&p, seed, 142, false, true);
     assert!(plain.mean_dense.is_none());
     assert_eq!(dense.pairs.len(), plain.pairs.len());
     for (a, b) in dense.pairs.iter().zip(&plain.pairs) {

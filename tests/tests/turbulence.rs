@@ -13,27 +13,15 @@
 //! with the second pass on 12-tick frames, 100 % at 0.75 px and 0.81 px;
 //! with the joint fit of `spiv flow --dense`, a dense EPE of 0.776 px.
 
+mod common;
+
+use common::flow_of;
 use spiv_firmware_sim::scene::{Scene, SceneKind, SceneParams};
-use spiv_firmware_sim::simulation::{simulate_planes, Request, Simulated};
+use spiv_firmware_sim::simulation::Simulated;
 use spiv_formats::State;
 use spiv_host::bench::flows::{families, Family};
 use spiv_host::estimator::ensemble;
-use spiv_host::flow::{run_flow, FlowOptions, FlowOutcome, PairResult, Recording};
-
-/// `spiv flow` with its defaults (and `dense`) on `ticks` planes of scene
-/// `p` from `seed`: the simulation, the pair's separation and the outcome.
-fn flow_of(p: &SceneParams, seed: u64, ticks: u32, dense: bool) -> (Simulated, u32, FlowOutcome) {
-    let mut req = Request::new(p.clone(), seed);
-    req.ticks = Some(ticks);
-    let (data, sim) = simulate_planes(&req).expect("simulates");
-    let pair = sim.meta.capture.pair;
-    let dt = pair[1] - pair[0];
-    let rec = Recording::simulated(p.width, p.height, data, dt);
-    let mut opts = FlowOptions::new(&rec, dt);
-    opts.dense = dense;
-    let out = run_flow(&rec, &opts, |_, _| {}).expect("runs");
-    (sim, dt, out)
-}
+use spiv_host::flow::PairResult;
 
 /// The spectral turbulence's family of `spiv bench flows`.
 fn spectral() -> Family {
@@ -48,7 +36,7 @@ fn turbulence_is_measured_densely_with_honest_uncertainty() {
     let seed = 2;
     let mut p = SceneParams::new(SceneKind::Turbulence);
     p.flow_seed = seed;
-    let (sim, dt, out) = flow_of(&p, seed, 62, true);
+    let (sim, dt, out) = flow_of(&p, seed, 62, true, true);
     assert!(!out.pairs.is_empty());
     let dtf = f64::from(dt);
     let (mut err, mut measured, mut all, mut within, mut comps) = (0.0, 0, 0, 0, 0);
@@ -110,7 +98,7 @@ fn turbulence_is_measured_densely_with_honest_uncertainty() {
 fn the_dense_field_never_runs_away() {
     let seed = 1;
     let fam = spectral();
-    let (sim, dt, out) = flow_of(&fam.params(seed), seed, fam.ticks, true);
+    let (sim, dt, out) = flow_of(&fam.params(seed), seed, fam.ticks, true, true);
     let pair = sim.meta.capture.pair;
     let mid = Scene::pair_mid(u64::from(pair[0]), u64::from(pair[1]));
     let truth = sim.scene.truth_dense_at(mid, f64::from(dt));
@@ -190,7 +178,7 @@ fn dim_slow_turbulence_is_not_confidently_wrong() {
     for seed in [107, 109] {
         let p = fam.params(seed);
         assert!(p.particle_peak < 0.12, "seed {seed} is a dim member");
-        let (sim, dt, out) = flow_of(&p, seed, fam.ticks, false);
+        let (sim, dt, out) = flow_of(&p, seed, fam.ticks, false, true);
         let mut score = ValidScore::default();
         for pr in &out.pairs {
             score.add(&sim, dt, pr);
@@ -218,7 +206,7 @@ fn a_short_slow_recording_measures_its_particles() {
     let seed = 4;
     let fam = spectral();
     let p = fam.params(seed);
-    let (sim, dt, out) = flow_of(&p, seed, fam.ticks, false);
+    let (sim, dt, out) = flow_of(&p, seed, fam.ticks, false, true);
     let (mut all, mut measured, mut err) = (0, 0, 0.0);
     for pr in &out.pairs {
         assert!(
@@ -263,7 +251,7 @@ fn a_dim_slow_flow_is_climbed_from_rest() {
     let seed = 21;
     let fam = spectral();
     let p = fam.params(seed);
-    let (sim, dt, out) = flow_of(&p, seed, fam.ticks, false);
+    let (sim, dt, out) = flow_of(&p, seed, fam.ticks, false, true);
     let mut score = ValidScore::default();
     for pr in &out.pairs {
         let bootstrap_refuted = pr.rungs.iter().any(|r| r.separation == 8 && r.kept == 0);
